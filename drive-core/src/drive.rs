@@ -1,0 +1,551 @@
+//! The drive: its state behind the object dictionary, and the RTU slave in front of it.
+
+use crate::crc;
+use crate::ident::Identity;
+use crate::od::{Access, NativeMap, OBJECTS, Obj, ObjError, RegisterMap, Storage};
+use crate::pdu::{Exception, MAX_READ, Request, Words};
+use crate::rtu::{Framer, MAX_FRAME, RxError};
+use crate::units::{Baud, Instant, SlaveAddr};
+
+/// Controller status bit 3: the motor is executing a move.
+pub const STATUS_BUSY: u8 = 1 << 3;
+
+/// What a platform gives a drive at power-up.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DriveConfig {
+    /// Overrides the node id object (0x2028) for this run.
+    pub address: Option<SlaveAddr>,
+    /// Overrides the baud rate object (0x202A) for this run.
+    pub baud: Option<Baud>,
+    /// The identification strings.
+    pub identity: Identity,
+    /// Whether the platform can save parameters (0x200F = 2); without it a save is refused (04).
+    pub can_save: bool,
+}
+
+impl Default for DriveConfig {
+    fn default() -> Self {
+        Self { address: None, baud: None, identity: Identity::SIMULATOR, can_save: false }
+    }
+}
+
+/// Requests the drive makes of its platform, collected with [`Drive::take_system_request`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SystemRequest {
+    /// Save every ROM object (0x200F = 2).
+    Save,
+    /// Jump to the boot loader (0x200F = 1).
+    BootLoader,
+}
+
+/// The drive's running status: what the live objects report.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Status {
+    /// Motor position in microsteps.
+    pub position: i32,
+    /// Error status bits (0x6000).
+    pub error: u8,
+    /// Controller status bits (0x6001).
+    pub controller: u8,
+    /// Step-notification bits (0x6061).
+    pub notify: u8,
+    /// GPIO levels (0x6031), inverted as the manual has them.
+    pub gpio: u16,
+    /// Analog input code (0x605F).
+    pub analog_in: u16,
+    /// PP statusword (0x6071).
+    pub statusword: u16,
+    /// PVT pointer (0x601A).
+    pub pvt_pointer: u16,
+    /// Measured speed in pps (0x607F).
+    pub real_speed: i32,
+    /// Encoder position in counts (0x6089).
+    pub encoder: i32,
+}
+
+/// Everything the object dictionary reads and writes.
+#[derive(Clone, Debug)]
+pub struct DriveState {
+    params: [u32; Obj::COUNT],
+    status: Status,
+    identity: Identity,
+    can_save: bool,
+    request: Option<SystemRequest>,
+}
+
+impl DriveState {
+    /// Factory state.
+    pub fn new(identity: Identity, can_save: bool) -> Self {
+        let mut params = [0; Obj::COUNT];
+        for (p, d) in params.iter_mut().zip(OBJECTS.iter()) {
+            *p = d.default;
+        }
+        Self { params, status: Status::default(), identity, can_save, request: None }
+    }
+
+    /// The running status.
+    pub fn status(&self) -> &Status {
+        &self.status
+    }
+
+    /// The running status, for the motion and I/O code that owns it.
+    pub fn status_mut(&mut self) -> &mut Status {
+        &mut self.status
+    }
+
+    /// The identification strings.
+    pub fn identity(&self) -> &Identity {
+        &self.identity
+    }
+
+    /// The value of `obj` as its registers show it (S32 as two's complement).
+    pub fn read(&self, obj: Obj) -> u32 {
+        let s = &self.status;
+        match obj {
+            Obj::Position => s.position as u32,
+            Obj::ErrorStatus => u32::from(s.error),
+            Obj::ControllerStatus => u32::from(s.controller),
+            Obj::NotifyStatus => u32::from(s.notify),
+            Obj::GpioValue => u32::from(s.gpio),
+            Obj::AnalogIn => u32::from(s.analog_in),
+            Obj::StatusWord => u32::from(s.statusword),
+            Obj::PvtPointer => u32::from(s.pvt_pointer),
+            Obj::RealSpeed => s.real_speed as u32,
+            Obj::EncoderPosition => s.encoder as u32,
+            _ => self.params.get(obj as usize).copied().unwrap_or(0),
+        }
+    }
+
+    /// `obj` read as a signed value.
+    pub fn read_i32(&self, obj: Obj) -> i32 {
+        self.read(obj) as i32
+    }
+
+    /// Word `k` of a text object: two ASCII bytes, first one high, zero padded.
+    pub fn text_word(&self, obj: Obj, k: usize) -> u16 {
+        let text = match obj {
+            Obj::DeviceName => self.identity.device_name,
+            Obj::HardwareVersion => self.identity.hardware_version,
+            Obj::SoftwareVersion => self.identity.software_version,
+            _ => "",
+        }
+        .as_bytes();
+        let byte = |i: usize| text.get(i).copied().unwrap_or(0);
+        u16::from_be_bytes([byte(2 * k), byte(2 * k + 1)])
+    }
+
+    /// Whether writing `value` to `obj` would be accepted; nothing changes.
+    pub fn check(&self, obj: Obj, value: u32) -> Result<(), ObjError> {
+        let d = obj.def();
+        if d.access == Access::Ro || d.storage == Storage::Const {
+            return Err(ObjError::ReadOnly);
+        }
+        if !d.range.accepts(d.ty, value) {
+            return Err(ObjError::OutOfRange);
+        }
+        match (obj, value) {
+            // No storage on this platform yet, and no boot loader to jump to.
+            (Obj::SystemControl, 2) if !self.can_save => Err(ObjError::Refused),
+            (Obj::SystemControl, 1) => Err(ObjError::Refused),
+            _ => Ok(()),
+        }
+    }
+
+    /// Writes `value` to `obj`, which [`DriveState::check`] accepted.
+    pub fn apply(&mut self, obj: Obj, value: u32) {
+        let s = &mut self.status;
+        match obj {
+            Obj::ErrorStatus => s.error &= !(value as u8),
+            Obj::ControllerStatus => s.controller &= !(value as u8 & !STATUS_BUSY),
+            Obj::NotifyStatus => s.notify &= !(value as u8),
+            Obj::Position => s.position = value as i32,
+            Obj::GpioValue => {
+                // Only outputs take the written level.
+                let outputs = self.params.get(Obj::GpioDirection as usize).copied().unwrap_or(0) as u16;
+                s.gpio = (s.gpio & !outputs) | (value as u16 & outputs);
+            }
+            _ => {
+                if let Some(p) = self.params.get_mut(obj as usize) {
+                    *p = value;
+                }
+                if obj == Obj::SystemControl {
+                    match value {
+                        2 => self.request = Some(SystemRequest::Save),
+                        3 => self.restore_factory(),
+                        _ => {}
+                    }
+                }
+            }
+        }
+    }
+
+    /// Puts every ROM object back to its factory value (RAM objects and status are untouched).
+    pub fn restore_factory(&mut self) {
+        for (p, d) in self.params.iter_mut().zip(OBJECTS.iter()) {
+            if d.storage == Storage::Rom {
+                *p = d.default;
+            }
+        }
+    }
+}
+
+/// The Modbus serial-line diagnostic counters (function 0x08, sub-functions 0x0B-0x12).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Counters {
+    /// 0x0B: frames with a good CRC seen on the bus, for any address.
+    pub bus_messages: u16,
+    /// 0x0C: frames dropped for a bad CRC, a gap inside the frame, or too short to hold a CRC.
+    pub bus_errors: u16,
+    /// 0x0D: exception replies sent.
+    pub exceptions: u16,
+    /// 0x0E: frames addressed to this drive or broadcast.
+    pub slave_messages: u16,
+    /// 0x0F: frames addressed to this drive or broadcast that were not answered.
+    pub no_responses: u16,
+    /// 0x10: negative acknowledges (never sent by this drive).
+    pub naks: u16,
+    /// 0x11: busy replies (never sent by this drive).
+    pub busy: u16,
+    /// 0x12: frames lost to a receive overrun (longer than 256 bytes).
+    pub overruns: u16,
+}
+
+/// A drive on a serial line: the RTU slave and the drive state behind it.
+#[derive(Clone, Debug)]
+pub struct Drive<M: RegisterMap = NativeMap> {
+    framer: Framer,
+    address: SlaveAddr,
+    baud: Baud,
+    listen_only: bool,
+    counters: Counters,
+    tx: [u8; MAX_FRAME],
+    tx_len: usize,
+    map: M,
+    state: DriveState,
+}
+
+impl Drive<NativeMap> {
+    /// A drive with factory settings and the native map.
+    pub fn factory() -> Self {
+        Self::new(DriveConfig::default())
+    }
+
+    /// A drive with the native map.
+    pub fn new(config: DriveConfig) -> Self {
+        Self::with_map(config, NativeMap::new())
+    }
+}
+
+impl<M: RegisterMap> Drive<M> {
+    /// A drive whose registers are laid out by `map`.
+    pub fn with_map(config: DriveConfig, map: M) -> Self {
+        let mut state = DriveState::new(config.identity, config.can_save);
+        if let Some(a) = config.address {
+            state.apply(Obj::NodeId, u32::from(a.get()));
+        }
+        if let Some(b) = config.baud {
+            state.apply(Obj::BaudRate, b.get());
+        }
+        // The serial settings in force are those of power-up; writes take effect at the next one.
+        let address = SlaveAddr::new(state.read(Obj::NodeId) as u8).unwrap_or(SlaveAddr::BROADCAST);
+        let baud = Baud::new(state.read(Obj::BaudRate)).unwrap_or(Baud::FACTORY);
+        Self {
+            framer: Framer::new(baud),
+            address,
+            baud,
+            listen_only: false,
+            counters: Counters::default(),
+            tx: [0; MAX_FRAME],
+            tx_len: 0,
+            map,
+            state,
+        }
+    }
+
+    /// The address this drive answers to.
+    pub fn address(&self) -> SlaveAddr {
+        self.address
+    }
+
+    /// The baud rate the framing is timed for.
+    pub fn baud(&self) -> Baud {
+        self.baud
+    }
+
+    /// The drive state behind the registers.
+    pub fn state(&self) -> &DriveState {
+        &self.state
+    }
+
+    /// The drive state, for the platform (inputs, motion).
+    pub fn state_mut(&mut self) -> &mut DriveState {
+        &mut self.state
+    }
+
+    /// The diagnostic counters.
+    pub fn counters(&self) -> &Counters {
+        &self.counters
+    }
+
+    /// Bytes received at `now`. A frame that had already ended is processed first.
+    pub fn on_rx(&mut self, now: Instant, bytes: &[u8]) {
+        for &b in bytes {
+            if self.framer.ended(now) {
+                self.end_frame();
+            }
+            self.framer.push(now, b);
+        }
+    }
+
+    /// Time passes: a frame whose t3.5 has run out is processed.
+    pub fn on_timer(&mut self, now: Instant) {
+        if self.framer.ended(now) {
+            self.end_frame();
+        }
+    }
+
+    /// When [`Drive::on_timer`] next has something to do.
+    pub fn deadline(&self) -> Option<Instant> {
+        self.framer.deadline()
+    }
+
+    /// The reply frame to send, once.
+    pub fn take_reply(&mut self) -> Option<&[u8]> {
+        let n = core::mem::take(&mut self.tx_len);
+        if n == 0 { None } else { self.tx.get(..n) }
+    }
+
+    /// A request the drive makes of its platform (save, boot loader), once.
+    pub fn take_system_request(&mut self) -> Option<SystemRequest> {
+        self.state.request.take()
+    }
+
+    fn end_frame(&mut self) {
+        let (frame, error) = self.framer.frame();
+        let c = &mut self.counters;
+        match error {
+            Some(RxError::Overrun) => c.overruns = c.overruns.wrapping_add(1),
+            Some(RxError::Gap) => c.bus_errors = c.bus_errors.wrapping_add(1),
+            None if !crc::frame_ok(frame) => c.bus_errors = c.bus_errors.wrapping_add(1),
+            None => self.serve(),
+        }
+        self.framer.clear();
+    }
+
+    /// Serves a frame with a good CRC that sits in the framer.
+    fn serve(&mut self) {
+        let Self { framer, address, listen_only, counters, tx, tx_len, map, state, .. } = self;
+        counters.bus_messages = counters.bus_messages.wrapping_add(1);
+        let (frame, _) = framer.frame();
+        let Some((&to, rest)) = frame.split_first() else {
+            return;
+        };
+        let broadcast = to == SlaveAddr::BROADCAST.get();
+        if !broadcast && to != address.get() {
+            return;
+        }
+        counters.slave_messages = counters.slave_messages.wrapping_add(1);
+        let pdu = rest.get(..rest.len().saturating_sub(2)).unwrap_or_default();
+        let function = pdu.first().copied().unwrap_or(0);
+        let request = Request::parse(pdu);
+        let mut server = Server { map, state, counters, listen_only };
+        if broadcast || *server.listen_only {
+            // Execute what may execute without an answer, and answer nothing.
+            if let Ok(req) = request
+                && server.silent_allowed(&req)
+            {
+                let mut scratch = [0u8; MAX_FRAME];
+                let _ = server.execute(&req, &mut scratch);
+            }
+            counters.no_responses = counters.no_responses.wrapping_add(1);
+            return;
+        }
+        let Some((head, body)) = tx.split_first_chunk_mut::<2>() else {
+            return;
+        };
+        let body = body.get_mut(..MAX_FRAME - 4).unwrap_or_default();
+        let len = match request.and_then(|req| server.execute(&req, body)) {
+            Ok(Outcome::Reply(n)) => {
+                *head = [address.get(), function];
+                n
+            }
+            Ok(Outcome::Silent) => {
+                counters.no_responses = counters.no_responses.wrapping_add(1);
+                return;
+            }
+            Err(e) => {
+                counters.exceptions = counters.exceptions.wrapping_add(1);
+                *head = [address.get(), function | 0x80];
+                if let Some(b) = body.first_mut() {
+                    *b = e.code();
+                }
+                1
+            }
+        };
+        *tx_len = seal(tx, 2 + len);
+    }
+}
+
+/// Appends the CRC to the first `n` bytes of `buf`; the frame's length, or 0 if it does not fit.
+fn seal(buf: &mut [u8], n: usize) -> usize {
+    let sum = crc::crc16(buf.get(..n).unwrap_or_default());
+    match buf.get_mut(n..n + 2) {
+        Some(c) => {
+            c.copy_from_slice(&sum.to_le_bytes());
+            n + 2
+        }
+        None => 0,
+    }
+}
+
+/// What a request produced.
+enum Outcome {
+    /// A normal reply with this many bytes after the function code.
+    Reply(usize),
+    /// No reply (force listen-only mode, restart from listen-only mode).
+    Silent,
+}
+
+/// The parts of a drive that execute a request.
+struct Server<'a, M> {
+    map: &'a mut M,
+    state: &'a mut DriveState,
+    counters: &'a mut Counters,
+    listen_only: &'a mut bool,
+}
+
+/// Conformity level of device identification: regular, stream and individual access.
+const CONFORMITY: u8 = 0x82;
+
+impl<M: RegisterMap> Server<'_, M> {
+    /// Whether a request executes when it gets no answer (broadcast, listen-only mode).
+    fn silent_allowed(&self, req: &Request<'_>) -> bool {
+        match *req {
+            Request::Diagnostics { sub: 0x01, .. } => true,
+            _ if *self.listen_only => false,
+            Request::WriteSingle { .. } | Request::WriteMultiple { .. } => true,
+            Request::Diagnostics { sub, .. } => matches!(sub, 0x04 | 0x0A),
+            _ => false,
+        }
+    }
+
+    /// Executes `req`, writing the reply's data (after the function code) into `out`.
+    fn execute(&mut self, req: &Request<'_>, out: &mut [u8]) -> Result<Outcome, Exception> {
+        match *req {
+            Request::ReadHolding { addr, qty } | Request::ReadInput { addr, qty } => self.read(addr, qty, out),
+            Request::WriteSingle { addr, value } => {
+                let bytes = value.to_be_bytes();
+                self.map.write(self.state, addr, Words::new(&bytes))?;
+                put(out, 0, &addr.to_be_bytes());
+                put(out, 2, &bytes);
+                Ok(Outcome::Reply(4))
+            }
+            Request::WriteMultiple { addr, values } => {
+                self.map.write(self.state, addr, values)?;
+                put(out, 0, &addr.to_be_bytes());
+                put(out, 2, &(values.len() as u16).to_be_bytes());
+                Ok(Outcome::Reply(4))
+            }
+            Request::ReadWrite { read_addr, read_qty, write_addr, values } => {
+                self.map.check_read(read_addr, read_qty)?;
+                self.map.write(self.state, write_addr, values)?;
+                self.read(read_addr, read_qty, out)
+            }
+            Request::Diagnostics { sub, data } => self.diagnostics(sub, data, out),
+            Request::ReadDeviceId { code, object } => device_id(self.state.identity(), code, object, out),
+        }
+    }
+
+    fn read(&mut self, addr: u16, qty: u16, out: &mut [u8]) -> Result<Outcome, Exception> {
+        let n = 2 * usize::from(qty.min(MAX_READ));
+        let (count, data) = out.split_first_mut().ok_or(Exception::ServerDeviceFailure)?;
+        *count = n as u8;
+        self.map.read(self.state, addr, data.get_mut(..n).ok_or(Exception::ServerDeviceFailure)?)?;
+        Ok(Outcome::Reply(1 + n))
+    }
+
+    fn diagnostics(&mut self, sub: u16, data: &[u8], out: &mut [u8]) -> Result<Outcome, Exception> {
+        let zero = data == [0, 0];
+        let c = &mut *self.counters;
+        let value = match sub {
+            0x00 => {
+                put(out, 0, &sub.to_be_bytes());
+                put(out, 2, data);
+                return Ok(Outcome::Reply(2 + data.len()));
+            }
+            0x01 => {
+                if !(zero || data == [0xFF, 0x00]) {
+                    return Err(Exception::IllegalDataValue);
+                }
+                let was_listening = core::mem::take(self.listen_only);
+                *c = Counters::default();
+                if was_listening {
+                    return Ok(Outcome::Silent);
+                }
+                u16::from_be_bytes([data.first().copied().unwrap_or(0), 0])
+            }
+            0x02..=0x12 if !zero => return Err(Exception::IllegalDataValue),
+            0x02 => 0,
+            0x04 => {
+                *self.listen_only = true;
+                return Ok(Outcome::Silent);
+            }
+            0x0A => {
+                *c = Counters::default();
+                0
+            }
+            0x0B => c.bus_messages,
+            0x0C => c.bus_errors,
+            0x0D => c.exceptions,
+            0x0E => c.slave_messages,
+            0x0F => c.no_responses,
+            0x10 => c.naks,
+            0x11 => c.busy,
+            0x12 => c.overruns,
+            _ => return Err(Exception::IllegalFunction),
+        };
+        put(out, 0, &sub.to_be_bytes());
+        put(out, 2, &value.to_be_bytes());
+        Ok(Outcome::Reply(4))
+    }
+}
+
+/// Copies `bytes` into `out` at `at`, as far as it fits.
+fn put(out: &mut [u8], at: usize, bytes: &[u8]) {
+    if let Some(dst) = out.get_mut(at..at + bytes.len()) {
+        dst.copy_from_slice(bytes);
+    }
+}
+
+/// Read device identification (0x2B / 0x0E): `[0x0E, code, conformity, more, next, count, objects..]`.
+fn device_id(id: &Identity, code: u8, object: u8, out: &mut [u8]) -> Result<Outcome, Exception> {
+    let last = match code {
+        1 => 2,
+        2 | 3 => 6,
+        4 => {
+            id.object(object).ok_or(Exception::IllegalDataAddress)?;
+            object
+        }
+        _ => return Err(Exception::IllegalDataValue),
+    };
+    // Stream access restarts at 0 when asked for an object outside the category.
+    let first = if code == 4 || object <= last { object } else { 0 };
+    put(out, 0, &[0x0E, code, CONFORMITY, 0, 0, 0]);
+    let mut n = 6;
+    let mut count = 0u8;
+    for oid in first..=last {
+        let text = id.object(oid).unwrap_or("").as_bytes();
+        let text = text.get(..text.len().min(240)).unwrap_or_default();
+        if n + 2 + text.len() > out.len() {
+            // Does not fit: tell the master where to continue.
+            put(out, 3, &[0xFF, oid]);
+            break;
+        }
+        put(out, n, &[oid, text.len() as u8]);
+        put(out, n + 2, text);
+        n += 2 + text.len();
+        count += 1;
+    }
+    put(out, 5, &[count]);
+    Ok(Outcome::Reply(n))
+}

@@ -1,0 +1,243 @@
+//! The object dictionary: every object of the drive declared once, with everything that the
+//! dispatch, the range checks, the defaults, persistence and the register reference need.
+//!
+//! [`native`] is the drive's own map (seed 000, MSME/PMC007). A register map of another vendor is
+//! another table over the same [`Obj`]ects, with its own addresses, units and exception codes.
+
+pub mod doc;
+pub mod map;
+pub mod native;
+
+pub use map::{NativeMap, RegisterMap};
+pub use native::{OBJECTS, Obj};
+
+/// How an object's value is encoded in registers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Type {
+    /// Unsigned 8 bit, one register.
+    U8,
+    /// Unsigned 16 bit, one register.
+    U16,
+    /// Unsigned 32 bit, two registers, high word at the lower address.
+    U32,
+    /// Signed 32 bit, two registers, high word at the lower address.
+    S32,
+    /// ASCII text of this many bytes (even), two per register, first byte high, zero padded.
+    Str(u8),
+}
+
+impl Type {
+    /// Registers the object occupies.
+    pub const fn words(self) -> u16 {
+        match self {
+            Type::U8 | Type::U16 => 1,
+            Type::U32 | Type::S32 => 2,
+            Type::Str(n) => n.div_ceil(2) as u16,
+        }
+    }
+    /// Name in the register reference.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Type::U8 => "U8",
+            Type::U16 => "U16",
+            Type::U32 => "U32",
+            Type::S32 => "S32",
+            Type::Str(_) => "string",
+        }
+    }
+    /// Whether a raw register value fits the type (strings are never written).
+    const fn fits(self, raw: u32) -> bool {
+        match self {
+            Type::U8 => raw <= 0xFF,
+            Type::U16 => raw <= 0xFFFF,
+            Type::U32 | Type::S32 => true,
+            Type::Str(_) => false,
+        }
+    }
+}
+
+/// Who may do what with an object over the bus.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Access {
+    /// Read only: a write is refused.
+    Ro,
+    /// Read and write.
+    Rw,
+    /// Writing runs a command (a completed write is the command); reading returns the last value.
+    Cmd,
+    /// Status bits: writing 1 to a bit clears it, writing 0 leaves it.
+    W1c,
+}
+
+impl Access {
+    /// Name in the register reference.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Access::Ro => "ro",
+            Access::Rw => "rw",
+            Access::Cmd => "cmd",
+            Access::W1c => "w1c",
+        }
+    }
+}
+
+/// Where the value lives (seed 000's storage column).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Storage {
+    /// Lost at power-off; starts at its default.
+    Ram,
+    /// Kept across power cycles once saved (0x200F = 2).
+    Rom,
+    /// Part of the drive's running state (position, status): read from it, not from a stored copy.
+    Live,
+    /// A constant of the firmware (identification strings).
+    Const,
+}
+
+impl Storage {
+    /// Name in the register reference.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Storage::Ram => "RAM",
+            Storage::Rom => "ROM",
+            Storage::Live => "live",
+            Storage::Const => "const",
+        }
+    }
+}
+
+/// The values an object accepts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Range {
+    /// Anything the type holds.
+    Any,
+    /// `min..=max`, compared as signed for S32 objects.
+    Span(i64, i64),
+    /// One of these values.
+    Set(&'static [u32]),
+    /// Only these bits may be set.
+    Bits(u32),
+    /// Signed value whose magnitude is within `min..=max` (zero excluded when `min > 0`).
+    Magnitude(u32, u32),
+}
+
+impl Range {
+    /// Whether `raw` (as read from the registers) is within the range for type `ty`.
+    ///
+    /// ```
+    /// use drive_core::od::{Range, Type};
+    /// assert!(Range::Span(-200_000, 200_000).accepts(Type::S32, (-5i32) as u32));
+    /// assert!(!Range::Span(1, 127).accepts(Type::U8, 128));
+    /// assert!(!Range::Magnitude(150, 300_000).accepts(Type::S32, (-100i32) as u32));
+    /// assert!(Range::Bits(0x13).accepts(Type::U8, 0x12));
+    /// assert!(!Range::Any.accepts(Type::U16, 0x1_0000));
+    /// ```
+    pub fn accepts(self, ty: Type, raw: u32) -> bool {
+        if !ty.fits(raw) {
+            return false;
+        }
+        let v = match ty {
+            Type::S32 => i64::from(raw as i32),
+            _ => i64::from(raw),
+        };
+        match self {
+            Range::Any => true,
+            Range::Span(min, max) => min <= v && v <= max,
+            Range::Set(set) => set.contains(&raw),
+            Range::Bits(mask) => raw & !mask == 0,
+            Range::Magnitude(min, max) => (u64::from(min)..=u64::from(max)).contains(&v.unsigned_abs()),
+        }
+    }
+}
+
+/// The unit of an object's value.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Unit {
+    /// A plain number, a code or a bit field.
+    None,
+    /// Microsteps (pulses) at the current resolution.
+    Steps,
+    /// Microsteps per second.
+    Pps,
+    /// Microsteps per second squared.
+    Pps2,
+    /// Milliamperes.
+    MilliAmps,
+    /// Millivolts.
+    MilliVolts,
+    /// Milliseconds.
+    Millis,
+    /// Bits per second.
+    Baud,
+    /// Percent.
+    Percent,
+    /// Encoder counts.
+    Counts,
+}
+
+impl Unit {
+    /// Symbol in the register reference.
+    pub const fn symbol(self) -> &'static str {
+        match self {
+            Unit::None => "",
+            Unit::Steps => "step",
+            Unit::Pps => "pps",
+            Unit::Pps2 => "pps²",
+            Unit::MilliAmps => "mA",
+            Unit::MilliVolts => "mV",
+            Unit::Millis => "ms",
+            Unit::Baud => "bit/s",
+            Unit::Percent => "%",
+            Unit::Counts => "count",
+        }
+    }
+}
+
+/// The declaration of one object.
+#[derive(Clone, Copy, Debug)]
+pub struct ObjectDef {
+    /// The object.
+    pub obj: Obj,
+    /// First register (the high word of a 32-bit object).
+    pub addr: u16,
+    /// Short name.
+    pub name: &'static str,
+    /// Encoding.
+    pub ty: Type,
+    /// Bus access.
+    pub access: Access,
+    /// Where the value lives.
+    pub storage: Storage,
+    /// Accepted values.
+    pub range: Range,
+    /// Factory value (raw register bits; S32 as two's complement).
+    pub default: u32,
+    /// Unit.
+    pub unit: Unit,
+    /// What the object does, from the manual, with our decisions where it is silent.
+    pub doc: &'static str,
+}
+
+impl ObjectDef {
+    /// Registers the object occupies.
+    pub const fn words(&self) -> u16 {
+        self.ty.words()
+    }
+    /// The register after the object's last one.
+    pub const fn end(&self) -> u32 {
+        self.addr as u32 + self.ty.words() as u32
+    }
+}
+
+/// Why an object access failed: each register map turns this into its own exception code.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ObjError {
+    /// No object at that register.
+    Unknown,
+    /// The object cannot be written.
+    ReadOnly,
+    /// The value is outside the object's range.
+    OutOfRange,
+    /// The value is valid but the drive cannot act on it in its present state.
+    Refused,
+}

@@ -1,0 +1,281 @@
+//! The drive's native objects (seed 000, MSME/PMC007): chapter 5 and appendix 1, with the
+//! corrections of the project's spec notes. Addresses are the native Modbus register numbers.
+//!
+//! Our own objects sit in the vendor range 0x2100..=0x21FF.
+
+use super::{
+    Access::*,
+    ObjectDef, Range,
+    Range::{Any, Bits, Magnitude, Set, Span},
+    Storage::*,
+    Type::*,
+    Unit,
+};
+
+/// Microstep resolutions of 0x600C.
+const MICROSTEPS: &[u32] = &[0, 2, 4, 8, 16, 32, 64, 128, 256];
+/// Encoder resolutions of 0x6054: counts per revolution, or 12 (bits) for the absolute encoder.
+const ENCODER_CPR: &[u32] = &[12, 200, 400, 500, 600, 800, 1000, 1200, 1600];
+/// Modes of 0x6007 (3, encoder follower, needs a special firmware and is refused).
+const MODES: &[u32] = &[0, 1, 2, 4, 5];
+/// A PVT table index or count.
+const PVT_INDEX: Range = Span(0, 1000);
+/// Full signed 32-bit range.
+const S32_ANY: Range = Span(i32::MIN as i64, i32::MAX as i64);
+
+macro_rules! objects {
+    ($(
+        $(#[doc = $doc:literal])*
+        $id:ident @ $addr:literal : $ty:expr, $acc:ident, $sto:ident, $range:expr, default $def:expr, $unit:ident, $name:literal;
+    )*) => {
+        /// An object of the drive. The discriminant is the object's index in [`OBJECTS`].
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+        #[repr(u8)]
+        pub enum Obj {
+            $( $(#[doc = $doc])* $id, )*
+        }
+
+        /// Every object, in register order.
+        pub static OBJECTS: [ObjectDef; Obj::COUNT] = [
+            $( ObjectDef {
+                obj: Obj::$id,
+                addr: $addr,
+                name: $name,
+                ty: $ty,
+                access: $acc,
+                storage: $sto,
+                range: $range,
+                default: ($def as i64) as u32,
+                unit: Unit::$unit,
+                doc: concat!($($doc, "\n"),*),
+            }, )*
+        ];
+
+        impl Obj {
+            /// Every object, in register order.
+            pub const ALL: [Obj; Obj::COUNT] = [ $( Obj::$id, )* ];
+            /// How many objects there are.
+            pub const COUNT: usize = [ $( stringify!($id), )* ].len();
+        }
+    };
+}
+
+impl Obj {
+    /// The object's declaration.
+    pub fn def(self) -> &'static ObjectDef {
+        // `self as usize < COUNT` by construction of the enum; the fallback is never taken.
+        OBJECTS.get(self as usize).unwrap_or(&OBJECTS[0])
+    }
+}
+
+// Declarations are in register order and do not overlap: checked when compiling.
+#[allow(clippy::indexing_slicing)]
+const _: () = {
+    let mut i = 1;
+    while i < OBJECTS.len() {
+        assert!(OBJECTS[i - 1].end() <= OBJECTS[i].addr as u32);
+        assert!(OBJECTS[i].obj as usize == i);
+        i += 1;
+    }
+};
+
+objects! {
+    /// Device name, ASCII, zero padded.
+    DeviceName @ 0x101A: Str(16), Ro, Const, Any, default 0, None, "device name";
+    /// Hardware version, 4 ASCII characters.
+    HardwareVersion @ 0x1022: Str(4), Ro, Const, Any, default 0, None, "hardware version";
+    /// Software version, 4 ASCII characters (`major.minor` as `VMmm`, e.g. `V001`).
+    SoftwareVersion @ 0x1024: Str(4), Ro, Const, Any, default 0, None, "software version";
+    /// Group id for group-synchronous starts by broadcast. 0: in no group.
+    GroupId @ 0x200E: U8, Rw, Rom, Span(0, 127), default 0, None, "group id";
+    /// System control: 1 jump to the boot loader, 2 save every ROM object, 3 restore factory
+    /// settings. The manual prints it read-only; its own examples write it.
+    SystemControl @ 0x200F: U8, Cmd, Ram, Set(&[1, 2, 3]), default 0, None, "system control";
+    /// Node id (slave address). Takes effect after saving (0x200F = 2) and restarting. The object
+    /// table prints a default of 5; §5.3 and every example use 1.
+    NodeId @ 0x2028: U8, Rw, Rom, Span(1, 127), default 1, None, "node id";
+    /// Baud rate. Takes effect after saving and restarting. 57600 is accepted beside the manual's
+    /// list; 51200 is the manual's.
+    BaudRate @ 0x202A: U32, Rw, Rom, Set(&crate::units::Baud::SUPPORTED), default 9600, Baud, "baud rate";
+    /// Parity of the serial line (our object): 0 none (8N1, the manual's setting), 1 even (8E1,
+    /// the Modbus serial-line default), 2 odd. Takes effect after saving and restarting.
+    Parity @ 0x2100: U8, Rw, Rom, Span(0, 2), default 0, None, "parity";
+    /// Error status, write 1 to clear: bit 0 over-temperature, 1 coil A open, 2 coil B open,
+    /// 3 A over-current, 4 B over-current, 5 under-voltage. Moves are refused while any is set.
+    ErrorStatus @ 0x6000: U8, W1c, Live, Bits(0x3F), default 0, None, "error status";
+    /// Controller status, write 1 to clear (bit 3 excepted): bit 0 external stop 1, 1 external
+    /// stop 2, 2 stall, 3 busy (moving), 4 external stop 3, 5 PVT FIFO empty, 6 FIFO below the low
+    /// mark, 7 FIFO above the high mark.
+    ControllerStatus @ 0x6001: U8, W1c, Live, Bits(0xFF), default 0, None, "controller status";
+    /// Direction of relative moves: 0 forward, 1 reverse.
+    Direction @ 0x6002: U8, Rw, Ram, Span(0, 1), default 0, None, "direction";
+    /// Maximum (run) speed. In velocity mode its sign is the direction.
+    MaxSpeed @ 0x6003: S32, Rw, Ram, Span(-200_000, 200_000), default 0, Pps, "maximum speed";
+    /// Relative move: completing the value (low word) starts a move of that many steps in the
+    /// direction of 0x6002.
+    RelativeMove @ 0x6005: U32, Cmd, Ram, Any, default 0, Steps, "relative move";
+    /// Work mode: 0 position, 1 velocity, 2 PVT, 4 profile position (PP), 5 profile velocity (PV).
+    /// 3 (encoder follower) needs a special firmware and is refused.
+    Mode @ 0x6007: U8, Rw, Ram, Set(MODES), default 0, None, "work mode";
+    /// Start speed of the S-curve (chapter 5 prints 0x6006, which collides with 0x6005..6).
+    StartSpeed @ 0x6008: U16, Rw, Rom, Any, default 600, Pps, "start speed";
+    /// Stop speed of the S-curve.
+    StopSpeed @ 0x6009: U16, Rw, Rom, Any, default 600, Pps, "stop speed";
+    /// Acceleration level: 1..8 = 77440, 48410, 27170, 21510, 14080, 10460, 6915, 5210 pps²;
+    /// 0 disables the ramp.
+    AccelLevel @ 0x600A: U8, Rw, Rom, Span(0, 8), default 8, None, "acceleration level";
+    /// Deceleration level, as 0x600A.
+    DecelLevel @ 0x600B: U8, Rw, Rom, Span(0, 8), default 8, None, "deceleration level";
+    /// Microstep resolution: microsteps per full step; 0 is full stepping, like 1.
+    Microsteps @ 0x600C: U16, Rw, Rom, Set(MICROSTEPS), default 0, None, "microstep resolution";
+    /// Phase current (peak of a phase).
+    PhaseCurrent @ 0x600D: U16, Rw, Rom, Span(0, 6000), default 658, MilliAmps, "phase current";
+    /// Motor position. Writing it sets the current position without moving.
+    Position @ 0x600E: S32, Rw, Live, S32_ANY, default 0, Steps, "motor position";
+    /// Current decay: 0 0 %, 1 50 %, 2 75 %, 3 87.5 %.
+    CurrentDecay @ 0x6010: U8, Rw, Rom, Span(0, 3), default 2, None, "current decay";
+    /// Motor enable: 0 frees the motor (current off) and ignores moves until 1.
+    Enable @ 0x6011: U8, Rw, Ram, Span(0, 1), default 1, None, "motor enable";
+    /// External emergency stop enable: bit 0 EXT1, bit 1 EXT2, bit 4 EXT3.
+    ExtStopEnable @ 0x6013: U8, Rw, Rom, Bits(0x13), default 0, None, "external stop enable";
+    /// External stop trigger edge, per bit as 0x6013: 0 falling, 1 rising.
+    ExtStopTrigger @ 0x6014: U8, Rw, Rom, Bits(0x13), default 0, None, "external stop trigger";
+    /// Sensor type: 0 NPN (pull-down on rising, pull-up on falling), 1 PNP (the opposite).
+    SensorType @ 0x6015: U8, Rw, Rom, Span(0, 1), default 0, None, "sensor type";
+    /// PVT operation (chapter 5 prints 0x6016): 0 stop, 1 start, 2 push the point 0x6027..2C
+    /// into the queue, 3 clear the queue.
+    PvtControl @ 0x6017: U8, Cmd, Ram, Span(0, 3), default 0, None, "PVT operation";
+    /// PVT mode: 0 mode 1 (single run), 1 mode 2 (loop), 2 mode 3 (FIFO).
+    PvtMode @ 0x6018: U8, Rw, Ram, Span(0, 2), default 0, None, "PVT mode";
+    /// Maximum number of PVT points.
+    PvtMaxPoints @ 0x6019: U16, Rw, Ram, PVT_INDEX, default 0, None, "PVT maximum points";
+    /// Current PVT point index.
+    PvtPointer @ 0x601A: U16, Ro, Live, PVT_INDEX, default 0, None, "PVT pointer";
+    /// PVT mode 1: first point.
+    PvtM1Start @ 0x601B: U16, Rw, Ram, PVT_INDEX, default 0, None, "PVT mode 1 start index";
+    /// PVT mode 1: last point.
+    PvtM1End @ 0x601C: U16, Rw, Ram, PVT_INDEX, default 0, None, "PVT mode 1 end index";
+    /// PVT mode 2: first point of the acceleration phase.
+    PvtM2AccStart @ 0x601D: U16, Rw, Ram, PVT_INDEX, default 0, None, "PVT mode 2 acceleration start";
+    /// PVT mode 2: last point of the acceleration phase.
+    PvtM2AccEnd @ 0x601E: U16, Rw, Ram, PVT_INDEX, default 0, None, "PVT mode 2 acceleration end";
+    /// PVT mode 2: first point of the loop phase.
+    PvtM2LoopStart @ 0x601F: U16, Rw, Ram, PVT_INDEX, default 0, None, "PVT mode 2 loop start";
+    /// PVT mode 2: last point of the loop phase.
+    PvtM2LoopEnd @ 0x6020: U16, Rw, Ram, PVT_INDEX, default 0, None, "PVT mode 2 loop end";
+    /// PVT mode 2: how many times the loop phase runs.
+    PvtM2Loops @ 0x6021: U16, Rw, Ram, Any, default 0, None, "PVT mode 2 loop count";
+    /// PVT mode 2: first point of the deceleration phase.
+    PvtM2DecStart @ 0x6022: U16, Rw, Ram, PVT_INDEX, default 0, None, "PVT mode 2 deceleration start";
+    /// PVT mode 2: last point of the deceleration phase.
+    PvtM2DecEnd @ 0x6023: U16, Rw, Ram, PVT_INDEX, default 0, None, "PVT mode 2 deceleration end";
+    /// PVT mode 3: FIFO depth.
+    PvtFifoDepth @ 0x6024: U16, Rw, Ram, PVT_INDEX, default 0, None, "PVT FIFO depth";
+    /// PVT mode 3: below this many points the low-mark status bit is set.
+    PvtFifoLow @ 0x6025: U16, Rw, Ram, PVT_INDEX, default 0, None, "PVT FIFO low mark";
+    /// PVT mode 3: above this many points the high-mark status bit is set.
+    PvtFifoHigh @ 0x6026: U16, Rw, Ram, PVT_INDEX, default 0, None, "PVT FIFO high mark";
+    /// PVT point: absolute position.
+    PvtPosition @ 0x6027: S32, Rw, Ram, S32_ANY, default 0, Steps, "PVT position";
+    /// PVT point: velocity.
+    PvtVelocity @ 0x6029: S32, Rw, Ram, S32_ANY, default 0, Pps, "PVT velocity";
+    /// PVT point: time since the previous point.
+    PvtTime @ 0x602B: S32, Rw, Ram, Span(0, i32::MAX as i64), default 0, Millis, "PVT time";
+    /// GPIO direction, 1 output: bits 0-6 GPIO1-7, 11 GPIO8. Bits 7-10 (EXT1-3, ENC2) are
+    /// inputs and cannot be set.
+    GpioDirection @ 0x602E: U16, Rw, Rom, Bits(0x087F), default 0, None, "GPIO direction";
+    /// GPIO configuration, 2 bits a pin (GPIO1 in bits 1-0 .. GPIO8 in 23-22): inputs 0 floating,
+    /// 1 pull-up, 2 pull-down, 3 analog; outputs 0 open drain, 1 push-pull. The manual's range
+    /// 0-0x3FFFF stops short of its own GPIO8 field; we accept all 24 bits.
+    GpioConfig @ 0x602F: U32, Rw, Rom, Bits(0x00FF_FFFF), default 0, None, "GPIO configuration";
+    /// GPIO levels, inverted as the manual says (0 high, 1 low); writes affect outputs only.
+    GpioValue @ 0x6031: U16, Rw, Live, Bits(0x0FFF), default 0, None, "GPIO value";
+    /// OCD1 (appendix only, meaning not documented): kept and returned.
+    Ocd1 @ 0x6034: U8, Rw, Rom, Any, default 0, None, "OCD1";
+    /// Brake output PWM duty.
+    Brake @ 0x6038: U8, Rw, Ram, Span(0, 100), default 0, Percent, "brake control";
+    /// Open-loop stall detection: bits 0-6 the threshold, signed; bits 7-15 reserved.
+    StallParams @ 0x6039: U16, Rw, Rom, Bits(0x7F), default 0, None, "stall parameters";
+    /// EXT1/2/3 debounce: the input is checked again this long after an edge.
+    ExtDebounce @ 0x6042: U16, Rw, Rom, Span(0, 200), default 100, Millis, "EXT debounce";
+    /// Stop on stall (open loop): 1 stops the motor when a stall is detected.
+    StallStop @ 0x6043: U8, Rw, Rom, Span(0, 1), default 0, None, "stop on stall";
+    /// Absolute move: completing the value starts a move to this position.
+    AbsoluteMove @ 0x6044: S32, Cmd, Ram, S32_ANY, default 0, Steps, "absolute move";
+    /// Synchronous positioning: speed.
+    SyncSpeed @ 0x6047: S32, Rw, Ram, S32_ANY, default 0, Pps, "sync speed";
+    /// Synchronous positioning: target position (printed 0x6049..5a).
+    SyncPosition @ 0x6049: S32, Rw, Ram, S32_ANY, default 0, Steps, "sync position";
+    /// Stop: writing 0 stops the motor at once, in any mode.
+    Stop @ 0x6053: U8, Cmd, Ram, Span(0, 0), default 0, None, "stop";
+    /// Encoder resolution: lines per revolution (counted ×4), or 12 for the 12-bit absolute
+    /// encoder. Takes effect after a restart.
+    EncoderCpr @ 0x6054: U16, Rw, Rom, Set(ENCODER_CPR), default 1000, None, "encoder resolution";
+    /// Position saved at the last power loss (see 0x605E).
+    SavedPosition @ 0x6055: S32, Ro, Rom, S32_ANY, default 0, Steps, "power-down position";
+    /// Closed loop: proportional gain.
+    Kp @ 0x6057: U8, Rw, Rom, Span(1, 255), default 8, None, "KP";
+    /// Closed loop: integral gain.
+    Ki @ 0x6058: U8, Rw, Rom, Span(1, 255), default 4, None, "KI";
+    /// Closed loop: derivative gain.
+    Kd @ 0x6059: U8, Rw, Rom, Span(1, 255), default 8, None, "KD";
+    /// Closed loop: prefilter (no larger than the microstep resolution).
+    PreFilter @ 0x605A: U8, Rw, Rom, Span(1, 128), default 32, None, "prefilter";
+    /// Closed loop: postfilter (reserved by the manual).
+    PostFilter @ 0x605B: U16, Rw, Rom, Span(1, 255), default 16, None, "postfilter";
+    /// Closed loop: following error that counts as a stall (chapter 5 prints 0x6028).
+    StallLength @ 0x605C: U16, Rw, Rom, Span(1, 255), default 64, Steps, "stall length";
+    /// Closed loop: 1 enables the torque (servo) loop with PID; 0 is the position loop.
+    TorqueLoop @ 0x605D: U8, Rw, Rom, Span(0, 1), default 0, None, "torque loop enable";
+    /// 1 saves the position when power loss is detected.
+    AutoSave @ 0x605E: U8, Rw, Rom, Span(0, 1), default 0, None, "power-down save enable";
+    /// Analog input, 12-bit ADC code. Read only here: the appendix's RW has no meaning for an input.
+    AnalogIn @ 0x605F: U16, Ro, Live, Span(0, 4095), default 0, None, "analog input";
+    /// Step notification status: bit 0 point 1 passed, bit 1 point 2 passed; write 1 to clear.
+    NotifyStatus @ 0x6061: U8, W1c, Live, Bits(0x03), default 0, None, "step notify status";
+    /// Step notification point 1, absolute.
+    NotifyPos1 @ 0x6062: S32, Rw, Ram, Span(-(i32::MAX as i64), i32::MAX as i64), default 0, Steps, "step notify position 1";
+    /// Step notification point 2, absolute.
+    NotifyPos2 @ 0x6064: S32, Rw, Ram, Span(-(i32::MAX as i64), i32::MAX as i64), default 0, Steps, "step notify position 2";
+    /// PP/PV acceleration.
+    PpAccel @ 0x6067: U32, Rw, Rom, Span(151, i32::MAX as i64), default 32000, Pps2, "PP acceleration";
+    /// PP/PV deceleration.
+    PpDecel @ 0x6069: U32, Rw, Rom, Span(151, i32::MAX as i64), default 32000, Pps2, "PP deceleration";
+    /// PP/PV start speed.
+    PpStartSpeed @ 0x606B: U32, Rw, Rom, Span(151, 300_000), default 600, Pps, "PP start speed";
+    /// PP/PV stop speed.
+    PpStopSpeed @ 0x606D: U32, Rw, Rom, Span(151, 300_000), default 600, Pps, "PP stop speed";
+    /// PP/PV controlword: bit 4 new set-point (rising edge), 5 change immediately, 6 relative,
+    /// 8 halt, 9 change on set-point without stopping.
+    ControlWord @ 0x6070: U16, Rw, Ram, Any, default 0, None, "controlword";
+    /// PP/PV statusword: bit 10 target reached, 12 set-point acknowledge.
+    StatusWord @ 0x6071: U16, Ro, Live, Any, default 0, None, "statusword";
+    /// PP/PV run speed; its sign is the direction.
+    PpRunSpeed @ 0x6072: S32, Rw, Ram, Magnitude(150, 300_000), default 32000, Pps, "PP run speed";
+    /// PP target position.
+    PpTarget @ 0x6074: S32, Rw, Ram, S32_ANY, default 0, Steps, "PP target position";
+    /// Analog positioning: 1 on.
+    AnalogPosEnable @ 0x6077: U8, Rw, Rom, Span(0, 1), default 0, None, "analog positioning enable";
+    /// Analog positioning: ADC code of the minimum position.
+    AnalogStartCode @ 0x6078: U16, Rw, Rom, Span(0, 4096), default 0, None, "analog start code";
+    /// Analog positioning: sampling interval.
+    AnalogInterval @ 0x6079: U16, Rw, Rom, Any, default 100, Millis, "analog interval";
+    /// Analog positioning: position change that triggers a move.
+    AnalogTrigger @ 0x607A: U16, Rw, Rom, Any, default 30, Steps, "analog trigger";
+    /// Analog positioning: position at the start code.
+    AnalogMinPos @ 0x607B: S32, Rw, Rom, S32_ANY, default 0, Steps, "analog minimum position";
+    /// Analog positioning: position at code 4095.
+    AnalogMaxPos @ 0x607D: S32, Rw, Rom, S32_ANY, default 64000, Steps, "analog maximum position";
+    /// Measured speed (closed loop). Read only: it is a measurement.
+    RealSpeed @ 0x607F: S32, Ro, Live, Span(-300_000, 300_000), default 0, Pps, "real-time speed";
+    /// Power-loss behaviour: bit 0 free the motor, bit 1 apply the brake.
+    PowerLossControl @ 0x6082: U16, Rw, Rom, Bits(0x03), default 0, None, "power-loss control";
+    /// Power loss: supply voltage below which the motor is freed.
+    PowerLossFreeVoltage @ 0x6083: U16, Rw, Rom, Any, default 0, MilliVolts, "power-loss free voltage";
+    /// Power loss: supply voltage below which the brake is applied.
+    PowerLossBrakeVoltage @ 0x6084: U16, Rw, Rom, Any, default 0, MilliVolts, "power-loss brake voltage";
+    /// Absolute encoder: zero offset; motor position = encoder position + zero offset.
+    ZeroOffset @ 0x6087: S32, Rw, Ram, S32_ANY, default 0, Counts, "zero calibration";
+    /// Encoder position. Read only: it is a measurement.
+    EncoderPosition @ 0x6089: S32, Ro, Live, S32_ANY, default 0, Counts, "encoder position";
+}

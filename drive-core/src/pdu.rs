@@ -1,0 +1,196 @@
+//! Modbus PDUs: requests borrowed from the receive buffer, and exception codes.
+
+/// Most registers one read may return (0x03, 0x04, read part of 0x17).
+pub const MAX_READ: u16 = 125;
+/// Most registers one 0x10 may write.
+pub const MAX_WRITE: u16 = 123;
+/// Most registers the write part of 0x17 may write.
+pub const MAX_RW_WRITE: u16 = 121;
+
+/// A Modbus exception code.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Exception {
+    /// 01: the function (or diagnostics sub-function) is not supported.
+    IllegalFunction,
+    /// 02: an address in the request has no object, or cannot be accessed that way.
+    IllegalDataAddress,
+    /// 03: a value is out of range, or the request's quantities or lengths are wrong.
+    IllegalDataValue,
+    /// 04: the drive cannot carry out a valid request in its present state.
+    ServerDeviceFailure,
+    /// A code of another vendor's map.
+    Vendor(u8),
+}
+
+impl Exception {
+    /// The code sent on the wire.
+    pub const fn code(self) -> u8 {
+        match self {
+            Exception::IllegalFunction => 1,
+            Exception::IllegalDataAddress => 2,
+            Exception::IllegalDataValue => 3,
+            Exception::ServerDeviceFailure => 4,
+            Exception::Vendor(c) => c,
+        }
+    }
+}
+
+/// Register values as they stand in a request: big-endian 16-bit words.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Words<'a>(&'a [u8]);
+
+impl<'a> Words<'a> {
+    /// Words of `bytes`; a trailing odd byte is ignored.
+    pub fn new(bytes: &'a [u8]) -> Self {
+        Self(bytes)
+    }
+    /// How many words.
+    pub fn len(&self) -> usize {
+        self.0.len() / 2
+    }
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Word `i`.
+    pub fn get(&self, i: usize) -> Option<u16> {
+        let pair = self.0.get(2 * i..2 * i + 2)?;
+        Some(u16::from_be_bytes([*pair.first()?, *pair.get(1)?]))
+    }
+    /// The words in order.
+    pub fn iter(&self) -> impl Iterator<Item = u16> + 'a {
+        self.0
+            .chunks_exact(2)
+            .map(|c| u16::from_be_bytes([c.first().copied().unwrap_or(0), c.get(1).copied().unwrap_or(0)]))
+    }
+}
+
+/// A request PDU, borrowing its data from the receive buffer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Request<'a> {
+    /// 0x03 read holding registers.
+    ReadHolding {
+        /// First register.
+        addr: u16,
+        /// How many (1..=125).
+        qty: u16,
+    },
+    /// 0x04 read input registers (the same objects as 0x03).
+    ReadInput {
+        /// First register.
+        addr: u16,
+        /// How many (1..=125).
+        qty: u16,
+    },
+    /// 0x06 write single register.
+    WriteSingle {
+        /// The register.
+        addr: u16,
+        /// Its new value.
+        value: u16,
+    },
+    /// 0x10 write multiple registers.
+    WriteMultiple {
+        /// First register.
+        addr: u16,
+        /// The values (1..=123).
+        values: Words<'a>,
+    },
+    /// 0x17 read/write multiple registers: the write is done before the read.
+    ReadWrite {
+        /// First register read.
+        read_addr: u16,
+        /// How many read (1..=125).
+        read_qty: u16,
+        /// First register written.
+        write_addr: u16,
+        /// The values written (1..=121).
+        values: Words<'a>,
+    },
+    /// 0x08 diagnostics.
+    Diagnostics {
+        /// Sub-function.
+        sub: u16,
+        /// Its data.
+        data: &'a [u8],
+    },
+    /// 0x2B / 0x0E read device identification.
+    ReadDeviceId {
+        /// 1 basic, 2 regular, 3 extended (stream), 4 one object.
+        code: u8,
+        /// First (or only) object id.
+        object: u8,
+    },
+}
+
+fn be16(b: &[u8], at: usize) -> Option<u16> {
+    Some(u16::from_be_bytes([*b.get(at)?, *b.get(at + 1)?]))
+}
+
+impl<'a> Request<'a> {
+    /// Decodes a PDU (function code and data, no address or CRC).
+    ///
+    /// Unsupported functions are [`Exception::IllegalFunction`]; wrong lengths, byte counts or
+    /// quantities are [`Exception::IllegalDataValue`], as the Modbus state diagrams order them.
+    ///
+    /// ```
+    /// use drive_core::pdu::Request;
+    /// use drive_core::Exception;
+    /// assert_eq!(Request::parse(&[0x03, 0x60, 0x0C, 0x00, 0x02]),
+    ///            Ok(Request::ReadHolding { addr: 0x600C, qty: 2 }));
+    /// assert_eq!(Request::parse(&[0x03, 0x60, 0x0C, 0x00, 126]), Err(Exception::IllegalDataValue));
+    /// assert_eq!(Request::parse(&[0x05, 0x00, 0x01, 0xFF, 0x00]), Err(Exception::IllegalFunction));
+    /// ```
+    pub fn parse(pdu: &'a [u8]) -> Result<Self, Exception> {
+        use Exception::IllegalDataValue as Bad;
+        let (&function, data) = pdu.split_first().ok_or(Exception::IllegalFunction)?;
+        let word = |at| be16(data, at).ok_or(Bad);
+        let fixed = |n: usize| if data.len() == n { Ok(()) } else { Err(Bad) };
+        let read_qty = |q: u16| {
+            if (1..=MAX_READ).contains(&q) { Ok(q) } else { Err(Bad) }
+        };
+        match function {
+            0x03 | 0x04 => {
+                fixed(4)?;
+                let (addr, qty) = (word(0)?, read_qty(word(2)?)?);
+                Ok(if function == 0x03 { Request::ReadHolding { addr, qty } } else { Request::ReadInput { addr, qty } })
+            }
+            0x06 => {
+                fixed(4)?;
+                Ok(Request::WriteSingle { addr: word(0)?, value: word(2)? })
+            }
+            0x10 => {
+                let (addr, qty) = (word(0)?, word(2)?);
+                let values = counted(data, 4, qty, MAX_WRITE)?;
+                Ok(Request::WriteMultiple { addr, values })
+            }
+            0x17 => {
+                let (read_addr, read_qty) = (word(0)?, read_qty(word(2)?)?);
+                let (write_addr, write_qty) = (word(4)?, word(6)?);
+                let values = counted(data, 8, write_qty, MAX_RW_WRITE)?;
+                Ok(Request::ReadWrite { read_addr, read_qty, write_addr, values })
+            }
+            0x08 => {
+                let sub = word(0)?;
+                let rest = data.get(2..).unwrap_or_default();
+                Ok(Request::Diagnostics { sub, data: rest })
+            }
+            0x2B => match data {
+                [0x0E, code, object] => Ok(Request::ReadDeviceId { code: *code, object: *object }),
+                [0x0E, ..] => Err(Bad),
+                _ => Err(Exception::IllegalFunction),
+            },
+            _ => Err(Exception::IllegalFunction),
+        }
+    }
+}
+
+/// The values of a write request whose quantity sits before a byte count at `at`.
+fn counted(data: &[u8], at: usize, qty: u16, max: u16) -> Result<Words<'_>, Exception> {
+    let count = *data.get(at).ok_or(Exception::IllegalDataValue)?;
+    let values = data.get(at + 1..).unwrap_or_default();
+    if !(1..=max).contains(&qty) || usize::from(count) != 2 * usize::from(qty) || values.len() != usize::from(count) {
+        return Err(Exception::IllegalDataValue);
+    }
+    Ok(Words::new(values))
+}

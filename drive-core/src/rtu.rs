@@ -1,0 +1,130 @@
+//! RTU framing by line silence (Modbus over serial line V1.02, §2.5.1.1).
+//!
+//! Bytes arrive with time stamps; a frame ends after t3.5 of silence. A gap of more than t1.5
+//! inside a frame spoils the whole frame, which is then dropped when it ends.
+
+use crate::units::{Baud, Instant};
+
+/// The longest RTU frame: address, 253-byte PDU, CRC.
+pub const MAX_FRAME: usize = 256;
+
+/// What the receiver found wrong with a frame, or that it is fine.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RxError {
+    /// A silence longer than t1.5 between two characters.
+    Gap,
+    /// More than [`MAX_FRAME`] bytes.
+    Overrun,
+}
+
+/// Assembles frames from time-stamped bytes.
+#[derive(Clone, Debug)]
+pub struct Framer {
+    buf: [u8; MAX_FRAME],
+    len: usize,
+    last: Option<Instant>,
+    error: Option<RxError>,
+    t15: u64,
+    t35: u64,
+}
+
+impl Framer {
+    /// An idle receiver timed for `baud`.
+    pub const fn new(baud: Baud) -> Self {
+        Self { buf: [0; MAX_FRAME], len: 0, last: None, error: None, t15: baud.t15_micros(), t35: baud.t35_micros() }
+    }
+
+    /// t3.5 in microseconds.
+    pub const fn t35_micros(&self) -> u64 {
+        self.t35
+    }
+
+    /// Whether the frame being received has ended: the line has been quiet for t3.5 at `now`.
+    pub fn ended(&self, now: Instant) -> bool {
+        matches!(self.last, Some(last) if self.len > 0 && now.since(last) >= self.t35)
+    }
+
+    /// When the frame being received ends if nothing more arrives.
+    pub fn deadline(&self) -> Option<Instant> {
+        match self.last {
+            Some(last) if self.len > 0 => Some(last.plus_micros(self.t35)),
+            _ => None,
+        }
+    }
+
+    /// Adds one byte received at `now`. The caller first takes an ended frame ([`Framer::ended`]).
+    pub fn push(&mut self, now: Instant, byte: u8) {
+        if let Some(last) = self.last
+            && self.len > 0
+            && now.since(last) > self.t15
+        {
+            self.error.get_or_insert(RxError::Gap);
+        }
+        self.last = Some(now);
+        match self.buf.get_mut(self.len) {
+            Some(slot) => {
+                *slot = byte;
+                self.len += 1;
+            }
+            None => {
+                self.error = Some(RxError::Overrun);
+            }
+        }
+    }
+
+    /// The received frame (whatever its state), and what went wrong while receiving it.
+    pub fn frame(&self) -> (&[u8], Option<RxError>) {
+        (self.buf.get(..self.len).unwrap_or_default(), self.error)
+    }
+
+    /// The frame buffer, to process an ended frame in place.
+    pub fn frame_mut(&mut self) -> &mut [u8] {
+        self.buf.get_mut(..self.len).unwrap_or_default()
+    }
+
+    /// Forgets the frame; the next byte starts a new one.
+    pub fn clear(&mut self) {
+        self.len = 0;
+        self.error = None;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(us: u64) -> Instant {
+        Instant::from_micros(us)
+    }
+
+    #[test]
+    fn frame_ends_after_t35_not_before() {
+        let mut f = Framer::new(Baud::FACTORY);
+        f.push(at(0), 1);
+        f.push(at(1000), 2);
+        assert!(!f.ended(at(1000 + 4009)));
+        assert!(f.ended(at(1000 + 4010)));
+        assert_eq!(f.deadline(), Some(at(5010)));
+        assert_eq!(f.frame(), (&[1u8, 2][..], None));
+    }
+
+    #[test]
+    fn gap_over_t15_spoils_frame() {
+        let mut f = Framer::new(Baud::FACTORY);
+        f.push(at(0), 1);
+        f.push(at(1718), 2);
+        assert_eq!(f.frame().1, None);
+        f.push(at(1718 + 1719), 3);
+        assert_eq!(f.frame().1, Some(RxError::Gap));
+    }
+
+    #[test]
+    fn overrun_after_256_bytes() {
+        let mut f = Framer::new(Baud::new(115_200).unwrap_or(Baud::FACTORY));
+        for i in 0..=MAX_FRAME {
+            f.push(at(i as u64), 0);
+        }
+        assert_eq!(f.frame().0.len(), MAX_FRAME);
+        assert_eq!(f.frame().1, Some(RxError::Overrun));
+    }
+}

@@ -1,0 +1,1 @@
+//! Workspace-level tests of the drive: see `tests/`.
