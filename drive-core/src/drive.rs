@@ -347,6 +347,11 @@ impl<M: RegisterMap> Drive<M> {
         counters.slave_messages = counters.slave_messages.wrapping_add(1);
         let pdu = rest.get(..rest.len().saturating_sub(2)).unwrap_or_default();
         let function = pdu.first().copied().unwrap_or(0);
+        if function & 0x80 != 0 {
+            // Codes 0x80-0xFF are exception replies, never requests: there is no way to answer.
+            counters.no_responses = counters.no_responses.wrapping_add(1);
+            return;
+        }
         let request = Request::parse(pdu);
         let mut server = Server { map, state, counters, listen_only };
         if broadcast || *server.listen_only {

@@ -18,7 +18,7 @@ pub fn write_native(out: &mut impl Write) -> fmt::Result {
     )?;
     writeln!(
         out,
-        "- Function codes 0x03 and 0x04 read the same objects. A read or write that touches a register without an object is refused as a whole."
+        "- Function codes 0x03 and 0x04 read the same objects. A read may span the reserved registers between the objects of one page (registers sharing the high byte): they read as 0. A read outside that, or a write that touches a register without an object, is refused as a whole."
     )?;
     writeln!(
         out,

@@ -23,7 +23,11 @@ pub trait RegisterMap {
 /// staged high word (or the present one if none is staged), checks it and commits it. Writing
 /// both words in one 0x10 commits at once. For command objects the commit is the command.
 ///
-/// Exception codes: an address without an object, or a write to a read-only object, is 02; a
+/// A read may span the reserved registers between the objects of one page (0x60xx, say): they
+/// read as 0, so a master can poll a whole block. A write touches objects only.
+///
+/// Exception codes: a read outside a page's objects, a write to a register without an object,
+/// or a write to a read-only object, is 02; a
 /// value out of range, or a request whose lengths are wrong, 03; a valid value the drive cannot
 /// act on now, 04.
 #[derive(Clone, Debug)]
@@ -125,46 +129,49 @@ impl NativeMap {
 
 impl RegisterMap for NativeMap {
     fn read(&self, drive: &DriveState, addr: u16, out: &mut [u8]) -> Result<(), Exception> {
-        let mut reg = u32::from(addr);
+        let qty = (out.len() / 2) as u16;
+        self.check_read(addr, qty)?;
         let mut i = first_at(addr);
-        let mut words = out.chunks_exact_mut(2);
-        let mut pending = words.len();
-        while pending > 0 {
-            let d = OBJECTS.get(i).ok_or(Exception::IllegalDataAddress)?;
-            if u32::from(d.addr) > reg {
-                return Err(Exception::IllegalDataAddress);
+        let mut reg = u32::from(addr);
+        // The object at or after `reg`, and its value, fetched once per object.
+        let mut cur = OBJECTS.get(i);
+        let mut value = cur.map_or(0, |d| drive.read(d.obj));
+        for slot in out.chunks_exact_mut(2) {
+            if cur.is_some_and(|d| d.end() <= reg) {
+                i += 1;
+                cur = OBJECTS.get(i);
+                value = cur.map_or(0, |d| drive.read(d.obj));
             }
-            let value = drive.read(d.obj);
-            while reg < d.end() && pending > 0 {
-                let k = reg - u32::from(d.addr);
-                let w = match d.ty {
-                    Type::U8 | Type::U16 => value as u16,
-                    Type::U32 | Type::S32 => (if k == 0 { value >> 16 } else { value }) as u16,
-                    Type::Str(_) => drive.text_word(d.obj, k as usize),
-                };
-                if let Some(slot) = words.next() {
-                    slot.copy_from_slice(&w.to_be_bytes());
+            let w = match cur {
+                Some(d) if u32::from(d.addr) <= reg => {
+                    let k = reg - u32::from(d.addr);
+                    match d.ty {
+                        Type::U8 | Type::U16 => value as u16,
+                        Type::U32 | Type::S32 => (if k == 0 { value >> 16 } else { value }) as u16,
+                        Type::Str(_) => drive.text_word(d.obj, k as usize),
+                    }
                 }
-                reg += 1;
-                pending -= 1;
-            }
-            i += 1;
+                // A reserved register between two objects of the page.
+                _ => 0,
+            };
+            slot.copy_from_slice(&w.to_be_bytes());
+            reg += 1;
         }
         Ok(())
     }
 
+    /// A read must lie within one page (256 registers sharing the high byte), from the page's
+    /// first object to its last; reserved registers between objects read as 0.
     fn check_read(&self, addr: u16, qty: u16) -> Result<(), Exception> {
         let end = u32::from(addr) + u32::from(qty);
-        let mut reg = u32::from(addr);
-        let mut i = first_at(addr);
-        while reg < end {
-            match OBJECTS.get(i) {
-                Some(d) if u32::from(d.addr) <= reg => reg = d.end(),
-                _ => return Err(Exception::IllegalDataAddress),
-            }
-            i += 1;
+        let page = u32::from(addr) & !0xFF;
+        let first = OBJECTS.partition_point(|d| u32::from(d.addr) < page);
+        let after = OBJECTS.partition_point(|d| u32::from(d.addr) < page + 0x100);
+        let last = after.checked_sub(1).and_then(|l| OBJECTS.get(l));
+        match (OBJECTS.get(first), last) {
+            (Some(lo), Some(hi)) if first < after && u32::from(lo.addr) <= u32::from(addr) && end <= hi.end() => Ok(()),
+            _ => Err(Exception::IllegalDataAddress),
         }
-        Ok(())
     }
 
     fn write(&mut self, drive: &mut DriveState, addr: u16, values: Words<'_>) -> Result<(), Exception> {
