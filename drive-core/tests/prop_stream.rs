@@ -69,11 +69,9 @@ proptest! {
         let mut replies: Vec<Vec<u8>> = Vec::new();
         for c in &chunks {
             let next = now + c.gap;
-            if use_timer {
-                if let Some(d) = drive.deadline().filter(|d| d.as_micros() <= next) {
-                    drive.on_timer(d);
-                    replies.extend(drive.take_reply().map(<[u8]>::to_vec));
-                }
+            if let Some(d) = drive.deadline().filter(|d| use_timer && d.as_micros() <= next) {
+                drive.on_timer(d);
+                replies.extend(drive.take_reply().map(<[u8]>::to_vec));
             }
             now = next;
             drive.on_rx(Instant::from_micros(now), &c.bytes);

@@ -132,11 +132,10 @@ impl RegisterMap for NativeMap {
         let qty = (out.len() / 2) as u16;
         self.check_read(addr, qty)?;
         let mut i = first_at(addr);
-        let mut reg = u32::from(addr);
         // The object at or after `reg`, and its value, fetched once per object.
         let mut cur = OBJECTS.get(i);
         let mut value = cur.map_or(0, |d| drive.read(d.obj));
-        for slot in out.chunks_exact_mut(2) {
+        for (reg, slot) in (u32::from(addr)..).zip(out.chunks_exact_mut(2)) {
             if cur.is_some_and(|d| d.end() <= reg) {
                 i += 1;
                 cur = OBJECTS.get(i);
@@ -155,7 +154,6 @@ impl RegisterMap for NativeMap {
                 _ => 0,
             };
             slot.copy_from_slice(&w.to_be_bytes());
-            reg += 1;
         }
         Ok(())
     }
