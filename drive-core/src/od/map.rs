@@ -1,6 +1,6 @@
 //! Register maps: how the registers of a vendor's protocol reach the drive's objects.
 
-use super::{Access, OBJECTS, Obj, ObjError, Type};
+use super::{Access, OBJECTS, Obj, ObjError, Type, index};
 use crate::drive::DriveState;
 use crate::pdu::{Exception, MAX_WRITE, Words};
 use heapless::Vec;
@@ -57,11 +57,6 @@ pub const fn native_exception(e: ObjError) -> Exception {
     }
 }
 
-/// Index of the first object that ends after register `addr`.
-fn first_at(addr: u16) -> usize {
-    OBJECTS.partition_point(|d| d.end() <= u32::from(addr))
-}
-
 impl NativeMap {
     /// A map with nothing staged.
     pub fn new() -> Self {
@@ -88,7 +83,7 @@ impl NativeMap {
         let mut ops = Vec::new();
         let mut reg = u32::from(addr);
         let end = reg + values.len() as u32;
-        let mut i = first_at(addr);
+        let mut i = index::locate(addr, values.len() as u16).ok_or(ObjError::Unknown)?;
         while reg < end {
             let d = OBJECTS.get(i).ok_or(ObjError::Unknown)?;
             if u32::from(d.addr) > reg {
@@ -129,9 +124,7 @@ impl NativeMap {
 
 impl RegisterMap for NativeMap {
     fn read(&self, drive: &DriveState, addr: u16, out: &mut [u8]) -> Result<(), Exception> {
-        let qty = (out.len() / 2) as u16;
-        self.check_read(addr, qty)?;
-        let mut i = first_at(addr);
+        let mut i = index::locate(addr, (out.len() / 2) as u16).ok_or(Exception::IllegalDataAddress)?;
         // The object at or after `reg`, and its value, fetched once per object.
         let mut cur = OBJECTS.get(i);
         let mut value = cur.map_or(0, |d| drive.read(d.obj));
@@ -161,15 +154,7 @@ impl RegisterMap for NativeMap {
     /// A read must lie within one page (256 registers sharing the high byte), from the page's
     /// first object to its last; reserved registers between objects read as 0.
     fn check_read(&self, addr: u16, qty: u16) -> Result<(), Exception> {
-        let end = u32::from(addr) + u32::from(qty);
-        let page = u32::from(addr) & !0xFF;
-        let first = OBJECTS.partition_point(|d| u32::from(d.addr) < page);
-        let after = OBJECTS.partition_point(|d| u32::from(d.addr) < page + 0x100);
-        let last = after.checked_sub(1).and_then(|l| OBJECTS.get(l));
-        match (OBJECTS.get(first), last) {
-            (Some(lo), Some(hi)) if first < after && u32::from(lo.addr) <= u32::from(addr) && end <= hi.end() => Ok(()),
-            _ => Err(Exception::IllegalDataAddress),
-        }
+        index::locate(addr, qty).map(|_| ()).ok_or(Exception::IllegalDataAddress)
     }
 
     fn write(&mut self, drive: &mut DriveState, addr: u16, values: Words<'_>) -> Result<(), Exception> {

@@ -5,6 +5,7 @@
 //! another table over the same [`Obj`]ects, with its own addresses, units and exception codes.
 
 pub mod doc;
+pub mod index;
 pub mod map;
 pub mod native;
 
