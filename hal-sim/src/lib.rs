@@ -1,0 +1,451 @@
+//! One simulated drive ([`drive_core::Drive`]) on a pseudo-terminal or a TCP port, in real time,
+//! where any Modbus-RTU master can reach it.
+//!
+//! The loop stamps each chunk of bytes it reads with the monotonic time since [`Simulator::run`]
+//! started and hands it to [`Drive::on_rx`]; between chunks it waits (`poll(2)`) until more bytes
+//! come or [`Drive::deadline`] passes (rounded up to the next millisecond), then calls
+//! [`Drive::on_timer`]. Every reply the drive makes is written out at once, in full. So frames end
+//! by line silence (t3.5) exactly as on a serial line, and a master that leaves more than t1.5
+//! between two bytes of a frame gets no answer.
+//!
+//! Over TCP, raw RTU frames travel (address, PDU, CRC: no MBAP header). One master connection is
+//! served at a time, the next one when it closes; a frame left unfinished by a master that goes
+//! away ends with it (its reply, if any, is dropped). The drive and its state outlive connections.
+//!
+//! ```
+//! use std::io::{Read, Write};
+//! use std::time::Duration;
+//! use hal_sim::{Endpoint, SimOptions, Simulator};
+//!
+//! let sim = Simulator::bind(SimOptions { endpoint: Endpoint::Tcp("127.0.0.1:0".into()), ..Default::default() })?;
+//! let at = sim.endpoint().to_owned(); // "127.0.0.1:PORT", the port the system picked
+//! sim.spawn();
+//! let mut master = std::net::TcpStream::connect(&at)?;
+//! master.set_read_timeout(Some(Duration::from_secs(3)))?;
+//! // Read 0x600C..0x600D (microstep resolution, phase current) from node 1.
+//! master.write_all(&[0x01, 0x03, 0x60, 0x0C, 0x00, 0x02, 0x1A, 0x08])?;
+//! let mut reply = [0; 9];
+//! master.read_exact(&mut reply)?;
+//! assert_eq!(reply, [0x01, 0x03, 0x04, 0x00, 0x00, 0x02, 0x92, 0x7A, 0xFE]);
+//! # Ok::<(), std::io::Error>(())
+//! ```
+
+use std::convert::Infallible;
+use std::fs::{self, File};
+use std::io::{self, ErrorKind, Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::os::fd::{AsFd, BorrowedFd, OwnedFd};
+use std::path::{Path, PathBuf};
+use std::thread::{self, JoinHandle};
+use std::time::Duration;
+
+use drive_core::od::{Obj, Range};
+use drive_core::{Baud, Drive, DriveConfig, Instant, SlaveAddr};
+use nix::errno::Errno;
+use nix::fcntl::{FcntlArg, OFlag, fcntl};
+use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
+use nix::pty::openpty;
+use nix::sys::termios::{FlushArg, SetArg, cfmakeraw, tcflush, tcgetattr, tcsetattr};
+use nix::unistd::ttyname;
+
+/// Where masters reach the simulated drive.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Endpoint {
+    /// A new pseudo-terminal, raw (8N1, no echo); the endpoint is the path of its slave end
+    /// (`/dev/pts/N`), which masters open and close as they like.
+    Pty {
+        /// Also put a symlink here pointing to the pseudo-terminal, replacing a symlink already
+        /// there (never another kind of file).
+        link: Option<PathBuf>,
+    },
+    /// A TCP listener at `HOST:PORT` (port 0: one the system picks); each connection carries raw
+    /// RTU frames with their CRC and no MBAP header.
+    Tcp(String),
+}
+
+impl Default for Endpoint {
+    fn default() -> Self {
+        Self::Pty { link: None }
+    }
+}
+
+/// How to start a [`Simulator`]. The default: a pseudo-terminal and the drive's factory settings.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct SimOptions {
+    /// Where masters reach the drive.
+    pub endpoint: Endpoint,
+    /// The slave address, instead of the drive's node id (factory 1). The drive takes 1-127.
+    pub address: Option<u8>,
+    /// The baud rate the frame timing (t1.5, t3.5) follows, instead of the drive's (factory 9600):
+    /// one of [`Baud::SUPPORTED`].
+    pub baud: Option<u32>,
+}
+
+/// One simulated drive with its endpoint open, ready to run.
+#[derive(Debug)]
+pub struct Simulator {
+    drive: Drive,
+    port: Port,
+    endpoint: String,
+}
+
+/// The open endpoint.
+#[derive(Debug)]
+enum Port {
+    /// The master end of the pseudo-terminal (non-blocking), and a slave fd kept open so that
+    /// masters can come and go (with no slave open, reads on the master end fail with EIO).
+    Pty {
+        master: File,
+        slave: OwnedFd,
+    },
+    Tcp(TcpListener),
+}
+
+impl Simulator {
+    /// Builds the drive and opens the endpoint: a new pseudo-terminal set raw (and the symlink),
+    /// or a bound TCP listener. An address or baud rate the drive does not take is an
+    /// [`ErrorKind::InvalidInput`] error.
+    pub fn bind(opts: SimOptions) -> io::Result<Simulator> {
+        let drive = Drive::new(drive_config(&opts)?);
+        let (port, endpoint) = match opts.endpoint {
+            Endpoint::Pty { link } => open_pty(link.as_deref())?,
+            Endpoint::Tcp(addr) => {
+                let listener = TcpListener::bind(&addr).map_err(|e| annotate(e, &addr))?;
+                let at = listener.local_addr()?.to_string();
+                (Port::Tcp(listener), at)
+            }
+        };
+        Ok(Simulator { drive, port, endpoint })
+    }
+
+    /// Where masters reach the drive: `/dev/pts/N`, or the bound `HOST:PORT`.
+    pub fn endpoint(&self) -> &str {
+        &self.endpoint
+    }
+
+    /// The drive, as it will start.
+    pub fn drive(&self) -> &Drive {
+        &self.drive
+    }
+
+    /// The drive, to set up before it runs (its state, its status); the loop owns it then.
+    pub fn drive_mut(&mut self) -> &mut Drive {
+        &mut self.drive
+    }
+
+    /// Runs the drive on a new thread, forever (see [`Simulator::run`]).
+    pub fn spawn(self) -> JoinHandle<io::Result<Infallible>> {
+        thread::spawn(move || self.run())
+    }
+
+    /// Runs the drive on this thread, serving one master after another. Bad frames, masters that
+    /// go away and failed reads or writes do not end it: it returns only if `poll(2)` fails.
+    pub fn run(self) -> io::Result<Infallible> {
+        let Simulator { mut drive, port, .. } = self;
+        let clock = Clock(std::time::Instant::now());
+        match port {
+            Port::Pty { master, slave } => {
+                let mut line = PtyLine { master, slave };
+                loop {
+                    serve(&mut drive, &clock, &mut line)?;
+                }
+            }
+            Port::Tcp(listener) => loop {
+                match listener.accept() {
+                    Ok((stream, _)) => {
+                        serve(&mut drive, &clock, &mut TcpLine::new(stream))?;
+                        settle(&mut drive, &clock);
+                    }
+                    Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                    Err(e) => {
+                        // Out of fds, a connection aborted before accept: wait and try again.
+                        eprintln!("hal-sim: accept: {e}");
+                        thread::sleep(Duration::from_millis(100));
+                    }
+                }
+            },
+        }
+    }
+}
+
+/// The drive configuration `opts` ask for, if the drive takes it.
+fn drive_config(opts: &SimOptions) -> io::Result<DriveConfig> {
+    let address = match opts.address {
+        None => None,
+        Some(a) => {
+            let node_id = Obj::NodeId.def();
+            let takes = node_id.range.accepts(node_id.ty, u32::from(a));
+            let range = match node_id.range {
+                Range::Span(lo, hi) => format!(" (the drive takes {lo}-{hi})"),
+                _ => String::new(),
+            };
+            let addr = SlaveAddr::new(a).filter(|_| takes);
+            Some(addr.ok_or_else(|| invalid(format!("invalid slave address {a}{range}")))?)
+        }
+    };
+    let baud = match opts.baud {
+        None => None,
+        Some(b) => {
+            let rates = Baud::SUPPORTED.map(|r| r.to_string()).join(", ");
+            Some(Baud::new(b).ok_or_else(|| invalid(format!("unsupported baud rate {b} (the drive takes {rates})")))?)
+        }
+    };
+    Ok(DriveConfig { address, baud, ..Default::default() })
+}
+
+fn invalid(msg: String) -> io::Error {
+    io::Error::new(ErrorKind::InvalidInput, msg)
+}
+
+/// `e`, with what it was about in front of its message.
+fn annotate(e: io::Error, what: impl std::fmt::Display) -> io::Error {
+    io::Error::new(e.kind(), format!("{what}: {e}"))
+}
+
+/// Opens a raw pseudo-terminal and, with `link`, the symlink to it.
+fn open_pty(link: Option<&Path>) -> io::Result<(Port, String)> {
+    let pty = openpty(None, None)?;
+    let mut termios = tcgetattr(&pty.slave)?;
+    cfmakeraw(&mut termios);
+    tcsetattr(&pty.slave, SetArg::TCSANOW, &termios)?;
+    let flags = OFlag::from_bits_retain(fcntl(&pty.master, FcntlArg::F_GETFL)?);
+    fcntl(&pty.master, FcntlArg::F_SETFL(flags | OFlag::O_NONBLOCK))?;
+    let path = ttyname(&pty.slave)?;
+    if let Some(link) = link {
+        make_link(&path, link).map_err(|e| annotate(e, link.display()))?;
+    }
+    let endpoint = path.to_string_lossy().into_owned();
+    Ok((Port::Pty { master: File::from(pty.master), slave: pty.slave }, endpoint))
+}
+
+/// Puts a symlink at `link` to `target`, replacing a symlink (but nothing else) already there.
+fn make_link(target: &Path, link: &Path) -> io::Result<()> {
+    match fs::symlink_metadata(link) {
+        Ok(meta) if meta.file_type().is_symlink() => fs::remove_file(link)?,
+        Ok(_) => return Err(io::Error::new(ErrorKind::AlreadyExists, "exists and is not a symlink")),
+        Err(e) if e.kind() == ErrorKind::NotFound => {}
+        Err(e) => return Err(e),
+    }
+    std::os::unix::fs::symlink(target, link)
+}
+
+/// Monotonic time since the loop started.
+struct Clock(std::time::Instant);
+
+impl Clock {
+    fn now(&self) -> Instant {
+        Instant::from_micros(u64::try_from(self.0.elapsed().as_micros()).unwrap_or(u64::MAX))
+    }
+}
+
+/// How long `poll(2)` may wait at `now`: until `deadline` (rounded up to the next millisecond, so
+/// the deadline has passed when it returns), or for ever without one.
+fn poll_timeout(deadline: Option<Instant>, now: Instant) -> PollTimeout {
+    match deadline {
+        None => PollTimeout::NONE,
+        Some(d) => PollTimeout::try_from(d.since(now).div_ceil(1000)).unwrap_or(PollTimeout::MAX),
+    }
+}
+
+/// What a read from a line found.
+enum Recv {
+    /// This many bytes.
+    Data(usize),
+    /// Nothing for now.
+    Nothing,
+    /// The master went away for good.
+    Closed,
+}
+
+/// A byte stream to one master (or to whoever opens the pseudo-terminal).
+trait Line: AsFd {
+    /// Reads what has arrived.
+    fn recv(&mut self, buf: &mut [u8]) -> Recv;
+    /// Writes a reply in full; an error means the master went away.
+    fn send(&mut self, frame: &[u8]) -> io::Result<()>;
+}
+
+/// Runs `drive` on `line` until the master goes away (`Ok`) or `poll(2)` fails.
+fn serve(drive: &mut Drive, clock: &Clock, line: &mut impl Line) -> io::Result<()> {
+    let mut buf = [0u8; 512];
+    loop {
+        let ready = {
+            let mut fds = [PollFd::new(line.as_fd(), PollFlags::POLLIN)];
+            match poll(&mut fds, poll_timeout(drive.deadline(), clock.now())) {
+                Ok(0) | Err(Errno::EINTR) => false,
+                Ok(_) => true,
+                Err(e) => return Err(e.into()),
+            }
+        };
+        if ready {
+            match line.recv(&mut buf) {
+                Recv::Data(n) => {
+                    drive.on_rx(clock.now(), buf.get(..n).unwrap_or_default());
+                    if let Some(reply) = drive.take_reply() {
+                        // A frame that had ended before these bytes came was answered first.
+                        if line.send(reply).is_err() {
+                            return Ok(());
+                        }
+                    }
+                }
+                Recv::Nothing => {}
+                Recv::Closed => return Ok(()),
+            }
+        }
+        drive.on_timer(clock.now());
+        if let Some(reply) = drive.take_reply()
+            && line.send(reply).is_err()
+        {
+            return Ok(());
+        }
+    }
+}
+
+/// Ends the frame a master left unfinished when it went away; its reply has nowhere to go.
+fn settle(drive: &mut Drive, clock: &Clock) {
+    while let Some(deadline) = drive.deadline() {
+        let now = clock.now();
+        match deadline.since(now) {
+            0 => {
+                drive.on_timer(now);
+                let _ = drive.take_reply();
+            }
+            wait => thread::sleep(Duration::from_micros(wait)),
+        }
+    }
+}
+
+/// The master end of the pseudo-terminal.
+struct PtyLine {
+    master: File,
+    slave: OwnedFd,
+}
+
+impl AsFd for PtyLine {
+    fn as_fd(&self) -> BorrowedFd<'_> {
+        self.master.as_fd()
+    }
+}
+
+impl Line for PtyLine {
+    fn recv(&mut self, buf: &mut [u8]) -> Recv {
+        match self.master.read(buf) {
+            Ok(n) if n > 0 => Recv::Data(n),
+            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::Interrupted) => Recv::Nothing,
+            other => {
+                // EIO (no slave open: cannot happen while we hold one) or end of file: poll(2)
+                // may report this at once again, so do not spin.
+                if let Err(e) = other
+                    && e.raw_os_error() != Some(Errno::EIO as i32)
+                {
+                    eprintln!("hal-sim: pty read: {e}");
+                }
+                thread::sleep(Duration::from_millis(1));
+                Recv::Nothing
+            }
+        }
+    }
+
+    fn send(&mut self, frame: &[u8]) -> io::Result<()> {
+        // Replies that no master read are stale, as bytes sent on a line nobody listens to: drop
+        // them, so that they neither reach the next master nor fill the buffer and block us.
+        let _ = tcflush(&self.slave, FlushArg::TCIFLUSH);
+        let mut rest = frame;
+        let mut waits = 0;
+        while !rest.is_empty() {
+            match self.master.write(rest) {
+                Ok(0) => break,
+                Ok(n) => rest = rest.get(n..).unwrap_or_default(),
+                Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                Err(e) if e.kind() == ErrorKind::WouldBlock && waits < 100 => {
+                    waits += 1;
+                    thread::sleep(Duration::from_micros(100));
+                }
+                Err(e) => {
+                    eprintln!("hal-sim: reply dropped: {e}");
+                    break;
+                }
+            }
+        }
+        // Whoever has the terminal open may read or not; the line itself never goes away.
+        Ok(())
+    }
+}
+
+/// One TCP connection.
+struct TcpLine {
+    stream: TcpStream,
+}
+
+impl TcpLine {
+    fn new(stream: TcpStream) -> Self {
+        // A reply is one small write; a master that stops reading is dropped after a while.
+        let _ = stream.set_nodelay(true);
+        let _ = stream.set_write_timeout(Some(Duration::from_secs(1)));
+        Self { stream }
+    }
+}
+
+impl AsFd for TcpLine {
+    fn as_fd(&self) -> BorrowedFd<'_> {
+        self.stream.as_fd()
+    }
+}
+
+impl Line for TcpLine {
+    fn recv(&mut self, buf: &mut [u8]) -> Recv {
+        match self.stream.read(buf) {
+            Ok(0) => Recv::Closed,
+            Ok(n) => Recv::Data(n),
+            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::Interrupted) => Recv::Nothing,
+            Err(_) => Recv::Closed,
+        }
+    }
+
+    fn send(&mut self, frame: &[u8]) -> io::Result<()> {
+        self.stream.write_all(frame)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(us: u64) -> Instant {
+        Instant::from_micros(us)
+    }
+
+    #[test]
+    fn poll_waits_until_the_deadline_has_passed() {
+        assert_eq!(poll_timeout(None, at(0)), PollTimeout::NONE);
+        assert_eq!(poll_timeout(Some(at(4010)), at(0)), PollTimeout::try_from(5u64).unwrap());
+        assert_eq!(poll_timeout(Some(at(4010)), at(3010)), PollTimeout::try_from(1u64).unwrap());
+        assert_eq!(poll_timeout(Some(at(4010)), at(4010)), PollTimeout::ZERO);
+        assert_eq!(poll_timeout(Some(at(4010)), at(9000)), PollTimeout::ZERO);
+    }
+
+    #[test]
+    fn options_reach_the_drive() {
+        let opts = SimOptions { address: Some(7), baud: Some(115_200), ..Default::default() };
+        let config = drive_config(&opts).unwrap();
+        let drive = Drive::new(config);
+        assert_eq!(drive.address().get(), 7);
+        assert_eq!(drive.baud().get(), 115_200);
+        let factory = Drive::new(drive_config(&SimOptions::default()).unwrap());
+        assert_eq!((factory.address().get(), factory.baud().get()), (1, 9600));
+    }
+
+    #[test]
+    fn options_the_drive_refuses() {
+        for opts in [
+            SimOptions { baud: Some(1200), ..Default::default() },
+            SimOptions { address: Some(0), ..Default::default() },
+            SimOptions { address: Some(128), ..Default::default() },
+        ] {
+            let e = drive_config(&opts).unwrap_err();
+            assert_eq!(e.kind(), ErrorKind::InvalidInput, "{opts:?}");
+        }
+        let e = drive_config(&SimOptions { baud: Some(1200), ..Default::default() }).unwrap_err();
+        assert!(e.to_string().contains("1200") && e.to_string().contains("9600"), "{e}");
+    }
+}

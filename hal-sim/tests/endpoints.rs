@@ -1,0 +1,317 @@
+//! The simulator as masters see it: the binary's command line and first line, raw RTU frames over
+//! TCP and over the pseudo-terminal, masters that come and go, frames that get no answer.
+
+use std::fs::{File, OpenOptions};
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::os::fd::AsFd;
+use std::os::unix::fs::OpenOptionsExt;
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::thread;
+use std::time::{Duration, Instant};
+
+use drive_core::crc::crc16;
+use hal_sim::{Endpoint, SimOptions, Simulator};
+use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
+use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
+
+/// How long anything may take before a test gives up.
+const LIMIT: Duration = Duration::from_secs(5);
+/// How long a frame that gets no answer is listened to.
+const QUIET: Duration = Duration::from_millis(300);
+
+/// Read 0x600C..0x600D (microstep resolution, phase current) from node 1.
+const READ: [u8; 8] = [0x01, 0x03, 0x60, 0x0C, 0x00, 0x02, 0x1A, 0x08];
+/// Its answer with factory settings: resolution 0, 658 mA.
+const REPLY: [u8; 9] = [0x01, 0x03, 0x04, 0x00, 0x00, 0x02, 0x92, 0x7A, 0xFE];
+
+/// `body` with its CRC appended.
+fn frame(body: &[u8]) -> Vec<u8> {
+    let mut f = body.to_vec();
+    f.extend_from_slice(&crc16(body).to_le_bytes());
+    f
+}
+
+/// The simulator binary, killed when dropped.
+struct Sim {
+    child: Child,
+    endpoint: String,
+}
+
+impl Drop for Sim {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Starts the binary with `args` and reads its first line, `listening on <endpoint>`.
+fn start(args: &[&str]) -> Sim {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_hal-sim"))
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("spawn hal-sim");
+    let stdout = child.stdout.take().expect("stdout");
+    let mut sim = Sim { child, endpoint: String::new() };
+    let (tx, rx) = mpsc::channel();
+    thread::spawn(move || {
+        let mut line = String::new();
+        let _ = BufReader::new(stdout).read_line(&mut line);
+        let _ = tx.send(line);
+    });
+    let line = rx.recv_timeout(LIMIT).expect("first line in time");
+    let endpoint = line.strip_suffix('\n').and_then(|l| l.strip_prefix("listening on ")).expect("listening on ..");
+    sim.endpoint = endpoint.to_owned();
+    sim
+}
+
+/// The simulator library on a thread of this process.
+fn start_in_process(opts: SimOptions) -> String {
+    let sim = Simulator::bind(opts).expect("bind");
+    let at = sim.endpoint().to_owned();
+    sim.spawn();
+    at
+}
+
+fn connect(at: &str) -> TcpStream {
+    let s = TcpStream::connect(at).expect("connect");
+    s.set_read_timeout(Some(LIMIT)).expect("read timeout");
+    s
+}
+
+/// Opens the pseudo-terminal as a serial master would, raw.
+fn open_pts(path: impl AsRef<Path>) -> File {
+    let f = OpenOptions::new().read(true).write(true).custom_flags(nix::libc::O_NOCTTY).open(path).expect("open pts");
+    let mut t = tcgetattr(&f).expect("tcgetattr");
+    cfmakeraw(&mut t);
+    tcsetattr(&f, SetArg::TCSANOW, &t).expect("tcsetattr");
+    f
+}
+
+/// Reads up to `n` bytes, for at most `limit`: what came.
+fn read_for(line: &mut (impl Read + AsFd), n: usize, limit: Duration) -> Vec<u8> {
+    let end = Instant::now() + limit;
+    let mut got = Vec::new();
+    while got.len() < n {
+        let left = end.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            break;
+        }
+        let ready = {
+            let mut fds = [PollFd::new(line.as_fd(), PollFlags::POLLIN)];
+            let ms = PollTimeout::try_from(left.as_millis().max(1)).expect("timeout");
+            poll(&mut fds, ms).expect("poll") > 0
+        };
+        if ready {
+            let mut buf = vec![0; n - got.len()];
+            let k = line.read(&mut buf).expect("read");
+            if k == 0 {
+                break;
+            }
+            got.extend_from_slice(&buf[..k]);
+        }
+    }
+    got
+}
+
+/// Sends `request` and returns the `n`-byte answer.
+fn ask(line: &mut (impl Read + Write + AsFd), request: &[u8], n: usize) -> Vec<u8> {
+    line.write_all(request).expect("send");
+    let got = read_for(line, n, LIMIT);
+    assert_eq!(got.len(), n, "answer to {request:02X?} in time, got {got:02X?}");
+    got
+}
+
+/// Sends `request` and checks that nothing comes back.
+fn ask_silence(line: &mut (impl Read + Write + AsFd), request: &[u8]) {
+    line.write_all(request).expect("send");
+    let got = read_for(line, 1, QUIET);
+    assert!(got.is_empty(), "no answer to {request:02X?}, got {got:02X?}");
+}
+
+/// Sets 0x600C (microstep resolution) to `value` with 0x06 and checks the echo.
+fn set_resolution(line: &mut (impl Read + Write + AsFd), value: u8) {
+    let request = frame(&[0x01, 0x06, 0x60, 0x0C, 0x00, value]);
+    assert_eq!(ask(line, &request, 8), request, "0x06 echoes the request");
+}
+
+/// Reads 0x600C alone.
+fn resolution(line: &mut (impl Read + Write + AsFd)) -> u16 {
+    let reply = ask(line, &frame(&[0x01, 0x03, 0x60, 0x0C, 0x00, 0x01]), 7);
+    assert_eq!(reply[..3], [0x01, 0x03, 0x02]);
+    assert_eq!(crc16(&reply[..5]).to_le_bytes(), reply[5..]);
+    u16::from_be_bytes([reply[3], reply[4]])
+}
+
+#[test]
+fn tcp_answers_with_factory_settings() {
+    let sim = start(&["--tcp", "127.0.0.1:0"]);
+    assert!(sim.endpoint.starts_with("127.0.0.1:") && !sim.endpoint.ends_with(":0"), "{}", sim.endpoint);
+    let mut master = connect(&sim.endpoint);
+    assert_eq!(ask(&mut master, &READ, REPLY.len()), REPLY);
+}
+
+#[test]
+fn pty_answers_with_factory_settings() {
+    let sim = start(&[]);
+    assert!(sim.endpoint.starts_with("/dev/pts/"), "{}", sim.endpoint);
+    let mut master = open_pts(&sim.endpoint);
+    assert_eq!(ask(&mut master, &READ, REPLY.len()), REPLY);
+}
+
+#[test]
+fn pty_link_replaces_a_stale_one_and_masters_come_and_go() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let link = dir.path().join("drive");
+    std::os::unix::fs::symlink("/dev/pts/does-not-exist", &link).expect("stale link");
+    let sim = start(&["--pty", link.to_str().expect("utf-8 path")]);
+    assert_eq!(std::fs::read_link(&link).expect("link"), Path::new(&sim.endpoint));
+
+    let mut first = open_pts(&link);
+    assert_eq!(ask(&mut first, &READ, REPLY.len()), REPLY);
+    set_resolution(&mut first, 32);
+    drop(first);
+    // A second master finds the drive as the first one left it.
+    let mut second = open_pts(&link);
+    assert_eq!(resolution(&mut second), 32);
+    drop(second);
+    let mut third = open_pts(&sim.endpoint);
+    assert_eq!(resolution(&mut third), 32);
+}
+
+#[test]
+fn pty_link_never_replaces_a_file() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("drive");
+    std::fs::write(&path, "keep me").expect("file");
+    let out = Command::new(env!("CARGO_BIN_EXE_hal-sim"))
+        .args(["--pty", path.to_str().expect("utf-8 path")])
+        .stdin(Stdio::null())
+        .output()
+        .expect("run hal-sim");
+    assert_eq!(out.status.code(), Some(1));
+    assert!(out.stdout.is_empty());
+    assert_eq!(std::fs::read_to_string(&path).expect("still a file"), "keep me");
+}
+
+#[test]
+fn tcp_masters_come_and_go() {
+    let sim = start(&["--tcp", "127.0.0.1:0"]);
+    let mut first = connect(&sim.endpoint);
+    set_resolution(&mut first, 16);
+    drop(first);
+    let mut second = connect(&sim.endpoint);
+    assert_eq!(resolution(&mut second), 16);
+    drop(second);
+    let mut third = connect(&sim.endpoint);
+    assert_eq!(ask(&mut third, &READ, REPLY.len()), frame(&[0x01, 0x03, 0x04, 0x00, 0x10, 0x02, 0x92]));
+}
+
+#[test]
+fn bad_crc_gets_no_answer_and_the_next_frame_does() {
+    let mut bad = READ;
+    bad[7] ^= 0x01;
+    let sim = start(&["--tcp", "127.0.0.1:0"]);
+    let mut master = connect(&sim.endpoint);
+    ask_silence(&mut master, &bad);
+    assert_eq!(ask(&mut master, &READ, REPLY.len()), REPLY);
+
+    let sim = start(&[]);
+    let mut master = open_pts(&sim.endpoint);
+    ask_silence(&mut master, &bad);
+    assert_eq!(ask(&mut master, &READ, REPLY.len()), REPLY);
+}
+
+#[test]
+fn address_option_and_other_slaves() {
+    let sim = start(&["--tcp", "127.0.0.1:0", "--address", "5", "--baud", "115200"]);
+    let mut master = connect(&sim.endpoint);
+    ask_silence(&mut master, &READ);
+    let reply = ask(&mut master, &frame(&[0x05, 0x03, 0x60, 0x0C, 0x00, 0x02]), 9);
+    assert_eq!(reply, frame(&[0x05, 0x03, 0x04, 0x00, 0x00, 0x02, 0x92]));
+    // The options go through the drive's own objects: node id 0x2028, baud rate 0x202A..B.
+    assert_eq!(ask(&mut master, &frame(&[0x05, 0x03, 0x20, 0x28, 0x00, 0x01]), 7), frame(&[0x05, 0x03, 0x02, 0, 5]));
+    let baud = ask(&mut master, &frame(&[0x05, 0x03, 0x20, 0x2A, 0x00, 0x02]), 9);
+    assert_eq!(baud, frame(&[0x05, 0x03, 0x04, 0x00, 0x01, 0xC2, 0x00]));
+}
+
+/// Runs the binary with `args`, which it must refuse with exit code 2 before listening.
+fn refused(args: &[&str]) -> String {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_hal-sim"))
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn hal-sim");
+    let end = Instant::now() + LIMIT;
+    let status = loop {
+        if let Some(status) = child.try_wait().expect("wait") {
+            break status;
+        }
+        if Instant::now() > end {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("hal-sim {args:?} still running");
+        }
+        thread::sleep(Duration::from_millis(10));
+    };
+    let mut out = String::new();
+    let mut err = String::new();
+    child.stdout.take().expect("stdout").read_to_string(&mut out).expect("stdout");
+    child.stderr.take().expect("stderr").read_to_string(&mut err).expect("stderr");
+    assert_eq!(status.code(), Some(2), "hal-sim {args:?}: {err}");
+    assert_eq!(out, "", "nothing on stdout");
+    err
+}
+
+#[test]
+fn bad_command_lines_exit_2() {
+    let err = refused(&["--baud", "1200"]);
+    assert!(err.contains("unsupported baud rate 1200") && err.contains("115200"), "{err}");
+    let err = refused(&["--address", "0"]);
+    assert!(err.contains("invalid slave address 0"), "{err}");
+    refused(&["--address", "300"]);
+    refused(&["--tcp", "127.0.0.1:0", "--pty", "/tmp/x"]);
+}
+
+#[test]
+fn library_serves_on_a_thread() {
+    let at = start_in_process(SimOptions { endpoint: Endpoint::Tcp("127.0.0.1:0".into()), ..Default::default() });
+    let mut master = connect(&at);
+    assert_eq!(ask(&mut master, &READ, REPLY.len()), REPLY);
+
+    let at = start_in_process(SimOptions::default());
+    let mut master = open_pts(&at);
+    assert_eq!(ask(&mut master, &READ, REPLY.len()), REPLY);
+}
+
+#[test]
+fn a_frame_left_unfinished_ends_with_its_connection() {
+    let at = start_in_process(SimOptions { endpoint: Endpoint::Tcp("127.0.0.1:0".into()), ..Default::default() });
+    let mut first = connect(&at);
+    first.write_all(&READ[..5]).expect("half a frame");
+    drop(first);
+    // The next master's frame follows at once, yet is not glued to the half frame before it.
+    let mut second = connect(&at);
+    assert_eq!(ask(&mut second, &READ, REPLY.len()), REPLY);
+}
+
+#[test]
+fn drive_can_be_set_up_before_it_runs() {
+    let mut sim =
+        Simulator::bind(SimOptions { endpoint: Endpoint::Tcp("127.0.0.1:0".into()), address: Some(9), baud: None })
+            .expect("bind");
+    assert_eq!(sim.drive().address().get(), 9);
+    sim.drive_mut().state_mut().status_mut().position = -2;
+    let at = sim.endpoint().to_owned();
+    sim.spawn();
+    let mut master = connect(&at);
+    // Motor position, 0x600E..F, high word first.
+    let reply = ask(&mut master, &frame(&[0x09, 0x03, 0x60, 0x0E, 0x00, 0x02]), 9);
+    assert_eq!(reply, frame(&[0x09, 0x03, 0x04, 0xFF, 0xFF, 0xFF, 0xFE]));
+}
