@@ -16,7 +16,9 @@ fn main() -> ExitCode {
     let task = std::env::args().nth(1).unwrap_or_default();
     let result = match task.as_str() {
         "ci" => ci(),
-        "docs" => run(cargo().args(["test", "-q", "-p", "drive-core", "--test", "registers_doc"]).env("UPDATE_DOCS", "1")),
+        "docs" => {
+            run(cargo().args(["test", "-q", "-p", "drive-core", "--test", "registers_doc"]).env("UPDATE_DOCS", "1"))
+        }
         "masters" => masters(),
         "firmware" => firmware(),
         _ => Err(format!("usage: cargo xtask <ci|docs|masters|firmware>, not {task:?}")),
@@ -56,7 +58,18 @@ fn ci() -> Result<(), String> {
     step("clippy (host)");
     run(cargo().args(["clippy", "--workspace", "--all-targets", "--", "-D", "warnings"]))?;
     step("clippy (firmware)");
-    run(cargo().args(["clippy", "-p", "firmware", "--target", TARGET, "--profile", "firmware", "--", "-D", "warnings"]))?;
+    run(cargo().args([
+        "clippy",
+        "-p",
+        "firmware",
+        "--target",
+        TARGET,
+        "--profile",
+        "firmware",
+        "--",
+        "-D",
+        "warnings",
+    ]))?;
     step("tests (host, including the register reference and tokio-modbus)");
     run(cargo().args(["test", "--workspace"]))?;
     step("firmware build and size");
@@ -89,11 +102,8 @@ impl Drop for Sim {
 
 fn start_sim(args: &[&str]) -> Result<Sim, String> {
     let bin = root().join("target/release/hal-sim");
-    let mut child = Command::new(&bin)
-        .args(args)
-        .stdout(Stdio::piped())
-        .spawn()
-        .map_err(|e| format!("{}: {e}", bin.display()))?;
+    let mut child =
+        Command::new(&bin).args(args).stdout(Stdio::piped()).spawn().map_err(|e| format!("{}: {e}", bin.display()))?;
     let mut line = String::new();
     let stdout = child.stdout.take().ok_or("no stdout")?;
     BufReader::new(stdout).read_line(&mut line).map_err(|e| e.to_string())?;
