@@ -194,7 +194,8 @@ impl DriveState {
 pub struct Counters {
     /// 0x0B: frames with a good CRC seen on the bus, for any address.
     pub bus_messages: u16,
-    /// 0x0C: frames dropped for a bad CRC, a gap inside the frame, or too short to hold a CRC.
+    /// 0x0C: frames dropped for a bad CRC, a gap inside the frame, or too short to hold a function
+    /// code and a CRC.
     pub bus_errors: u16,
     /// 0x0D: exception replies sent.
     pub exceptions: u16,
@@ -326,7 +327,8 @@ impl<M: RegisterMap> Drive<M> {
         match error {
             Some(RxError::Overrun) => c.overruns = c.overruns.wrapping_add(1),
             Some(RxError::Gap) => c.bus_errors = c.bus_errors.wrapping_add(1),
-            None if !crc::frame_ok(frame) => c.bus_errors = c.bus_errors.wrapping_add(1),
+            // Address, function code and CRC make four bytes at least.
+            None if frame.len() < 4 || !crc::frame_ok(frame) => c.bus_errors = c.bus_errors.wrapping_add(1),
             None => self.serve(),
         }
         self.framer.clear();
