@@ -48,6 +48,10 @@ use nix::pty::openpty;
 use nix::sys::termios::{FlushArg, SetArg, cfmakeraw, tcflush, tcgetattr, tcsetattr};
 use nix::unistd::ttyname;
 
+pub mod motor;
+pub mod plot;
+pub mod trace;
+
 /// Where masters reach the simulated drive.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Endpoint {

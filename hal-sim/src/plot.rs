@@ -1,0 +1,181 @@
+//! PNG plots of motion traces ([`crate::trace`]), with `plotters`.
+//!
+//! Four panels over time: position (commanded and rotor), following error (commanded − rotor,
+//! where lost steps show as a jump of 4 full steps at a time), velocity (commanded and rotor) and
+//! the two phase currents with the current vector's magnitude (which falls at speed, when the
+//! supply can no longer push the commanded current through the winding).
+//!
+//! Text is drawn with `plotters`' `ab_glyph` feature and the DejaVu Sans font compiled in (the
+//! `dejavu` crate), so plotting needs no system font, fontconfig or freetype.
+
+use std::fmt;
+use std::ops::Range;
+use std::path::Path;
+use std::sync::OnceLock;
+
+use plotters::prelude::*;
+use plotters::style::register_font;
+
+use crate::trace::{TraceRow, load_csv};
+
+/// Why a plot could not be drawn.
+#[derive(Debug)]
+pub struct PlotError(String);
+
+impl fmt::Display for PlotError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "cannot plot the trace: {}", self.0)
+    }
+}
+
+impl std::error::Error for PlotError {}
+
+fn err(e: impl fmt::Display) -> PlotError {
+    PlotError(e.to_string())
+}
+
+/// The font family every text of the plots uses (registered on first use).
+const FONT: &str = "sans-serif";
+
+fn register_fonts() -> Result<(), PlotError> {
+    static DONE: OnceLock<bool> = OnceLock::new();
+    let ok = *DONE.get_or_init(|| {
+        register_font(FONT, FontStyle::Normal, dejavu::sans::regular()).is_ok()
+            && register_font(FONT, FontStyle::Bold, dejavu::sans::bold()).is_ok()
+    });
+    if ok { Ok(()) } else { Err(PlotError("the embedded font did not load".into())) }
+}
+
+/// The range of the values, padded by 5 % (and widened around a constant).
+fn padded(values: impl Iterator<Item = f64>) -> Range<f64> {
+    let (lo, hi) =
+        values.filter(|v| v.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    if lo > hi {
+        return -1.0..1.0;
+    }
+    let pad = ((hi - lo) * 0.05).max(1e-9 + lo.abs().max(hi.abs()) * 1e-6).max(if hi == lo { 1.0 } else { 0.0 });
+    (lo - pad)..(hi + pad)
+}
+
+const COMMANDED: RGBColor = RGBColor(30, 90, 200);
+const ROTOR: RGBColor = RGBColor(220, 50, 30);
+const PHASE_A: RGBColor = RGBColor(30, 90, 200);
+const PHASE_B: RGBColor = RGBColor(20, 150, 60);
+
+/// One line of a panel: label, colour, width in pixels, (time, value) points.
+type Series<'a> = (&'a str, RGBColor, u32, Vec<(f64, f64)>);
+
+/// One panel: a few series against time.
+struct Panel<'a> {
+    title: String,
+    y_desc: &'a str,
+    series: Vec<Series<'a>>,
+}
+
+/// Draws the trace to a PNG file (1200 × 1400 pixels), titled `title`.
+pub fn plot_trace(rows: &[TraceRow], png: impl AsRef<Path>, title: &str) -> Result<(), PlotError> {
+    if rows.is_empty() {
+        return Err(PlotError("the trace is empty".into()));
+    }
+    register_fonts()?;
+    let t = |f: fn(&TraceRow) -> f64| rows.iter().map(|r| (r.t_s, f(r))).collect::<Vec<_>>();
+    let last = rows[rows.len() - 1];
+    let final_error = last.commanded_position_usteps - last.rotor_position_usteps;
+    let max_error =
+        rows.iter().map(|r| (r.commanded_position_usteps - r.rotor_position_usteps).abs()).fold(0.0, f64::max);
+    let panels = [
+        Panel {
+            title: "Position".into(),
+            y_desc: "position (µsteps)",
+            series: vec![
+                ("commanded", COMMANDED, 3, t(|r| r.commanded_position_usteps)),
+                ("rotor", ROTOR, 1, t(|r| r.rotor_position_usteps)),
+            ],
+        },
+        Panel {
+            title: format!("Following error: final {final_error:.1} µsteps, largest |error| {max_error:.1} µsteps"),
+            y_desc: "commanded − rotor (µsteps)",
+            series: vec![("error", ROTOR, 1, t(|r| r.commanded_position_usteps - r.rotor_position_usteps))],
+        },
+        Panel {
+            title: "Velocity".into(),
+            y_desc: "velocity (µsteps/s)",
+            series: vec![
+                ("commanded", COMMANDED, 3, t(|r| r.commanded_velocity_pps)),
+                ("rotor", ROTOR, 1, t(|r| r.rotor_velocity_pps)),
+            ],
+        },
+        Panel {
+            title: "Phase currents".into(),
+            y_desc: "current (A)",
+            series: vec![
+                ("i_a", PHASE_A, 1, t(|r| r.i_a)),
+                ("i_b", PHASE_B, 1, t(|r| r.i_b)),
+                ("|i| = √(i_a² + i_b²)", BLACK, 2, t(|r| r.i_a.hypot(r.i_b))),
+            ],
+        },
+    ];
+
+    let root = BitMapBackend::new(png.as_ref(), (1200, 1400)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let root = root.titled(title, (FONT, 28).into_font().style(FontStyle::Bold)).map_err(err)?;
+    let time = padded(rows.iter().map(|r| r.t_s));
+    let time = rows[0].t_s.min(time.start.max(0.0))..time.end;
+    for (area, panel) in root.split_evenly((panels.len(), 1)).iter().zip(&panels) {
+        let y = padded(panel.series.iter().flat_map(|s| s.3.iter().map(|p| p.1)));
+        let span = y.end - y.start;
+        let decimals = if span >= 50.0 {
+            0
+        } else if span >= 5.0 {
+            1
+        } else if span >= 0.5 {
+            2
+        } else {
+            4
+        };
+        let y_label = move |v: &f64| format!("{v:.decimals$}");
+        let mut chart = ChartBuilder::on(area)
+            .caption(&panel.title, (FONT, 20))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(90)
+            .build_cartesian_2d(time.clone(), y)
+            .map_err(err)?;
+        chart
+            .configure_mesh()
+            .x_desc("time (s)")
+            .y_desc(panel.y_desc)
+            .y_label_formatter(&y_label)
+            .label_style((FONT, 15))
+            .axis_desc_style((FONT, 16))
+            .light_line_style(RGBColor(235, 235, 235))
+            .draw()
+            .map_err(err)?;
+        for (label, color, width, points) in &panel.series {
+            let style = color.stroke_width(*width);
+            chart
+                .draw_series(LineSeries::new(points.iter().copied(), style))
+                .map_err(err)?
+                .label(*label)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style));
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperLeft)
+            .label_font((FONT, 15))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()
+            .map_err(err)?;
+    }
+    root.present().map_err(err)
+}
+
+/// Reads a trace CSV ([`crate::trace::load_csv`]) and draws it to a PNG file with
+/// [`plot_trace`], titled with the CSV's file name.
+pub fn plot_trace_csv(csv: impl AsRef<Path>, png: impl AsRef<Path>) -> Result<(), PlotError> {
+    let csv = csv.as_ref();
+    let rows = load_csv(csv).map_err(|e| PlotError(format!("{}: {e}", csv.display())))?;
+    let title = csv.file_name().map_or_else(|| csv.display().to_string(), |n| n.to_string_lossy().into_owned());
+    plot_trace(&rows, png, &title)
+}
