@@ -6,6 +6,7 @@
 //!
 //! - `drive`: a factory [`Drive`] that has received every byte of the frame but the last; measured
 //!   is `on_rx` of the last byte, `on_timer` at t3.5 after it, and `take_reply`.
+//! - `drive_whole`: the same drive fed the whole frame at once: its total cost per request.
 //! - `crc_floor`: CRC-16/MODBUS over the request and over the reply (both without their CRC),
 //!   with `drive_core::crc::crc16`: what any slave must pay to check one and seal the other.
 //! - `rmodbus`: rmodbus 0.13's server (no_std, heapless response buffer) parsing the same RTU frame
@@ -122,6 +123,36 @@ fn setup_drive(req: Req) -> DriveCase {
 fn drive(mut case: DriveCase) -> usize {
     let t0 = black_box(T0);
     case.drive.on_rx(t0, &[black_box(case.last)]);
+    case.drive.on_timer(t0.plus_micros(T35_US));
+    let reply = black_box(case.drive.take_reply());
+    reply.map_or(0, <[u8]>::len)
+}
+
+/// A factory drive and a whole request, nothing received yet.
+struct WholeCase {
+    drive: Drive,
+    frame: Frame,
+}
+
+fn setup_whole(req: Req) -> WholeCase {
+    let case = WholeCase { drive: Drive::factory(), frame: Frame::new(&request(req)) };
+    let mut probe = case.drive.clone();
+    probe.on_rx(T0, case.frame.bytes());
+    probe.on_timer(T0.plus_micros(T35_US));
+    assert_eq!(probe.take_reply(), Some(&drive_reply(req)[..]));
+    case
+}
+
+// The whole request, every byte of it, to the reply ready: the drive's total cost, including
+// the request CRC that `drive` computes while the bytes arrive.
+#[library_benchmark]
+#[bench::read_2(args = (Req::Read2), setup = setup_whole)]
+#[bench::read_125(args = (Req::Read125), setup = setup_whole)]
+#[bench::write_1(args = (Req::Write1), setup = setup_whole)]
+#[bench::write_10(args = (Req::Write10), setup = setup_whole)]
+fn drive_whole(mut case: WholeCase) -> usize {
+    let t0 = black_box(T0);
+    case.drive.on_rx(t0, black_box(case.frame.bytes()));
     case.drive.on_timer(t0.plus_micros(T35_US));
     let reply = black_box(case.drive.take_reply());
     reply.map_or(0, <[u8]>::len)
@@ -247,7 +278,7 @@ fn rmodbus(case: RmodbusCase) -> usize {
 
 library_benchmark_group!(
     name = rtu;
-    benchmarks = drive, crc_floor, rmodbus
+    benchmarks = drive, drive_whole, crc_floor, rmodbus
 );
 
 main!(library_benchmark_groups = rtu);

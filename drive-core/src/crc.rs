@@ -21,3 +21,21 @@ pub fn frame_ok(frame: &[u8]) -> bool {
         _ => false,
     }
 }
+
+/// The CRC register after one more byte. Start from [`INIT`]; after the last byte the register is
+/// the CRC, and after a frame's own CRC (low byte first) it is 0.
+///
+/// ```
+/// use drive_core::crc::{INIT, update};
+/// let frame = [0x01, 0x03, 0x60, 0x0C, 0x00, 0x02, 0x1A, 0x08];
+/// assert_eq!(frame[..6].iter().fold(INIT, |c, &b| update(c, b)), 0x081A);
+/// assert_eq!(frame.iter().fold(INIT, |c, &b| update(c, b)), 0);
+/// ```
+#[inline]
+pub fn update(crc: u16, byte: u8) -> u16 {
+    let table = &MODBUS.table()[0];
+    table.get(usize::from(crc as u8 ^ byte)).copied().unwrap_or(0) ^ (crc >> 8)
+}
+
+/// The CRC register before the first byte.
+pub const INIT: u16 = 0xFFFF;

@@ -2,7 +2,7 @@
 
 use crate::crc;
 use crate::ident::Identity;
-use crate::od::{Access, NativeMap, OBJECTS, Obj, ObjError, RegisterMap, Storage};
+use crate::od::{Access, NativeMap, OBJECTS, Obj, ObjError, ObjectDef, RegisterMap, Storage};
 use crate::pdu::{Exception, MAX_READ, Request, Words};
 use crate::rtu::{Framer, MAX_FRAME, RxError};
 use crate::units::{Baud, Instant, SlaveAddr};
@@ -100,6 +100,20 @@ impl DriveState {
 
     /// The value of `obj` as its registers show it (S32 as two's complement).
     pub fn read(&self, obj: Obj) -> u32 {
+        self.read_def(obj.def())
+    }
+
+    /// The value of the object `d` declares: from the running status for live objects, else stored.
+    #[inline]
+    pub fn read_def(&self, d: &ObjectDef) -> u32 {
+        if d.storage == Storage::Live {
+            self.live(d.obj)
+        } else {
+            self.params.get(d.obj as usize).copied().unwrap_or(0)
+        }
+    }
+
+    fn live(&self, obj: Obj) -> u32 {
         let s = &self.status;
         match obj {
             Obj::Position => s.position as u32,
@@ -136,18 +150,36 @@ impl DriveState {
 
     /// Whether writing `value` to `obj` would be accepted; nothing changes.
     pub fn check(&self, obj: Obj, value: u32) -> Result<(), ObjError> {
-        let d = obj.def();
+        self.check_def(obj.def(), value)
+    }
+
+    /// [`DriveState::check`] for the object `d` declares.
+    #[inline]
+    pub fn check_def(&self, d: &ObjectDef, value: u32) -> Result<(), ObjError> {
         if d.access == Access::Ro || d.storage == Storage::Const {
             return Err(ObjError::ReadOnly);
         }
         if !d.range.accepts(d.ty, value) {
             return Err(ObjError::OutOfRange);
         }
-        match (obj, value) {
+        match (d.obj, value) {
             // No storage on this platform yet, and no boot loader to jump to.
             (Obj::SystemControl, 2) if !self.can_save => Err(ObjError::Refused),
             (Obj::SystemControl, 1) => Err(ObjError::Refused),
             _ => Ok(()),
+        }
+    }
+
+    /// Writes `value` to the object `d` declares, which [`DriveState::check`] accepted.
+    #[inline]
+    pub fn apply_def(&mut self, d: &ObjectDef, value: u32) {
+        if d.access == Access::Rw && d.storage != Storage::Live {
+            // A plain setting: stored.
+            if let Some(p) = self.params.get_mut(d.obj as usize) {
+                *p = value;
+            }
+        } else {
+            self.apply(d.obj, value);
         }
     }
 
@@ -290,12 +322,14 @@ impl<M: RegisterMap> Drive<M> {
 
     /// Bytes received at `now`. A frame that had already ended is processed first.
     pub fn on_rx(&mut self, now: Instant, bytes: &[u8]) {
-        for &b in bytes {
-            if self.framer.ended(now) {
-                self.end_frame();
-            }
-            self.framer.push(now, b);
+        if bytes.is_empty() {
+            return;
         }
+        // The bytes of one call arrived together: only the first can follow a silence.
+        if self.framer.ended(now) {
+            self.end_frame();
+        }
+        self.framer.extend(now, bytes);
     }
 
     /// Time passes: a frame whose t3.5 has run out is processed.
@@ -322,13 +356,12 @@ impl<M: RegisterMap> Drive<M> {
     }
 
     fn end_frame(&mut self) {
-        let (frame, error) = self.framer.frame();
+        let (_, error) = self.framer.frame();
         let c = &mut self.counters;
         match error {
             Some(RxError::Overrun) => c.overruns = c.overruns.wrapping_add(1),
             Some(RxError::Gap) => c.bus_errors = c.bus_errors.wrapping_add(1),
-            // Address, function code and CRC make four bytes at least.
-            None if frame.len() < 4 || !crc::frame_ok(frame) => c.bus_errors = c.bus_errors.wrapping_add(1),
+            None if !self.framer.crc_ok() => c.bus_errors = c.bus_errors.wrapping_add(1),
             None => self.serve(),
         }
         self.framer.clear();
@@ -518,6 +551,7 @@ impl<M: RegisterMap> Server<'_, M> {
 }
 
 /// Copies `bytes` into `out` at `at`, as far as it fits.
+#[inline(always)]
 fn put(out: &mut [u8], at: usize, bytes: &[u8]) {
     if let Some(dst) = out.get_mut(at..at + bytes.len()) {
         dst.copy_from_slice(bytes);

@@ -24,6 +24,9 @@ pub struct Framer {
     len: usize,
     last: Option<Instant>,
     error: Option<RxError>,
+    /// CRC register over the bytes received so far: computed as they arrive, so that the check
+    /// at the end of the frame costs nothing (as a receive interrupt would do it).
+    crc: u16,
     t15: u64,
     t35: u64,
 }
@@ -31,7 +34,15 @@ pub struct Framer {
 impl Framer {
     /// An idle receiver timed for `baud`.
     pub const fn new(baud: Baud) -> Self {
-        Self { buf: [0; MAX_FRAME], len: 0, last: None, error: None, t15: baud.t15_micros(), t35: baud.t35_micros() }
+        Self {
+            buf: [0; MAX_FRAME],
+            len: 0,
+            last: None,
+            error: None,
+            crc: crate::crc::INIT,
+            t15: baud.t15_micros(),
+            t35: baud.t35_micros(),
+        }
     }
 
     /// t3.5 in microseconds.
@@ -54,6 +65,12 @@ impl Framer {
 
     /// Adds one byte received at `now`. The caller first takes an ended frame ([`Framer::ended`]).
     pub fn push(&mut self, now: Instant, byte: u8) {
+        self.extend(now, &[byte]);
+    }
+
+    /// Adds bytes received together at `now` (no silence between them). The caller first takes
+    /// an ended frame ([`Framer::ended`]).
+    pub fn extend(&mut self, now: Instant, bytes: &[u8]) {
         if let Some(last) = self.last
             && self.len > 0
             && now.since(last) > self.t15
@@ -61,14 +78,15 @@ impl Framer {
             self.error.get_or_insert(RxError::Gap);
         }
         self.last = Some(now);
-        match self.buf.get_mut(self.len) {
-            Some(slot) => {
-                *slot = byte;
-                self.len += 1;
-            }
-            None => {
-                self.error = Some(RxError::Overrun);
-            }
+        let room = MAX_FRAME - self.len;
+        let (fits, over) = bytes.split_at(bytes.len().min(room));
+        if let Some(dst) = self.buf.get_mut(self.len..self.len + fits.len()) {
+            dst.copy_from_slice(fits);
+            self.len += fits.len();
+            self.crc = fits.iter().fold(self.crc, |c, &b| crate::crc::update(c, b));
+        }
+        if !over.is_empty() {
+            self.error = Some(RxError::Overrun);
         }
     }
 
@@ -86,6 +104,13 @@ impl Framer {
     pub fn clear(&mut self) {
         self.len = 0;
         self.error = None;
+        self.crc = crate::crc::INIT;
+    }
+
+    /// Whether the frame holds an address, a function code and a CRC that matches the bytes
+    /// before it (the CRC register run over a frame and its own CRC ends at 0).
+    pub fn crc_ok(&self) -> bool {
+        self.len >= 4 && self.crc == 0
     }
 }
 

@@ -1,6 +1,6 @@
 //! Register maps: how the registers of a vendor's protocol reach the drive's objects.
 
-use super::{Access, OBJECTS, Obj, ObjError, Type, index};
+use super::{Access, OBJECTS, Obj, ObjError, ObjectDef, Type, index};
 use crate::drive::DriveState;
 use crate::pdu::{Exception, MAX_WRITE, Words};
 use heapless::Vec;
@@ -41,11 +41,13 @@ impl Default for NativeMap {
     }
 }
 
-/// One step of a write, planned before anything is changed.
+/// What writing one object amounts to.
 #[derive(Clone, Copy, Debug)]
 enum Op {
-    Commit(Obj, u32),
-    Stage(Obj, u16),
+    /// The complete value: checked, then applied.
+    Commit(u32),
+    /// The high word of a 32-bit object alone: kept until its low word comes.
+    Stage(u16),
 }
 
 /// The native exception for an object error.
@@ -73,80 +75,93 @@ impl NativeMap {
         }
     }
 
-    /// Plans a write of `values` from `addr` object by object, checking each value.
-    fn plan(
-        &self,
-        drive: &DriveState,
-        addr: u16,
-        values: Words<'_>,
-    ) -> Result<Vec<Op, { MAX_WRITE as usize }>, ObjError> {
-        let mut ops = Vec::new();
-        let mut reg = u32::from(addr);
-        let end = reg + values.len() as u32;
-        let mut i = index::locate(addr, values.len() as u16).ok_or(ObjError::Unknown)?;
-        while reg < end {
-            let d = OBJECTS.get(i).ok_or(ObjError::Unknown)?;
+    /// What `values` (written from register `addr`) do to the object `d`, which starts at or
+    /// before register `reg` and is the first object of the write or follows the previous one.
+    #[inline]
+    fn op(&self, drive: &DriveState, d: &ObjectDef, addr: u32, reg: u32, values: Words<'_>) -> Result<Op, ObjError> {
+        let word = |r: u32| values.get((r - addr) as usize).map(u32::from).ok_or(ObjError::Unknown);
+        match d.ty {
+            Type::U8 | Type::U16 => Ok(Op::Commit(word(reg)?)),
+            Type::U32 | Type::S32 => {
+                let low = u32::from(d.addr) + 1;
+                if reg == low {
+                    let hi = match self.staged(d.obj) {
+                        Some(hi) => u32::from(hi),
+                        None => drive.read_def(d) >> 16,
+                    };
+                    Ok(Op::Commit(hi << 16 | word(low)?))
+                } else if low < addr + values.len() as u32 {
+                    Ok(Op::Commit(word(reg)? << 16 | word(low)?))
+                } else {
+                    Ok(Op::Stage(word(reg)? as u16))
+                }
+            }
+            Type::Str(_) => Err(ObjError::ReadOnly),
+        }
+    }
+
+    /// Checks a write of `values` from `addr` object by object, noting what to do to each.
+    fn plan(&self, drive: &DriveState, addr: u16, values: Words<'_>, plan: &mut Plan) -> Result<(), ObjError> {
+        let first = index::locate(addr, values.len() as u16).ok_or(ObjError::Unknown)?;
+        let (addr, end) = (u32::from(addr), u32::from(addr) + values.len() as u32);
+        let mut reg = addr;
+        for d in OBJECTS.get(first..).unwrap_or_default() {
+            if reg >= end {
+                break;
+            }
             if u32::from(d.addr) > reg {
                 return Err(ObjError::Unknown);
             }
             if d.access == Access::Ro {
                 return Err(ObjError::ReadOnly);
             }
-            let word = |r: u32| values.get((r - u32::from(addr)) as usize).ok_or(ObjError::Unknown);
-            let op = match d.ty {
-                Type::Str(_) => return Err(ObjError::ReadOnly),
-                Type::U8 | Type::U16 => Op::Commit(d.obj, u32::from(word(reg)?)),
-                Type::U32 | Type::S32 => {
-                    let low = u32::from(d.addr) + 1;
-                    if reg == low {
-                        let hi = match self.staged(d.obj) {
-                            Some(hi) => u32::from(hi),
-                            None => drive.read(d.obj) >> 16,
-                        };
-                        Op::Commit(d.obj, hi << 16 | u32::from(word(low)?))
-                    } else if low < end {
-                        Op::Commit(d.obj, u32::from(word(reg)?) << 16 | u32::from(word(low)?))
-                    } else {
-                        Op::Stage(d.obj, word(reg)?)
-                    }
-                }
-            };
-            if let Op::Commit(obj, v) = op {
-                drive.check(obj, v)?;
+            let op = self.op(drive, d, addr, reg, values)?;
+            if let Op::Commit(v) = op {
+                drive.check_def(d, v)?;
             }
-            ops.push(op).map_err(|_| ObjError::OutOfRange)?;
+            plan.push((d, op)).map_err(|_| ObjError::Unknown)?;
             reg = d.end();
-            i += 1;
         }
-        Ok(ops)
+        if reg < end { Err(ObjError::Unknown) } else { Ok(()) }
     }
 }
 
+/// The objects a write touches and what it does to each, checked before anything changes.
+type Plan = Vec<(&'static ObjectDef, Op), { MAX_WRITE as usize }>;
+
 impl RegisterMap for NativeMap {
+    #[inline]
     fn read(&self, drive: &DriveState, addr: u16, out: &mut [u8]) -> Result<(), Exception> {
-        let mut i = index::locate(addr, (out.len() / 2) as u16).ok_or(Exception::IllegalDataAddress)?;
-        // The object at or after `reg`, and its value, fetched once per object.
-        let mut cur = OBJECTS.get(i);
-        let mut value = cur.map_or(0, |d| drive.read(d.obj));
-        for (reg, slot) in (u32::from(addr)..).zip(out.chunks_exact_mut(2)) {
-            if cur.is_some_and(|d| d.end() <= reg) {
-                i += 1;
-                cur = OBJECTS.get(i);
-                value = cur.map_or(0, |d| drive.read(d.obj));
+        let first = index::locate(addr, (out.len() / 2) as u16).ok_or(Exception::IllegalDataAddress)?;
+        let (base, end) = (u32::from(addr), u32::from(addr) + (out.len() / 2) as u32);
+        // Reserved registers between objects read as 0.
+        out.fill(0);
+        let mut put = |reg: u32, w: u16| {
+            if reg >= base {
+                let at = 2 * (reg - base) as usize;
+                if let Some(slot) = out.get_mut(at..at + 2) {
+                    slot.copy_from_slice(&w.to_be_bytes());
+                }
             }
-            let w = match cur {
-                Some(d) if u32::from(d.addr) <= reg => {
-                    let k = reg - u32::from(d.addr);
-                    match d.ty {
-                        Type::U8 | Type::U16 => value as u16,
-                        Type::U32 | Type::S32 => (if k == 0 { value >> 16 } else { value }) as u16,
-                        Type::Str(_) => drive.text_word(d.obj, k as usize),
+        };
+        for d in OBJECTS.get(first..).unwrap_or_default() {
+            let at = u32::from(d.addr);
+            if at >= end {
+                break;
+            }
+            match d.ty {
+                Type::U8 | Type::U16 => put(at, drive.read_def(d) as u16),
+                Type::U32 | Type::S32 => {
+                    let v = drive.read_def(d);
+                    put(at, (v >> 16) as u16);
+                    put(at + 1, v as u16);
+                }
+                Type::Str(_) => {
+                    for k in 0..d.words() {
+                        put(at + u32::from(k), drive.text_word(d.obj, usize::from(k)));
                     }
                 }
-                // A reserved register between two objects of the page.
-                _ => 0,
-            };
-            slot.copy_from_slice(&w.to_be_bytes());
+            }
         }
         Ok(())
     }
@@ -158,14 +173,16 @@ impl RegisterMap for NativeMap {
     }
 
     fn write(&mut self, drive: &mut DriveState, addr: u16, values: Words<'_>) -> Result<(), Exception> {
-        let ops = self.plan(drive, addr, values).map_err(native_exception)?;
-        for op in ops {
+        // Everything is checked before anything changes: all or nothing.
+        let mut plan = Plan::new();
+        self.plan(drive, addr, values, &mut plan).map_err(native_exception)?;
+        for &(d, op) in plan.iter() {
             match op {
-                Op::Commit(obj, v) => {
-                    self.set_staged(obj, None);
-                    drive.apply(obj, v);
+                Op::Commit(v) => {
+                    self.set_staged(d.obj, None);
+                    drive.apply_def(d, v);
                 }
-                Op::Stage(obj, hi) => self.set_staged(obj, Some(hi)),
+                Op::Stage(hi) => self.set_staged(d.obj, Some(hi)),
             }
         }
         Ok(())

@@ -29,6 +29,7 @@ pub enum Type {
 
 impl Type {
     /// Registers the object occupies.
+    #[inline]
     pub const fn words(self) -> u16 {
         match self {
             Type::U8 | Type::U16 => 1,
@@ -133,6 +134,7 @@ impl Range {
     /// assert!(Range::Bits(0x13).accepts(Type::U8, 0x12));
     /// assert!(!Range::Any.accepts(Type::U16, 0x1_0000));
     /// ```
+    #[inline(always)]
     pub fn accepts(self, ty: Type, raw: u32) -> bool {
         if !ty.fits(raw) {
             return false;
