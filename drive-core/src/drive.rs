@@ -1,7 +1,9 @@
 //! The drive: its state behind the object dictionary, and the RTU slave in front of it.
 
+use crate::control::{Outputs, has_effect};
 use crate::crc;
 use crate::ident::Identity;
+use crate::motion::axis::Axis;
 use crate::od::{Access, NativeMap, OBJECTS, Obj, ObjError, ObjectDef, RegisterMap, Storage};
 use crate::pdu::{Exception, MAX_READ, Request, Words};
 use crate::rtu::{Framer, MAX_FRAME, RxError};
@@ -41,8 +43,6 @@ pub enum SystemRequest {
 /// The drive's running status: what the live objects report.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Status {
-    /// Motor position in microsteps.
-    pub position: i32,
     /// Error status bits (0x6000).
     pub error: u8,
     /// Controller status bits (0x6001).
@@ -57,8 +57,6 @@ pub struct Status {
     pub statusword: u16,
     /// PVT pointer (0x601A).
     pub pvt_pointer: u16,
-    /// Measured speed in pps (0x607F).
-    pub real_speed: i32,
     /// Encoder position in counts (0x6089).
     pub encoder: i32,
 }
@@ -66,11 +64,15 @@ pub struct Status {
 /// Everything the object dictionary reads and writes.
 #[derive(Clone, Debug)]
 pub struct DriveState {
-    params: [u32; Obj::COUNT],
-    status: Status,
+    pub(crate) params: [u32; Obj::COUNT],
+    pub(crate) status: Status,
     identity: Identity,
     can_save: bool,
     request: Option<SystemRequest>,
+    /// The time of the event being handled (a frame, a tick): when a command takes effect.
+    pub(crate) now: Instant,
+    /// The motion being executed.
+    pub(crate) axis: Axis,
 }
 
 impl DriveState {
@@ -80,7 +82,15 @@ impl DriveState {
         for (p, d) in params.iter_mut().zip(OBJECTS.iter()) {
             *p = d.default;
         }
-        Self { params, status: Status::default(), identity, can_save, request: None }
+        Self {
+            params,
+            status: Status::default(),
+            identity,
+            can_save,
+            request: None,
+            now: Instant::from_micros(0),
+            axis: Axis::new(0),
+        }
     }
 
     /// The running status.
@@ -91,6 +101,16 @@ impl DriveState {
     /// The running status, for the motion and I/O code that owns it.
     pub fn status_mut(&mut self) -> &mut Status {
         &mut self.status
+    }
+
+    /// The position setpoint in whole microsteps (it never wraps; 0x600E..F shows its low 32 bits).
+    pub fn position(&self) -> i64 {
+        self.axis.setpoint().whole
+    }
+
+    /// Declares the present position, as writing 0x600E..F does; refused while moving.
+    pub fn set_position(&mut self, position: i64) -> bool {
+        self.axis.set_position(position)
     }
 
     /// The identification strings.
@@ -116,15 +136,17 @@ impl DriveState {
     fn live(&self, obj: Obj) -> u32 {
         let s = &self.status;
         match obj {
-            Obj::Position => s.position as u32,
+            // The axis's own state, not a copy: the register shows the low 32 bits of the setpoint.
+            Obj::Position => self.axis.setpoint().whole as u32,
             Obj::ErrorStatus => u32::from(s.error),
-            Obj::ControllerStatus => u32::from(s.controller),
+            Obj::ControllerStatus => u32::from(s.controller | if self.axis.is_still() { 0 } else { STATUS_BUSY }),
             Obj::NotifyStatus => u32::from(s.notify),
             Obj::GpioValue => u32::from(s.gpio),
             Obj::AnalogIn => u32::from(s.analog_in),
             Obj::StatusWord => u32::from(s.statusword),
             Obj::PvtPointer => u32::from(s.pvt_pointer),
-            Obj::RealSpeed => s.real_speed as u32,
+            // Open loop: the commanded speed (the encoder's measurement comes with the closed loop).
+            Obj::RealSpeed => libm::round(self.axis.setpoint().velocity) as i32 as u32,
             Obj::EncoderPosition => s.encoder as u32,
             _ => self.params.get(obj as usize).copied().unwrap_or(0),
         }
@@ -166,6 +188,7 @@ impl DriveState {
             // No storage on this platform yet, and no boot loader to jump to.
             (Obj::SystemControl, 2) if !self.can_save => Err(ObjError::Refused),
             (Obj::SystemControl, 1) => Err(ObjError::Refused),
+            (obj, _) if has_effect(obj) => self.check_motion(obj, value),
             _ => Ok(()),
         }
     }
@@ -173,7 +196,7 @@ impl DriveState {
     /// Writes `value` to the object `d` declares, which [`DriveState::check`] accepted.
     #[inline]
     pub fn apply_def(&mut self, d: &ObjectDef, value: u32) {
-        if d.access == Access::Rw && d.storage != Storage::Live {
+        if d.access == Access::Rw && d.storage != Storage::Live && !has_effect(d.obj) {
             // A plain setting: stored.
             if let Some(p) = self.params.get_mut(d.obj as usize) {
                 *p = value;
@@ -190,12 +213,15 @@ impl DriveState {
             Obj::ErrorStatus => s.error &= !(value as u8),
             Obj::ControllerStatus => s.controller &= !(value as u8 & !STATUS_BUSY),
             Obj::NotifyStatus => s.notify &= !(value as u8),
-            Obj::Position => s.position = value as i32,
             Obj::GpioValue => {
                 // Only outputs take the written level.
                 let outputs = self.params.get(Obj::GpioDirection as usize).copied().unwrap_or(0) as u16;
                 s.gpio = (s.gpio & !outputs) | (value as u16 & outputs);
             }
+            Obj::Position => {
+                let _ = self.axis.set_position(i64::from(value as i32));
+            }
+            obj if has_effect(obj) => self.apply_motion(obj, value),
             _ => {
                 if let Some(p) = self.params.get_mut(obj as usize) {
                     *p = value;
@@ -325,6 +351,7 @@ impl<M: RegisterMap> Drive<M> {
         if bytes.is_empty() {
             return;
         }
+        self.state.now = now;
         // The bytes of one call arrived together: only the first can follow a silence.
         if self.framer.ended(now) {
             self.end_frame();
@@ -334,9 +361,16 @@ impl<M: RegisterMap> Drive<M> {
 
     /// Time passes: a frame whose t3.5 has run out is processed.
     pub fn on_timer(&mut self, now: Instant) {
+        self.state.now = now;
         if self.framer.ended(now) {
             self.end_frame();
         }
+    }
+
+    /// One control tick at `now` (every [`TICK_MICROS`](crate::control::TICK_MICROS)): runs the
+    /// motion and says what the output stage does.
+    pub fn tick(&mut self, now: Instant) -> Outputs {
+        self.state.tick(now)
     }
 
     /// When [`Drive::on_timer`] next has something to do.

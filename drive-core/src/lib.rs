@@ -20,9 +20,11 @@
 #![forbid(unsafe_code)]
 #![deny(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::indexing_slicing, missing_docs)]
 
+pub mod control;
 pub mod crc;
 pub mod drive;
 pub mod ident;
+pub mod motion;
 pub mod od;
 pub mod pdu;
 pub mod rtu;

@@ -16,7 +16,7 @@ fn read_write_multiple_writes_then_reads() {
 #[test]
 fn read_125_registers_across_reserved_ones() {
     let mut bus = Bus::factory();
-    bus.drive.state_mut().status_mut().position = -3;
+    bus.drive.state_mut().set_position(-3);
     let r = bus.request(&[0x01, 0x03, 0x60, 0x00, 0x00, 0x7D]).expect("answered");
     assert_eq!((r.len(), r[2]), (3 + 250 + 2, 250));
     let reg = |a: usize| u16::from_be_bytes([r[3 + 2 * a], r[4 + 2 * a]]);
@@ -136,7 +136,7 @@ fn status_bits_clear_by_writing_one() {
 fn writing_position_sets_it() {
     let mut bus = Bus::factory();
     bus.request(&[0x01, 0x10, 0x60, 0x0E, 0x00, 0x02, 0x04, 0xFF, 0xFF, 0xFF, 0xFE]);
-    assert_eq!(bus.drive.state().status().position, -2);
+    assert_eq!(bus.drive.state().position(), -2);
 }
 
 #[test]

@@ -34,7 +34,7 @@ fn write_600c() {
 #[test]
 fn write_600c_to_600f() {
     let mut bus = Bus::factory();
-    bus.drive.state_mut().status_mut().position = 12345;
+    bus.drive.state_mut().set_position(12345);
     assert_eq!(exchange(&mut bus, &WRITE_MANY).as_deref(), Some(&WRITE_MANY_REPLY[..]));
     let st = bus.drive.state();
     // The manual's text says 588 beside 0x0292; 0x0292 is 658, which is what the frame carries.

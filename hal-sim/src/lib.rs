@@ -39,6 +39,8 @@ use std::path::{Path, PathBuf};
 use std::thread::{self, JoinHandle};
 use std::time::Duration;
 
+use std::sync::{Arc, Mutex};
+
 use drive_core::od::{Obj, Range};
 use drive_core::{Baud, Drive, DriveConfig, Instant, SlaveAddr};
 use nix::errno::Errno;
@@ -48,7 +50,11 @@ use nix::pty::openpty;
 use nix::sys::termios::{FlushArg, SetArg, cfmakeraw, tcflush, tcgetattr, tcsetattr};
 use nix::unistd::ttyname;
 
+use crate::motor::{Motor, MotorCatalog, MotorInputs};
+use crate::plant::Plant;
+
 pub mod motor;
+pub mod plant;
 pub mod plot;
 pub mod trace;
 
@@ -73,8 +79,9 @@ impl Default for Endpoint {
     }
 }
 
-/// How to start a [`Simulator`]. The default: a pseudo-terminal and the drive's factory settings.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
+/// How to start a [`Simulator`]. The default: a pseudo-terminal, the drive's factory settings,
+/// the NEMA 17 motor at 24 V without load.
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct SimOptions {
     /// Where masters reach the drive.
     pub endpoint: Endpoint,
@@ -83,14 +90,48 @@ pub struct SimOptions {
     /// The baud rate the frame timing (t1.5, t3.5) follows, instead of the drive's (factory 9600):
     /// one of [`Baud::SUPPORTED`].
     pub baud: Option<u32>,
+    /// The motor and its surroundings.
+    pub motor: MotorOptions,
+}
+
+/// Which motor the drive turns, and what it turns.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MotorOptions {
+    /// A motor of the catalogue (`motors.toml`).
+    pub name: String,
+    /// Supply voltage, load inertia and load torque.
+    pub inputs: MotorInputs,
+    /// Record a trace (CSV) here, one row per this many ticks.
+    pub trace: Option<(PathBuf, u32)>,
+}
+
+impl Default for MotorOptions {
+    fn default() -> Self {
+        Self { name: DEFAULT_MOTOR.into(), inputs: MotorInputs::default(), trace: None }
+    }
+}
+
+/// The motor of the simulator unless told otherwise: a NEMA 17.
+pub const DEFAULT_MOTOR: &str = "17HS19-2004S1";
+
+/// What a test can watch of a running simulator, updated at every wake-up of its loop.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Snapshot {
+    /// Simulated time, µs.
+    pub time_us: u64,
+    /// Rotor position in the drive's microsteps.
+    pub rotor_microsteps: f64,
+    /// The drive's position setpoint, whole microsteps.
+    pub setpoint: i64,
 }
 
 /// One simulated drive with its endpoint open, ready to run.
 #[derive(Debug)]
 pub struct Simulator {
-    drive: Drive,
+    plant: Plant,
     port: Port,
     endpoint: String,
+    snapshot: Arc<Mutex<Snapshot>>,
 }
 
 /// The open endpoint.
@@ -111,6 +152,14 @@ impl Simulator {
     /// [`ErrorKind::InvalidInput`] error.
     pub fn bind(opts: SimOptions) -> io::Result<Simulator> {
         let drive = Drive::new(drive_config(&opts)?);
+        let params = MotorCatalog::builtin()
+            .get(&opts.motor.name)
+            .cloned()
+            .ok_or_else(|| invalid(format!("no motor {:?} in the catalogue", opts.motor.name)))?;
+        let mut plant = Plant::new(drive, Motor::new(params, opts.motor.inputs));
+        if let Some((path, every)) = &opts.motor.trace {
+            plant.trace_to(path, *every).map_err(|e| annotate(e, path.display()))?;
+        }
         let (port, endpoint) = match opts.endpoint {
             Endpoint::Pty { link } => open_pty(link.as_deref())?,
             Endpoint::Tcp(addr) => {
@@ -119,7 +168,7 @@ impl Simulator {
                 (Port::Tcp(listener), at)
             }
         };
-        Ok(Simulator { drive, port, endpoint })
+        Ok(Simulator { plant, port, endpoint, snapshot: Arc::default() })
     }
 
     /// Where masters reach the drive: `/dev/pts/N`, or the bound `HOST:PORT`.
@@ -129,12 +178,17 @@ impl Simulator {
 
     /// The drive, as it will start.
     pub fn drive(&self) -> &Drive {
-        &self.drive
+        self.plant.drive()
     }
 
     /// The drive, to set up before it runs (its state, its status); the loop owns it then.
     pub fn drive_mut(&mut self) -> &mut Drive {
-        &mut self.drive
+        self.plant.drive_mut()
+    }
+
+    /// What the running loop publishes of the motor and the drive.
+    pub fn snapshot(&self) -> Arc<Mutex<Snapshot>> {
+        Arc::clone(&self.snapshot)
     }
 
     /// Runs the drive on a new thread, forever (see [`Simulator::run`]).
@@ -145,20 +199,21 @@ impl Simulator {
     /// Runs the drive on this thread, serving one master after another. Bad frames, masters that
     /// go away and failed reads or writes do not end it: it returns only if `poll(2)` fails.
     pub fn run(self) -> io::Result<Infallible> {
-        let Simulator { mut drive, port, .. } = self;
+        let Simulator { mut plant, port, snapshot, .. } = self;
         let clock = Clock(std::time::Instant::now());
+        let mut sim = Sim { plant: &mut plant, snapshot: &snapshot };
         match port {
             Port::Pty { master, slave } => {
                 let mut line = PtyLine { master, slave };
                 loop {
-                    serve(&mut drive, &clock, &mut line)?;
+                    serve(&mut sim, &clock, &mut line)?;
                 }
             }
             Port::Tcp(listener) => loop {
                 match listener.accept() {
                     Ok((stream, _)) => {
-                        serve(&mut drive, &clock, &mut TcpLine::new(stream))?;
-                        settle(&mut drive, &clock);
+                        serve(&mut sim, &clock, &mut TcpLine::new(stream))?;
+                        settle(&mut sim, &clock);
                     }
                     Err(e) if e.kind() == ErrorKind::Interrupted => {}
                     Err(e) => {
@@ -269,13 +324,42 @@ trait Line: AsFd {
     fn send(&mut self, frame: &[u8]) -> io::Result<()>;
 }
 
-/// Runs `drive` on `line` until the master goes away (`Ok`) or `poll(2)` fails.
-fn serve(drive: &mut Drive, clock: &Clock, line: &mut impl Line) -> io::Result<()> {
+/// The plant and what it publishes, as the loop sees them.
+struct Sim<'a> {
+    plant: &'a mut Plant,
+    snapshot: &'a Mutex<Snapshot>,
+}
+
+impl Sim<'_> {
+    /// Brings the simulated motor and drive up to `now`, and publishes the result.
+    fn catch_up(&mut self, now: Instant) -> &mut Drive {
+        self.plant.advance_to(now);
+        // A trace is read while the simulator runs (and after it is killed): keep the file current.
+        let _ = self.plant.flush_trace();
+        if let Ok(mut s) = self.snapshot.lock() {
+            *s = Snapshot {
+                time_us: now.as_micros(),
+                rotor_microsteps: self.plant.rotor_microsteps(),
+                setpoint: self.plant.outputs().map_or(0, |o| o.setpoint.whole),
+            };
+        }
+        self.plant.drive_mut()
+    }
+}
+
+/// How often the loop wakes up to keep the motor in pace with wall time, at the least.
+const PACE: Duration = Duration::from_millis(1);
+
+/// Runs the drive on `line` until the master goes away (`Ok`) or `poll(2)` fails.
+fn serve(sim: &mut Sim<'_>, clock: &Clock, line: &mut impl Line) -> io::Result<()> {
     let mut buf = [0u8; 512];
     loop {
         let ready = {
             let mut fds = [PollFd::new(line.as_fd(), PollFlags::POLLIN)];
-            match poll(&mut fds, poll_timeout(drive.deadline(), clock.now())) {
+            let deadline = sim.plant.drive().deadline();
+            let pace = clock.now().plus_micros(PACE.as_micros() as u64);
+            let wake = deadline.map_or(pace, |d| d.min(pace));
+            match poll(&mut fds, poll_timeout(Some(wake), clock.now())) {
                 Ok(0) | Err(Errno::EINTR) => false,
                 Ok(_) => true,
                 Err(e) => return Err(e.into()),
@@ -284,7 +368,9 @@ fn serve(drive: &mut Drive, clock: &Clock, line: &mut impl Line) -> io::Result<(
         if ready {
             match line.recv(&mut buf) {
                 Recv::Data(n) => {
-                    drive.on_rx(clock.now(), buf.get(..n).unwrap_or_default());
+                    let now = clock.now();
+                    let drive = sim.catch_up(now);
+                    drive.on_rx(now, buf.get(..n).unwrap_or_default());
                     if let Some(reply) = drive.take_reply() {
                         // A frame that had ended before these bytes came was answered first.
                         if line.send(reply).is_err() {
@@ -296,7 +382,9 @@ fn serve(drive: &mut Drive, clock: &Clock, line: &mut impl Line) -> io::Result<(
                 Recv::Closed => return Ok(()),
             }
         }
-        drive.on_timer(clock.now());
+        let now = clock.now();
+        let drive = sim.catch_up(now);
+        drive.on_timer(now);
         if let Some(reply) = drive.take_reply()
             && line.send(reply).is_err()
         {
@@ -306,11 +394,12 @@ fn serve(drive: &mut Drive, clock: &Clock, line: &mut impl Line) -> io::Result<(
 }
 
 /// Ends the frame a master left unfinished when it went away; its reply has nowhere to go.
-fn settle(drive: &mut Drive, clock: &Clock) {
-    while let Some(deadline) = drive.deadline() {
+fn settle(sim: &mut Sim<'_>, clock: &Clock) {
+    while let Some(deadline) = sim.plant.drive().deadline() {
         let now = clock.now();
         match deadline.since(now) {
             0 => {
+                let drive = sim.catch_up(now);
                 drive.on_timer(now);
                 let _ = drive.take_reply();
             }

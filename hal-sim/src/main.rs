@@ -8,7 +8,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
-use hal_sim::{Endpoint, SimOptions, Simulator};
+use hal_sim::motor::MotorInputs;
+use hal_sim::{Endpoint, MotorOptions, SimOptions, Simulator};
 
 /// One simulated OpenStep drive, a Modbus-RTU slave, on a pseudo-terminal or a TCP port.
 ///
@@ -30,15 +31,55 @@ struct Args {
     /// Baud rate the frame timing (t1.5, t3.5) follows [default: the drive's, factory 9600].
     #[arg(long, value_name = "B")]
     baud: Option<u32>,
+    /// The motor, by name in the catalogue (hal-sim/motors.toml).
+    #[arg(long, value_name = "NAME", default_value = hal_sim::DEFAULT_MOTOR)]
+    motor: String,
+    /// Supply voltage, V.
+    #[arg(long, value_name = "V", default_value_t = 24.0)]
+    supply: f64,
+    /// Load inertia at the shaft, kg·m².
+    #[arg(long, value_name = "KGM2", default_value_t = 0.0)]
+    load_inertia: f64,
+    /// Constant load torque, N·m (positive opposes positive rotation).
+    #[arg(long, value_name = "NM", default_value_t = 0.0)]
+    load_torque: f64,
+    /// Record time, commanded and rotor position and velocity, and phase currents as CSV.
+    #[arg(long, value_name = "FILE.csv")]
+    trace: Option<PathBuf>,
+    /// Keep one trace row per this many control ticks (20 kHz).
+    #[arg(long, value_name = "N", default_value_t = 20)]
+    trace_every: u32,
+    /// Render a trace CSV to a PNG plot and exit.
+    #[arg(long, num_args = 2, value_names = ["TRACE.csv", "PLOT.png"])]
+    plot: Option<Vec<PathBuf>>,
 }
 
 fn main() -> ExitCode {
     let args = Args::parse();
+    if let Some([csv, png]) = args.plot.as_deref() {
+        return match hal_sim::plot::plot_trace_csv(csv, png) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("hal-sim: {e}");
+                ExitCode::FAILURE
+            }
+        };
+    }
+    let motor = MotorOptions {
+        name: args.motor,
+        inputs: MotorInputs {
+            supply_v: args.supply,
+            load_inertia_kgm2: args.load_inertia,
+            load_torque_nm: args.load_torque,
+            ..MotorInputs::default()
+        },
+        trace: args.trace.map(|path| (path, args.trace_every)),
+    };
     let endpoint = match args.tcp {
         Some(addr) => Endpoint::Tcp(addr),
         None => Endpoint::Pty { link: args.pty },
     };
-    let sim = match Simulator::bind(SimOptions { endpoint, address: args.address, baud: args.baud }) {
+    let sim = match Simulator::bind(SimOptions { endpoint, address: args.address, baud: args.baud, motor }) {
         Ok(sim) => sim,
         Err(e) => {
             eprintln!("hal-sim: {e}");

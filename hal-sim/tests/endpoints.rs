@@ -303,11 +303,14 @@ fn a_frame_left_unfinished_ends_with_its_connection() {
 
 #[test]
 fn drive_can_be_set_up_before_it_runs() {
-    let mut sim =
-        Simulator::bind(SimOptions { endpoint: Endpoint::Tcp("127.0.0.1:0".into()), address: Some(9), baud: None })
-            .expect("bind");
+    let mut sim = Simulator::bind(SimOptions {
+        endpoint: Endpoint::Tcp("127.0.0.1:0".into()),
+        address: Some(9),
+        ..Default::default()
+    })
+    .expect("bind");
     assert_eq!(sim.drive().address().get(), 9);
-    sim.drive_mut().state_mut().status_mut().position = -2;
+    sim.drive_mut().state_mut().set_position(-2);
     let at = sim.endpoint().to_owned();
     sim.spawn();
     let mut master = connect(&at);

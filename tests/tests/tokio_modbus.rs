@@ -14,7 +14,7 @@ const LIMIT: Duration = Duration::from_secs(3);
 
 /// Starts a simulator on its own thread and returns its endpoint.
 fn start(endpoint: Endpoint) -> String {
-    let sim = Simulator::bind(SimOptions { endpoint, address: None, baud: None }).expect("bind simulator");
+    let sim = Simulator::bind(SimOptions { endpoint, ..Default::default() }).expect("bind simulator");
     let at = sim.endpoint().to_string();
     sim.spawn();
     at

@@ -100,6 +100,9 @@ objects! {
     /// Parity of the serial line (our object): 0 none (8N1, the manual's setting), 1 even (8E1,
     /// the Modbus serial-line default), 2 odd. Takes effect after saving and restarting.
     Parity @ 0x2100: U8, Rw, Rom, Span(0, 2), default 0, None, "parity";
+    /// S-curve jerk time (our object): how long the acceleration of the native position and
+    /// velocity modes takes to build up to its level; jerk = acceleration / jerk time.
+    JerkTime @ 0x2101: U16, Rw, Rom, Span(1, 1000), default 50, Millis, "S-curve jerk time";
     /// Error status, write 1 to clear: bit 0 over-temperature, 1 coil A open, 2 coil B open,
     /// 3 A over-current, 4 B over-current, 5 under-voltage. Moves are refused while any is set.
     ErrorStatus @ 0x6000: U8, W1c, Live, Bits(0x3F), default 0, None, "error status";

@@ -1,0 +1,213 @@
+//! The axis: executes one planned segment at a time, evaluated by time at every control tick.
+//!
+//! Positions are whole microsteps in an `i64` anchor plus an `f64` offset from it that the
+//! planner works in. Every re-plan moves the whole part of the present position into the anchor,
+//! so the offset stays small and a move ends exactly on its (integer) target however far the
+//! axis has travelled: nothing drifts over 2^31 microsteps.
+
+use super::scurve::{Limits, PlanError, Profile, State};
+use crate::units::Instant;
+use fixed::types::U0F32;
+
+/// What to do when a profile has run its course.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Then {
+    /// A move: stand on the target.
+    Stand,
+    /// A speed change: keep the speed reached.
+    Cruise,
+}
+
+/// The segment being executed.
+// One segment lives in the axis (no heap): the size of the profile variant is what it costs.
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Copy, Debug)]
+enum Segment {
+    /// Standing on the anchor.
+    Still,
+    /// Following a profile that started at `start`, positions relative to the anchor.
+    Profile { profile: Profile, start: Instant, then: Then },
+    /// Constant speed `v` from `start`, where the position was `p0` (relative to the anchor).
+    Cruise { start: Instant, p0: f64, v: f64 },
+}
+
+/// The setpoint of one tick.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Setpoint {
+    /// Whole microsteps.
+    pub whole: i64,
+    /// The fraction of a microstep beyond `whole`.
+    pub fraction: U0F32,
+    /// Velocity in microsteps per second.
+    pub velocity: f64,
+    /// Acceleration in microsteps per second squared.
+    pub acceleration: f64,
+}
+
+/// One axis of motion.
+#[derive(Clone, Copy, Debug)]
+pub struct Axis {
+    anchor: i64,
+    segment: Segment,
+    /// The setpoint of the last tick.
+    last: Setpoint,
+}
+
+/// Seconds from `start` to `now`.
+fn seconds(start: Instant, now: Instant) -> f64 {
+    now.since(start) as f64 * 1e-6
+}
+
+/// Whole part (floor) and fraction of a position offset; `f64 as i64` saturates, never panics.
+fn split(anchor: i64, p: f64) -> (i64, f64) {
+    let floor = libm::floor(p);
+    (anchor.saturating_add(floor as i64), p - floor)
+}
+
+impl Axis {
+    /// An axis standing at `position`.
+    pub fn new(position: i64) -> Self {
+        Self {
+            anchor: position,
+            segment: Segment::Still,
+            last: Setpoint { whole: position, fraction: U0F32::ZERO, velocity: 0.0, acceleration: 0.0 },
+        }
+    }
+
+    /// Whether the axis is standing still with nothing to do.
+    pub fn is_still(&self) -> bool {
+        matches!(self.segment, Segment::Still)
+    }
+
+    /// The setpoint of the last tick.
+    pub fn setpoint(&self) -> Setpoint {
+        self.last
+    }
+
+    /// Where a move now in progress will stop (its target), if it is a move.
+    pub fn target(&self) -> Option<i64> {
+        match self.segment {
+            Segment::Profile { profile, then: Then::Stand, .. } => {
+                Some(self.anchor.saturating_add(libm::round(profile.at(profile.duration()).p) as i64))
+            }
+            Segment::Still => Some(self.anchor),
+            _ => None,
+        }
+    }
+
+    /// Position, velocity and acceleration at `now`, relative to the anchor.
+    fn state_at(&self, now: Instant) -> State {
+        match self.segment {
+            Segment::Still => State { p: 0.0, v: 0.0, a: 0.0 },
+            Segment::Profile { profile, start, .. } => profile.at(seconds(start, now)),
+            Segment::Cruise { start, p0, v } => State { p: p0 + v * seconds(start, now), v, a: 0.0 },
+        }
+    }
+
+    /// The state at `now` with the anchor moved to its whole part.
+    fn rebase(&mut self, now: Instant) -> State {
+        let s = self.state_at(now);
+        let (whole, frac) = split(self.anchor, s.p);
+        self.anchor = whole;
+        State { p: frac, ..s }
+    }
+
+    /// Moves to `target`, arriving at `arrive_v` (the stop speed, from which the drive jumps to
+    /// rest), from whatever the axis is doing at `now`. `depart_v` is the speed it may jump to
+    /// from rest (the start speed). Nothing changes if the plan fails.
+    pub fn move_to(
+        &mut self,
+        now: Instant,
+        target: i64,
+        depart_v: f64,
+        arrive_v: f64,
+        limits: &Limits,
+    ) -> Result<(), PlanError> {
+        let mut next = *self;
+        let mut start = next.rebase(now);
+        let goal = target.saturating_sub(next.anchor) as f64;
+        let direction = if goal >= start.p { 1.0 } else { -1.0 };
+        if next.is_still() && start.p != goal {
+            start.v = direction * depart_v.min(limits.v_max);
+        }
+        // The planner takes the arrival speed as a magnitude, in the direction of the move.
+        let profile = Profile::to_position(start, goal, arrive_v.min(limits.v_max), limits)?;
+        next.segment = Segment::Profile { profile, start: now, then: Then::Stand };
+        *self = next;
+        Ok(())
+    }
+
+    /// Changes speed to `v` (signed) from whatever the axis is doing at `now`, then keeps it.
+    /// From rest it may jump to `depart_v` first. Nothing changes if the plan fails.
+    pub fn run_at(&mut self, now: Instant, v: f64, depart_v: f64, limits: &Limits) -> Result<(), PlanError> {
+        let mut next = *self;
+        let mut start = next.rebase(now);
+        if next.is_still() && v != 0.0 {
+            start.v = libm::copysign(depart_v.min(libm::fabs(v)), v);
+        }
+        let profile = Profile::to_velocity(start, v, limits)?;
+        next.segment = Segment::Profile { profile, start: now, then: Then::Cruise };
+        *self = next;
+        Ok(())
+    }
+
+    /// Stops at once where the axis is (seed 000 0x6053, disable, faults): no ramp.
+    pub fn halt(&mut self) {
+        self.anchor = self.last.whole;
+        self.segment = Segment::Still;
+        self.last = Setpoint { fraction: U0F32::ZERO, velocity: 0.0, acceleration: 0.0, ..self.last };
+    }
+
+    /// Declares the present position to be `position` (only while still; a moving axis keeps
+    /// its course). Returns whether it was done.
+    pub fn set_position(&mut self, position: i64) -> bool {
+        if !self.is_still() {
+            return false;
+        }
+        *self = Self::new(position);
+        true
+    }
+
+    /// Evaluates the segment at `now` and returns the setpoint and the whole microsteps moved
+    /// since the last tick.
+    pub fn tick(&mut self, now: Instant) -> (Setpoint, i64) {
+        let s = match self.segment {
+            Segment::Profile { profile, start, then } if seconds(start, now) >= profile.duration() => {
+                let end = profile.at(profile.duration());
+                match then {
+                    Then::Stand => {
+                        // Exactly on the target: the whole part is the new anchor.
+                        let (whole, _) = split(self.anchor, libm::round(end.p));
+                        self.anchor = whole;
+                        self.segment = Segment::Still;
+                        State { p: 0.0, v: 0.0, a: 0.0 }
+                    }
+                    Then::Cruise if end.v == 0.0 => {
+                        let (whole, frac) = split(self.anchor, end.p);
+                        self.anchor = whole;
+                        self.segment = Segment::Still;
+                        State { p: frac, v: 0.0, a: 0.0 }
+                    }
+                    Then::Cruise => {
+                        // The same line as the profile's end, extrapolated back to its start.
+                        self.segment = Segment::Cruise { start, p0: end.p - end.v * profile.duration(), v: end.v };
+                        self.state_at(now)
+                    }
+                }
+            }
+            Segment::Cruise { start, p0, v } if libm::fabs(p0 + v * seconds(start, now)) > 65536.0 => {
+                // Keep the offset small: restart the cruise from here, on a whole microsecond.
+                let s = self.state_at(now);
+                let (whole, frac) = split(self.anchor, s.p);
+                self.anchor = whole;
+                self.segment = Segment::Cruise { start: now, p0: frac, v };
+                State { p: frac, ..s }
+            }
+            _ => self.state_at(now),
+        };
+        let (whole, frac) = split(self.anchor, s.p);
+        let moved = whole.saturating_sub(self.last.whole);
+        self.last = Setpoint { whole, fraction: U0F32::saturating_from_num(frac), velocity: s.v, acceleration: s.a };
+        (self.last, moved)
+    }
+}

@@ -1,0 +1,4 @@
+//! Motion: profiles planned once and evaluated by time at every control tick.
+
+pub mod axis;
+pub mod scurve;
