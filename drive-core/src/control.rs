@@ -43,7 +43,46 @@ pub(crate) const fn has_effect(obj: Obj) -> bool {
             | Obj::Enable
             | Obj::Position
             | Obj::Microsteps
+            | Obj::ControlWord
+            | Obj::PpRunSpeed
     )
+}
+
+/// Controlword bit 4: a new set-point, on its rising edge.
+pub const CW_NEW_SETPOINT: u16 = 1 << 4;
+/// Controlword bit 5: change immediately, not after the running move.
+pub const CW_IMMEDIATE: u16 = 1 << 5;
+/// Controlword bit 6: the target is relative.
+pub const CW_RELATIVE: u16 = 1 << 6;
+/// Controlword bit 8: halt.
+pub const CW_HALT: u16 = 1 << 8;
+/// Controlword bit 9: change on set-point: pass through the running target without stopping.
+pub const CW_CHANGE_ON_SETPOINT: u16 = 1 << 9;
+/// Statusword bit 10: target reached (PP), target speed reached (PV).
+pub const SW_TARGET_REACHED: u16 = 1 << 10;
+/// Statusword bit 12: set-point acknowledge.
+pub const SW_SETPOINT_ACK: u16 = 1 << 12;
+
+/// A profile-position set-point, with the parameters it was given with.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct SetPoint {
+    target: i64,
+    limits: Limits,
+    depart: f64,
+    arrive: f64,
+}
+
+/// The state of the profile position and velocity modes (§5.11-5.12).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(crate) struct Pp {
+    /// The set-point being executed.
+    active: Option<SetPoint>,
+    /// The one-deep buffer: the set-point that starts when the active one ends.
+    buffered: Option<SetPoint>,
+    /// Statusword bit 12.
+    ack: bool,
+    /// Stopped by the halt bit.
+    halted: bool,
 }
 
 /// What the output stage is told at one tick.
@@ -90,10 +129,86 @@ impl DriveState {
         (ramp(Obj::AccelLevel, Obj::StartSpeed), ramp(Obj::DecelLevel, Obj::StopSpeed))
     }
 
+    /// The trapezoid limits of the PP and PV modes at `speed`, and their start and stop speeds.
+    fn pp_setpoint(&self, target: i64, speed: f64) -> SetPoint {
+        let limits = Limits {
+            v_max: libm::fabs(speed),
+            a_max: f64::from(self.param(Obj::PpAccel)),
+            d_max: f64::from(self.param(Obj::PpDecel)),
+            jerk: None,
+        };
+        let (depart, arrive) = (f64::from(self.param(Obj::PpStartSpeed)), f64::from(self.param(Obj::PpStopSpeed)));
+        SetPoint { target, limits, depart, arrive }
+    }
+
+    /// The axis and PP state after a controlword write in PP or PV mode.
+    fn plan_controlword(&self, axis: &mut Axis, pp: &mut Pp, new: u16) -> Result<(), ObjError> {
+        let old = self.param(Obj::ControlWord) as u16;
+        let rise = |bit: u16| new & bit != 0 && old & bit == 0;
+        let fall = |bit: u16| new & bit == 0 && old & bit != 0;
+        let now = self.now;
+        let run_speed = f64::from(self.param(Obj::PpRunSpeed) as i32);
+        let failed = |_| ObjError::Refused;
+        let refuse = |ok: bool| if ok { Ok(()) } else { Err(ObjError::Refused) };
+        let mode = self.param(Obj::Mode);
+        if rise(CW_HALT) {
+            pp.halted = true;
+            if !axis.is_still() {
+                let sp = self.pp_setpoint(0, libm::fabs(axis.setpoint().velocity).max(1.0));
+                axis.run_at(now, 0.0, 0.0, &sp.limits).map_err(failed)?;
+            }
+        } else if fall(CW_HALT) {
+            pp.halted = false;
+            refuse(self.may_move())?;
+            if mode == 5 {
+                let sp = self.pp_setpoint(0, run_speed);
+                axis.run_at(now, run_speed, sp.depart, &sp.limits).map_err(failed)?;
+            } else if let Some(sp) = pp.active {
+                // PP: resume the interrupted move.
+                axis.move_to(now, sp.target, sp.depart, sp.arrive, &sp.limits).map_err(failed)?;
+            }
+        }
+        if mode == 4 && rise(CW_NEW_SETPOINT) && !pp.ack {
+            // With the buffer full (acknowledge still set) a new set-point is ignored (§5.11.3, 4).
+            refuse(self.may_move())?;
+            let value = i64::from(self.param(Obj::PpTarget) as i32);
+            let base = match (pp.buffered, pp.active) {
+                (_, Some(a)) if !axis.is_still() => a.target,
+                _ => axis.setpoint().whole,
+            };
+            let target = if new & CW_RELATIVE != 0 { base.saturating_add(value) } else { value };
+            let sp = self.pp_setpoint(target, run_speed);
+            if axis.is_still() || new & CW_IMMEDIATE != 0 || pp.halted {
+                if !pp.halted {
+                    axis.move_to(now, sp.target, sp.depart, sp.arrive, &sp.limits).map_err(failed)?;
+                }
+                pp.active = Some(sp);
+                pp.buffered = None;
+            } else {
+                if let (true, Some(a)) = (new & CW_CHANGE_ON_SETPOINT != 0, pp.active) {
+                    // Keep going through the running target if the next one lies beyond it.
+                    let here = axis.setpoint().whole;
+                    let onward = (a.target - here).signum() == (sp.target - a.target).signum();
+                    if onward {
+                        let pass = a.limits.v_max.min(sp.limits.v_max);
+                        axis.pass_through(now, a.target, a.depart, pass, &a.limits).map_err(failed)?;
+                    }
+                }
+                pp.buffered = Some(sp);
+            }
+            pp.ack = true;
+        }
+        if fall(CW_NEW_SETPOINT) && pp.buffered.is_none() {
+            pp.ack = false;
+        }
+        Ok(())
+    }
+
     /// The axis after writing `value` to the motion object `obj` at `self.now`, or why not.
     /// `Ok(None)`: accepted, the axis is left as it is.
-    fn plan_motion(&self, obj: Obj, value: u32) -> Result<Option<Axis>, ObjError> {
+    fn plan_motion(&self, obj: Obj, value: u32) -> Result<Option<(Axis, Pp)>, ObjError> {
         let mut axis = self.axis;
+        let mut pp = self.pp;
         let now = self.now;
         let busy = !axis.is_still();
         let mode = self.param(Obj::Mode);
@@ -142,14 +257,27 @@ impl DriveState {
                 if busy {
                     axis.run_at(now, 0.0, 0.0, &self.scurve_limits(speed)).map_err(|_| ObjError::Refused)?;
                 }
+                pp = Pp::default();
             }
-            Obj::Stop => axis.halt(),
-            Obj::Enable if value == 0 => axis.halt(),
+            Obj::ControlWord if matches!(mode, 4 | 5) => self.plan_controlword(&mut axis, &mut pp, value as u16)?,
+            Obj::PpRunSpeed if mode == 5 && busy && !pp.halted => {
+                let v = f64::from(value as i32);
+                let sp = self.pp_setpoint(0, v);
+                axis.run_at(now, v, sp.depart, &sp.limits).map_err(|_| ObjError::Refused)?;
+            }
+            Obj::Stop => {
+                axis.halt();
+                pp = Pp::default();
+            }
+            Obj::Enable if value == 0 => {
+                axis.halt();
+                pp = Pp::default();
+            }
             Obj::Enable => return Ok(None),
             Obj::Position | Obj::Microsteps => refuse(!busy)?,
             _ => return Ok(None),
         }
-        Ok(Some(axis))
+        Ok(Some((axis, pp)))
     }
 
     /// Checks a write to a motion object: refused when the drive cannot act on it now.
@@ -168,14 +296,43 @@ impl DriveState {
         if obj != Obj::Stop {
             self.set_param(obj, value);
         }
-        if let Ok(Some(axis)) = planned {
+        if let Ok(Some((axis, pp))) = planned {
             self.axis = axis;
+            self.pp = pp;
+        }
+    }
+
+    /// The PP/PV statusword: target reached and set-point acknowledge.
+    pub(crate) fn statusword(&self) -> u16 {
+        let reached = match self.param(Obj::Mode) {
+            4 => self.axis.is_still() && self.pp.buffered.is_none(),
+            5 => self.axis.settled(),
+            _ => false,
+        };
+        (if reached { SW_TARGET_REACHED } else { 0 }) | if self.pp.ack { SW_SETPOINT_ACK } else { 0 }
+    }
+
+    /// PP: when the running move has ended, the buffered set-point starts.
+    fn pp_tick(&mut self, now: Instant) {
+        if self.param(Obj::Mode) != 4 || !self.axis.settled() || self.pp.halted {
+            return;
+        }
+        if let Some(sp) = self.pp.buffered.take() {
+            let mut axis = self.axis;
+            if axis.move_to(now, sp.target, sp.depart, sp.arrive, &sp.limits).is_ok() {
+                self.axis = axis;
+                self.pp.active = Some(sp);
+            }
+            if self.param(Obj::ControlWord) as u16 & CW_NEW_SETPOINT == 0 {
+                self.pp.ack = false;
+            }
         }
     }
 
     /// One control tick at `now`: evaluates the motion and updates the live objects.
     pub fn tick(&mut self, now: Instant) -> Outputs {
         self.now = now;
+        self.pp_tick(now);
         let (setpoint, steps) = self.axis.tick(now);
         let enabled = self.param(Obj::Enable) == 1;
         Outputs {

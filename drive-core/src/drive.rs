@@ -1,6 +1,6 @@
 //! The drive: its state behind the object dictionary, and the RTU slave in front of it.
 
-use crate::control::{Outputs, has_effect};
+use crate::control::{Outputs, Pp, has_effect};
 use crate::crc;
 use crate::ident::Identity;
 use crate::motion::axis::Axis;
@@ -53,8 +53,6 @@ pub struct Status {
     pub gpio: u16,
     /// Analog input code (0x605F).
     pub analog_in: u16,
-    /// PP statusword (0x6071).
-    pub statusword: u16,
     /// PVT pointer (0x601A).
     pub pvt_pointer: u16,
     /// Encoder position in counts (0x6089).
@@ -73,6 +71,8 @@ pub struct DriveState {
     pub(crate) now: Instant,
     /// The motion being executed.
     pub(crate) axis: Axis,
+    /// The profile position and velocity modes' set-points.
+    pub(crate) pp: Pp,
 }
 
 impl DriveState {
@@ -90,6 +90,7 @@ impl DriveState {
             request: None,
             now: Instant::from_micros(0),
             axis: Axis::new(0),
+            pp: Pp::default(),
         }
     }
 
@@ -143,7 +144,7 @@ impl DriveState {
             Obj::NotifyStatus => u32::from(s.notify),
             Obj::GpioValue => u32::from(s.gpio),
             Obj::AnalogIn => u32::from(s.analog_in),
-            Obj::StatusWord => u32::from(s.statusword),
+            Obj::StatusWord => u32::from(self.statusword()),
             Obj::PvtPointer => u32::from(s.pvt_pointer),
             // Open loop: the commanded speed (the encoder's measurement comes with the closed loop).
             Obj::RealSpeed => libm::round(self.axis.setpoint().velocity) as i32 as u32,

@@ -123,6 +123,31 @@ impl Axis {
         arrive_v: f64,
         limits: &Limits,
     ) -> Result<(), PlanError> {
+        self.plan_to(now, target, depart_v, arrive_v, Then::Stand, limits)
+    }
+
+    /// Moves through `target` at `pass_v` and keeps that speed beyond it, until the next plan
+    /// (a set-point that follows without a stop). Nothing changes if the plan fails.
+    pub fn pass_through(
+        &mut self,
+        now: Instant,
+        target: i64,
+        depart_v: f64,
+        pass_v: f64,
+        limits: &Limits,
+    ) -> Result<(), PlanError> {
+        self.plan_to(now, target, depart_v, pass_v, Then::Cruise, limits)
+    }
+
+    fn plan_to(
+        &mut self,
+        now: Instant,
+        target: i64,
+        depart_v: f64,
+        arrive_v: f64,
+        then: Then,
+        limits: &Limits,
+    ) -> Result<(), PlanError> {
         let mut next = *self;
         let mut start = next.rebase(now);
         let goal = target.saturating_sub(next.anchor) as f64;
@@ -132,9 +157,14 @@ impl Axis {
         }
         // The planner takes the arrival speed as a magnitude, in the direction of the move.
         let profile = Profile::to_position(start, goal, arrive_v.min(limits.v_max), limits)?;
-        next.segment = Segment::Profile { profile, start: now, then: Then::Stand };
+        next.segment = Segment::Profile { profile, start: now, then };
         *self = next;
         Ok(())
+    }
+
+    /// Whether the last planned profile has run its course (standing, or cruising at its speed).
+    pub fn settled(&self) -> bool {
+        !matches!(self.segment, Segment::Profile { .. })
     }
 
     /// Changes speed to `v` (signed) from whatever the axis is doing at `now`, then keeps it.

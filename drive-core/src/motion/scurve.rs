@@ -243,15 +243,33 @@ impl Pulse {
         self.segs.iter().take(self.n)
     }
 
-    /// Duration and distance of the pulse when it starts at velocity `v`.
-    fn time_dist(&self, mut v: f64) -> (f64, f64) {
-        let (mut t, mut d) = (0.0, 0.0);
+    /// Duration, distance and path length (Σ|Δp| of the segments, the scale of the rounding) of
+    /// the pulse when it starts at velocity `v`.
+    fn time_dist(&self, mut v: f64) -> Eval {
+        let mut e = Eval { t: 0.0, d: 0.0, mag: 0.0 };
         for s in self.iter() {
-            d += s.t * (v + s.t * (0.5 * s.a + s.t * s.j / 6.0));
+            let dp = s.t * (v + s.t * (0.5 * s.a + s.t * s.j / 6.0));
+            e.d += dp;
+            e.mag += fabs(dp);
             v += s.t * (s.a + 0.5 * s.j * s.t);
-            t += s.t;
+            e.t += s.t;
         }
-        (t, d)
+        e
+    }
+}
+
+/// Duration, distance and path length of a candidate.
+#[derive(Clone, Copy, Debug)]
+struct Eval {
+    t: f64,
+    d: f64,
+    mag: f64,
+}
+
+impl Eval {
+    /// The distance error accepted for this candidate: the rounding of its positions.
+    fn tol(&self) -> f64 {
+        1e-12 * self.mag + 1e-9
     }
 }
 
@@ -530,22 +548,18 @@ fn dip_bounds(vs: f64, a_s: f64, ve: f64, lim: &Lim, v: f64) -> Result<Option<(f
 
 const ROOT_ITERS: usize = 200;
 
-/// Finds `x` in `[xa, xb]` with `f(x) ≈ 0`, given `f(xa)`, `f(xb)` of opposite signs (or zero).
-/// Illinois (modified regula falsi) with a bisection every fourth step; bounded.
+/// Finds `x` in `[xa, xb]` with `f(x) ≈ 0`, given `f(xa)`, `f(xb)` of opposite signs (if they are
+/// not, the endpoint nearer to zero is returned). Illinois (modified regula falsi) with a bisection
+/// every fourth step; stops at `|f| ≤ ftol`, when the bracket cannot shrink, or after
+/// `ROOT_ITERS` evaluations.
 fn solve<F>(mut f: F, mut xa: f64, mut fa: f64, mut xb: f64, mut fb: f64, ftol: f64) -> Result<f64, PlanError>
 where
     F: FnMut(f64) -> Result<f64, PlanError>,
 {
-    if fabs(fa) <= ftol {
-        return Ok(xa);
-    }
-    if fabs(fb) <= ftol {
-        return Ok(xb);
-    }
-    if (fa > 0.0) == (fb > 0.0) {
-        return Err(PlanError::NoSolution);
-    }
     let (mut best, mut fbest) = if fabs(fa) < fabs(fb) { (xa, fabs(fa)) } else { (xb, fabs(fb)) };
+    if fbest <= ftol || (fa > 0.0) == (fb > 0.0) {
+        return Ok(best);
+    }
     let mut side = 0i8;
     for it in 0..ROOT_ITERS {
         let mut x = (xa * fb - xb * fa) / (fb - fa);
@@ -596,13 +610,13 @@ enum Cand {
 }
 
 /// Duration and distance of "pulse to vp, pulse to vf".
-fn turn_td(v0: f64, a0: f64, vp: f64, vf: f64, lim: &Lim) -> Result<(f64, f64), PlanError> {
-    let (t1, d1) = pulse(v0, a0, vp, lim, None)?.time_dist(v0);
-    let (t2, d2) = pulse(vp, 0.0, vf, lim, None)?.time_dist(vp);
-    Ok((t1 + t2, d1 + d2))
+fn turn_td(v0: f64, a0: f64, vp: f64, vf: f64, lim: &Lim) -> Result<Eval, PlanError> {
+    let e1 = pulse(v0, a0, vp, lim, None)?.time_dist(v0);
+    let e2 = pulse(vp, 0.0, vf, lim, None)?.time_dist(vp);
+    Ok(Eval { t: e1.t + e2.t, d: e1.d + e2.d, mag: e1.mag + e2.mag })
 }
 
-fn dip_td(v0: f64, a0: f64, vf: f64, lim: &Lim, dip: Dip) -> Result<(f64, f64), PlanError> {
+fn dip_td(v0: f64, a0: f64, vf: f64, lim: &Lim, dip: Dip) -> Result<Eval, PlanError> {
     Ok(pulse(v0, a0, vf, lim, Some(dip))?.time_dist(v0))
 }
 
@@ -657,50 +671,55 @@ impl Profile {
         };
         let end = State { p: target_p, v: vf, a: 0.0 };
         if d == 0.0 && v0 == 0.0 && a0 == 0.0 {
-            return Profile::build(start, &[], end);
+            return Profile::build(start, &[], None, end);
         }
 
         let vmax = lim.v;
-        let ftol = 1e-12 * fabs(d).max(1.0);
-        let mut best: Option<(f64, Cand)> = None;
-        let mut consider = |t: f64, c: Cand| {
-            if t.is_finite() && best.is_none_or(|(bt, _)| t < bt) {
-                best = Some((t, c));
+        // Root searches stop at this residual; candidates are accepted within their own rounding.
+        let ftol = 1e-14 * fabs(d).max(1.0);
+        let mut best: Option<(f64, Cand, Eval)> = None;
+        let mut consider = |c: Cand, e: Eval, residual: f64| {
+            if e.t.is_finite() && fabs(residual) <= e.tol() && best.is_none_or(|(bt, _, _)| e.t < bt) {
+                best = Some((e.t, c, e));
             }
+        };
+        // A bracket [fa, fb] around zero, up to the rounding of each end.
+        let brackets = |fa: f64, ea: &Eval, fb: f64, eb: &Eval| {
+            (fa <= ea.tol() && fb >= -eb.tol()) || (fa >= -ea.tol() && fb <= eb.tol())
         };
 
         // Cruise at +v_max or -v_max.
-        let (tp, dp) = turn_td(v0, a0, vmax, vf, &lim)?;
-        let (tm, dm) = turn_td(v0, a0, -vmax, vf, &lim)?;
-        if d >= dp - ftol {
-            let c = ((d - dp) / vmax).max(0.0);
-            consider(tp + c, Cand::Turn { vp: vmax, cruise: c });
-        }
-        if d <= dm + ftol {
-            let c = ((dm - d) / vmax).max(0.0);
-            consider(tm + c, Cand::Turn { vp: -vmax, cruise: c });
+        let ep = turn_td(v0, a0, vmax, vf, &lim)?;
+        let em = turn_td(v0, a0, -vmax, vf, &lim)?;
+        for (e, v) in [(ep, vmax), (em, -vmax)] {
+            let c = (d - e.d) / v;
+            if c >= -e.tol() / vmax {
+                let c = c.max(0.0);
+                let e = Eval { t: e.t + c, d: e.d + c * v, mag: e.mag + fabs(c * v) };
+                consider(Cand::Turn { vp: v, cruise: c }, e, e.d - d);
+            }
         }
 
         // Turning velocity above both the natural and the final velocity, or below both.
         let vn = lim.v_nat(v0, a0);
         let (lo, hi) = (vn.min(vf), vn.max(vf));
-        let dist = |vp: f64| turn_td(v0, a0, vp, vf, &lim).map(|x| x.1 - d);
-        if hi <= vmax {
-            let fh = dist(hi)?;
-            let fv = dp - d;
-            if fh <= ftol && fv >= -ftol {
-                let vp = solve(dist, hi, fh, vmax, fv, ftol)?;
-                let (t, _) = turn_td(v0, a0, vp, vf, &lim)?;
-                consider(t, Cand::Turn { vp, cruise: 0.0 });
+        let dist = |vp: f64| turn_td(v0, a0, vp, vf, &lim).map(|e| e.d - d);
+        for (xa, ea, xb, eb) in [(hi, None, vmax, Some(ep)), (-vmax, Some(em), lo, None)] {
+            if !(xa <= xb && xa >= -vmax && xb <= vmax) {
+                continue;
             }
-        }
-        if lo >= -vmax {
-            let fl = dist(lo)?;
-            let fm = dm - d;
-            if fm <= ftol && fl >= -ftol {
-                let vp = solve(dist, -vmax, fm, lo, fl, ftol)?;
-                let (t, _) = turn_td(v0, a0, vp, vf, &lim)?;
-                consider(t, Cand::Turn { vp, cruise: 0.0 });
+            let ea = match ea {
+                Some(e) => e,
+                None => turn_td(v0, a0, xa, vf, &lim)?,
+            };
+            let eb = match eb {
+                Some(e) => e,
+                None => turn_td(v0, a0, xb, vf, &lim)?,
+            };
+            if brackets(ea.d - d, &ea, eb.d - d, &eb) {
+                let vp = solve(dist, xa, ea.d - d, xb, eb.d - d, ftol)?;
+                let e = turn_td(v0, a0, vp, vf, &lim)?;
+                consider(Cand::Turn { vp, cruise: 0.0 }, e, e.d - d);
             }
         }
 
@@ -718,13 +737,12 @@ impl Profile {
                 let vd = if v0 > 0.0 { vmax } else { -vmax };
                 sqrt((an * an - 2.0 * lim.j * fabs(v0 - vd)).max(0.0))
             };
-            let dd = |a: f64| dip_td(v0, a0, vf, &lim, Dip { v: apex(a), a }).map(|x| x.1 - d);
-            let f0 = dd(0.0)?;
-            let f1 = dd(a_top)?;
-            if (f0 <= ftol && f1 >= -ftol) || (f0 >= -ftol && f1 <= ftol) {
-                let a = solve(dd, 0.0, f0, a_top, f1, ftol)?;
-                let (t, _) = dip_td(v0, a0, vf, &lim, Dip { v: apex(a), a })?;
-                consider(t, Cand::Dip { v: apex(a), a });
+            let eval = |a: f64| dip_td(v0, a0, vf, &lim, Dip { v: apex(a), a });
+            let (e0, e1) = (eval(0.0)?, eval(a_top)?);
+            if brackets(e0.d - d, &e0, e1.d - d, &e1) {
+                let a = solve(|a| eval(a).map(|e| e.d - d), 0.0, e0.d - d, a_top, e1.d - d, ftol)?;
+                let e = eval(a)?;
+                consider(Cand::Dip { v: apex(a), a }, e, e.d - d);
             }
         }
 
@@ -734,18 +752,17 @@ impl Profile {
             let sigma = if fabs(v0) > vmax { v0 } else { vn };
             let vd = if sigma > 0.0 { vmax } else { -vmax };
             if let Some((a_lo, a_hi)) = dip_bounds(v0, a0, vf, &lim, vd)? {
-                let dd = |a: f64| dip_td(v0, a0, vf, &lim, Dip { v: vd, a }).map(|x| x.1 - d);
-                let f0 = dd(a_lo)?;
-                let f1 = dd(a_hi)?;
-                if (f0 <= ftol && f1 >= -ftol) || (f0 >= -ftol && f1 <= ftol) {
-                    let a = solve(dd, a_lo, f0, a_hi, f1, ftol)?;
-                    let (t, _) = dip_td(v0, a0, vf, &lim, Dip { v: vd, a })?;
-                    consider(t, Cand::Dip { v: vd, a });
+                let eval = |a: f64| dip_td(v0, a0, vf, &lim, Dip { v: vd, a });
+                let (e0, e1) = (eval(a_lo)?, eval(a_hi)?);
+                if brackets(e0.d - d, &e0, e1.d - d, &e1) {
+                    let a = solve(|a| eval(a).map(|e| e.d - d), a_lo, e0.d - d, a_hi, e1.d - d, ftol)?;
+                    let e = eval(a)?;
+                    consider(Cand::Dip { v: vd, a }, e, e.d - d);
                 }
             }
         }
 
-        let (_, cand) = best.ok_or(PlanError::NoSolution)?;
+        let (_, cand, eval) = best.ok_or(PlanError::NoSolution)?;
         let mut segs = [Seg::default(); MAX_PHASES];
         let mut ns = 0usize;
         let mut add = |p: &Pulse| -> Result<(), PlanError> {
@@ -755,10 +772,15 @@ impl Profile {
             }
             Ok(())
         };
+        // The cruise phase (index, exact velocity): it starts from v_max exactly, not from the
+        // integrated velocity, so that a long cruise does not accumulate its rounding.
+        let mut cruise_at = None;
         match cand {
             Cand::Turn { vp, cruise } => {
-                add(&pulse(v0, a0, vp, &lim, None)?)?;
+                let p1 = pulse(v0, a0, vp, &lim, None)?;
+                add(&p1)?;
                 if cruise > 0.0 {
+                    cruise_at = Some((p1.n, vp));
                     let mut c = Pulse::EMPTY;
                     c.push(cruise, 0.0, 0.0)?;
                     add(&c)?;
@@ -768,12 +790,13 @@ impl Profile {
             Cand::Dip { v, a } => add(&pulse(v0, a0, vf, &lim, Some(Dip { v, a }))?)?,
         }
         let start = State { a: a0, ..start };
-        let prof = Profile::build(start, segs.get(..ns).unwrap_or(&[]), end)?;
-        // The integrated end must meet the target (the last phase lands on it).
+        let prof = Profile::build(start, segs.get(..ns).unwrap_or(&[]), cruise_at, end)?;
+        // The integrated end must meet the target (the last phase lands on it) to within rounding.
         let last = prof.eval_end();
-        let reach = prof.phases.iter().take(prof.n).fold(fabs(d), |m, ph| m.max(fabs(ph.p - start.p)));
-        let tol = 1e-6 + 1e-9 * (reach + fabs(start.p));
-        if fabs(last.p - target_p) > tol || fabs(last.v - vf) > 1e-6 * vmax + 1e-6 {
+        let tol = eval.tol() + 1e-13 * fabs(start.p);
+        // (The end time of a long profile is rounded: up to a few ulp of the duration at full a.)
+        let tol_v = 1e-9 * vmax + 8.0 * f64::EPSILON * prof.duration * lim.acc.max(lim.dec);
+        if fabs(last.p - target_p) > tol || fabs(last.v - vf) > tol_v {
             return Err(PlanError::NoSolution);
         }
         Ok(prof)
@@ -805,18 +828,24 @@ impl Profile {
         let a0 = if lim.smooth() { start.a } else { 0.0 };
         let p = pulse(start.v, a0, target_v, &lim, None)?;
         let start = State { a: a0, ..start };
-        let mut prof = Profile::build(start, p.segs.get(..p.n).unwrap_or(&[]), start)?;
+        let mut prof = Profile::build(start, p.segs.get(..p.n).unwrap_or(&[]), None, start)?;
         let e = prof.eval_end();
         prof.end = State { p: e.p, v: target_v, a: 0.0 };
         Ok(prof)
     }
 
-    /// Precomputes the phase start states.
-    fn build(start: State, segs: &[Seg], end: State) -> Result<Profile, PlanError> {
+    /// Precomputes the phase start states; the phase `cruise.0` (if any) starts at velocity
+    /// `cruise.1` exactly.
+    fn build(start: State, segs: &[Seg], cruise: Option<(usize, f64)>, end: State) -> Result<Profile, PlanError> {
         let mut phases = [Phase::default(); MAX_PHASES];
         let (mut t, mut p, mut v) = (0.0, start.p, start.v);
         let mut n = 0usize;
         for s in segs {
+            if let Some((i, vc)) = cruise
+                && i == n
+            {
+                v = vc;
+            }
             let ph = phases.get_mut(n).ok_or(PlanError::NoSolution)?;
             *ph = Phase { t0: t, p, v, a2: 0.5 * s.a, j6: s.j / 6.0 };
             n += 1;
