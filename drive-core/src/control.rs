@@ -19,6 +19,7 @@ use crate::motion::axis::{Axis, Setpoint};
 use crate::motion::scurve::Limits;
 use crate::od::{Obj, ObjError};
 use crate::units::Instant;
+use fixed::types::U0F16;
 
 /// Control ticks per second. At 20 kHz a tick is 50 µs: at the manual's top speed of 200 kpps
 /// that is 10 steps per tick, which the output stage spaces from the setpoint's velocity and
@@ -96,7 +97,12 @@ pub struct Outputs {
     pub current_ma: u16,
     /// Microsteps per full step that positions count in (0x600C; 0 counts full steps).
     pub microsteps: u16,
+    /// The share of fast decay in the chopper's off-time (0x6010).
+    pub fast_decay: U0F16,
 }
+
+/// Fast-decay shares of 0x6010's values 0..=3: 0, 1/2, 3/4, 7/8.
+const DECAY: [U0F16; 4] = [U0F16::ZERO, U0F16::lit("0.5"), U0F16::lit("0.75"), U0F16::lit("0.875")];
 
 impl DriveState {
     fn param(&self, obj: Obj) -> u32 {
@@ -334,12 +340,21 @@ impl DriveState {
         self.now = now;
         self.pp_tick(now);
         let (setpoint, steps) = self.axis.tick(now);
+        // Standstill current reduction once the motor has stood for the delay.
+        let still = self.axis.is_still();
+        let since = *self.still_since.get_or_insert(now);
+        if !still {
+            self.still_since = None;
+        }
+        let idle = still && now.since(since) >= u64::from(self.param(Obj::IdleDelay)) * 1000;
+        let current = self.param(Obj::PhaseCurrent) * if idle { self.param(Obj::IdleCurrent) } else { 100 } / 100;
         let enabled = self.param(Obj::Enable) == 1;
         Outputs {
             setpoint,
             steps,
-            current_ma: if enabled { self.param(Obj::PhaseCurrent) as u16 } else { 0 },
+            current_ma: if enabled { current as u16 } else { 0 },
             microsteps: self.param(Obj::Microsteps) as u16,
+            fast_decay: DECAY.get(self.param(Obj::CurrentDecay) as usize).copied().unwrap_or(U0F16::ZERO),
         }
     }
 }

@@ -73,6 +73,8 @@ pub struct DriveState {
     pub(crate) axis: Axis,
     /// The profile position and velocity modes' set-points.
     pub(crate) pp: Pp,
+    /// Since when the axis has stood still (for the standstill current).
+    pub(crate) still_since: Option<Instant>,
 }
 
 impl DriveState {
@@ -91,6 +93,7 @@ impl DriveState {
             now: Instant::from_micros(0),
             axis: Axis::new(0),
             pp: Pp::default(),
+            still_since: None,
         }
     }
 

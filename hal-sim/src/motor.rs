@@ -282,11 +282,15 @@ pub struct DriverCommand {
     pub current: f64,
     /// Whether the bridges are on. Off: the currents freewheel to zero; no torque but detent.
     pub enabled: bool,
+    /// The share of fast decay in the chopper's off-time, 0..=1: when a phase current must
+    /// fall, the bridge can reverse at most this share of the supply across the winding (fast
+    /// decay); the rest of the time it shorts it (slow decay). 1 is the ideal chopper.
+    pub fast_decay: f64,
 }
 
 impl DriverCommand {
     /// Bridges off.
-    pub const DISABLED: Self = Self { theta_e: 0.0, current: 0.0, enabled: false };
+    pub const DISABLED: Self = Self { theta_e: 0.0, current: 0.0, enabled: false, fast_decay: 1.0 };
 
     /// Bridges on, holding or moving to the microstep `position` (counted from the start, where
     /// θe = 0), with `microsteps_per_step` microsteps per full step, at current amplitude `current`.
@@ -295,13 +299,18 @@ impl DriverCommand {
     pub fn at_microstep(position: i64, microsteps_per_step: u32, current: f64) -> Self {
         let cycle = 4 * i64::from(microsteps_per_step.max(1));
         let in_cycle = position.rem_euclid(cycle);
-        Self { theta_e: in_cycle as f64 * FRAC_PI_2 / f64::from(microsteps_per_step.max(1)), current, enabled: true }
+        Self {
+            theta_e: in_cycle as f64 * FRAC_PI_2 / f64::from(microsteps_per_step.max(1)),
+            current,
+            enabled: true,
+            fast_decay: 1.0,
+        }
     }
 
     /// Bridges on at the electrical angle of a fractional full-step position (`full_steps` × π/2,
     /// reduced modulo 4 full steps first), at current amplitude `current`.
     pub fn at_full_steps(full_steps: f64, current: f64) -> Self {
-        Self { theta_e: full_steps.rem_euclid(4.0) * FRAC_PI_2, current, enabled: true }
+        Self { theta_e: full_steps.rem_euclid(4.0) * FRAC_PI_2, current, enabled: true, fast_decay: 1.0 }
     }
 }
 
@@ -445,8 +454,12 @@ impl Motor {
             if cmd.enabled {
                 let (se, ce) = cmd.theta_e.sin_cos();
                 let a = self.decay_pwm;
-                let dead_beat =
-                    |i_ref: f64, i: f64, e: f64| (e + p.r_ohm * (i_ref - i * a) / (1.0 - a)).clamp(-supply, supply);
+                // Driving the current down (against its sign) only fast decay reverses the supply.
+                let down = supply * cmd.fast_decay.clamp(0.0, 1.0);
+                let dead_beat = |i_ref: f64, i: f64, e: f64| {
+                    let v = e + p.r_ohm * (i_ref - i * a) / (1.0 - a);
+                    if v * i < 0.0 { v.clamp(-down, down) } else { v.clamp(-supply, supply) }
+                };
                 self.v_a = dead_beat(cmd.current * ce, self.i_a, e_a);
                 self.v_b = dead_beat(cmd.current * se, self.i_b, e_b);
             }

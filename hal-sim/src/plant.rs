@@ -40,7 +40,11 @@ pub fn driver_command(out: &Outputs) -> DriverCommand {
     let per_step = microsteps_per_step(out.microsteps);
     let whole = DriverCommand::at_microstep(out.setpoint.whole, per_step, f64::from(out.current_ma) * 1e-3);
     let fraction: f64 = out.setpoint.fraction.to_num();
-    DriverCommand { theta_e: whole.theta_e + fraction * FRAC_PI_2 / f64::from(per_step), ..whole }
+    DriverCommand {
+        theta_e: whole.theta_e + fraction * FRAC_PI_2 / f64::from(per_step),
+        fast_decay: out.fast_decay.to_num(),
+        ..whole
+    }
 }
 
 impl Plant {

@@ -52,9 +52,10 @@
 //! [`Profile::position_q32`] adds a floor and two conversions to return whole microsteps and a
 //! 32-bit fraction for a step generator. On a host (x86-64) `position` takes about 11 ns.
 //!
-//! Planning builds a pulse tens of times (median 34, at most about 110 for short moves; each a
-//! few dozen flops, a sort of at most 48 numbers and a few square roots): about 1 µs on a host,
-//! an estimated 0.3–3 ms on the M4F. It belongs outside the 20 kHz tick. A [`Profile`] is 680 bytes.
+//! Planning builds a pulse a few dozen times (median about 35, at most about 110 in the tests;
+//! each a few dozen `f64` operations, a sort of at most 48 numbers and a few square roots): 2–6 µs
+//! on a host, an estimated 3–5 ms typical and 15 ms worst on a 168 MHz M4F (not measured on the
+//! target). It belongs outside the 20 kHz tick. A [`Profile`] is 680 bytes.
 //!
 //! ```
 //! use drive_core::motion::scurve::{Limits, Profile, State};
@@ -549,8 +550,8 @@ fn dip_bounds(vs: f64, a_s: f64, ve: f64, lim: &Lim, v: f64) -> Result<Option<(f
 const ROOT_ITERS: usize = 200;
 
 /// Finds `x` in `[xa, xb]` with `f(x) ≈ 0`, given `f(xa)`, `f(xb)` of opposite signs (if they are
-/// not, the endpoint nearer to zero is returned). Illinois (modified regula falsi) with a bisection
-/// every fourth step; stops at `|f| ≤ ftol`, when the bracket cannot shrink, or after
+/// not, the endpoint nearer to zero is returned). Illinois (modified regula falsi), bisecting when
+/// three steps have not halved the bracket; stops at `|f| ≤ ftol`, when the bracket cannot shrink, or after
 /// `ROOT_ITERS` evaluations.
 fn solve<F>(mut f: F, mut xa: f64, mut fa: f64, mut xb: f64, mut fb: f64, ftol: f64) -> Result<f64, PlanError>
 where
@@ -561,10 +562,19 @@ where
         return Ok(best);
     }
     let mut side = 0i8;
+    // Bisect when three steps have not halved the bracket (Illinois stalls on one side).
+    let mut width_ref = fabs(xb - xa);
     for it in 0..ROOT_ITERS {
         let mut x = (xa * fb - xb * fa) / (fb - fa);
         let (lo, hi) = if xa < xb { (xa, xb) } else { (xb, xa) };
-        if it % 4 == 3 || !(x > lo && x < hi) {
+        if it % 3 == 2 {
+            let w = hi - lo;
+            if w > 0.5 * width_ref {
+                x = 0.5 * (xa + xb);
+            }
+            width_ref = w;
+        }
+        if !(x > lo && x < hi) {
             x = 0.5 * (xa + xb);
         }
         if !(x > lo && x < hi) {
@@ -678,11 +688,13 @@ impl Profile {
         // Root searches stop at this residual; candidates are accepted within their own rounding.
         let ftol = 1e-14 * fabs(d).max(1.0);
         let mut best: Option<(f64, Cand, Eval)> = None;
-        let mut consider = |c: Cand, e: Eval, residual: f64| {
+        let consider = |best: &mut Option<(f64, Cand, Eval)>, c: Cand, e: Eval, residual: f64| {
             if e.t.is_finite() && fabs(residual) <= e.tol() && best.is_none_or(|(bt, _, _)| e.t < bt) {
-                best = Some((e.t, c, e));
+                *best = Some((e.t, c, e));
             }
         };
+        // A family whose shortest possible duration is no better than the best so far is skipped.
+        let beaten = |best: &Option<(f64, Cand, Eval)>, t_min: f64| best.is_some_and(|(bt, _, _)| t_min >= bt);
         // A bracket [fa, fb] around zero, up to the rounding of each end.
         let brackets = |fa: f64, ea: &Eval, fb: f64, eb: &Eval| {
             (fa <= ea.tol() && fb >= -eb.tol()) || (fa >= -ea.tol() && fb <= eb.tol())
@@ -696,7 +708,7 @@ impl Profile {
             if c >= -e.tol() / vmax {
                 let c = c.max(0.0);
                 let e = Eval { t: e.t + c, d: e.d + c * v, mag: e.mag + fabs(c * v) };
-                consider(Cand::Turn { vp: v, cruise: c }, e, e.d - d);
+                consider(&mut best, Cand::Turn { vp: v, cruise: c }, e, e.d - d);
             }
         }
 
@@ -716,10 +728,11 @@ impl Profile {
                 Some(e) => e,
                 None => turn_td(v0, a0, xb, vf, &lim)?,
             };
-            if brackets(ea.d - d, &ea, eb.d - d, &eb) {
+            // The duration grows away from the direct profile: the inner end is the shortest.
+            if brackets(ea.d - d, &ea, eb.d - d, &eb) && !beaten(&best, ea.t.min(eb.t)) {
                 let vp = solve(dist, xa, ea.d - d, xb, eb.d - d, ftol)?;
                 let e = turn_td(v0, a0, vp, vf, &lim)?;
-                consider(Cand::Turn { vp, cruise: 0.0 }, e, e.d - d);
+                consider(&mut best, Cand::Turn { vp, cruise: 0.0 }, e, e.d - d);
             }
         }
 
@@ -739,10 +752,10 @@ impl Profile {
             };
             let eval = |a: f64| dip_td(v0, a0, vf, &lim, Dip { v: apex(a), a });
             let (e0, e1) = (eval(0.0)?, eval(a_top)?);
-            if brackets(e0.d - d, &e0, e1.d - d, &e1) {
+            if brackets(e0.d - d, &e0, e1.d - d, &e1) && !beaten(&best, e0.t.min(e1.t)) {
                 let a = solve(|a| eval(a).map(|e| e.d - d), 0.0, e0.d - d, a_top, e1.d - d, ftol)?;
                 let e = eval(a)?;
-                consider(Cand::Dip { v: apex(a), a }, e, e.d - d);
+                consider(&mut best, Cand::Dip { v: apex(a), a }, e, e.d - d);
             }
         }
 
@@ -754,10 +767,10 @@ impl Profile {
             if let Some((a_lo, a_hi)) = dip_bounds(v0, a0, vf, &lim, vd)? {
                 let eval = |a: f64| dip_td(v0, a0, vf, &lim, Dip { v: vd, a });
                 let (e0, e1) = (eval(a_lo)?, eval(a_hi)?);
-                if brackets(e0.d - d, &e0, e1.d - d, &e1) {
+                if brackets(e0.d - d, &e0, e1.d - d, &e1) && !beaten(&best, e0.t.min(e1.t)) {
                     let a = solve(|a| eval(a).map(|e| e.d - d), a_lo, e0.d - d, a_hi, e1.d - d, ftol)?;
                     let e = eval(a)?;
-                    consider(Cand::Dip { v: vd, a }, e, e.d - d);
+                    consider(&mut best, Cand::Dip { v: vd, a }, e, e.d - d);
                 }
             }
         }

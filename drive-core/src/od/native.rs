@@ -103,6 +103,12 @@ objects! {
     /// S-curve jerk time (our object): how long the acceleration of the native position and
     /// velocity modes takes to build up to its level; jerk = acceleration / jerk time.
     JerkTime @ 0x2101: U16, Rw, Rom, Span(1, 1000), default 50, Millis, "S-curve jerk time";
+    /// Standstill current (our object, as seed 002's 0x0213): the phase current in percent of
+    /// 0x600D once the motor has stood still for 0x2103. 100: no reduction.
+    IdleCurrent @ 0x2102: U8, Rw, Rom, Span(10, 100), default 100, Percent, "standstill current";
+    /// Standstill delay (our object, as seed 002's 0x0245): how long the motor stands before the
+    /// current drops to 0x2102.
+    IdleDelay @ 0x2103: U16, Rw, Rom, Span(1, 32767), default 500, Millis, "standstill delay";
     /// Error status, write 1 to clear: bit 0 over-temperature, 1 coil A open, 2 coil B open,
     /// 3 A over-current, 4 B over-current, 5 under-voltage. Moves are refused while any is set.
     ErrorStatus @ 0x6000: U8, W1c, Live, Bits(0x3F), default 0, None, "error status";
@@ -135,7 +141,9 @@ objects! {
     PhaseCurrent @ 0x600D: U16, Rw, Rom, Span(0, 6000), default 658, MilliAmps, "phase current";
     /// Motor position. Writing it sets the current position without moving.
     Position @ 0x600E: S32, Rw, Live, S32_ANY, default 0, Steps, "motor position";
-    /// Current decay: 0 0 %, 1 50 %, 2 75 %, 3 87.5 %.
+    /// Current decay: the share of fast decay in the chopper's off-time, 0 0 % (slow decay only),
+    /// 1 50 %, 2 75 %, 3 87.5 %. More fast decay lets the current fall faster at speed, at the
+    /// cost of ripple. (The standstill current reduction is 0x2102/0x2103.)
     CurrentDecay @ 0x6010: U8, Rw, Rom, Span(0, 3), default 2, None, "current decay";
     /// Motor enable: 0 frees the motor (current off) and ignores moves until 1.
     Enable @ 0x6011: U8, Rw, Ram, Span(0, 1), default 1, None, "motor enable";
