@@ -1,0 +1,122 @@
+//! The drive driving the physical motor model in simulated time: the seed examples lose no step
+//! with the defaults and the NEMA 17; a load or an acceleration beyond the motor's torque does.
+
+use drive_core::{Drive, Instant, crc};
+use hal_sim::DEFAULT_MOTOR;
+use hal_sim::motor::{Motor, MotorCatalog, MotorInputs};
+use hal_sim::plant::Plant;
+
+fn plant(inputs: MotorInputs) -> Plant {
+    let params = MotorCatalog::builtin().get(DEFAULT_MOTOR).cloned().expect("catalogue motor");
+    Plant::new(Drive::factory(), Motor::new(params, inputs))
+}
+
+/// Sends a request (CRC appended) at the plant's time and runs until it is answered.
+fn send(plant: &mut Plant, body: &[u8]) -> Vec<u8> {
+    let mut frame = body.to_vec();
+    frame.extend(crc::crc16(body).to_le_bytes());
+    let now = plant.next_tick();
+    plant.drive_mut().on_rx(now, &frame);
+    for _ in 0..200 {
+        let t = plant.next_tick();
+        plant.advance_to(t);
+        plant.drive_mut().on_timer(t);
+        if let Some(r) = plant.drive_mut().take_reply() {
+            return r.to_vec();
+        }
+    }
+    panic!("no reply to {body:02X?}");
+}
+
+fn write(plant: &mut Plant, reg: u16, value: u16) {
+    let [rh, rl] = reg.to_be_bytes();
+    let [vh, vl] = value.to_be_bytes();
+    let r = send(plant, &[0x01, 0x06, rh, rl, vh, vl]);
+    assert_eq!(r[1], 0x06, "{reg:04X}: {r:02X?}");
+}
+
+/// Runs for `secs` of simulated time; the largest |rotor - setpoint| in microsteps on the way.
+fn run(plant: &mut Plant, secs: f64) -> f64 {
+    let end = plant.next_tick().as_micros() + (secs * 1e6) as u64;
+    let mut worst = 0.0f64;
+    while plant.next_tick().as_micros() < end {
+        let t = plant.next_tick();
+        plant.advance_to(t);
+        let set = plant.outputs().map_or(0.0, |o| o.setpoint.whole as f64 + o.setpoint.fraction.to_num::<f64>());
+        worst = worst.max((plant.rotor_microsteps() - set).abs());
+        plant.drive_mut().on_timer(Instant::from_micros(t.as_micros()));
+    }
+    worst
+}
+
+fn setpoint(plant: &Plant) -> f64 {
+    plant.outputs().map_or(0.0, |o| o.setpoint.whole as f64)
+}
+
+/// §9.4.1-9.4.2 settings: 1/32, 1000 mA, 32000 pps.
+fn section_9_4(plant: &mut Plant) {
+    for (reg, v) in [(0x600C, 0x20), (0x600D, 0x3E8), (0x6003, 0), (0x6004, 0x7D00), (0x6002, 0)] {
+        write(plant, reg, v);
+    }
+}
+
+#[test]
+fn seed_examples_lose_no_step() {
+    // §9.4.1: relative 32000.
+    let mut p = plant(MotorInputs::default());
+    section_9_4(&mut p);
+    write(&mut p, 0x6005, 0);
+    write(&mut p, 0x6006, 0x7D00);
+    let worst = run(&mut p, 6.0);
+    assert_eq!(setpoint(&p), 32000.0);
+    assert!((p.rotor_microsteps() - 32000.0).abs() < 3.2, "rotor {}", p.rotor_microsteps());
+    // The rotor lags by its load angle at speed (half a full step here); a lost step would show
+    // as a jump of four full steps (one electrical cycle). Two full steps is the pull-out limit.
+    assert!(worst < 64.0, "following error {worst} microsteps");
+    // §9.4.2: absolute back to -32000.
+    write(&mut p, 0x6044, 0xFFFF);
+    write(&mut p, 0x6045, 0x8300);
+    let worst = run(&mut p, 10.0);
+    assert!((p.rotor_microsteps() + 32000.0).abs() < 3.2, "rotor {}", p.rotor_microsteps());
+    assert!(worst < 64.0, "{worst}");
+    // §9.4.3: velocity mode at 32000 pps, then back to position mode (decelerates).
+    write(&mut p, 0x6007, 1);
+    write(&mut p, 0x6003, 0);
+    write(&mut p, 0x6004, 0x7D00);
+    let worst = run(&mut p, 10.0);
+    write(&mut p, 0x6007, 0);
+    let worst = worst.max(run(&mut p, 10.0));
+    assert!(worst < 64.0, "{worst}");
+    assert!((p.rotor_microsteps() - setpoint(&p)).abs() < 3.2);
+}
+
+#[test]
+fn a_load_beyond_the_torque_loses_steps() {
+    // K_m·I at 1 A is 0.21 N·m: a 0.3 N·m load back-drives the motor.
+    let mut p = plant(MotorInputs { load_torque_nm: 0.3, ..MotorInputs::default() });
+    section_9_4(&mut p);
+    write(&mut p, 0x6005, 0);
+    write(&mut p, 0x6006, 0x7D00);
+    run(&mut p, 6.0);
+    assert_eq!(setpoint(&p), 32000.0, "the open-loop drive believes it arrived");
+    let lost = (setpoint(&p) - p.rotor_microsteps()) / 32.0;
+    assert!(lost > 4.0, "lost only {lost} full steps");
+}
+
+#[test]
+fn a_step_to_full_speed_loses_steps() {
+    // Level 0 disables the ramp: 0 -> 32000 pps (5 rev/s) at once. The bare rotor follows that
+    // (the motor's start-stop rate is above 1000 full steps/s); with a load of 12 times the
+    // rotor's inertia it cannot.
+    let mut p = plant(MotorInputs { load_inertia_kgm2: 1e-4, ..MotorInputs::default() });
+    section_9_4(&mut p);
+    write(&mut p, 0x600A, 0);
+    write(&mut p, 0x600B, 0);
+    write(&mut p, 0x6008, 32000);
+    write(&mut p, 0x6009, 32000);
+    write(&mut p, 0x6005, 0);
+    write(&mut p, 0x6006, 0x7D00);
+    run(&mut p, 3.0);
+    let lost = (setpoint(&p) - p.rotor_microsteps()).abs() / 32.0;
+    assert!(lost > 4.0, "lost only {lost} full steps");
+}
