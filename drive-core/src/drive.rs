@@ -180,7 +180,7 @@ impl DriveState {
     }
 
     /// [`DriveState::check`] for the object `d` declares.
-    #[inline]
+    #[inline(always)]
     pub fn check_def(&self, d: &ObjectDef, value: u32) -> Result<(), ObjError> {
         if d.access == Access::Ro || d.storage == Storage::Const {
             return Err(ObjError::ReadOnly);
@@ -198,7 +198,7 @@ impl DriveState {
     }
 
     /// Writes `value` to the object `d` declares, which [`DriveState::check`] accepted.
-    #[inline]
+    #[inline(always)]
     pub fn apply_def(&mut self, d: &ObjectDef, value: u32) {
         if d.access == Access::Rw && d.storage != Storage::Live && !has_effect(d.obj) {
             // A plain setting: stored.

@@ -144,3 +144,20 @@ fn far_travel_does_not_drift() {
     }
     assert_eq!(bus.drive.state().read_i32(Obj::Position), (3 * i64::from(hop)) as i32);
 }
+
+#[test]
+fn one_request_sets_the_speed_then_moves() {
+    // 0x6002..0x6006 in one 0x10: direction, speed 32000, relative move 6400. The move is checked
+    // with the speed written before it in the same request.
+    let mut bus = Bus::factory();
+    let r = bus.request(&[0x01, 0x10, 0x60, 0x02, 0x00, 0x05, 0x0A, 0, 0, 0, 0, 0x7D, 0x00, 0, 0, 0x19, 0x00]);
+    assert_eq!(r.map(|r| r[1]), Some(0x10));
+    run(&mut bus, 5_000_000);
+    assert_eq!(bus.drive.state().read_i32(Obj::Position), 6400);
+    // The same with a speed out of range: nothing is written, nothing moves.
+    let r = bus.request(&[0x01, 0x10, 0x60, 0x02, 0x00, 0x05, 0x0A, 0, 0, 0, 0x04, 0x7D, 0x00, 0, 0, 0x19, 0x00]);
+    assert_eq!(r.map(|r| r[1]), Some(0x90));
+    run(&mut bus, 1_000_000);
+    assert_eq!(bus.drive.state().read_i32(Obj::Position), 6400);
+    assert_eq!(bus.drive.state().read_i32(Obj::MaxSpeed), 32000);
+}

@@ -1,6 +1,7 @@
 //! Register maps: how the registers of a vendor's protocol reach the drive's objects.
 
 use super::{Access, OBJECTS, Obj, ObjError, ObjectDef, Type, index};
+use crate::control::has_effect;
 use crate::drive::DriveState;
 use crate::pdu::{Exception, MAX_WRITE, Words};
 use heapless::Vec;
@@ -100,11 +101,14 @@ impl NativeMap {
         }
     }
 
-    /// Checks a write of `values` from `addr` object by object, noting what to do to each.
-    fn plan(&self, drive: &DriveState, addr: u16, values: Words<'_>, plan: &mut Plan) -> Result<(), ObjError> {
+    /// Decodes a write of `values` from `addr` object by object, noting what to do to each; the
+    /// addresses and access are checked here, the values by the caller.
+    /// Whether any of them is a command (an object whose write does more than store it).
+    fn plan(&self, drive: &DriveState, addr: u16, values: Words<'_>, plan: &mut Plan) -> Result<bool, ObjError> {
         let first = index::locate(addr, values.len() as u16).ok_or(ObjError::Unknown)?;
         let (addr, end) = (u32::from(addr), u32::from(addr) + values.len() as u32);
         let mut reg = addr;
+        let mut commands = false;
         for d in OBJECTS.get(first..).unwrap_or_default() {
             if reg >= end {
                 break;
@@ -116,13 +120,11 @@ impl NativeMap {
                 return Err(ObjError::ReadOnly);
             }
             let op = self.op(drive, d, addr, reg, values)?;
-            if let Op::Commit(v) = op {
-                drive.check_def(d, v)?;
-            }
+            commands |= has_effect(d.obj);
             plan.push((d, op)).map_err(|_| ObjError::Unknown)?;
             reg = d.end();
         }
-        if reg < end { Err(ObjError::Unknown) } else { Ok(()) }
+        if reg < end { Err(ObjError::Unknown) } else { Ok(commands) }
     }
 }
 
@@ -175,7 +177,29 @@ impl RegisterMap for NativeMap {
     fn write(&mut self, drive: &mut DriveState, addr: u16, values: Words<'_>) -> Result<(), Exception> {
         // Everything is checked before anything changes: all or nothing.
         let mut plan = Plan::new();
-        self.plan(drive, addr, values, &mut plan).map_err(native_exception)?;
+        let commands = self.plan(drive, addr, values, &mut plan).map_err(native_exception)?;
+        if commands && plan.len() > 1 {
+            // A command may depend on values written before it in the same request (a speed,
+            // then a move): check each on a copy that has taken the ones before, then commit.
+            let mut scratch = drive.clone();
+            for &(d, op) in plan.iter() {
+                if let Op::Commit(v) = op {
+                    scratch.check_def(d, v).map_err(native_exception)?;
+                    scratch.apply_def(d, v);
+                }
+            }
+            *drive = scratch;
+            for &(d, op) in plan.iter() {
+                self.set_staged(d.obj, if let Op::Stage(hi) = op { Some(hi) } else { None });
+            }
+            return Ok(());
+        }
+        // Values independent of each other: check them all, then apply them.
+        for &(d, op) in plan.iter() {
+            if let Op::Commit(v) = op {
+                drive.check_def(d, v).map_err(native_exception)?;
+            }
+        }
         for &(d, op) in plan.iter() {
             match op {
                 Op::Commit(v) => {
