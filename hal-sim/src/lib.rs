@@ -56,6 +56,7 @@ use crate::plant::Plant;
 pub mod motor;
 pub mod plant;
 pub mod plot;
+pub mod script;
 pub mod trace;
 
 /// Where masters reach the simulated drive.

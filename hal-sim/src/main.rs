@@ -2,9 +2,14 @@
 //!
 //! Prints `listening on <endpoint>` as its first line on stdout, then serves masters until killed.
 //! Exit code 2: a bad command line (including an address or baud rate the drive does not take).
+//!
+//! With `--script FILE` it runs the script's requests in simulated time instead, with no endpoint,
+//! prints the replies and a summary (see [`hal_sim::script`]) and exits: 0 when the script ran,
+//! 1 when a line does not parse (nothing runs then; stderr names the line) or the file cannot be
+//! read.
 
-use std::io::{self, ErrorKind, Write};
-use std::path::PathBuf;
+use std::io::{self, BufWriter, ErrorKind, Write};
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::Parser;
@@ -46,6 +51,11 @@ struct Args {
     /// Record time, commanded and rotor position and velocity, and phase currents as CSV.
     #[arg(long, value_name = "FILE.csv")]
     trace: Option<PathBuf>,
+    /// Run the requests of this script in simulated time, as fast as possible, without an
+    /// endpoint; print the replies and a summary, then exit (one command a line: `at <ms> <hex>`
+    /// delivers a request, its CRC appended; `until <ms>` runs to that time; `#` comments).
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["pty", "tcp"])]
+    script: Option<PathBuf>,
     /// Keep one trace row per this many control ticks (20 kHz).
     #[arg(long, value_name = "N", default_value_t = 20)]
     trace_every: u32,
@@ -75,6 +85,10 @@ fn main() -> ExitCode {
         },
         trace: args.trace.map(|path| (path, args.trace_every)),
     };
+    if let Some(path) = &args.script {
+        let opts = SimOptions { address: args.address, baud: args.baud, motor, ..Default::default() };
+        return run_script(path, &opts);
+    }
     let endpoint = match args.tcp {
         Some(addr) => Endpoint::Tcp(addr),
         None => Endpoint::Pty { link: args.pty },
@@ -95,4 +109,30 @@ fn main() -> ExitCode {
     let Err(e) = sim.run();
     eprintln!("hal-sim: {e}");
     ExitCode::FAILURE
+}
+
+/// `--script`: runs the script at `path` on the plant `opts` describe, replies to stdout.
+fn run_script(path: &Path, opts: &SimOptions) -> ExitCode {
+    let text = match std::fs::read_to_string(path) {
+        Ok(text) => text,
+        Err(e) => {
+            eprintln!("hal-sim: {}: {e}", path.display());
+            return ExitCode::FAILURE;
+        }
+    };
+    let mut plant = match hal_sim::script::plant(opts) {
+        Ok(plant) => plant,
+        Err(e) => {
+            eprintln!("hal-sim: {e}");
+            return ExitCode::from(if e.kind() == ErrorKind::InvalidInput { 2 } else { 1 });
+        }
+    };
+    let mut out = BufWriter::new(io::stdout().lock());
+    match hal_sim::script::run_script(&text, &mut plant, &mut out) {
+        Ok(_) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("hal-sim: {}: {e}", path.display());
+            ExitCode::FAILURE
+        }
+    }
 }
