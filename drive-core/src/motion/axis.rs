@@ -86,7 +86,7 @@ impl Axis {
 
     /// Where a move now in progress will stop (its target), if it is a move.
     pub fn target(&self) -> Option<i64> {
-        match self.segment {
+        match &self.segment {
             Segment::Profile { profile, then: Then::Stand, .. } => {
                 Some(self.anchor.saturating_add(libm::round(profile.at(profile.duration()).p) as i64))
             }
@@ -97,10 +97,11 @@ impl Axis {
 
     /// Position, velocity and acceleration at `now`, relative to the anchor.
     fn state_at(&self, now: Instant) -> State {
-        match self.segment {
+        // By reference: a profile is large, and this runs every tick.
+        match &self.segment {
             Segment::Still => State { p: 0.0, v: 0.0, a: 0.0 },
-            Segment::Profile { profile, start, .. } => profile.at(seconds(start, now)),
-            Segment::Cruise { start, p0, v } => State { p: p0 + v * seconds(start, now), v, a: 0.0 },
+            Segment::Profile { profile, start, .. } => profile.at(seconds(*start, now)),
+            Segment::Cruise { start, p0, v } => State { p: p0 + v * seconds(*start, now), v: *v, a: 0.0 },
         }
     }
 
@@ -201,10 +202,10 @@ impl Axis {
     /// Evaluates the segment at `now` and returns the setpoint and the whole microsteps moved
     /// since the last tick.
     pub fn tick(&mut self, now: Instant) -> (Setpoint, i64) {
-        let s = match self.segment {
-            Segment::Profile { profile, start, then } if seconds(start, now) >= profile.duration() => {
-                let end = profile.at(profile.duration());
-                match then {
+        let s = match &self.segment {
+            Segment::Profile { profile, start, then } if seconds(*start, now) >= profile.duration() => {
+                let (end, duration, start) = (profile.at(profile.duration()), profile.duration(), *start);
+                match *then {
                     Then::Stand => {
                         // Exactly on the target: the whole part is the new anchor.
                         let (whole, _) = split(self.anchor, libm::round(end.p));
@@ -220,12 +221,12 @@ impl Axis {
                     }
                     Then::Cruise => {
                         // The same line as the profile's end, extrapolated back to its start.
-                        self.segment = Segment::Cruise { start, p0: end.p - end.v * profile.duration(), v: end.v };
+                        self.segment = Segment::Cruise { start, p0: end.p - end.v * duration, v: end.v };
                         self.state_at(now)
                     }
                 }
             }
-            Segment::Cruise { start, p0, v } if libm::fabs(p0 + v * seconds(start, now)) > 65536.0 => {
+            &Segment::Cruise { start, p0, v } if libm::fabs(p0 + v * seconds(start, now)) > 65536.0 => {
                 // Keep the offset small: restart the cruise from here, on a whole microsecond.
                 let s = self.state_at(now);
                 let (whole, frac) = split(self.anchor, s.p);
@@ -237,7 +238,9 @@ impl Axis {
         };
         let (whole, frac) = split(self.anchor, s.p);
         let moved = whole.saturating_sub(self.last.whole);
-        self.last = Setpoint { whole, fraction: U0F32::saturating_from_num(frac), velocity: s.v, acceleration: s.a };
+        // `saturating_from_num` panics on NaN; a planner fault must not take the drive down.
+        let fraction = if frac.is_nan() { U0F32::ZERO } else { U0F32::saturating_from_num(frac) };
+        self.last = Setpoint { whole, fraction, velocity: s.v, acceleration: s.a };
         (self.last, moved)
     }
 }
