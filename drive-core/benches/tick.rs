@@ -21,6 +21,10 @@
 //! apply plans again. `plain` is the same size of write to an object without effect (the PP
 //! target in native mode), the framing and dictionary cost without any planning.
 //!
+//! `plan` and `ruckig`: one time-optimal jerk-limited plan by our planner and by Ruckig (the
+//! peer, `rsruckig`) on the same start, target and limits: from rest, a reversal while
+//! cruising, a re-target while accelerating.
+//!
 //! Setup checks that the situation is the one named: the velocity constant or rising, the
 //! acceleration zero or not, and for a re-target that the drive runs to the new target.
 
@@ -30,9 +34,11 @@ use std::hint::black_box;
 
 use drive_core::control::{Outputs, TICK_MICROS};
 use drive_core::crc::crc16;
+use drive_core::motion::scurve::{Limits, Profile, State};
 use drive_core::od::Obj;
 use drive_core::{Drive, Instant};
 use gungraun::{library_benchmark, library_benchmark_group, main};
+use rsruckig::prelude::*;
 
 /// The drive's address (factory node id).
 const SLAVE: u8 = 1;
@@ -336,9 +342,86 @@ fn write(mut case: WriteCase) -> usize {
     reply.map_or(0, <[u8]>::len)
 }
 
+/// A planning case: the same start, target and limits for our planner and for Ruckig.
+#[derive(Clone, Copy, Debug)]
+struct PlanCase {
+    start: State,
+    target: f64,
+    limits: Limits,
+}
+
+/// Level-1 acceleration (77440 pps²), 50 ms jerk time, 32000 pps, as the native mode plans.
+const PLAN_LIMITS: Limits = Limits { v_max: 32_000.0, a_max: 77_440.0, d_max: 77_440.0, jerk: Some(77_440.0 / 0.05) };
+
+/// `rest`: 200 000 microsteps from rest. `moving`: a re-target 4096 behind while cruising at
+/// full speed (the reversal of `after_retarget_reverse`). `accelerating`: a re-target while
+/// half-way up the acceleration, with acceleration in hand.
+fn setup_plan(which: &str) -> PlanCase {
+    let start = match which {
+        "rest" => State { p: 0.0, v: 0.0, a: 0.0 },
+        "moving" => State { p: 0.0, v: 32_000.0, a: 0.0 },
+        _ => State { p: 0.0, v: 12_000.0, a: 60_000.0 },
+    };
+    let target = match which {
+        "rest" => 200_000.0,
+        "moving" => -4096.0,
+        _ => 50_000.0,
+    };
+    PlanCase { start, target, limits: PLAN_LIMITS }
+}
+
+// Ours: `Profile::to_position`, the plan a move or re-target makes.
+#[library_benchmark]
+#[bench::rest(args = ("rest"), setup = setup_plan)]
+#[bench::moving(args = ("moving"), setup = setup_plan)]
+#[bench::accelerating(args = ("accelerating"), setup = setup_plan)]
+fn plan(case: PlanCase) -> f64 {
+    let c = black_box(case);
+    Profile::to_position(c.start, c.target, 0.0, &c.limits).map_or(0.0, |p| p.duration())
+}
+
+// The peer: Ruckig (`rsruckig` 3, the Rust port) on the same case, in revolutions (÷ 6400) as
+// it wants moderate magnitudes; the durations agree with ours (checked in the test suite).
+#[library_benchmark]
+#[bench::rest(args = ("rest"), setup = setup_ruckig)]
+#[bench::moving(args = ("moving"), setup = setup_ruckig)]
+#[bench::accelerating(args = ("accelerating"), setup = setup_ruckig)]
+fn ruckig(mut case: RuckigCase) -> f64 {
+    let mut traj = Trajectory::new(None);
+    match case.otg.calculate(black_box(&case.input), &mut traj) {
+        Ok(_) => traj.get_duration(),
+        Err(_) => 0.0,
+    }
+}
+
+/// Ruckig's input, built outside the measured call.
+struct RuckigCase {
+    otg: Ruckig<1, ThrowErrorHandler>,
+    input: InputParameter<1>,
+}
+
+fn setup_ruckig(which: &str) -> RuckigCase {
+    const SCALE: f64 = 6400.0;
+    let c = setup_plan(which);
+    let mut input = InputParameter::new(None);
+    input.current_position[0] = c.start.p / SCALE;
+    input.current_velocity[0] = c.start.v / SCALE;
+    input.current_acceleration[0] = c.start.a / SCALE;
+    input.target_position[0] = c.target / SCALE;
+    input.max_velocity[0] = c.limits.v_max / SCALE;
+    input.max_acceleration[0] = c.limits.a_max / SCALE;
+    input.max_jerk[0] = c.limits.jerk.unwrap_or(f64::INFINITY) / SCALE;
+    RuckigCase { otg: Ruckig::new(None, 0.001), input }
+}
+
 library_benchmark_group!(
     name = control;
     benchmarks = tick, write
 );
 
-main!(library_benchmark_groups = control);
+library_benchmark_group!(
+    name = planning;
+    benchmarks = plan, ruckig
+);
+
+main!(library_benchmark_groups = control, planning);
