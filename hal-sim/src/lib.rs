@@ -8,6 +8,11 @@
 //! by line silence (t3.5) exactly as on a serial line, and a master that leaves more than t1.5
 //! between two bytes of a frame gets no answer.
 //!
+//! Parameters are kept in a [`SimFlash`] (in memory, or in a file with [`SimOptions::flash`])
+//! through drive-core's [`Store`]: loaded before the endpoint opens, saved on the I/O side of the
+//! loop after the reply to 0x200F = 2 or 3 has gone out (see [`serve_request`]), never inside the
+//! control tick.
+//!
 //! Over TCP, raw RTU frames travel (address, PDU, CRC: no MBAP header). One master connection is
 //! served at a time, the next one when it closes; a frame left unfinished by a master that goes
 //! away ends with it (its reply, if any, is dropped). The drive and its state outlive connections.
@@ -41,8 +46,10 @@ use std::time::Duration;
 
 use std::sync::{Arc, Mutex};
 
+use drive_core::drive::{STORAGE_FSET, STORAGE_SAVE_FAILED};
 use drive_core::od::{Obj, Range};
-use drive_core::{Baud, Drive, DriveConfig, Instant, SlaveAddr};
+use drive_core::store::Store;
+use drive_core::{Baud, Drive, DriveConfig, Instant, Params, SlaveAddr, SystemRequest};
 use nix::errno::Errno;
 use nix::fcntl::{FcntlArg, OFlag, fcntl};
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
@@ -50,9 +57,11 @@ use nix::pty::openpty;
 use nix::sys::termios::{FlushArg, SetArg, cfmakeraw, tcflush, tcgetattr, tcsetattr};
 use nix::unistd::ttyname;
 
+use crate::flash::{PAGES, SimFlash, block_on};
 use crate::motor::{Motor, MotorCatalog, MotorInputs};
 use crate::plant::Plant;
 
+pub mod flash;
 pub mod motor;
 pub mod plant;
 pub mod plot;
@@ -93,6 +102,11 @@ pub struct SimOptions {
     pub baud: Option<u32>,
     /// The motor and its surroundings.
     pub motor: MotorOptions,
+    /// Keep the parameter store's flash in this file (created erased if missing), so that saved
+    /// parameters survive a restart. Without it the flash is in memory: saves work for the run.
+    pub flash: Option<PathBuf>,
+    /// FSET held low at power-up (as for 5 s or more): factory settings are restored and saved.
+    pub fset_low: bool,
 }
 
 /// Which motor the drive turns, and what it turns.
@@ -130,6 +144,7 @@ pub struct Snapshot {
 #[derive(Debug)]
 pub struct Simulator {
     plant: Plant,
+    store: Store<SimFlash>,
     port: Port,
     endpoint: String,
     snapshot: Arc<Mutex<Snapshot>>,
@@ -152,7 +167,13 @@ impl Simulator {
     /// or a bound TCP listener. An address or baud rate the drive does not take is an
     /// [`ErrorKind::InvalidInput`] error.
     pub fn bind(opts: SimOptions) -> io::Result<Simulator> {
-        let drive = Drive::new(drive_config(&opts)?);
+        let config = drive_config(&opts)?;
+        let flash = match &opts.flash {
+            Some(path) => SimFlash::open(path).map_err(|e| annotate(e, path.display()))?,
+            None => SimFlash::erased(PAGES),
+        };
+        let mut store = store(flash)?;
+        let drive = boot(&mut store, DriveConfig { can_save: true, ..config }, opts.fset_low);
         let params = MotorCatalog::builtin()
             .get(&opts.motor.name)
             .cloned()
@@ -169,7 +190,7 @@ impl Simulator {
                 (Port::Tcp(listener), at)
             }
         };
-        Ok(Simulator { plant, port, endpoint, snapshot: Arc::default() })
+        Ok(Simulator { plant, store, port, endpoint, snapshot: Arc::default() })
     }
 
     /// Where masters reach the drive: `/dev/pts/N`, or the bound `HOST:PORT`.
@@ -200,9 +221,9 @@ impl Simulator {
     /// Runs the drive on this thread, serving one master after another. Bad frames, masters that
     /// go away and failed reads or writes do not end it: it returns only if `poll(2)` fails.
     pub fn run(self) -> io::Result<Infallible> {
-        let Simulator { mut plant, port, snapshot, .. } = self;
+        let Simulator { mut plant, mut store, port, snapshot, .. } = self;
         let clock = Clock(std::time::Instant::now());
-        let mut sim = Sim { plant: &mut plant, snapshot: &snapshot };
+        let mut sim = Sim { plant: &mut plant, store: &mut store, snapshot: &snapshot };
         match port {
             Port::Pty { master, slave } => {
                 let mut line = PtyLine { master, slave };
@@ -224,6 +245,50 @@ impl Simulator {
                     }
                 }
             },
+        }
+    }
+}
+
+/// The parameter store on the whole of `flash`.
+pub fn store(flash: SimFlash) -> io::Result<Store<SimFlash>> {
+    let end = u32::try_from(flash.bytes().len()).map_err(|_| invalid("flash too large".into()))?;
+    Store::new(flash, 0..end).map_err(|e| invalid(format!("flash of {end} bytes: {e:?}")))
+}
+
+/// Powers the drive up on `store`: the saved parameters (factory values and a status bit if there
+/// are none or they cannot be read), or with `fset_low` the factory values, saved at once after
+/// the store is erased. Never fails: a flash that fails shows in the storage status (0x2120).
+pub fn boot(store: &mut Store<SimFlash>, config: DriveConfig, fset_low: bool) -> Drive {
+    if fset_low {
+        let params = Params::factory();
+        let saved = block_on(store.erase()).and_then(|()| block_on(store.save(&params)));
+        let failed = if saved.is_ok() { 0 } else { STORAGE_SAVE_FAILED };
+        return Drive::boot(config, &params, STORAGE_FSET | failed);
+    }
+    let loaded = block_on(store.load());
+    Drive::boot(config, &loaded.params, loaded.status)
+}
+
+/// Does what the drive asks of its platform, if anything: a save of its parameters (then
+/// [`Drive::save_done`]), or of the power-down position. The boot loader is never asked for (the
+/// simulator's drive refuses 0x200F = 1).
+pub fn serve_request(drive: &mut Drive, store: &mut Store<SimFlash>) {
+    while let Some(request) = drive.take_system_request() {
+        match request {
+            SystemRequest::Save => {
+                let params = drive.state().params();
+                let saved = block_on(store.save(&params));
+                if let Err(e) = &saved {
+                    eprintln!("hal-sim: save failed: {e:?}");
+                }
+                drive.save_done(saved.is_ok());
+            }
+            SystemRequest::SavePosition(position) => {
+                if let Err(e) = block_on(store.save_position(position)) {
+                    eprintln!("hal-sim: power-down position not saved: {e:?}");
+                }
+            }
+            SystemRequest::BootLoader => {}
         }
     }
 }
@@ -325,9 +390,10 @@ trait Line: AsFd {
     fn send(&mut self, frame: &[u8]) -> io::Result<()>;
 }
 
-/// The plant and what it publishes, as the loop sees them.
+/// The plant, its store and what it publishes, as the loop sees them.
 struct Sim<'a> {
     plant: &'a mut Plant,
+    store: &'a mut Store<SimFlash>,
     snapshot: &'a Mutex<Snapshot>,
 }
 
@@ -391,6 +457,8 @@ fn serve(sim: &mut Sim<'_>, clock: &Clock, line: &mut impl Line) -> io::Result<(
         {
             return Ok(());
         }
+        // After the reply: the save runs here, on the I/O side; the motor catches up after it.
+        serve_request(sim.plant.drive_mut(), sim.store);
     }
 }
 
@@ -403,6 +471,7 @@ fn settle(sim: &mut Sim<'_>, clock: &Clock) {
                 let drive = sim.catch_up(now);
                 drive.on_timer(now);
                 let _ = drive.take_reply();
+                serve_request(sim.plant.drive_mut(), sim.store);
             }
             wait => thread::sleep(Duration::from_micros(wait)),
         }
