@@ -148,10 +148,19 @@ impl<S: NorFlash> Store<S> {
             Ok(None) => status |= STORAGE_EMPTY,
             Err(_) => unreadable = true,
         }
+        let mut position_found = false;
         match self.map.fetch_item::<i32>(&mut self.buf, &POSITION_KEY).await {
-            Ok(Some(position)) => params.set_saved_position(position),
+            Ok(Some(position)) => {
+                params.set_saved_position(position);
+                position_found = true;
+            }
             Ok(None) => {}
             Err(_) => unreadable = true,
+        }
+        // Neither record, yet the pages are not erased: not a store of ours (or one torn beyond
+        // repair). Saving into it would fail on programmed words.
+        if status & STORAGE_EMPTY != 0 && !position_found && !self.is_erased().await {
+            unreadable = true;
         }
         if unreadable {
             params = Params::factory();
@@ -160,6 +169,21 @@ impl<S: NorFlash> Store<S> {
             let _ = self.map.erase_all().await;
         }
         Loaded { params, status }
+    }
+
+    /// Whether every byte of the store's pages reads erased (0xFF); a failed read counts as not.
+    async fn is_erased(&mut self) -> bool {
+        let range = self.map.flash_range();
+        let mut at = range.start;
+        while at < range.end {
+            let n = (range.end - at).min(BUFFER as u32);
+            let chunk = self.buf.get_mut(..n as usize).unwrap_or_default();
+            if self.map.flash().read(at, chunk).await.is_err() || chunk.iter().any(|&b| b != 0xFF) {
+                return false;
+            }
+            at += n;
+        }
+        true
     }
 
     /// Saves `params` as one record (see the module documentation).

@@ -44,6 +44,7 @@ use std::path::{Path, PathBuf};
 use std::thread::{self, JoinHandle};
 use std::time::Duration;
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
 use drive_core::drive::{STORAGE_FSET, STORAGE_SAVE_FAILED};
@@ -221,31 +222,76 @@ impl Simulator {
     /// Runs the drive on this thread, serving one master after another. Bad frames, masters that
     /// go away and failed reads or writes do not end it: it returns only if `poll(2)` fails.
     pub fn run(self) -> io::Result<Infallible> {
+        self.run_until(&AtomicBool::new(false))?;
+        Err(io::Error::other("the simulator loop ended without being switched off"))
+    }
+
+    /// Runs the drive on a new thread until [`PowerSwitch::off`]: a power cycle for tests, with
+    /// the same flash file given to the next [`Simulator::bind`].
+    pub fn power_on(self) -> PowerSwitch {
+        let off = Arc::new(AtomicBool::new(false));
+        let endpoint = self.endpoint.clone();
+        let flag = Arc::clone(&off);
+        let thread = thread::spawn(move || self.run_until(&flag));
+        PowerSwitch { off, endpoint, thread }
+    }
+
+    /// [`Simulator::run`] until `off` is set (seen within a millisecond while a master is
+    /// connected, at the next connection attempt while none is over TCP).
+    fn run_until(self, off: &AtomicBool) -> io::Result<()> {
         let Simulator { mut plant, mut store, port, snapshot, .. } = self;
         let clock = Clock(std::time::Instant::now());
-        let mut sim = Sim { plant: &mut plant, store: &mut store, snapshot: &snapshot };
+        let mut sim = Sim { plant: &mut plant, store: &mut store, snapshot: &snapshot, off };
         match port {
             Port::Pty { master, slave } => {
                 let mut line = PtyLine { master, slave };
-                loop {
+                while !off.load(Ordering::Relaxed) {
                     serve(&mut sim, &clock, &mut line)?;
                 }
             }
-            Port::Tcp(listener) => loop {
-                match listener.accept() {
-                    Ok((stream, _)) => {
-                        serve(&mut sim, &clock, &mut TcpLine::new(stream))?;
-                        settle(&mut sim, &clock);
-                    }
-                    Err(e) if e.kind() == ErrorKind::Interrupted => {}
-                    Err(e) => {
-                        // Out of fds, a connection aborted before accept: wait and try again.
-                        eprintln!("hal-sim: accept: {e}");
-                        thread::sleep(Duration::from_millis(100));
+            Port::Tcp(listener) => {
+                while !off.load(Ordering::Relaxed) {
+                    match listener.accept() {
+                        Ok(_) if off.load(Ordering::Relaxed) => {}
+                        Ok((stream, _)) => {
+                            serve(&mut sim, &clock, &mut TcpLine::new(stream))?;
+                            settle(&mut sim, &clock);
+                        }
+                        Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                        Err(e) => {
+                            // Out of fds, a connection aborted before accept: wait and try again.
+                            eprintln!("hal-sim: accept: {e}");
+                            thread::sleep(Duration::from_millis(100));
+                        }
                     }
                 }
-            },
+            }
         }
+        Ok(())
+    }
+}
+
+/// A simulator running on its own thread, which a test can switch off ([`Simulator::power_on`]).
+#[derive(Debug)]
+pub struct PowerSwitch {
+    off: Arc<AtomicBool>,
+    endpoint: String,
+    thread: JoinHandle<io::Result<()>>,
+}
+
+impl PowerSwitch {
+    /// Where masters reach the drive.
+    pub fn endpoint(&self) -> &str {
+        &self.endpoint
+    }
+
+    /// Switches the drive off and waits until it is: its endpoint and flash file are closed, and
+    /// whatever it saved is in the file. Masters still connected are cut off.
+    pub fn off(self) -> io::Result<()> {
+        self.off.store(true, Ordering::Relaxed);
+        // Wakes a TCP loop waiting in accept(2); a pseudo-terminal loop wakes by itself.
+        let _ = TcpStream::connect(&self.endpoint);
+        self.thread.join().map_err(|_| io::Error::other("simulator thread panicked"))?
     }
 }
 
@@ -395,6 +441,8 @@ struct Sim<'a> {
     plant: &'a mut Plant,
     store: &'a mut Store<SimFlash>,
     snapshot: &'a Mutex<Snapshot>,
+    /// The power switch: set, the loop ends.
+    off: &'a AtomicBool,
 }
 
 impl Sim<'_> {
@@ -417,10 +465,11 @@ impl Sim<'_> {
 /// How often the loop wakes up to keep the motor in pace with wall time, at the least.
 const PACE: Duration = Duration::from_millis(1);
 
-/// Runs the drive on `line` until the master goes away (`Ok`) or `poll(2)` fails.
+/// Runs the drive on `line` until the master goes away or the power is switched off (`Ok`), or
+/// `poll(2)` fails.
 fn serve(sim: &mut Sim<'_>, clock: &Clock, line: &mut impl Line) -> io::Result<()> {
     let mut buf = [0u8; 512];
-    loop {
+    while !sim.off.load(Ordering::Relaxed) {
         let ready = {
             let mut fds = [PollFd::new(line.as_fd(), PollFlags::POLLIN)];
             let deadline = sim.plant.drive().deadline();
@@ -460,6 +509,7 @@ fn serve(sim: &mut Sim<'_>, clock: &Clock, line: &mut impl Line) -> io::Result<(
         // After the reply: the save runs here, on the I/O side; the motor catches up after it.
         serve_request(sim.plant.drive_mut(), sim.store);
     }
+    Ok(())
 }
 
 /// Ends the frame a master left unfinished when it went away; its reply has nowhere to go.
