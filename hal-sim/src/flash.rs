@@ -48,11 +48,13 @@ pub enum Tear {
     /// A write programmed all its double words but the last, which got only some of its bits; an
     /// erase set only some bits of each byte (the page reads as garbage).
     Garbled,
+    /// All of it happened; the power went before the caller heard so.
+    Complete,
 }
 
 impl Tear {
     /// Every kind of tear.
-    pub const ALL: [Tear; 3] = [Tear::Nothing, Tear::Half, Tear::Garbled];
+    pub const ALL: [Tear; 4] = [Tear::Nothing, Tear::Half, Tear::Garbled, Tear::Complete];
 }
 
 /// Why an operation failed.
@@ -223,7 +225,7 @@ impl NorFlash for SimFlash {
         for page in (start..start + len).step_by(PAGE) {
             let bytes = self.bytes.get_mut(page..page + PAGE).ok_or(FlashError::OutOfBounds)?;
             match tear {
-                None => bytes.fill(0xFF),
+                None | Some(Tear::Complete) => bytes.fill(0xFF),
                 Some(Tear::Nothing) => {}
                 Some(Tear::Half) => bytes.iter_mut().take(PAGE / 2).for_each(|b| *b = 0xFF),
                 Some(Tear::Garbled) => bytes.iter_mut().for_each(|b| *b |= 0x5A),
@@ -246,7 +248,7 @@ impl NorFlash for SimFlash {
         let tear = self.begin()?;
         let words = data.len() / WORD;
         let (full, partial) = match tear {
-            None => (words, false),
+            None | Some(Tear::Complete) => (words, false),
             Some(Tear::Nothing) => (0, false),
             Some(Tear::Half) => (words / 2, false),
             Some(Tear::Garbled) => (words.saturating_sub(1), words > 0),

@@ -6,8 +6,9 @@
 
 use std::time::{Duration, Instant as WallClock};
 
+
 use drive_core::crc::crc16;
-use drive_core::drive::{STORAGE_CORRUPT, STORAGE_EMPTY};
+use drive_core::drive::{STORAGE_CORRUPT, STORAGE_EMPTY, STORAGE_SAVE_FAILED};
 use drive_core::od::Obj;
 use drive_core::store::{RECORD, SAVED, Store, item_bytes};
 use drive_core::{Drive, DriveConfig, Instant, Params};
@@ -50,70 +51,91 @@ fn restart(bytes: &[u8]) -> (Params, u8) {
     (loaded.params, loaded.status)
 }
 
-#[test]
-fn a_power_cut_at_every_operation_leaves_the_old_or_the_new_set() {
-    let mut flash = SimFlash::erased(PAGES);
-    let mut store = store_on(flash);
-    block_on(store.save(&set(0))).expect("first save");
-    let mut points = 0;
-    let mut max_ops = 0;
-    let mut cut_with_erase = 0;
-    // Enough saves to fill every page and wrap around twice, with a power-down position now and
-    // then, which must survive cuts of the parameter saves too.
-    let saves = 2 * (PAGES * PAGE) as u32 / item_bytes::<SimFlash>(RECORD) as u32 + 8;
-    let mut position = None;
-    for g in 1..=saves {
-        if g % 7 == 0 {
-            position = Some(g as i32 * -1000);
-            block_on(store.save_position(g as i32 * -1000)).expect("position save");
-        }
-        flash = store.into_flash();
-        let before = flash.bytes().to_vec();
-        let ops0 = flash.ops();
-        let erases0: u64 = flash.erase_counts().iter().sum();
-        store = store_on(flash);
-        block_on(store.save(&set(g))).expect("uncut save");
-        let ops = store.flash().ops() - ops0;
-        max_ops = max_ops.max(ops);
-        let erased = store.flash().erase_counts().iter().sum::<u64>() > erases0;
-        let (old, new) = (set(g - 1), set(g));
+/// What the power cuts of one save ended with.
+#[derive(Default)]
+struct Cuts {
+    /// Cut points tested.
+    points: u32,
+    /// Restarts that found the old set, and the new one.
+    old: u32,
+    new: u32,
+    /// Most operations in one save.
+    max_ops: u64,
+}
+
+impl Cuts {
+    /// Runs `save` on a flash holding `before`, uncut, then cut at each of its operations with
+    /// each tear; after each cut the restart must find exactly `old` or `new` (0x6055 included),
+    /// with a readable store, a drive that answers, and a store that takes the next save.
+    fn every_cut(&mut self, before: &[u8], old: &Params, new: &Params, save: impl Fn(&mut Store<SimFlash>) -> bool) {
+        let mut uncut = store_on(SimFlash::from_bytes(before.to_vec()));
+        assert!(save(&mut uncut), "uncut save");
+        let ops = uncut.flash().ops();
+        self.max_ops = self.max_ops.max(ops);
         for k in 0..ops {
             for tear in Tear::ALL {
-                let mut cut = SimFlash::from_bytes(before.clone());
+                let mut cut = SimFlash::from_bytes(before.to_vec());
                 cut.cut_after(k, tear);
                 let mut s = store_on(cut);
-                assert!(block_on(s.save(&new)).is_err(), "save {g}, cut at op {k} ({tear:?}) went through");
+                assert!(!save(&mut s), "cut at op {k} ({tear:?}) went through");
                 let bytes = s.into_flash().bytes().to_vec();
                 let (loaded, status) = restart(&bytes);
-                assert_eq!(status, 0, "save {g}, cut at op {k} ({tear:?}): store unreadable");
-                let which = if loaded == new {
-                    "new"
+                assert_eq!(status, 0, "cut at op {k} ({tear:?}): store unreadable");
+                if loaded == *new {
+                    self.new += 1;
                 } else {
-                    let mut want = old.clone();
-                    want.set_saved_position(0);
-                    let mut got = loaded.clone();
-                    got.set_saved_position(0);
-                    assert_eq!(got, want, "save {g}, cut at op {k} ({tear:?}): a mix");
-                    "old"
-                };
-                let _ = which;
-                assert_eq!(loaded.get(Obj::SavedPosition) as i32, position.unwrap_or(0), "position record lost");
-                // The store works again after the restart: the next save goes through and loads.
+                    assert_eq!(loaded, *old, "cut at op {k} ({tear:?}): neither the old set nor the new");
+                    self.old += 1;
+                }
                 let mut again = store_on(SimFlash::from_bytes(bytes));
-                block_on(again.save(&new)).expect("save after the restart");
-                let (reloaded, _) = restart(again.into_flash().bytes());
-                assert_eq!(reloaded.get(Obj::PhaseCurrent), new.get(Obj::PhaseCurrent));
-                points += 1;
-                cut_with_erase += u32::from(erased);
+                assert!(save(&mut again), "the save after the restart goes through");
+                assert_eq!(restart(again.into_flash().bytes()), (new.clone(), 0));
+                self.points += 1;
             }
         }
     }
-    println!(
-        "{saves} saves, up to {max_ops} operations each; {points} power cuts tested ({} operations x {} tears), \
-         {cut_with_erase} of them in saves that erase a page",
-        points / Tear::ALL.len(),
-        Tear::ALL.len()
-    );
+}
+
+#[test]
+fn a_power_cut_at_every_operation_leaves_the_old_or_the_new_set() {
+    let mut store = store_on(SimFlash::erased(PAGES));
+    block_on(store.save(&set(0))).expect("first save");
+    let mut params = Cuts::default();
+    let mut positions = Cuts::default();
+    // Enough saves to fill every page and wrap around twice, with a power-down position now and
+    // then (its own record, which a cut parameter save must not lose either).
+    let saves = 2 * (PAGES * PAGE) as u32 / item_bytes::<SimFlash>(RECORD) as u32 + 8;
+    let mut current = set(0);
+    for g in 1..=saves {
+        if g % 7 == 0 {
+            let mut next = current.clone();
+            next.set_saved_position(g as i32 * -1000);
+            let bytes = store.flash().bytes().to_vec();
+            positions.every_cut(&bytes, &current, &next, |s| block_on(s.save_position(g as i32 * -1000)).is_ok());
+            block_on(store.save_position(g as i32 * -1000)).expect("position save");
+            current = next;
+        }
+        let mut next = set(g);
+        next.set_saved_position(current.get(Obj::SavedPosition) as i32);
+        let bytes = store.flash().bytes().to_vec();
+        params.every_cut(&bytes, &current, &next, |s| block_on(s.save(&set(g))).is_ok());
+        block_on(store.save(&set(g))).expect("save");
+        current = next;
+    }
+    let erases = store.flash().erase_counts().to_vec();
+    for (what, c) in [("parameter", &params), ("position", &positions)] {
+        println!(
+            "{what} saves: {} power cuts tested (every operation, up to {} a save, x {} tears): {} restarts found the old set, {} the new",
+            c.points,
+            c.max_ops,
+            Tear::ALL.len(),
+            c.old,
+            c.new
+        );
+    }
+    println!("{saves} parameter saves; erases per page {erases:?}");
+    assert!(erases.iter().all(|&e| e >= 1), "every page was erased and reused: {erases:?}");
+    assert!(params.new > 0 && params.old > 0, "both outcomes happen");
 }
 
 #[test]
@@ -170,4 +192,43 @@ fn a_hundred_thousand_saves_spread_wear_over_the_pages() {
     // Each page erase frees a page's worth of records: no more erases than that needs.
     let per_page = (PAGE / item_bytes::<SimFlash>(RECORD)) as u64;
     assert!(max <= u64::from(CYCLES) / (PAGES as u64 * (per_page - 1)) + 2, "{erases:?}");
+}
+
+#[test]
+fn a_failed_save_shows_in_the_status_and_keeps_the_old_set() {
+    let mut store = store_on(SimFlash::erased(PAGES));
+    block_on(store.save(&set(1))).expect("save");
+    let mut drive = hal_sim::boot(&mut store, DriveConfig { can_save: true, ..Default::default() }, false);
+    let st = drive.state_mut();
+    st.check(Obj::PhaseCurrent, 2000).expect("in range");
+    st.apply(Obj::PhaseCurrent, 2000);
+    st.check(Obj::SystemControl, 2).expect("a save is allowed");
+    st.apply(Obj::SystemControl, 2);
+    store.flash().cut_after(0, Tear::Half);
+    hal_sim::serve_request(&mut drive, &mut store);
+    assert_eq!(drive.state().read(Obj::StorageStatus), u32::from(STORAGE_SAVE_FAILED));
+    assert_eq!(restart(store.into_flash().bytes()), (set(1), 0));
+}
+
+#[test]
+fn the_power_down_position_is_saved_when_enabled() {
+    let mut store = store_on(SimFlash::erased(PAGES));
+    block_on(store.save(&set(2))).expect("save");
+    let mut drive = hal_sim::boot(&mut store, DriveConfig { can_save: true, ..Default::default() }, false);
+    let st = drive.state_mut();
+    assert!(st.set_position(98_765));
+    assert!(!st.power_lost(), "0x605E is off");
+    st.apply(Obj::AutoSave, 1);
+    assert!(st.power_lost());
+    let ops = store.flash().ops();
+    let busy = store.flash().busy();
+    hal_sim::serve_request(&mut drive, &mut store);
+    println!(
+        "power-down position: {} flash operations, {:.2?} of G431 flash time",
+        store.flash().ops() - ops,
+        store.flash().busy() - busy
+    );
+    let (loaded, _) = restart(store.into_flash().bytes());
+    assert_eq!(loaded.get(Obj::SavedPosition) as i32, 98_765);
+    assert_eq!({ let mut p = loaded; p.set_saved_position(0); p }, set(2), "the parameters are untouched");
 }
