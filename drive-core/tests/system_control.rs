@@ -90,5 +90,12 @@ fn power_up_takes_the_saved_values() {
     let st = drive.state();
     assert_eq!((st.read(Obj::PhaseCurrent), st.read_i32(Obj::SavedPosition)), (900, -42));
     assert_eq!(st.read(Obj::StorageStatus), u32::from(STORAGE_CORRUPT), "no save runs at power-up");
-    assert_eq!(st.params(), { p.set_saved_position(0); p }, "0x6055 is not part of a save");
+    assert_eq!(
+        st.params(),
+        {
+            p.set_saved_position(0);
+            p
+        },
+        "0x6055 is not part of a save"
+    );
 }

@@ -6,7 +6,6 @@
 
 use std::time::{Duration, Instant as WallClock};
 
-
 use drive_core::crc::crc16;
 use drive_core::drive::{STORAGE_CORRUPT, STORAGE_EMPTY, STORAGE_SAVE_FAILED};
 use drive_core::od::Obj;
@@ -230,5 +229,13 @@ fn the_power_down_position_is_saved_when_enabled() {
     );
     let (loaded, _) = restart(store.into_flash().bytes());
     assert_eq!(loaded.get(Obj::SavedPosition) as i32, 98_765);
-    assert_eq!({ let mut p = loaded; p.set_saved_position(0); p }, set(2), "the parameters are untouched");
+    assert_eq!(
+        {
+            let mut p = loaded;
+            p.set_saved_position(0);
+            p
+        },
+        set(2),
+        "the parameters are untouched"
+    );
 }

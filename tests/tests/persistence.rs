@@ -187,11 +187,8 @@ async fn node_id_and_baud_rate_take_effect_after_save_and_restart() {
     drop(ctx);
     sim.off().expect("off");
 
-    let opts = SimOptions {
-        endpoint: Endpoint::Tcp("127.0.0.1:0".into()),
-        flash: Some(flash.clone()),
-        ..Default::default()
-    };
+    let opts =
+        SimOptions { endpoint: Endpoint::Tcp("127.0.0.1:0".into()), flash: Some(flash.clone()), ..Default::default() };
     let booted = Simulator::bind(opts).expect("bind");
     assert_eq!((booted.drive().address().get(), booted.drive().baud().get()), (7, 19200));
     let sim = booted.power_on();
@@ -202,7 +199,10 @@ async fn node_id_and_baud_rate_take_effect_after_save_and_restart() {
     assert_eq!(settings(&mut at_7).await, want);
     drop(at_7);
     let mut at_1 = master(&sim, 1).await;
-    assert!(timeout(Duration::from_millis(300), at_1.read_holding_registers(0x2028, 1)).await.is_err(), "node 1 is gone");
+    assert!(
+        timeout(Duration::from_millis(300), at_1.read_holding_registers(0x2028, 1)).await.is_err(),
+        "node 1 is gone"
+    );
     drop(at_1);
     sim.off().expect("off");
 

@@ -234,7 +234,8 @@ objects! {
     /// Encoder resolution: lines per revolution (counted ×4), or 12 for the 12-bit absolute
     /// encoder. Takes effect after a restart.
     EncoderCpr @ 0x6054: U16, Rw, Rom, Set(ENCODER_CPR), default 1000, None, "encoder resolution";
-    /// Position saved at the last power loss (see 0x605E).
+    /// Position saved at the last power loss (see 0x605E): its own small record in flash, loaded
+    /// at power-up; a save (0x200F = 2) neither writes nor clears it.
     SavedPosition @ 0x6055: S32, Ro, Rom, S32_ANY, default 0, Steps, "power-down position";
     /// Closed loop: proportional gain.
     Kp @ 0x6057: U8, Rw, Rom, Span(1, 255), default 8, None, "KP";
@@ -250,7 +251,8 @@ objects! {
     StallLength @ 0x605C: U16, Rw, Rom, Span(1, 255), default 64, Steps, "stall length";
     /// Closed loop: 1 enables the torque (servo) loop with PID; 0 is the position loop.
     TorqueLoop @ 0x605D: U8, Rw, Rom, Span(0, 1), default 0, None, "torque loop enable";
-    /// 1 saves the position when power loss is detected.
+    /// 1 saves the position (as 0x6055) when power loss is detected: one record of two flash
+    /// writes, ~0.2 ms on the STM32G431 (~22 ms more if it falls at a page's end).
     AutoSave @ 0x605E: U8, Rw, Rom, Span(0, 1), default 0, None, "power-down save enable";
     /// Analog input, 12-bit ADC code. Read only here: the appendix's RW has no meaning for an input.
     AnalogIn @ 0x605F: U16, Ro, Live, Span(0, 4095), default 0, None, "analog input";
