@@ -22,8 +22,8 @@ use embedded_storage_async::nor_flash::NorFlash;
 use sequential_storage::cache::{Cache, Uncached};
 use sequential_storage::map::{MapConfig, MapConfigError, MapStorage};
 
-use crate::drive::{Params, STORAGE_CORRUPT, STORAGE_EMPTY};
-use crate::od::{Access, OBJECTS, Storage};
+use crate::drive::{Drive, Params, STORAGE_CORRUPT, STORAGE_EMPTY, STORAGE_FSET, STORAGE_SAVE_FAILED, SystemRequest};
+use crate::od::{Access, OBJECTS, RegisterMap, Storage};
 
 /// Map key of the parameter record.
 pub const PARAMS_KEY: u8 = 0;
@@ -169,6 +169,45 @@ impl<S: NorFlash> Store<S> {
             let _ = self.map.erase_all().await;
         }
         Loaded { params, status }
+    }
+
+    /// Power-up: [`Store::load`], or with `fset_low` (FSET held low for 5 s) the factory values,
+    /// saved at once after the store is erased (status [`STORAGE_FSET`], and
+    /// [`STORAGE_SAVE_FAILED`] if that save failed). Build the drive from the result with
+    /// [`Drive::boot`].
+    pub async fn power_up(&mut self, fset_low: bool) -> Loaded {
+        if !fset_low {
+            return self.load().await;
+        }
+        let params = Params::factory();
+        let saved = match self.erase().await {
+            Ok(()) => self.save(&params).await,
+            Err(e) => Err(e),
+        };
+        let failed = if saved.is_ok() { 0 } else { STORAGE_SAVE_FAILED };
+        Loaded { params, status: STORAGE_FSET | failed }
+    }
+
+    /// Performs the request `drive` makes of its platform, if any: a save of its parameters
+    /// (reported to the drive with [`Drive::save_done`]) or of the power-down position. Returns
+    /// the request and how it went; [`SystemRequest::BootLoader`] is the platform's to act on.
+    /// Call it outside the control tick, after the reply to the request has been sent.
+    pub async fn serve<M: RegisterMap>(
+        &mut self,
+        drive: &mut Drive<M>,
+    ) -> Option<(SystemRequest, Result<(), Error<S>>)> {
+        let request = drive.take_system_request()?;
+        let done = match request {
+            SystemRequest::Save => {
+                let params = drive.state().params();
+                let saved = self.save(&params).await;
+                drive.save_done(saved.is_ok());
+                saved
+            }
+            SystemRequest::SavePosition(position) => self.save_position(position).await,
+            SystemRequest::BootLoader => Ok(()),
+        };
+        Some((request, done))
     }
 
     /// Whether every byte of the store's pages reads erased (0xFF); a failed read counts as not.

@@ -47,10 +47,9 @@ use std::time::Duration;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
-use drive_core::drive::{STORAGE_FSET, STORAGE_SAVE_FAILED};
 use drive_core::od::{Obj, Range};
 use drive_core::store::Store;
-use drive_core::{Baud, Drive, DriveConfig, Instant, Params, SlaveAddr, SystemRequest};
+use drive_core::{Baud, Drive, DriveConfig, Instant, SlaveAddr};
 use nix::errno::Errno;
 use nix::fcntl::{FcntlArg, OFlag, fcntl};
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
@@ -301,40 +300,20 @@ pub fn store(flash: SimFlash) -> io::Result<Store<SimFlash>> {
     Store::new(flash, 0..end).map_err(|e| invalid(format!("flash of {end} bytes: {e:?}")))
 }
 
-/// Powers the drive up on `store`: the saved parameters (factory values and a status bit if there
-/// are none or they cannot be read), or with `fset_low` the factory values, saved at once after
-/// the store is erased. Never fails: a flash that fails shows in the storage status (0x2120).
+/// Powers the drive up on `store` ([`Store::power_up`]): the saved parameters, or with
+/// `fset_low` the factory values, saved.
 pub fn boot(store: &mut Store<SimFlash>, config: DriveConfig, fset_low: bool) -> Drive {
-    if fset_low {
-        let params = Params::factory();
-        let saved = block_on(store.erase()).and_then(|()| block_on(store.save(&params)));
-        let failed = if saved.is_ok() { 0 } else { STORAGE_SAVE_FAILED };
-        return Drive::boot(config, &params, STORAGE_FSET | failed);
-    }
-    let loaded = block_on(store.load());
+    let loaded = block_on(store.power_up(fset_low));
     Drive::boot(config, &loaded.params, loaded.status)
 }
 
-/// Does what the drive asks of its platform, if anything: a save of its parameters (then
-/// [`Drive::save_done`]), or of the power-down position. The boot loader is never asked for (the
-/// simulator's drive refuses 0x200F = 1).
+/// Does what the drive asks of its platform ([`Store::serve`]); failures are logged (the drive
+/// shows a failed save in 0x2120). The boot loader is never asked for: the simulator's drive
+/// refuses 0x200F = 1.
 pub fn serve_request(drive: &mut Drive, store: &mut Store<SimFlash>) {
-    while let Some(request) = drive.take_system_request() {
-        match request {
-            SystemRequest::Save => {
-                let params = drive.state().params();
-                let saved = block_on(store.save(&params));
-                if let Err(e) = &saved {
-                    eprintln!("hal-sim: save failed: {e:?}");
-                }
-                drive.save_done(saved.is_ok());
-            }
-            SystemRequest::SavePosition(position) => {
-                if let Err(e) = block_on(store.save_position(position)) {
-                    eprintln!("hal-sim: power-down position not saved: {e:?}");
-                }
-            }
-            SystemRequest::BootLoader => {}
+    while let Some((request, done)) = block_on(store.serve(drive)) {
+        if let Err(e) = done {
+            eprintln!("hal-sim: {request:?} failed: {e:?}");
         }
     }
 }
