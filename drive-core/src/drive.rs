@@ -35,6 +35,7 @@ pub struct DriveConfig {
     /// The identification strings.
     pub identity: Identity,
     /// Whether the platform can save parameters (0x200F = 2); without it a save is refused (04).
+    /// With it, the platform serves [`SystemRequest::Save`] (see [`crate::store::Store::serve`]).
     pub can_save: bool,
 }
 
@@ -196,8 +197,9 @@ impl DriveState {
     }
 
     /// Power is failing: if the power-down save is on (0x605E = 1), asks the platform to save the
-    /// position ([`SystemRequest::SavePosition`]), ahead of any request still pending. The
-    /// power-loss detector calls this once; whether it asked is returned.
+    /// position ([`SystemRequest::SavePosition`]), replacing any request still pending (a
+    /// parameter save could not finish on the remaining charge anyway). The power-loss detector
+    /// calls this once; whether it asked is returned.
     pub fn power_lost(&mut self) -> bool {
         let on = self.read(Obj::AutoSave) == 1;
         if on {

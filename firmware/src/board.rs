@@ -79,7 +79,7 @@ pub struct Inputs {
 }
 
 /// Sets up clocks and peripherals; the UART runs 8N1 at the factory 9600 baud until
-/// [`set_baud`] sets the drive's (it is known once the parameters are loaded from flash).
+/// [`set_serial`] sets the drive's (known once the parameters are loaded from flash).
 pub fn init() -> Board {
     let mut config = embassy_stm32::Config::default();
     let rcc = &mut config.rcc;
@@ -95,13 +95,7 @@ pub fn init() -> Board {
     rcc.boost = true; // required above 150 MHz
     let p = embassy_stm32::init(config);
 
-    let mut uart_config = usart::Config::default();
-    uart_config.baudrate = Baud::FACTORY.get();
-    // Wake the reader at every byte so each one is time-stamped close to its arrival (t1.5/t3.5).
-    uart_config.eager_reads = Some(1);
-    // embassy-stm32 0.6 writes DEDT from `de_assertion_time` too: keep both the same.
-    uart_config.de_assertion_time = 16; // one bit time of DE before the start bit
-    uart_config.de_deassertion_time = 16;
+    let uart_config = uart_config(Baud::FACTORY, 0);
     // Each singleton! yields once; a second `init` already panicked in `embassy_stm32::init`.
     let (Some(tx_buf), Some(rx_buf)) =
         (singleton!(: [u8; TX_BUF] = [0; TX_BUF]), singleton!(: [u8; RX_BUF] = [0; RX_BUF]))
@@ -127,9 +121,27 @@ pub fn init() -> Board {
     Board { flash: Flash::new_blocking(p.FLASH), uart, motor, inputs }
 }
 
-/// Runs the UART at `baud` (the drive's power-up setting).
-pub fn set_baud(uart: &BufferedUart<'static>, baud: Baud) {
-    if uart.set_baudrate(baud.get()).is_err() {
+/// The UART settings for `baud` and `parity` (object 0x2100: 0 none, 1 even, 2 odd).
+fn uart_config(baud: Baud, parity: u32) -> usart::Config {
+    let mut config = usart::Config::default();
+    config.baudrate = baud.get();
+    // 8 data bits either way: with parity the USART frames 9 bits.
+    config.parity = match parity {
+        1 => usart::Parity::ParityEven,
+        2 => usart::Parity::ParityOdd,
+        _ => usart::Parity::ParityNone,
+    };
+    // Wake the reader at every byte so each one is time-stamped close to its arrival (t1.5/t3.5).
+    config.eager_reads = Some(1);
+    // embassy-stm32 0.6 writes DEDT from `de_assertion_time` too: keep both the same.
+    config.de_assertion_time = 16; // one bit time of DE before the start bit
+    config.de_deassertion_time = 16;
+    config
+}
+
+/// Runs the UART at the drive's power-up settings: `baud` and `parity` (0x2100).
+pub fn set_serial(uart: &mut BufferedUart<'static>, baud: Baud, parity: u32) {
+    if uart.set_config(&uart_config(baud, parity)).is_err() {
         defmt::warn!("uart: {} baud not reachable from the kernel clock", baud.get());
     }
 }

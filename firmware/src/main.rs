@@ -19,6 +19,7 @@ mod app {
     use defmt::{info, unwrap, warn};
     use defmt_rtt as _;
     use drive_core::ident::Identity;
+    use drive_core::od::Obj;
     use drive_core::store::Store;
     use drive_core::{Drive, DriveConfig, Instant, SystemRequest};
     use embassy_embedded_hal::adapter::BlockingAsync;
@@ -50,7 +51,7 @@ mod app {
 
     #[embassy_executor::main]
     async fn main(spawner: Spawner) {
-        let Board { flash, uart, motor, mut inputs } = board::init();
+        let Board { flash, mut uart, motor, mut inputs } = board::init();
         let fset_low = fset_held(&mut inputs.fset).await;
         let Ok(mut store) = Store::new(BlockingAsync::new(flash), board::STORE) else {
             defmt::panic!("the store's flash range is not whole pages");
@@ -59,7 +60,7 @@ mod app {
         let loaded = store.power_up(fset_low).await;
         let config = DriveConfig { identity: IDENTITY, can_save: true, ..DriveConfig::default() };
         let drive = Drive::boot(config, &loaded.params, loaded.status);
-        board::set_baud(&uart, drive.baud());
+        board::set_serial(&mut uart, drive.baud(), drive.state().read(Obj::Parity));
         info!(
             "drive up: node {}, {} baud, storage status {:#x}",
             drive.address().get(),
