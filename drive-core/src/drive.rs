@@ -12,6 +12,19 @@ use crate::units::{Baud, Instant, SlaveAddr};
 /// Controller status bit 3: the motor is executing a move.
 pub const STATUS_BUSY: u8 = 1 << 3;
 
+/// Storage status (0x2120) bit 0: no saved parameters were found at power-up; factory values.
+pub const STORAGE_EMPTY: u8 = 1 << 0;
+/// Storage status bit 1: the saved parameters could not be read at power-up (corrupt store or a
+/// record format this firmware does not know); factory values (a store the flash map cannot read
+/// is erased, so that the next save works).
+pub const STORAGE_CORRUPT: u8 = 1 << 1;
+/// Storage status bit 2: FSET was held low at power-up; factory values restored and saved.
+pub const STORAGE_FSET: u8 = 1 << 2;
+/// Storage status bit 3: a save is in progress (read only: it clears when the save ends).
+pub const STORAGE_SAVING: u8 = 1 << 3;
+/// Storage status bit 4: the last save failed; the flash holds the set saved before it.
+pub const STORAGE_SAVE_FAILED: u8 = 1 << 4;
+
 /// What a platform gives a drive at power-up.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct DriveConfig {
@@ -22,6 +35,7 @@ pub struct DriveConfig {
     /// The identification strings.
     pub identity: Identity,
     /// Whether the platform can save parameters (0x200F = 2); without it a save is refused (04).
+    /// With it, the platform serves [`SystemRequest::Save`] (see [`crate::store::Store::serve`]).
     pub can_save: bool,
 }
 
@@ -38,6 +52,62 @@ pub enum SystemRequest {
     Save,
     /// Jump to the boot loader (0x200F = 1).
     BootLoader,
+    /// Power is failing and 0x605E is on: save this position as 0x6055 before it is gone.
+    SavePosition(i32),
+}
+
+/// The values of the saved objects: what a save writes and what power-up loads.
+///
+/// Only objects a save covers ([`Params::covers`]) can be set; the others stay at their factory
+/// values and are ignored when a drive is built from a set.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Params {
+    values: [u32; Obj::COUNT],
+}
+
+impl Params {
+    /// Every object at its factory value.
+    pub fn factory() -> Self {
+        let mut values = [0; Obj::COUNT];
+        for (v, d) in values.iter_mut().zip(OBJECTS.iter()) {
+            *v = d.default;
+        }
+        Self { values }
+    }
+
+    /// Whether a save (0x200F = 2) covers the object `d` declares: the ROM objects a master can
+    /// write. 0x6055 (ROM, read only) has its own record, written at power loss.
+    pub fn covers(d: &ObjectDef) -> bool {
+        d.storage == Storage::Rom && d.access == Access::Rw
+    }
+
+    /// The value of `obj`.
+    pub fn get(&self, obj: Obj) -> u32 {
+        self.values.get(obj as usize).copied().unwrap_or(0)
+    }
+
+    /// Sets `obj` to `value` if a save covers it and its range accepts the value; whether it did.
+    pub fn set(&mut self, obj: Obj, value: u32) -> bool {
+        let d = obj.def();
+        let ok = Self::covers(d) && d.range.accepts(d.ty, value);
+        if ok && let Some(v) = self.values.get_mut(obj as usize) {
+            *v = value;
+        }
+        ok
+    }
+
+    /// Sets the position saved at the last power loss (0x6055), which has its own record.
+    pub fn set_saved_position(&mut self, position: i32) {
+        if let Some(v) = self.values.get_mut(Obj::SavedPosition as usize) {
+            *v = position as u32;
+        }
+    }
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Self::factory()
+    }
 }
 
 /// The drive's running status: what the live objects report.
@@ -57,6 +127,8 @@ pub struct Status {
     pub pvt_pointer: u16,
     /// Encoder position in counts (0x6089).
     pub encoder: i32,
+    /// Storage status bits (0x2120): `STORAGE_*`.
+    pub storage: u8,
 }
 
 /// Everything the object dictionary reads and writes.
@@ -80,12 +152,8 @@ pub struct DriveState {
 impl DriveState {
     /// Factory state.
     pub fn new(identity: Identity, can_save: bool) -> Self {
-        let mut params = [0; Obj::COUNT];
-        for (p, d) in params.iter_mut().zip(OBJECTS.iter()) {
-            *p = d.default;
-        }
         Self {
-            params,
+            params: Params::factory().values,
             status: Status::default(),
             identity,
             can_save,
@@ -115,6 +183,29 @@ impl DriveState {
     /// Declares the present position, as writing 0x600E..F does; refused while moving.
     pub fn set_position(&mut self, position: i64) -> bool {
         self.axis.set_position(position)
+    }
+
+    /// The present values of the objects a save covers: what 0x200F = 2 writes.
+    pub fn params(&self) -> Params {
+        let mut p = Params::factory();
+        for (v, (now, d)) in p.values.iter_mut().zip(self.params.iter().zip(OBJECTS.iter())) {
+            if Params::covers(d) {
+                *v = *now;
+            }
+        }
+        p
+    }
+
+    /// Power is failing: if the power-down save is on (0x605E = 1), asks the platform to save the
+    /// position ([`SystemRequest::SavePosition`]), replacing any request still pending (a
+    /// parameter save could not finish on the remaining charge anyway). The power-loss detector
+    /// calls this once; whether it asked is returned.
+    pub fn power_lost(&mut self) -> bool {
+        let on = self.read(Obj::AutoSave) == 1;
+        if on {
+            self.request = Some(SystemRequest::SavePosition(self.position() as i32));
+        }
+        on
     }
 
     /// The identification strings.
@@ -152,6 +243,7 @@ impl DriveState {
             // Open loop: the commanded speed (the encoder's measurement comes with the closed loop).
             Obj::RealSpeed => libm::round(self.axis.setpoint().velocity) as i32 as u32,
             Obj::EncoderPosition => s.encoder as u32,
+            Obj::StorageStatus => u32::from(s.storage),
             _ => self.params.get(obj as usize).copied().unwrap_or(0),
         }
     }
@@ -189,9 +281,14 @@ impl DriveState {
             return Err(ObjError::OutOfRange);
         }
         match (d.obj, value) {
-            // No storage on this platform yet, and no boot loader to jump to.
-            (Obj::SystemControl, 2) if !self.can_save => Err(ObjError::Refused),
+            // No boot loader to jump to yet (see 0x200F's documentation).
             (Obj::SystemControl, 1) => Err(ObjError::Refused),
+            (Obj::SystemControl, 2) if !self.can_save => Err(ObjError::Refused),
+            // A flash erase stalls the STM32G431's single bank for ~22 ms: never while moving. A
+            // second save waits for the first to end.
+            (Obj::SystemControl, 2 | 3) if !self.axis.is_still() || self.status.storage & STORAGE_SAVING != 0 => {
+                Err(ObjError::Refused)
+            }
             (obj, _) if has_effect(obj) => self.check_motion(obj, value),
             _ => Ok(()),
         }
@@ -217,6 +314,7 @@ impl DriveState {
             Obj::ErrorStatus => s.error &= !(value as u8),
             Obj::ControllerStatus => s.controller &= !(value as u8 & !STATUS_BUSY),
             Obj::NotifyStatus => s.notify &= !(value as u8),
+            Obj::StorageStatus => s.storage &= !(value as u8 & !STORAGE_SAVING),
             Obj::GpioValue => {
                 // Only outputs take the written level.
                 let outputs = self.params.get(Obj::GpioDirection as usize).copied().unwrap_or(0) as u16;
@@ -231,22 +329,42 @@ impl DriveState {
                     *p = value;
                 }
                 if obj == Obj::SystemControl {
-                    match value {
-                        2 => self.request = Some(SystemRequest::Save),
-                        3 => self.restore_factory(),
-                        _ => {}
+                    if value == 3 {
+                        self.restore_factory();
+                    }
+                    // Factory settings are saved too, so that they survive a restart as §3.11's
+                    // FSET reset does; without storage they hold until power-off.
+                    if (value == 2 || value == 3) && self.can_save {
+                        self.status.storage = (self.status.storage & !STORAGE_SAVE_FAILED) | STORAGE_SAVING;
+                        self.request = Some(SystemRequest::Save);
                     }
                 }
             }
         }
     }
 
-    /// Puts every ROM object back to its factory value (RAM objects and status are untouched).
+    /// Puts every object a save covers back to its factory value (RAM objects, 0x6055 and the
+    /// status are untouched).
     pub fn restore_factory(&mut self) {
-        for (p, d) in self.params.iter_mut().zip(OBJECTS.iter()) {
-            if d.storage == Storage::Rom {
-                *p = d.default;
+        self.load(&Params::factory());
+    }
+
+    /// Takes the values of the objects a save covers from `params`.
+    fn load(&mut self, params: &Params) {
+        for ((p, v), d) in self.params.iter_mut().zip(params.values.iter()).zip(OBJECTS.iter()) {
+            if Params::covers(d) {
+                *p = *v;
             }
+        }
+    }
+
+    /// The platform finished the save it was asked for ([`SystemRequest::Save`]); `ok` if the
+    /// flash holds the new set.
+    pub fn save_done(&mut self, ok: bool) {
+        let s = &mut self.status.storage;
+        *s &= !STORAGE_SAVING;
+        if !ok {
+            *s |= STORAGE_SAVE_FAILED;
         }
     }
 }
@@ -297,12 +415,30 @@ impl Drive<NativeMap> {
     pub fn new(config: DriveConfig) -> Self {
         Self::with_map(config, NativeMap::new())
     }
+
+    /// A drive with the native map that starts from the saved `params` (loaded from the store
+    /// before the drive answers anything) and the storage status bits `storage` (`STORAGE_*`).
+    pub fn boot(config: DriveConfig, params: &Params, storage: u8) -> Self {
+        Self::boot_with_map(config, NativeMap::new(), params, storage)
+    }
 }
 
 impl<M: RegisterMap> Drive<M> {
     /// A drive whose registers are laid out by `map`.
     pub fn with_map(config: DriveConfig, map: M) -> Self {
+        Self::boot_with_map(config, map, &Params::factory(), 0)
+    }
+
+    /// [`Drive::boot`] with the registers laid out by `map`. The node id and baud rate in force
+    /// are those of `params` unless `config` overrides them (and the override is what the objects
+    /// then show, and what a save stores).
+    pub fn boot_with_map(config: DriveConfig, map: M, params: &Params, storage: u8) -> Self {
         let mut state = DriveState::new(config.identity, config.can_save);
+        state.load(params);
+        if let Some(p) = state.params.get_mut(Obj::SavedPosition as usize) {
+            *p = params.get(Obj::SavedPosition);
+        }
+        state.status.storage = storage & !STORAGE_SAVING;
         if let Some(a) = config.address {
             state.apply(Obj::NodeId, u32::from(a.get()));
         }
@@ -388,9 +524,18 @@ impl<M: RegisterMap> Drive<M> {
         if n == 0 { None } else { self.tx.get(..n) }
     }
 
-    /// A request the drive makes of its platform (save, boot loader), once.
+    /// A request the drive makes of its platform (save, boot loader, power-down position), once.
+    ///
+    /// On [`SystemRequest::Save`] the platform takes [`DriveState::params`] at once, writes them
+    /// outside the control tick, and reports with [`Drive::save_done`].
     pub fn take_system_request(&mut self) -> Option<SystemRequest> {
         self.state.request.take()
+    }
+
+    /// The save the drive asked for has ended; `ok` if the flash holds the new set (else the
+    /// storage status shows [`STORAGE_SAVE_FAILED`]).
+    pub fn save_done(&mut self, ok: bool) {
+        self.state.save_done(ok);
     }
 
     fn end_frame(&mut self) {

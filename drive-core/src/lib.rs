@@ -28,8 +28,9 @@ pub mod motion;
 pub mod od;
 pub mod pdu;
 pub mod rtu;
+pub mod store;
 pub mod units;
 
-pub use drive::{Drive, DriveConfig, DriveState};
+pub use drive::{Drive, DriveConfig, DriveState, Params, SystemRequest};
 pub use pdu::Exception;
 pub use units::{Baud, Instant, SlaveAddr};

@@ -85,7 +85,8 @@ fn illegal_data_value_03() {
 
 #[test]
 fn server_device_failure_04() {
-    // The simulator of this issue has no parameter storage yet, and no boot loader.
+    // A drive on a platform without storage (the default configuration) cannot save; none has a
+    // boot loader to jump to yet.
     refused(&[0x01, 0x06, 0x20, 0x0F, 0x00, 0x02], 4);
     refused(&[0x01, 0x06, 0x20, 0x0F, 0x00, 0x01], 4);
 }

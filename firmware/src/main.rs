@@ -19,11 +19,17 @@ mod app {
     use defmt::{info, unwrap, warn};
     use defmt_rtt as _;
     use drive_core::ident::Identity;
-    use drive_core::{Drive, DriveConfig, Instant};
+    use drive_core::od::Obj;
+    use drive_core::store::Store;
+    use drive_core::{Drive, DriveConfig, Instant, SystemRequest};
+    use embassy_embedded_hal::adapter::BlockingAsync;
     use embassy_executor::Spawner;
     use embassy_futures::select::{Either, select, select4};
+    use embassy_stm32::exti::ExtiInput;
+    use embassy_stm32::flash::{Blocking, Flash};
+    use embassy_stm32::mode::Async;
     use embassy_stm32::usart::BufferedUart;
-    use embassy_time::Timer;
+    use embassy_time::{Duration, Timer};
     use embedded_io_async::{Read, Write};
     use panic_probe as _;
 
@@ -37,16 +43,45 @@ mod app {
         ..Identity::SIMULATOR
     };
 
+    /// The parameter store on the flash's last pages.
+    type FlashStore = Store<BlockingAsync<Flash<'static, Blocking>>>;
+
+    /// How long FSET must be held low at power-up to restore the factory settings (§3.11).
+    const FSET_HOLD: Duration = Duration::from_secs(5);
+
     #[embassy_executor::main]
     async fn main(spawner: Spawner) {
-        // No parameter storage yet: factory settings at every power-up, and saving is refused.
-        let drive = Drive::new(DriveConfig { identity: IDENTITY, can_save: false, ..DriveConfig::default() });
-        let Board { uart, motor, inputs } = board::init(drive.baud());
-        info!("drive up: node {}, {} baud", drive.address().get(), drive.baud().get());
-        spawner.spawn(unwrap!(modbus(uart, drive)));
+        let Board { flash, mut uart, motor, mut inputs } = board::init();
+        let fset_low = fset_held(&mut inputs.fset).await;
+        let Ok(mut store) = Store::new(BlockingAsync::new(flash), board::STORE) else {
+            defmt::panic!("the store's flash range is not whole pages");
+        };
+        // The parameters are loaded before the drive answers anything.
+        let loaded = store.power_up(fset_low).await;
+        let config = DriveConfig { identity: IDENTITY, can_save: true, ..DriveConfig::default() };
+        let drive = Drive::boot(config, &loaded.params, loaded.status);
+        board::set_serial(&mut uart, drive.baud(), drive.state().read(Obj::Parity));
+        info!(
+            "drive up: node {}, {} baud, storage status {:#x}",
+            drive.address().get(),
+            drive.baud().get(),
+            loaded.status
+        );
+        spawner.spawn(unwrap!(modbus(uart, drive, store)));
         // Held, not dropped: a dropped pin returns to analog mode and the driver's inputs would float.
         let _motor = motor;
         watch_inputs(inputs).await
+    }
+
+    /// Whether FSET is held low from power-up for [`FSET_HOLD`] (released earlier: no reset).
+    async fn fset_held(fset: &mut ExtiInput<'static, Async>) -> bool {
+        // Let the pull-up charge the pin before reading it.
+        Timer::after_millis(1).await;
+        if fset.is_high() {
+            return false;
+        }
+        info!("FSET low at power-up: factory settings if held {} s", FSET_HOLD.as_secs());
+        matches!(select(fset.wait_for_high(), Timer::after(FSET_HOLD)).await, Either::Second(()))
     }
 
     /// The RTU slave: bytes in with their arrival time, t3.5 from a timer, replies out.
@@ -55,7 +90,7 @@ mod app {
     /// (RTOF, reachable through `unstable-pac`) would time the silence in hardware; that is a later
     /// issue, and needs its own interrupt handler because the buffered driver clears RTOF unseen.
     #[embassy_executor::task]
-    async fn modbus(mut uart: BufferedUart<'static>, mut drive: Drive) -> ! {
+    async fn modbus(mut uart: BufferedUart<'static>, mut drive: Drive, mut store: FlashStore) -> ! {
         let mut buf = [0u8; 64];
         loop {
             let deadline = drive.deadline();
@@ -76,6 +111,12 @@ mod app {
                 && let Err(e) = uart.write_all(reply).await
             {
                 warn!("uart: {}", e);
+            }
+            // After the reply: a save blocks this task for up to ~25 ms (a page erase).
+            match store.serve(&mut drive).await {
+                Some((SystemRequest::Save, Err(_))) => warn!("parameter save failed"),
+                Some((SystemRequest::SavePosition(_), Err(_))) => warn!("power-down position not saved"),
+                _ => {}
             }
         }
     }

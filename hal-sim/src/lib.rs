@@ -8,6 +8,11 @@
 //! by line silence (t3.5) exactly as on a serial line, and a master that leaves more than t1.5
 //! between two bytes of a frame gets no answer.
 //!
+//! Parameters are kept in a [`SimFlash`] (in memory, or in a file with [`SimOptions::flash`])
+//! through drive-core's [`Store`]: loaded before the endpoint opens, saved on the I/O side of the
+//! loop after the reply to 0x200F = 2 or 3 has gone out (see [`serve_request`]), never inside the
+//! control tick.
+//!
 //! Over TCP, raw RTU frames travel (address, PDU, CRC: no MBAP header). One master connection is
 //! served at a time, the next one when it closes; a frame left unfinished by a master that goes
 //! away ends with it (its reply, if any, is dropped). The drive and its state outlive connections.
@@ -39,9 +44,11 @@ use std::path::{Path, PathBuf};
 use std::thread::{self, JoinHandle};
 use std::time::Duration;
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
 use drive_core::od::{Obj, Range};
+use drive_core::store::Store;
 use drive_core::{Baud, Drive, DriveConfig, Instant, SlaveAddr};
 use nix::errno::Errno;
 use nix::fcntl::{FcntlArg, OFlag, fcntl};
@@ -50,9 +57,11 @@ use nix::pty::openpty;
 use nix::sys::termios::{FlushArg, SetArg, cfmakeraw, tcflush, tcgetattr, tcsetattr};
 use nix::unistd::ttyname;
 
+use crate::flash::{PAGES, SimFlash, block_on};
 use crate::motor::{Motor, MotorCatalog, MotorInputs};
 use crate::plant::Plant;
 
+pub mod flash;
 pub mod motor;
 pub mod plant;
 pub mod plot;
@@ -93,6 +102,11 @@ pub struct SimOptions {
     pub baud: Option<u32>,
     /// The motor and its surroundings.
     pub motor: MotorOptions,
+    /// Keep the parameter store's flash in this file (created erased if missing), so that saved
+    /// parameters survive a restart. Without it the flash is in memory: saves work for the run.
+    pub flash: Option<PathBuf>,
+    /// FSET held low at power-up (as for 5 s or more): factory settings are restored and saved.
+    pub fset_low: bool,
 }
 
 /// Which motor the drive turns, and what it turns.
@@ -130,6 +144,7 @@ pub struct Snapshot {
 #[derive(Debug)]
 pub struct Simulator {
     plant: Plant,
+    store: Store<SimFlash>,
     port: Port,
     endpoint: String,
     snapshot: Arc<Mutex<Snapshot>>,
@@ -152,7 +167,13 @@ impl Simulator {
     /// or a bound TCP listener. An address or baud rate the drive does not take is an
     /// [`ErrorKind::InvalidInput`] error.
     pub fn bind(opts: SimOptions) -> io::Result<Simulator> {
-        let drive = Drive::new(drive_config(&opts)?);
+        let config = drive_config(&opts)?;
+        let flash = match &opts.flash {
+            Some(path) => SimFlash::open(path).map_err(|e| annotate(e, path.display()))?,
+            None => SimFlash::erased(PAGES),
+        };
+        let mut store = store(flash)?;
+        let drive = boot(&mut store, DriveConfig { can_save: true, ..config }, opts.fset_low);
         let params = MotorCatalog::builtin()
             .get(&opts.motor.name)
             .cloned()
@@ -169,7 +190,7 @@ impl Simulator {
                 (Port::Tcp(listener), at)
             }
         };
-        Ok(Simulator { plant, port, endpoint, snapshot: Arc::default() })
+        Ok(Simulator { plant, store, port, endpoint, snapshot: Arc::default() })
     }
 
     /// Where masters reach the drive: `/dev/pts/N`, or the bound `HOST:PORT`.
@@ -200,30 +221,99 @@ impl Simulator {
     /// Runs the drive on this thread, serving one master after another. Bad frames, masters that
     /// go away and failed reads or writes do not end it: it returns only if `poll(2)` fails.
     pub fn run(self) -> io::Result<Infallible> {
-        let Simulator { mut plant, port, snapshot, .. } = self;
+        self.run_until(&AtomicBool::new(false))?;
+        Err(io::Error::other("the simulator loop ended without being switched off"))
+    }
+
+    /// Runs the drive on a new thread until [`PowerSwitch::off`]: a power cycle for tests, with
+    /// the same flash file given to the next [`Simulator::bind`].
+    pub fn power_on(self) -> PowerSwitch {
+        let off = Arc::new(AtomicBool::new(false));
+        let endpoint = self.endpoint.clone();
+        let flag = Arc::clone(&off);
+        let thread = thread::spawn(move || self.run_until(&flag));
+        PowerSwitch { off, endpoint, thread }
+    }
+
+    /// [`Simulator::run`] until `off` is set (seen within a millisecond while a master is
+    /// connected, at the next connection attempt while none is over TCP).
+    fn run_until(self, off: &AtomicBool) -> io::Result<()> {
+        let Simulator { mut plant, mut store, port, snapshot, .. } = self;
         let clock = Clock(std::time::Instant::now());
-        let mut sim = Sim { plant: &mut plant, snapshot: &snapshot };
+        let mut sim = Sim { plant: &mut plant, store: &mut store, snapshot: &snapshot, off };
         match port {
             Port::Pty { master, slave } => {
                 let mut line = PtyLine { master, slave };
-                loop {
+                while !off.load(Ordering::Relaxed) {
                     serve(&mut sim, &clock, &mut line)?;
                 }
             }
-            Port::Tcp(listener) => loop {
-                match listener.accept() {
-                    Ok((stream, _)) => {
-                        serve(&mut sim, &clock, &mut TcpLine::new(stream))?;
-                        settle(&mut sim, &clock);
-                    }
-                    Err(e) if e.kind() == ErrorKind::Interrupted => {}
-                    Err(e) => {
-                        // Out of fds, a connection aborted before accept: wait and try again.
-                        eprintln!("hal-sim: accept: {e}");
-                        thread::sleep(Duration::from_millis(100));
+            Port::Tcp(listener) => {
+                while !off.load(Ordering::Relaxed) {
+                    match listener.accept() {
+                        Ok(_) if off.load(Ordering::Relaxed) => {}
+                        Ok((stream, _)) => {
+                            serve(&mut sim, &clock, &mut TcpLine::new(stream))?;
+                            settle(&mut sim, &clock);
+                        }
+                        Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                        Err(e) => {
+                            // Out of fds, a connection aborted before accept: wait and try again.
+                            eprintln!("hal-sim: accept: {e}");
+                            thread::sleep(Duration::from_millis(100));
+                        }
                     }
                 }
-            },
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A simulator running on its own thread, which a test can switch off ([`Simulator::power_on`]).
+#[derive(Debug)]
+pub struct PowerSwitch {
+    off: Arc<AtomicBool>,
+    endpoint: String,
+    thread: JoinHandle<io::Result<()>>,
+}
+
+impl PowerSwitch {
+    /// Where masters reach the drive.
+    pub fn endpoint(&self) -> &str {
+        &self.endpoint
+    }
+
+    /// Switches the drive off and waits until it is: its endpoint and flash file are closed, and
+    /// whatever it saved is in the file. Masters still connected are cut off.
+    pub fn off(self) -> io::Result<()> {
+        self.off.store(true, Ordering::Relaxed);
+        // Wakes a TCP loop waiting in accept(2); a pseudo-terminal loop wakes by itself.
+        let _ = TcpStream::connect(&self.endpoint);
+        self.thread.join().map_err(|_| io::Error::other("simulator thread panicked"))?
+    }
+}
+
+/// The parameter store on the whole of `flash`.
+pub fn store(flash: SimFlash) -> io::Result<Store<SimFlash>> {
+    let end = u32::try_from(flash.bytes().len()).map_err(|_| invalid("flash too large".into()))?;
+    Store::new(flash, 0..end).map_err(|e| invalid(format!("flash of {end} bytes: {e:?}")))
+}
+
+/// Powers the drive up on `store` ([`Store::power_up`]): the saved parameters, or with
+/// `fset_low` the factory values, saved.
+pub fn boot(store: &mut Store<SimFlash>, config: DriveConfig, fset_low: bool) -> Drive {
+    let loaded = block_on(store.power_up(fset_low));
+    Drive::boot(config, &loaded.params, loaded.status)
+}
+
+/// Does what the drive asks of its platform ([`Store::serve`]); failures are logged (the drive
+/// shows a failed save in 0x2120). The boot loader is never asked for: the simulator's drive
+/// refuses 0x200F = 1.
+pub fn serve_request(drive: &mut Drive, store: &mut Store<SimFlash>) {
+    while let Some((request, done)) = block_on(store.serve(drive)) {
+        if let Err(e) = done {
+            eprintln!("hal-sim: {request:?} failed: {e:?}");
         }
     }
 }
@@ -325,10 +415,13 @@ trait Line: AsFd {
     fn send(&mut self, frame: &[u8]) -> io::Result<()>;
 }
 
-/// The plant and what it publishes, as the loop sees them.
+/// The plant, its store and what it publishes, as the loop sees them.
 struct Sim<'a> {
     plant: &'a mut Plant,
+    store: &'a mut Store<SimFlash>,
     snapshot: &'a Mutex<Snapshot>,
+    /// The power switch: set, the loop ends.
+    off: &'a AtomicBool,
 }
 
 impl Sim<'_> {
@@ -351,10 +444,11 @@ impl Sim<'_> {
 /// How often the loop wakes up to keep the motor in pace with wall time, at the least.
 const PACE: Duration = Duration::from_millis(1);
 
-/// Runs the drive on `line` until the master goes away (`Ok`) or `poll(2)` fails.
+/// Runs the drive on `line` until the master goes away or the power is switched off (`Ok`), or
+/// `poll(2)` fails.
 fn serve(sim: &mut Sim<'_>, clock: &Clock, line: &mut impl Line) -> io::Result<()> {
     let mut buf = [0u8; 512];
-    loop {
+    while !sim.off.load(Ordering::Relaxed) {
         let ready = {
             let mut fds = [PollFd::new(line.as_fd(), PollFlags::POLLIN)];
             let deadline = sim.plant.drive().deadline();
@@ -391,7 +485,10 @@ fn serve(sim: &mut Sim<'_>, clock: &Clock, line: &mut impl Line) -> io::Result<(
         {
             return Ok(());
         }
+        // After the reply: the save runs here, on the I/O side; the motor catches up after it.
+        serve_request(sim.plant.drive_mut(), sim.store);
     }
+    Ok(())
 }
 
 /// Ends the frame a master left unfinished when it went away; its reply has nowhere to go.
@@ -403,6 +500,7 @@ fn settle(sim: &mut Sim<'_>, clock: &Clock) {
                 let drive = sim.catch_up(now);
                 drive.on_timer(now);
                 let _ = drive.take_reply();
+                serve_request(sim.plant.drive_mut(), sim.store);
             }
             wait => thread::sleep(Duration::from_micros(wait)),
         }

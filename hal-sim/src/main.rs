@@ -36,6 +36,15 @@ struct Args {
     /// Baud rate the frame timing (t1.5, t3.5) follows [default: the drive's, factory 9600].
     #[arg(long, value_name = "B")]
     baud: Option<u32>,
+    /// Keep the drive's parameter flash (8 KiB, as the STM32G431's last four pages) in FILE,
+    /// created erased if missing: parameters saved with 0x200F = 2 are back after a restart.
+    /// Without it the flash is in memory and saves last for the run.
+    #[arg(long, value_name = "FILE", conflicts_with = "script")]
+    flash: Option<PathBuf>,
+    /// Start with FSET held low (as for 5 s or more at power-up): factory settings are restored
+    /// and saved (0x2120 bit 2 shows it).
+    #[arg(long, conflicts_with = "script")]
+    fset_low: bool,
     /// The motor, by name in the catalogue (hal-sim/motors.toml).
     #[arg(long, value_name = "NAME", default_value = hal_sim::DEFAULT_MOTOR)]
     motor: String,
@@ -93,7 +102,15 @@ fn main() -> ExitCode {
         Some(addr) => Endpoint::Tcp(addr),
         None => Endpoint::Pty { link: args.pty },
     };
-    let sim = match Simulator::bind(SimOptions { endpoint, address: args.address, baud: args.baud, motor }) {
+    let opts = SimOptions {
+        endpoint,
+        address: args.address,
+        baud: args.baud,
+        motor,
+        flash: args.flash,
+        fset_low: args.fset_low,
+    };
+    let sim = match Simulator::bind(opts) {
         Ok(sim) => sim,
         Err(e) => {
             eprintln!("hal-sim: {e}");

@@ -97,8 +97,8 @@ pub struct Summary {
 }
 
 /// The plant `opts` describe: the drive with its address and baud rate, the motor of the
-/// catalogue with its supply and load, and the trace file if any. The endpoint is not opened.
-/// Options the drive or the catalogue do not take are [`io::ErrorKind::InvalidInput`] errors.
+/// catalogue with its supply and load, and the trace file if any. The endpoint is not opened, and
+/// there is no parameter store: a script's 0x200F = 2 is refused (04). Options the drive or the catalogue do not take are [`io::ErrorKind::InvalidInput`] errors.
 pub fn plant(opts: &SimOptions) -> io::Result<Plant> {
     let drive = Drive::new(drive_config(opts)?);
     let params = MotorCatalog::builtin()

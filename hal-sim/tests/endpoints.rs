@@ -318,3 +318,42 @@ fn drive_can_be_set_up_before_it_runs() {
     let reply = ask(&mut master, &frame(&[0x09, 0x03, 0x60, 0x0E, 0x00, 0x02]), 9);
     assert_eq!(reply, frame(&[0x09, 0x03, 0x04, 0xFF, 0xFF, 0xFF, 0xFE]));
 }
+
+#[test]
+fn saved_parameters_survive_a_kill_and_fset_low_restores_the_factory_ones() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let flash = dir.path().join("flash.bin");
+    let args = ["--tcp", "127.0.0.1:0", "--flash", flash.to_str().expect("utf-8 path")];
+    let sim = start(&args);
+    let mut master = connect(&sim.endpoint);
+    // 1/32 microstepping and 1500 mA, then save (0x200F = 2).
+    let write = frame(&[0x01, 0x10, 0x60, 0x0C, 0x00, 0x02, 0x04, 0x00, 0x20, 0x05, 0xDC]);
+    assert_eq!(ask(&mut master, &write, 8), frame(&[0x01, 0x10, 0x60, 0x0C, 0x00, 0x02]));
+    let save = frame(&[0x01, 0x06, 0x20, 0x0F, 0x00, 0x02]);
+    assert_eq!(ask(&mut master, &save, 8), save);
+    // Storage status: bit 0 (nothing was saved at power-up) only; the save is over and went well.
+    let status = frame(&[0x01, 0x03, 0x21, 0x20, 0x00, 0x01]);
+    assert_eq!(ask(&mut master, &status, 7), frame(&[0x01, 0x03, 0x02, 0x00, 0x01]));
+    drop(master);
+    drop(sim); // SIGKILL
+
+    let saved = frame(&[0x01, 0x03, 0x04, 0x00, 0x20, 0x05, 0xDC]);
+    let sim = start(&args);
+    let mut master = connect(&sim.endpoint);
+    assert_eq!(ask(&mut master, &READ, 9), saved);
+    assert_eq!(ask(&mut master, &status, 7), frame(&[0x01, 0x03, 0x02, 0x00, 0x00]));
+    drop(master);
+    drop(sim);
+
+    let fset = [&args[..], &["--fset-low"]].concat();
+    let sim = start(&fset);
+    let mut master = connect(&sim.endpoint);
+    assert_eq!(ask(&mut master, &READ, 9), REPLY, "factory values");
+    assert_eq!(ask(&mut master, &status, 7), frame(&[0x01, 0x03, 0x02, 0x00, 0x04]), "FSET bit");
+    drop(master);
+    drop(sim);
+
+    let sim = start(&args);
+    let mut master = connect(&sim.endpoint);
+    assert_eq!(ask(&mut master, &READ, 9), REPLY, "the factory values were saved");
+}

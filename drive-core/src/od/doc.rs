@@ -22,11 +22,11 @@ pub fn write_native(out: &mut impl Write) -> fmt::Result {
     )?;
     writeln!(
         out,
-        "- Exceptions: 01 unsupported function or diagnostics sub-function; 02 register without an object, or a write to a read-only object; 03 value out of range, or wrong quantities and lengths; 04 a valid request the drive cannot act on now (e.g. a save on a platform without storage). A multi-register write is all or nothing."
+        "- Exceptions: 01 unsupported function or diagnostics sub-function; 02 register without an object, or a write to a read-only object; 03 value out of range, or wrong quantities and lengths; 04 a valid request the drive cannot act on now (e.g. a move while disabled, a save while moving). A multi-register write is all or nothing."
     )?;
     writeln!(
         out,
-        "- Access: `ro` read only, `rw` read/write, `cmd` a write runs a command, `w1c` write 1 to clear a bit. Storage: `ROM` kept when saved (0x200F = 2), `RAM` reset at power-up, `live` the drive's running state, `const` firmware constants."
+        "- Access: `ro` read only, `rw` read/write, `cmd` a write runs a command, `w1c` write 1 to clear a bit. Storage: `ROM` kept in flash when saved (0x200F = 2; 0x6055 by the power-down save), `RAM` reset at power-up, `live` the drive's running state, `const` firmware constants."
     )?;
     writeln!(out)?;
     writeln!(out, "| Register | Name | Type | Access | Storage | Range | Default | Unit | Description |")?;

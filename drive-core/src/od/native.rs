@@ -88,14 +88,21 @@ objects! {
     SoftwareVersion @ 0x1024: Str(4), Ro, Const, Any, default 0, None, "software version";
     /// Group id for group-synchronous starts by broadcast. 0: in no group.
     GroupId @ 0x200E: U8, Rw, Rom, Span(0, 127), default 0, None, "group id";
-    /// System control: 1 jump to the boot loader, 2 save every ROM object, 3 restore factory
-    /// settings. The manual prints it read-only; its own examples write it.
+    /// System control. 2 saves every ROM object the master can write (one record, so a power cut
+    /// leaves the old set or the new one, never a mix); 3 restores their factory values and saves
+    /// them too, so that they survive a restart as §3.11's FSET reset does. Both are refused (04)
+    /// while the axis moves (an erase stalls the flash for ~22 ms) or a save is in progress, and 2
+    /// on a platform without storage. The reply means the save started: 0x2120 bit 3 shows it
+    /// running, bit 4 a failure. 1 (jump to the boot loader) is refused (04): the simulator has
+    /// none, and the firmware does not jump yet. The manual prints it read-only; its own examples
+    /// write it.
     SystemControl @ 0x200F: U8, Cmd, Ram, Set(&[1, 2, 3]), default 0, None, "system control";
-    /// Node id (slave address). Takes effect after saving (0x200F = 2) and restarting. The object
+    /// Node id (slave address). A write takes effect at the next power-up once saved (0x200F = 2),
+    /// so a typo cannot lose the drive; until then the drive answers at the old id. The object
     /// table prints a default of 5; §5.3 and every example use 1.
     NodeId @ 0x2028: U8, Rw, Rom, Span(1, 127), default 1, None, "node id";
-    /// Baud rate. Takes effect after saving and restarting. 57600 is accepted beside the manual's
-    /// list; 51200 is the manual's.
+    /// Baud rate. A write takes effect at the next power-up once saved (0x200F = 2). 57600 is
+    /// accepted beside the manual's list; 51200 is the manual's.
     BaudRate @ 0x202A: U32, Rw, Rom, Set(&crate::units::Baud::SUPPORTED), default 9600, Baud, "baud rate";
     /// Parity of the serial line (our object): 0 none (8N1, the manual's setting), 1 even (8E1,
     /// the Modbus serial-line default), 2 odd. Takes effect after saving and restarting.
@@ -109,6 +116,11 @@ objects! {
     /// Standstill delay (our object, as seed 002's 0x0245): how long the motor stands before the
     /// current drops to 0x2102.
     IdleDelay @ 0x2103: U16, Rw, Rom, Span(1, 32767), default 500, Millis, "standstill delay";
+    /// Storage status (our object), write 1 to clear (bit 3 excepted): bit 0 no saved parameters
+    /// at power-up, 1 saved parameters unreadable at power-up (both: factory values in use), 2 FSET
+    /// held low at power-up (factory values restored and saved), 3 save in progress, 4 last save
+    /// failed (the flash keeps the set saved before it).
+    StorageStatus @ 0x2120: U8, W1c, Live, Bits(0x1F), default 0, None, "storage status";
     /// Error status, write 1 to clear: bit 0 over-temperature, 1 coil A open, 2 coil B open,
     /// 3 A over-current, 4 B over-current, 5 under-voltage. Moves are refused while any is set.
     ErrorStatus @ 0x6000: U8, W1c, Live, Bits(0x3F), default 0, None, "error status";
@@ -222,7 +234,8 @@ objects! {
     /// Encoder resolution: lines per revolution (counted ×4), or 12 for the 12-bit absolute
     /// encoder. Takes effect after a restart.
     EncoderCpr @ 0x6054: U16, Rw, Rom, Set(ENCODER_CPR), default 1000, None, "encoder resolution";
-    /// Position saved at the last power loss (see 0x605E).
+    /// Position saved at the last power loss (see 0x605E): its own small record in flash, loaded
+    /// at power-up; a save (0x200F = 2) neither writes nor clears it.
     SavedPosition @ 0x6055: S32, Ro, Rom, S32_ANY, default 0, Steps, "power-down position";
     /// Closed loop: proportional gain.
     Kp @ 0x6057: U8, Rw, Rom, Span(1, 255), default 8, None, "KP";
@@ -238,7 +251,8 @@ objects! {
     StallLength @ 0x605C: U16, Rw, Rom, Span(1, 255), default 64, Steps, "stall length";
     /// Closed loop: 1 enables the torque (servo) loop with PID; 0 is the position loop.
     TorqueLoop @ 0x605D: U8, Rw, Rom, Span(0, 1), default 0, None, "torque loop enable";
-    /// 1 saves the position when power loss is detected.
+    /// 1 saves the position (as 0x6055) when power loss is detected: one record of two flash
+    /// writes, ~0.2 ms on the STM32G431 (~22 ms more if it falls at a page's end).
     AutoSave @ 0x605E: U8, Rw, Rom, Span(0, 1), default 0, None, "power-down save enable";
     /// Analog input, 12-bit ADC code. Read only here: the appendix's RW has no meaning for an input.
     AnalogIn @ 0x605F: U16, Ro, Live, Span(0, 4095), default 0, None, "analog input";

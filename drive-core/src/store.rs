@@ -1,0 +1,317 @@
+//! The saved parameters in flash, through `sequential-storage`'s map over a [`NorFlash`].
+//!
+//! Two records, each one map item (a CRC-checked write that a power cut leaves either whole or
+//! ignored, with the crate's repair of torn pages on the next access):
+//!
+//! - [`PARAMS_KEY`]: every object a save covers ([`Params::covers`]), as one record, so that a
+//!   power cut during a save leaves the complete old set or the complete new set, never a mix.
+//!   The record is a header `[format, 0, count (u16)]` and `count` entries `(register address
+//!   (u16), value (u32))`, little endian. Loading ignores addresses this firmware does not save
+//!   (an object dropped by an update) and values its ranges refuse; objects the record lacks (added
+//!   by an update) keep their factory values. A record of another [`FORMAT`] is not read at all.
+//! - [`POSITION_KEY`]: the position saved at power loss (0x6055), an `i32`, small and quick so it
+//!   fits in the power supply's hold-up time.
+//!
+//! The functions are async as the flash traits are; the drive state machine is not: the platform
+//! [`Store::load`]s before it builds the [`Drive`](crate::Drive) and performs the saves that
+//! [`Drive::take_system_request`](crate::Drive::take_system_request) asks for.
+
+use core::ops::Range;
+
+use embedded_storage_async::nor_flash::NorFlash;
+use sequential_storage::cache::{Cache, Uncached};
+use sequential_storage::map::{MapConfig, MapConfigError, MapStorage};
+
+use crate::drive::{Drive, Params, STORAGE_CORRUPT, STORAGE_EMPTY, STORAGE_FSET, STORAGE_SAVE_FAILED, SystemRequest};
+use crate::od::{Access, OBJECTS, RegisterMap, Storage};
+
+/// Map key of the parameter record.
+pub const PARAMS_KEY: u8 = 0;
+/// Map key of the power-down position record.
+pub const POSITION_KEY: u8 = 1;
+/// Format of the parameter record; bumped only if the entry layout changes (new objects do not).
+pub const FORMAT: u8 = 1;
+
+/// How many objects the parameter record holds (as [`Params::covers`], at compile time).
+pub const SAVED: usize = {
+    let mut n = 0;
+    let mut i = 0;
+    while i < OBJECTS.len() {
+        #[allow(clippy::indexing_slicing)]
+        let d = &OBJECTS[i];
+        if matches!(d.storage, Storage::Rom) && matches!(d.access, Access::Rw) {
+            n += 1;
+        }
+        i += 1;
+    }
+    n
+};
+
+/// Bytes of the record header.
+const HEADER: usize = 4;
+/// Bytes of one entry.
+const ENTRY: usize = 6;
+/// Bytes of the parameter record.
+pub const RECORD: usize = HEADER + ENTRY * SAVED;
+/// The crate's work buffer: key and value, rounded up to its largest flash word (32 bytes).
+const BUFFER: usize = (1 + RECORD).next_multiple_of(32);
+
+/// Writes the parameter record of `params` into `out`; its length, or `None` if `out` is short.
+pub fn encode(params: &Params, out: &mut [u8]) -> Option<usize> {
+    let out = out.get_mut(..RECORD)?;
+    let (head, mut rest) = out.split_first_chunk_mut::<HEADER>()?;
+    let [lo, hi] = (SAVED as u16).to_le_bytes();
+    *head = [FORMAT, 0, lo, hi];
+    for d in OBJECTS.iter().filter(|d| Params::covers(d)) {
+        let (entry, tail) = rest.split_first_chunk_mut::<ENTRY>()?;
+        let [a0, a1] = d.addr.to_le_bytes();
+        let [v0, v1, v2, v3] = params.get(d.obj).to_le_bytes();
+        *entry = [a0, a1, v0, v1, v2, v3];
+        rest = tail;
+    }
+    Some(RECORD)
+}
+
+/// Why a parameter record was not read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DecodeError {
+    /// A format this firmware does not know.
+    Format(u8),
+    /// The length does not match the header's entry count.
+    Length,
+}
+
+/// Reads a parameter record into `params`. Unknown addresses and refused values are skipped;
+/// objects the record lacks keep the value they had. On an error `params` is unchanged.
+pub fn decode(record: &[u8], params: &mut Params) -> Result<(), DecodeError> {
+    let (&[format, _, lo, hi], entries) = record.split_first_chunk::<HEADER>().ok_or(DecodeError::Length)?;
+    if format != FORMAT {
+        return Err(DecodeError::Format(format));
+    }
+    if entries.len() != ENTRY * usize::from(u16::from_le_bytes([lo, hi])) {
+        return Err(DecodeError::Length);
+    }
+    for &[a0, a1, v0, v1, v2, v3] in entries.as_chunks::<ENTRY>().0 {
+        let addr = u16::from_le_bytes([a0, a1]);
+        if let Some(d) = OBJECTS.iter().find(|d| d.addr == addr) {
+            // Refused values (a range narrowed by an update) keep the present one.
+            let _ = params.set(d.obj, u32::from_le_bytes([v0, v1, v2, v3]));
+        }
+    }
+    Ok(())
+}
+
+/// What power-up found in the store.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Loaded {
+    /// The saved values, factory values where none could be read.
+    pub params: Params,
+    /// Storage status bits for 0x2120: [`STORAGE_EMPTY`] or [`STORAGE_CORRUPT`], or 0.
+    pub status: u8,
+}
+
+/// A flash error, or one of the map's (corruption it could not repair, full storage, ...).
+pub type Error<S> = sequential_storage::Error<<S as embedded_storage_async::nor_flash::ErrorType>::Error>;
+
+/// The parameter store on the pages `range` of a flash.
+pub struct Store<S: NorFlash> {
+    map: MapStorage<u8, S, Cache<Uncached, Uncached, Uncached, u8>>,
+    buf: [u8; BUFFER],
+}
+
+impl<S: NorFlash> core::fmt::Debug for Store<S> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Store").field("range", &self.map.flash_range()).finish_non_exhaustive()
+    }
+}
+
+impl<S: NorFlash> Store<S> {
+    /// The store on the flash pages `range` (whole erase pages, at least two).
+    pub fn new(flash: S, range: Range<u32>) -> Result<Self, MapConfigError> {
+        let config = MapConfig::try_new(range)?;
+        Ok(Self { map: MapStorage::new(flash, config, Cache::new_uncached()), buf: [0; BUFFER] })
+    }
+
+    /// Reads the saved parameters and the power-down position. A missing record gives factory
+    /// values; a store the map cannot read gives factory values and is erased, so that the next
+    /// save works. Never fails: what went wrong is in the status bits.
+    pub async fn load(&mut self) -> Loaded {
+        let mut params = Params::factory();
+        let mut status = 0;
+        let mut unreadable = false;
+        match self.map.fetch_item::<&[u8]>(&mut self.buf, &PARAMS_KEY).await {
+            Ok(Some(record)) => {
+                if decode(record, &mut params).is_err() {
+                    status |= STORAGE_CORRUPT;
+                }
+            }
+            Ok(None) => status |= STORAGE_EMPTY,
+            Err(_) => unreadable = true,
+        }
+        let mut position_found = false;
+        match self.map.fetch_item::<i32>(&mut self.buf, &POSITION_KEY).await {
+            Ok(Some(position)) => {
+                params.set_saved_position(position);
+                position_found = true;
+            }
+            Ok(None) => {}
+            Err(_) => unreadable = true,
+        }
+        // Neither record, yet the pages are not erased: not a store of ours (or one torn beyond
+        // repair). Saving into it would fail on programmed words.
+        if status & STORAGE_EMPTY != 0 && !position_found && !self.is_erased().await {
+            unreadable = true;
+        }
+        if unreadable {
+            params = Params::factory();
+            status = STORAGE_CORRUPT;
+            // If even the erase fails, saves will fail and say so (0x2120 bit 4).
+            let _ = self.map.erase_all().await;
+        }
+        Loaded { params, status }
+    }
+
+    /// Power-up: [`Store::load`], or with `fset_low` (FSET held low for 5 s) the factory values,
+    /// saved at once after the store is erased (status [`STORAGE_FSET`], and
+    /// [`STORAGE_SAVE_FAILED`] if that save failed). Build the drive from the result with
+    /// [`Drive::boot`].
+    pub async fn power_up(&mut self, fset_low: bool) -> Loaded {
+        if !fset_low {
+            return self.load().await;
+        }
+        let params = Params::factory();
+        let saved = match self.erase().await {
+            Ok(()) => self.save(&params).await,
+            Err(e) => Err(e),
+        };
+        let failed = if saved.is_ok() { 0 } else { STORAGE_SAVE_FAILED };
+        Loaded { params, status: STORAGE_FSET | failed }
+    }
+
+    /// Performs the request `drive` makes of its platform, if any: a save of its parameters
+    /// (reported to the drive with [`Drive::save_done`]) or of the power-down position. Returns
+    /// the request and how it went; [`SystemRequest::BootLoader`] is the platform's to act on.
+    /// Call it outside the control tick, after the reply to the request has been sent.
+    pub async fn serve<M: RegisterMap>(
+        &mut self,
+        drive: &mut Drive<M>,
+    ) -> Option<(SystemRequest, Result<(), Error<S>>)> {
+        let request = drive.take_system_request()?;
+        let done = match request {
+            SystemRequest::Save => {
+                let params = drive.state().params();
+                let saved = self.save(&params).await;
+                drive.save_done(saved.is_ok());
+                saved
+            }
+            SystemRequest::SavePosition(position) => self.save_position(position).await,
+            SystemRequest::BootLoader => Ok(()),
+        };
+        Some((request, done))
+    }
+
+    /// Whether every byte of the store's pages reads erased (0xFF); a failed read counts as not.
+    async fn is_erased(&mut self) -> bool {
+        let range = self.map.flash_range();
+        let mut at = range.start;
+        while at < range.end {
+            let n = (range.end - at).min(BUFFER as u32);
+            let chunk = self.buf.get_mut(..n as usize).unwrap_or_default();
+            if self.map.flash().read(at, chunk).await.is_err() || chunk.iter().any(|&b| b != 0xFF) {
+                return false;
+            }
+            at += n;
+        }
+        true
+    }
+
+    /// Saves `params` as one record (see the module documentation).
+    pub async fn save(&mut self, params: &Params) -> Result<(), Error<S>> {
+        let mut record = [0u8; RECORD];
+        let n = encode(params, &mut record).ok_or(sequential_storage::Error::BufferTooSmall(RECORD))?;
+        let record = record.get(..n).unwrap_or_default();
+        self.map.store_item(&mut self.buf, &PARAMS_KEY, &record).await
+    }
+
+    /// Saves the power-down position (0x6055): one small record, for the power-loss detector.
+    pub async fn save_position(&mut self, position: i32) -> Result<(), Error<S>> {
+        self.map.store_item(&mut self.buf, &POSITION_KEY, &position).await
+    }
+
+    /// Erases every page of the store.
+    pub async fn erase(&mut self) -> Result<(), Error<S>> {
+        self.map.erase_all().await
+    }
+
+    /// The flash under the store.
+    pub fn flash(&mut self) -> &mut S {
+        self.map.flash()
+    }
+
+    /// Ends the store, giving back its flash.
+    pub fn into_flash(self) -> S {
+        self.map.destroy().0
+    }
+}
+
+/// Flash bytes one item of `len` value bytes occupies on a flash `S` (header, key, padding).
+pub const fn item_bytes<S: NorFlash>(len: usize) -> usize {
+    let header = MapStorage::<u8, S, Cache<Uncached, Uncached, Uncached, u8>>::item_overhead_size() as usize;
+    header + (1 + len).next_multiple_of(S::WRITE_SIZE)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::od::Obj;
+
+    #[test]
+    fn a_record_round_trips() {
+        let mut p = Params::factory();
+        assert!(p.set(Obj::NodeId, 9));
+        assert!(p.set(Obj::PhaseCurrent, 1500));
+        assert!(p.set(Obj::AnalogMinPos, (-5i32) as u32));
+        let mut buf = [0u8; RECORD];
+        assert_eq!(encode(&p, &mut buf), Some(RECORD));
+        let mut back = Params::factory();
+        assert_eq!(decode(&buf, &mut back), Ok(()));
+        assert_eq!(back, p);
+        assert_eq!(encode(&p, &mut [0u8; RECORD - 1]), None);
+    }
+
+    #[test]
+    fn unknown_addresses_are_ignored_and_missing_ones_keep_their_values() {
+        // An older or newer firmware's record: node id 9, an address we do not have, a value our
+        // range refuses (microsteps 3), and nothing else.
+        let mut rec = [FORMAT, 0, 3, 0].to_vec();
+        for (addr, v) in [(0x2028u16, 9u32), (0x21FF, 77), (0x600C, 3)] {
+            rec.extend(addr.to_le_bytes());
+            rec.extend(v.to_le_bytes());
+        }
+        let mut p = Params::factory();
+        assert_eq!(decode(&rec, &mut p), Ok(()));
+        let mut want = Params::factory();
+        want.set(Obj::NodeId, 9);
+        assert_eq!(p, want);
+    }
+
+    #[test]
+    fn bad_records_change_nothing() {
+        let mut p = Params::factory();
+        p.set(Obj::GroupId, 5);
+        let before = p.clone();
+        assert_eq!(decode(&[2, 0, 0, 0], &mut p), Err(DecodeError::Format(2)));
+        assert_eq!(decode(&[FORMAT, 0, 1, 0, 0x28, 0x20, 9], &mut p), Err(DecodeError::Length));
+        assert_eq!(decode(&[FORMAT], &mut p), Err(DecodeError::Length));
+        assert_eq!(p, before);
+    }
+
+    #[test]
+    fn read_only_and_ram_objects_are_not_saved() {
+        let mut p = Params::factory();
+        assert!(!p.set(Obj::SavedPosition, 5), "0x6055 has its own record");
+        assert!(!p.set(Obj::MaxSpeed, 5), "RAM");
+        assert!(!p.set(Obj::StorageStatus, 1), "live");
+        assert!(!p.set(Obj::NodeId, 0), "out of range");
+    }
+}
