@@ -166,7 +166,8 @@ fn profile_position_time_points_on_the_rotor() {
 #[test]
 fn section_9_4_4_common_settings() {
     // §9.4.4's settings, then §9.4.1's move with them. Its last line (0x200F = 2, save) needs the
-    // parameter store, which this build refuses with exception 04.
+    // parameter store, which a bare plant has not: tests/tests/seed_000_motion.rs saves them
+    // through a real master and power-cycles the simulator.
     let mut p = plant(MotorInputs::default());
     for (reg, v) in [
         (0x600C, 0x20),

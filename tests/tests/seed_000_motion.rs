@@ -1,4 +1,4 @@
-//! Seed 000 §9.4.1-9.4.3 replayed by a real master (tokio-modbus) over the simulator's serial
+//! Seed 000 §9.4.1-9.4.4 replayed by a real master (tokio-modbus) over the simulator's serial
 //! endpoint, in real time, against the physical motor model.
 
 use std::sync::{Arc, Mutex};
@@ -112,4 +112,55 @@ async fn velocity_mode_at_300_rpm() {
     // Back to position mode: decelerates to a stop.
     write(&mut ctx, 0x6007, 0).await;
     wait_idle(&mut ctx, Duration::from_secs(5)).await;
+}
+
+/// §9.4.4: the common settings, saved (0x200F = 2), kept across a power cycle on the same flash,
+/// then §9.4.1's move with them.
+#[tokio::test(flavor = "current_thread")]
+async fn common_settings_saved_and_used_after_a_power_cycle() {
+    const SETTINGS: [(u16, u16); 8] = [
+        (0x600C, 0x0020),
+        (0x600D, 0x03E8),
+        (0x6008, 0x0258),
+        (0x6009, 0x0258),
+        (0x600A, 8),
+        (0x600B, 8),
+        (0x6013, 3),
+        (0x6014, 0),
+    ];
+    let dir = tempfile::tempdir().expect("tempdir");
+    let flash = dir.path().join("flash.bin");
+    let opts = || SimOptions {
+        endpoint: Endpoint::Tcp("127.0.0.1:0".into()),
+        flash: Some(flash.clone()),
+        ..Default::default()
+    };
+
+    let sim = Simulator::bind(opts()).expect("bind").power_on();
+    let mut ctx = rtu::attach_slave(TcpStream::connect(sim.endpoint()).await.expect("connect"), Slave(1));
+    for (reg, v) in SETTINGS {
+        write(&mut ctx, reg, v).await;
+    }
+    write(&mut ctx, 0x200F, 2).await;
+    // Storage status 0x2120: bit 3 save running, bit 4 last save failed.
+    assert_eq!(read(&mut ctx, 0x2120, 1).await[0] & 0x18, 0, "saved");
+    drop(ctx);
+    sim.off().expect("power off");
+
+    let sim = Simulator::bind(opts()).expect("bind");
+    let snapshot = sim.snapshot();
+    let sim = sim.power_on();
+    let mut ctx = rtu::attach_slave(TcpStream::connect(sim.endpoint()).await.expect("connect"), Slave(1));
+    for (reg, v) in SETTINGS {
+        assert_eq!(read(&mut ctx, reg, 1).await, vec![v], "0x{reg:04X} after the power cycle");
+    }
+    for (reg, v) in [(0x6003, 0), (0x6004, 0x7D00), (0x6002, 0), (0x6005, 0), (0x6006, 0x7D00)] {
+        write(&mut ctx, reg, v).await;
+    }
+    wait_idle(&mut ctx, Duration::from_secs(10)).await;
+    sleep(Duration::from_millis(100)).await;
+    let r = rotor(&snapshot);
+    assert!((r - 32000.0).abs() < 3.2, "rotor at {r} microsteps");
+    drop(ctx);
+    sim.off().expect("power off");
 }
