@@ -5,9 +5,9 @@ use crate::crc;
 use crate::ident::Identity;
 use crate::motion::axis::Axis;
 use crate::motion::cubic::Table;
-use crate::pvt::Pvt;
 use crate::od::{Access, NativeMap, OBJECTS, Obj, ObjError, ObjectDef, RegisterMap, Storage};
 use crate::pdu::{Exception, MAX_READ, Request, Words};
+use crate::pvt::Pvt;
 use crate::rtu::{Framer, MAX_FRAME, RxError};
 use crate::units::{Baud, Instant, SlaveAddr};
 
@@ -123,7 +123,8 @@ impl DriveState {
     /// Everything but the PVT table, to [`DriveState::restore`] later.
     pub fn checkpoint(&self) -> Checkpoint {
         // Naming every field: a new one must be decided on here.
-        let Self { params, status, identity: _, can_save: _, request, now, axis, pp, still_since, pvt, table: _ } = self;
+        let Self { params, status, identity: _, can_save: _, request, now, axis, pp, still_since, pvt, table: _ } =
+            self;
         Checkpoint {
             params: *params,
             status: *status,

@@ -26,7 +26,8 @@
 //! - **End of a run, underflow.** A run ends when no point follows. On a point of velocity 0 the
 //!   axis stands exactly on it. Otherwise (mode 3: the FIFO ran dry while moving) it is an
 //!   underflow: 0x2111 bit 0 is set and the axis decelerates from the point's velocity to rest
-//!   with the jerk-limited ramp of 0x600B, with no jump in position or velocity.
+//!   with the deceleration of 0x600B (a trapezoid: the segment's acceleration may be beyond what
+//!   the S-curve's jerk could take back soon), with no jump in position or velocity.
 //! - Controller status bits 5-7 (FIFO empty, below the low mark, above the high mark) show the
 //!   FIFO's state in mode 3 (0x6018 = 2) and are 0 otherwise; writing 1 to them does nothing.
 //! - 0x6017 = 0 stops a run by decelerating as an underflow does (0x6053 stops at once).
@@ -45,6 +46,7 @@ use crate::control::TICK_MICROS;
 use crate::drive::DriveState;
 use crate::motion::axis::Axis;
 use crate::motion::cubic::{Cubic, Point, TABLE_SIZE, V_MAX};
+use crate::motion::scurve::Limits;
 use crate::od::{Obj, ObjError};
 use crate::units::Instant;
 
@@ -304,7 +306,10 @@ impl DriveState {
             return axis;
         }
         let v = axis.setpoint().velocity.abs().max(1.0);
-        if axis.run_at(now, 0.0, 0.0, &self.scurve_limits(v)).is_err() {
+        // No jerk limit: a PVT segment may end with more acceleration than the ramp's jerk could
+        // take back in time; the acceleration steps to the deceleration, velocity stays smooth.
+        let limits = Limits { jerk: None, ..self.scurve_limits(v) };
+        if axis.run_at(now, 0.0, 0.0, &limits).is_err() {
             // Beyond what the ramp can plan from: stop where it stands.
             axis.halt();
         }
@@ -327,7 +332,9 @@ impl DriveState {
         match (obj, value) {
             (Obj::PvtControl, OP_STOP) => Ok(self.stop_effect()),
             (Obj::PvtControl, OP_START) => self.plan_start(),
-            (Obj::PvtControl, OP_PUSH) => self.check_push(self.point_registers()).map(|()| Effect::Push(self.point_registers())),
+            (Obj::PvtControl, OP_PUSH) => {
+                self.check_push(self.point_registers()).map(|()| Effect::Push(self.point_registers()))
+            }
             (Obj::PvtControl, OP_CLEAR) | (Obj::PvtMode, _) if running => Err(ObjError::Refused),
             (Obj::PvtControl, _) => Ok(Effect::Clear),
             (Obj::PvtMode, v) if v != self.pvt_mode() => Ok(Effect::Clear),
