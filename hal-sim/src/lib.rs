@@ -1,5 +1,11 @@
-//! One simulated drive ([`drive_core::Drive`]) on a pseudo-terminal or a TCP port, in real time,
-//! where any Modbus-RTU master can reach it.
+//! Simulated drives ([`drive_core::Drive`]) on a pseudo-terminal or a TCP port, in real time,
+//! where any Modbus-RTU master can reach them.
+//!
+//! With [`SimOptions::axes`] several drives, each with its own motor (and trace), share one
+//! simulated RS-485 bus behind the one endpoint: every drive receives every byte at the same
+//! instant, only the addressed drive answers, a broadcast reaches all. Replies are not echoed to
+//! the other drives: a master on a pseudo-terminal or TCP does not keep the line's silence after a
+//! reply, so the others would see reply and next request as one garbled frame.
 //!
 //! The loop stamps each chunk of bytes it reads with the monotonic time since [`Simulator::run`]
 //! started and hands it to [`Drive::on_rx`]; between chunks it waits (`poll(2)`) until more bytes
@@ -93,6 +99,20 @@ pub struct SimOptions {
     pub baud: Option<u32>,
     /// The motor and its surroundings.
     pub motor: MotorOptions,
+    /// Several drives on one bus, at these addresses, each with its own motor (the same model)
+    /// and its own trace ([`axis_trace_path`]). Empty: one drive, at `address`.
+    pub axes: Vec<u8>,
+}
+
+/// The trace file of the drive at `address` when several share the bus: `-axisN` before the
+/// extension (`run.csv` → `run-axis2.csv`).
+pub fn axis_trace_path(path: &Path, address: u8) -> PathBuf {
+    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    let name = match path.extension() {
+        Some(ext) => format!("{stem}-axis{address}.{}", ext.to_string_lossy()),
+        None => format!("{stem}-axis{address}"),
+    };
+    path.with_file_name(name)
 }
 
 /// Which motor the drive turns, and what it turns.
@@ -126,13 +146,13 @@ pub struct Snapshot {
     pub setpoint: i64,
 }
 
-/// One simulated drive with its endpoint open, ready to run.
+/// Simulated drives (one, or several on one bus) with their endpoint open, ready to run.
 #[derive(Debug)]
 pub struct Simulator {
-    plant: Plant,
+    plants: Vec<Plant>,
     port: Port,
     endpoint: String,
-    snapshot: Arc<Mutex<Snapshot>>,
+    snapshots: Vec<Arc<Mutex<Snapshot>>>,
 }
 
 /// The open endpoint.
@@ -152,15 +172,7 @@ impl Simulator {
     /// or a bound TCP listener. An address or baud rate the drive does not take is an
     /// [`ErrorKind::InvalidInput`] error.
     pub fn bind(opts: SimOptions) -> io::Result<Simulator> {
-        let drive = Drive::new(drive_config(&opts)?);
-        let params = MotorCatalog::builtin()
-            .get(&opts.motor.name)
-            .cloned()
-            .ok_or_else(|| invalid(format!("no motor {:?} in the catalogue", opts.motor.name)))?;
-        let mut plant = Plant::new(drive, Motor::new(params, opts.motor.inputs));
-        if let Some((path, every)) = &opts.motor.trace {
-            plant.trace_to(path, *every).map_err(|e| annotate(e, path.display()))?;
-        }
+        let plants = plants(&opts)?;
         let (port, endpoint) = match opts.endpoint {
             Endpoint::Pty { link } => open_pty(link.as_deref())?,
             Endpoint::Tcp(addr) => {
@@ -169,7 +181,8 @@ impl Simulator {
                 (Port::Tcp(listener), at)
             }
         };
-        Ok(Simulator { plant, port, endpoint, snapshot: Arc::default() })
+        let snapshots = plants.iter().map(|_| Arc::default()).collect();
+        Ok(Simulator { plants, port, endpoint, snapshots })
     }
 
     /// Where masters reach the drive: `/dev/pts/N`, or the bound `HOST:PORT`.
@@ -177,19 +190,29 @@ impl Simulator {
         &self.endpoint
     }
 
-    /// The drive, as it will start.
+    /// The (first) drive, as it will start.
     pub fn drive(&self) -> &Drive {
-        self.plant.drive()
+        self.plants.first().map(Plant::drive).unwrap_or_else(|| unreachable!("a simulator has a drive"))
     }
 
-    /// The drive, to set up before it runs (its state, its status); the loop owns it then.
+    /// The (first) drive, to set up before it runs (its state, its status); the loop owns it then.
     pub fn drive_mut(&mut self) -> &mut Drive {
-        self.plant.drive_mut()
+        self.plants.first_mut().map(Plant::drive_mut).unwrap_or_else(|| unreachable!("a simulator has a drive"))
     }
 
-    /// What the running loop publishes of the motor and the drive.
+    /// Every drive and its motor, in the order of [`SimOptions::axes`], to set up before it runs.
+    pub fn plants_mut(&mut self) -> &mut [Plant] {
+        &mut self.plants
+    }
+
+    /// What the running loop publishes of the (first) motor and drive.
     pub fn snapshot(&self) -> Arc<Mutex<Snapshot>> {
-        Arc::clone(&self.snapshot)
+        self.snapshots.first().map(Arc::clone).unwrap_or_default()
+    }
+
+    /// What the running loop publishes of each motor and drive, in the order of the axes.
+    pub fn snapshots(&self) -> Vec<Arc<Mutex<Snapshot>>> {
+        self.snapshots.clone()
     }
 
     /// Runs the drive on a new thread, forever (see [`Simulator::run`]).
@@ -200,9 +223,9 @@ impl Simulator {
     /// Runs the drive on this thread, serving one master after another. Bad frames, masters that
     /// go away and failed reads or writes do not end it: it returns only if `poll(2)` fails.
     pub fn run(self) -> io::Result<Infallible> {
-        let Simulator { mut plant, port, snapshot, .. } = self;
+        let Simulator { mut plants, port, snapshots, .. } = self;
         let clock = Clock(std::time::Instant::now());
-        let mut sim = Sim { plant: &mut plant, snapshot: &snapshot };
+        let mut sim = Sim { plants: &mut plants, snapshots: &snapshots };
         match port {
             Port::Pty { master, slave } => {
                 let mut line = PtyLine { master, slave };
@@ -226,6 +249,33 @@ impl Simulator {
             },
         }
     }
+}
+
+/// The drives and motors `opts` ask for, traces open.
+pub fn plants(opts: &SimOptions) -> io::Result<Vec<Plant>> {
+    let params = MotorCatalog::builtin()
+        .get(&opts.motor.name)
+        .cloned()
+        .ok_or_else(|| invalid(format!("no motor {:?} in the catalogue", opts.motor.name)))?;
+    let addresses =
+        if opts.axes.is_empty() { vec![opts.address] } else { opts.axes.iter().map(|&a| Some(a)).collect() };
+    let mut plants = Vec::new();
+    for (i, &address) in addresses.iter().enumerate() {
+        if addresses.get(..i).is_some_and(|before| before.contains(&address)) {
+            return Err(invalid(format!("address {} twice on the bus", address.unwrap_or(0))));
+        }
+        let drive = Drive::new(drive_config(&SimOptions { address, ..opts.clone() })?);
+        let mut plant = Plant::new(drive, Motor::new(params.clone(), opts.motor.inputs));
+        if let Some((path, every)) = &opts.motor.trace {
+            let path = match address {
+                Some(a) if !opts.axes.is_empty() => axis_trace_path(path, a),
+                _ => path.clone(),
+            };
+            plant.trace_to(&path, *every).map_err(|e| annotate(e, path.display()))?;
+        }
+        plants.push(plant);
+    }
+    Ok(plants)
 }
 
 /// The drive configuration `opts` ask for, if the drive takes it.
@@ -325,26 +375,60 @@ trait Line: AsFd {
     fn send(&mut self, frame: &[u8]) -> io::Result<()>;
 }
 
-/// The plant and what it publishes, as the loop sees them.
+/// The plants on the bus and what they publish, as the loop sees them.
 struct Sim<'a> {
-    plant: &'a mut Plant,
-    snapshot: &'a Mutex<Snapshot>,
+    plants: &'a mut [Plant],
+    snapshots: &'a [Arc<Mutex<Snapshot>>],
 }
 
 impl Sim<'_> {
-    /// Brings the simulated motor and drive up to `now`, and publishes the result.
-    fn catch_up(&mut self, now: Instant) -> &mut Drive {
-        self.plant.advance_to(now);
-        // A trace is read while the simulator runs (and after it is killed): keep the file current.
-        let _ = self.plant.flush_trace();
-        if let Ok(mut s) = self.snapshot.lock() {
-            *s = Snapshot {
-                time_us: now.as_micros(),
-                rotor_microsteps: self.plant.rotor_microsteps(),
-                setpoint: self.plant.outputs().map_or(0, |o| o.setpoint.whole),
-            };
+    /// Brings every simulated motor and drive up to `now`, and publishes the result.
+    fn catch_up(&mut self, now: Instant) {
+        for (plant, snapshot) in self.plants.iter_mut().zip(self.snapshots) {
+            plant.advance_to(now);
+            // A trace is read while the simulator runs (and after it is killed): keep it current.
+            let _ = plant.flush_trace();
+            if let Ok(mut s) = snapshot.lock() {
+                *s = Snapshot {
+                    time_us: now.as_micros(),
+                    rotor_microsteps: plant.rotor_microsteps(),
+                    setpoint: plant.outputs().map_or(0, |o| o.setpoint.whole),
+                };
+            }
         }
-        self.plant.drive_mut()
+    }
+
+    /// The earliest time a drive's framer has something to do.
+    fn deadline(&self) -> Option<Instant> {
+        self.plants.iter().filter_map(|p| p.drive().deadline()).min()
+    }
+
+    /// Bytes on the bus at `now`, after the motors have caught up: every drive receives them.
+    /// Sends what the drives answer; `Err` when the master has gone.
+    fn receive(&mut self, now: Instant, bytes: &[u8], line: &mut impl Line) -> io::Result<()> {
+        self.catch_up(now);
+        for plant in self.plants.iter_mut() {
+            let drive = plant.drive_mut();
+            drive.on_rx(now, bytes);
+            // A frame that had ended before these bytes came was answered first.
+            if let Some(reply) = drive.take_reply() {
+                line.send(reply)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Time passes: frames that have ended are served, replies sent (or dropped without `line`).
+    fn timer<L: Line>(&mut self, now: Instant, mut line: Option<&mut L>) -> io::Result<()> {
+        self.catch_up(now);
+        for plant in self.plants.iter_mut() {
+            let drive = plant.drive_mut();
+            drive.on_timer(now);
+            if let (Some(reply), Some(line)) = (drive.take_reply(), line.as_mut()) {
+                line.send(reply)?;
+            }
+        }
+        Ok(())
     }
 }
 
@@ -357,7 +441,7 @@ fn serve(sim: &mut Sim<'_>, clock: &Clock, line: &mut impl Line) -> io::Result<(
     loop {
         let ready = {
             let mut fds = [PollFd::new(line.as_fd(), PollFlags::POLLIN)];
-            let deadline = sim.plant.drive().deadline();
+            let deadline = sim.deadline();
             let pace = clock.now().plus_micros(PACE.as_micros() as u64);
             let wake = deadline.map_or(pace, |d| d.min(pace));
             match poll(&mut fds, poll_timeout(Some(wake), clock.now())) {
@@ -369,26 +453,15 @@ fn serve(sim: &mut Sim<'_>, clock: &Clock, line: &mut impl Line) -> io::Result<(
         if ready {
             match line.recv(&mut buf) {
                 Recv::Data(n) => {
-                    let now = clock.now();
-                    let drive = sim.catch_up(now);
-                    drive.on_rx(now, buf.get(..n).unwrap_or_default());
-                    if let Some(reply) = drive.take_reply() {
-                        // A frame that had ended before these bytes came was answered first.
-                        if line.send(reply).is_err() {
-                            return Ok(());
-                        }
+                    if sim.receive(clock.now(), buf.get(..n).unwrap_or_default(), line).is_err() {
+                        return Ok(());
                     }
                 }
                 Recv::Nothing => {}
                 Recv::Closed => return Ok(()),
             }
         }
-        let now = clock.now();
-        let drive = sim.catch_up(now);
-        drive.on_timer(now);
-        if let Some(reply) = drive.take_reply()
-            && line.send(reply).is_err()
-        {
+        if sim.timer(clock.now(), Some(&mut *line)).is_err() {
             return Ok(());
         }
     }
@@ -396,13 +469,11 @@ fn serve(sim: &mut Sim<'_>, clock: &Clock, line: &mut impl Line) -> io::Result<(
 
 /// Ends the frame a master left unfinished when it went away; its reply has nowhere to go.
 fn settle(sim: &mut Sim<'_>, clock: &Clock) {
-    while let Some(deadline) = sim.plant.drive().deadline() {
+    while let Some(deadline) = sim.deadline() {
         let now = clock.now();
         match deadline.since(now) {
             0 => {
-                let drive = sim.catch_up(now);
-                drive.on_timer(now);
-                let _ = drive.take_reply();
+                let _ = sim.timer::<TcpLine>(now, None);
             }
             wait => thread::sleep(Duration::from_micros(wait)),
         }
