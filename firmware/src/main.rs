@@ -40,7 +40,10 @@ mod app {
     #[embassy_executor::main]
     async fn main(spawner: Spawner) {
         // No parameter storage yet: factory settings at every power-up, and saving is refused.
-        let drive = Drive::new(DriveConfig { identity: IDENTITY, can_save: false, ..DriveConfig::default() });
+        // One static drive (its PVT table is 10 KB): a task taking it by value would keep a copy
+        // in its future and in main's.
+        let config = DriveConfig { identity: IDENTITY, can_save: false, ..DriveConfig::default() };
+        let drive = unwrap!(cortex_m::singleton!(: Drive = Drive::new(config)));
         let Board { uart, motor, inputs } = board::init(drive.baud());
         info!("drive up: node {}, {} baud", drive.address().get(), drive.baud().get());
         spawner.spawn(unwrap!(modbus(uart, drive)));
@@ -55,7 +58,7 @@ mod app {
     /// (RTOF, reachable through `unstable-pac`) would time the silence in hardware; that is a later
     /// issue, and needs its own interrupt handler because the buffered driver clears RTOF unseen.
     #[embassy_executor::task]
-    async fn modbus(mut uart: BufferedUart<'static>, mut drive: Drive) -> ! {
+    async fn modbus(mut uart: BufferedUart<'static>, drive: &'static mut Drive) -> ! {
         let mut buf = [0u8; 64];
         loop {
             let deadline = drive.deadline();
