@@ -305,6 +305,27 @@ async fn eight_axes_start_in_the_same_tick() {
     group_start(&[1, 2, 3, 4, 5, 6, 7, 8]).await;
 }
 
+/// §5.9: each drive is given its own target and speed, one broadcast starts them together.
+#[tokio::test(flavor = "current_thread")]
+async fn synchronous_positioning_starts_by_one_broadcast() {
+    let nodes = [1, 2, 3];
+    let mut bus = Bus::start(&nodes, true).await;
+    for (n, target, speed) in [(1, 6400, 20_000), (2, -3200, 10_000), (3, 12_345, 30_000)] {
+        bus.write(n, 0x200E, &[4]).await;
+        let words = |v: i32| [(v >> 16) as u16, v as u16];
+        bus.write(n, 0x6047, &[words(speed), words(target)].concat()).await;
+    }
+    bus.broadcast(0x2113, 4).await;
+    bus.wait_idle(&nodes, Duration::from_secs(5)).await;
+    assert_eq!([bus.position(1).await, bus.position(2).await, bus.position(3).await], [6400, -3200, 12_345]);
+    sleep(Duration::from_millis(50)).await;
+    let first: Vec<i64> = nodes
+        .iter()
+        .map(|&n| tick_of(bus.trace(n).iter().find(|r| r.commanded_position_usteps != 0.0).expect("moved")))
+        .collect();
+    assert!(first.iter().all(|&t| t == first[0]), "first moving ticks {first:?}");
+}
+
 #[tokio::test(flavor = "current_thread")]
 async fn mode_2_runs_the_phases_in_order() {
     let mut bus = Bus::start(&[1], false).await;
