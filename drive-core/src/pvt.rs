@@ -7,7 +7,9 @@
 //!
 //! Decisions where the manual is silent:
 //! - **The first point of a run** is reached from where the axis stands, at rest, in the point's
-//!   time; its time may be 0 only if the axis already stands on it.
+//!   time; its time may be 0 only if the axis already stands on it. Only the first point pushed
+//!   (after a clear) may have time 0, and a mode 2 loop of that point alone is refused, so a
+//!   run never has more than a few segments of no time in a row (all pass in one tick).
 //! - **Storage.** Modes 1 and 2 append pushed points at indices 0, 1, ... (0x601B-0x6023 index
 //!   them, inclusive); mode 3 is a ring over the same 1000 slots, each point leaving it when its
 //!   segment starts. The capacity is 0x6019 in modes 1 and 2 and the FIFO depth 0x6024 in mode 3
@@ -16,7 +18,7 @@
 //!   while a run is active.
 //! - **Infeasible points are refused**, with exception 04 and nothing stored: a point whose
 //!   segment from the previously pushed point would move faster than 200 kpps somewhere (the
-//!   manual's top speed), or that would jump (no time, yet another position or velocity). A start
+//!   manual's top speed), or that takes no time and is not the first point. A start
 //!   is refused (04) when the drive cannot move (disabled, an error or stop bit, already moving),
 //!   0x6007 is not 2, the run's indices lie outside the stored points, a junction between phases
 //!   of mode 2 or the approach to the first point is infeasible, or (modes 1 and 2) the last
@@ -59,8 +61,8 @@ pub const STATUS_FIFO_HIGH: u8 = 1 << 7;
 /// 0x2111 bit 0: the FIFO ran dry while the axis was moving.
 pub const FAULT_UNDERFLOW: u8 = 1;
 
-/// Segments started in one tick at most: zero-time points are passed at once, but a table of
-/// nothing else cannot hold up a tick (the rest follow at the next one, on their exact times).
+/// Segments started in one tick at most. Only a few of no time can follow each other (see the
+/// module documentation); the bound keeps a tick's work bounded whatever the table holds.
 const SEGMENTS_PER_TICK: usize = 16;
 
 /// The 0x6017 operations.
@@ -231,7 +233,8 @@ impl DriveState {
         refuse(self.pvt.len < self.capacity())?;
         refuse(f64::from(p.velocity).abs() <= V_MAX)?;
         match self.pvt.last {
-            Some(prev) => refuse(Cubic::between(prev, p).feasible()),
+            // Only a first point may take no time (a run's start where the axis stands).
+            Some(prev) => refuse(p.time_ms > 0 && Cubic::between(prev, p).feasible()),
             None => Ok(()),
         }
     }
@@ -267,6 +270,8 @@ impl DriveState {
                 acc.last
             } else {
                 if lp.times > 0 {
+                    // A loop of no time would pass its points endlessly within one tick.
+                    refuse(lp.first < lp.last || at(lp.first)?.time_ms > 0)?;
                     joins(acc.last, lp.first)?;
                     joins(lp.last, dec.first)?;
                     if lp.times > 1 {
@@ -445,7 +450,9 @@ impl DriveState {
                     self.status.pvt_pointer = i;
                 }
                 None => {
-                    if run.to.velocity != 0 {
+                    if run.to.velocity == 0 {
+                        self.axis.stand_on_cubic_end();
+                    } else {
                         self.pvt.fault |= FAULT_UNDERFLOW;
                         self.axis = self.plan_stop(now);
                     }

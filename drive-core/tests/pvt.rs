@@ -504,3 +504,34 @@ proptest! {
         prop_assert_eq!(r.drive.state().position(), i64::from(stored.last().unwrap().position));
     }
 }
+
+#[test]
+fn only_the_first_point_may_take_no_time() {
+    let mut r = Rig::new();
+    r.set(Obj::Mode, 2);
+    r.push(pt(0, 0, 0)).unwrap();
+    assert_eq!(r.push(pt(0, 0, 0)), Err(ObjError::Refused));
+    r.push(pt(100, 0, 50)).unwrap();
+    assert_eq!(r.read(Obj::PvtCount), 2);
+}
+
+#[test]
+fn points_of_no_time_pass_in_the_tick_they_start() {
+    let mut r = Rig::new();
+    r.set(Obj::Mode, 2);
+    r.set(Obj::PvtMode, 1);
+    r.push(pt(0, 0, 0)).unwrap();
+    r.push(pt(100, 0, 50)).unwrap();
+    // A loop of point 0 alone (no time) is refused.
+    r.set(Obj::PvtM2Loops, 1000);
+    r.set(Obj::PvtM2DecEnd, 1);
+    assert_eq!(r.write(Obj::PvtControl, 1), Err(ObjError::Refused));
+    // Acceleration 0..=0, no loop, deceleration 0..=1: the approach and two points of no time,
+    // then 50 ms, exactly on the cubic from the first tick.
+    r.set(Obj::PvtM2Loops, 0);
+    r.set(Obj::PvtControl, 1);
+    let got = run(&mut r);
+    assert_eq!(r.drive.state().position(), 100);
+    assert_eq!(got.len(), 1 + 1000);
+    check_path(&got, &reference(0.0, &[pt(100, 0, 50)]));
+}

@@ -32,8 +32,7 @@ enum Segment {
     /// Constant speed `v` from `start`, where the position was `p0` (relative to the anchor).
     Cruise { start: Instant, p0: f64, v: f64 },
     /// A PVT segment from the anchor, started at the control tick `start`. Evaluated exactly in
-    /// integers; held on its end point until the next segment replaces it (or, ending at rest,
-    /// standing there).
+    /// integers; held on its end point until the next segment replaces it or the run ends.
     Cubic { start: Instant, cubic: Cubic },
 }
 
@@ -129,6 +128,14 @@ impl Axis {
     pub fn follow(&mut self, start: Instant, cubic: Cubic) {
         self.anchor = cubic.p0;
         self.segment = Segment::Cubic { start, cubic };
+    }
+
+    /// Ends a PVT segment that has arrived at rest: the axis stands exactly on its end point.
+    pub fn stand_on_cubic_end(&mut self) {
+        if let Segment::Cubic { cubic, .. } = self.segment {
+            self.anchor = cubic.p1();
+            self.segment = Segment::Still;
+        }
     }
 
     /// The PVT segment being followed and its start tick.
@@ -269,18 +276,14 @@ impl Axis {
                 State { p: frac, ..s }
             }
             Segment::Cubic { start, cubic } => {
-                let k = cubic_tick(start, now);
-                if k >= cubic.ticks() && cubic.v1() == 0 {
-                    // Ended at rest with nothing after it: stand exactly on the point.
-                    self.anchor = cubic.p1();
-                    self.segment = Segment::Still;
-                }
                 // Exact: whole microsteps and fraction straight from the integer evaluation.
+                let k = cubic_tick(start, now);
                 let o = cubic.at(k);
                 let whole = cubic.p0.saturating_add(o.whole);
                 let moved = whole.saturating_sub(self.last.whole);
-                let (v, a) = if self.is_still() { (0.0, 0.0) } else { (cubic.velocity(k), cubic.acceleration(k)) };
-                self.last = Setpoint { whole, fraction: U0F32::from_bits(o.fraction), velocity: v, acceleration: a };
+                let fraction = U0F32::from_bits(o.fraction);
+                self.last =
+                    Setpoint { whole, fraction, velocity: cubic.velocity(k), acceleration: cubic.acceleration(k) };
                 return (self.last, moved);
             }
             _ => self.state_at(now),
