@@ -13,6 +13,8 @@
 //!   be planned (speed 0), a position set while moving, and a resolution change while moving.
 //! - The jerk of the S-curve is the larger of the acceleration and deceleration divided by the
 //!   jerk time 0x2101 (our object, ms): the time the acceleration takes to build up.
+//!
+//! PVT (0x6007 = 2), synchronous positioning and group starts are in [`crate::pvt`].
 
 use crate::drive::{DriveState, STATUS_BUSY};
 use crate::motion::axis::{Axis, Setpoint};
