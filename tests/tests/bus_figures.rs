@@ -102,7 +102,8 @@ async fn points_per_second_on_the_bus() {
     ok(ctx.write_single_register(0x6007, 2).await);
     ok(ctx.write_single_register(0x6018, 2).await);
     ok(ctx.write_single_register(0x2112, 1).await);
-    let point = [0u16, 0, 0, 0, 0, 0];
+    // Position 0, velocity 0, 1 ms: the axis stands, as points that only a master's timing sees.
+    let point = [0u16, 0, 0, 0, 0, 1];
     let write = bytes_of(&counts, async || ok(ctx.write_multiple_registers(0x6027, &point).await)).await;
     let status = bytes_of(&counts, async || {
         ctx.read_write_multiple_registers(0x6001, 1, 0x6027, &point).await.expect("transport").expect("no exception");
@@ -112,7 +113,7 @@ async fn points_per_second_on_the_bus() {
     let time = bytes_of(&counts, async || {
         ctx.set_slave(Slave::broadcast());
         // No reply comes: tokio-modbus is given 30 ms.
-        assert!(timeout(Duration::from_millis(30), ctx.write_multiple_registers(0x602B, &[0, 0])).await.is_err());
+        assert!(timeout(Duration::from_millis(30), ctx.write_multiple_registers(0x602B, &[0, 1])).await.is_err());
         ctx.set_slave(Slave(1));
     })
     .await;
