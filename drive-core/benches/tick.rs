@@ -14,12 +14,14 @@
 //! - `pp_ramp`: the accelerating part of a profile position (mode 4) trapezoid.
 //! - `after_retarget_*`: the tick right after an absolute move was re-targeted while cruising,
 //!   farther on (`extend`) or behind (`reverse`).
+//! - `pvt`: PVT mode 1, inside a cubic segment (evaluated exactly in `i128`).
 //!
 //! `write`: the Modbus write that re-plans, for the tick does not plan: a complete 0x10 frame
 //! given to `on_rx` at once, `on_timer` at t3.5 and `take_reply`, with the drive cruising as in
 //! `after_retarget_*`. The absolute move's check plans on a copy of the axis (trial) and its
 //! apply plans again. `plain` is the same size of write to an object without effect (the PP
-//! target in native mode), the framing and dictionary cost without any planning.
+//! target in native mode), the framing and dictionary cost without any planning. `pvt_point`:
+//! one PVT point (0x10 of 0x6027..0x602C, pushed on time) into the FIFO of a running mode 3.
 //!
 //! `plan` and `ruckig`: one time-optimal jerk-limited plan by our planner and by Ruckig (the
 //! peer, `rsruckig`) on the same start, target and limits: from rest, a reversal while
@@ -71,6 +73,33 @@ fn write32(reg: u16, value: i32) -> Vec<u8> {
     let ([rh, rl], [a, b, c, d]) = (reg.to_be_bytes(), value.to_be_bytes());
     frame(&[SLAVE, 0x10, rh, rl, 0x00, 0x02, 0x04, a, b, c, d])
 }
+
+/// 0x10: one PVT point, 0x6027..0x602C (pushed on time with 0x2112 = 1).
+fn write_point(position: i32, velocity: i32, time_ms: u16) -> Vec<u8> {
+    let mut body = vec![SLAVE, 0x10, 0x60, 0x27, 0x00, 0x06, 0x0C];
+    body.extend_from_slice(&position.to_be_bytes());
+    body.extend_from_slice(&velocity.to_be_bytes());
+    body.extend_from_slice(&u32::from(time_ms).to_be_bytes());
+    frame(&body)
+}
+
+/// PVT mode (0x6018 = `pvt_mode`), push on time, the points of [`PVT_POINTS`] pushed and a run
+/// started.
+fn pvt_rig(pvt_mode: u16) -> Rig {
+    let mut rig = Rig::new();
+    rig.request(&write16(0x6007, 2));
+    rig.request(&write16(0x6018, pvt_mode));
+    rig.request(&write16(0x2112, 1));
+    for (p, v, t) in PVT_POINTS {
+        rig.request(&write_point(p, v, t));
+    }
+    rig.request(&write16(0x601C, PVT_POINTS.len() as u16 - 1));
+    rig.request(&write16(0x6017, 1));
+    rig
+}
+
+/// From rest to 20000 pps and back to rest, 100 ms a segment.
+const PVT_POINTS: [(i32, i32, u16); 4] = [(0, 0, 0), (1000, 20_000, 100), (3000, 20_000, 100), (4000, 0, 100)];
 
 /// A drive and its clock: the time of the last tick. Bytes arrive right after a tick, and ticks
 /// go on while a frame is pending, as on the target.
@@ -171,6 +200,7 @@ enum Situation {
     Ramp,
     PpRamp,
     AfterRetarget(i32),
+    Pvt,
 }
 
 /// A drive about to tick at `at`.
@@ -218,6 +248,11 @@ fn setup_tick(situation: Situation) -> TickCase {
             assert_eq!(probe.drive.state().read_i32(Obj::Position), target);
             rig
         }
+        Situation::Pvt => {
+            let mut rig = pvt_rig(0);
+            rig.run(150_000);
+            rig
+        }
     };
     // Dry run on a copy: the measured tick is in the situation named, and so is the one after.
     let mut probe = rig.clone();
@@ -243,6 +278,13 @@ fn setup_tick(situation: Situation) -> TickCase {
             assert!(a == 32_000.0 && next.setpoint.velocity > v && v < v_max, "{out:?}");
             assert!((v - (600.0 + 32_000.0 * 0.1)).abs() < 5.0, "{out:?}");
         }
+        Situation::Pvt => {
+            // Inside the second segment, at the constant 20000 pps between its points.
+            assert!(busy(&rig.drive) && (v - 20_000.0).abs() < 1.0 && rig.drive.state().read(Obj::PvtPointer) == 2);
+            let mut probe = rig.clone();
+            probe.run_until_still(1_000_000);
+            assert_eq!(probe.drive.state().read_i32(Obj::Position), 4000);
+        }
         Situation::AfterRetarget(target) => {
             assert!(busy(&rig.drive));
             if target < FIRST_TARGET {
@@ -264,6 +306,7 @@ fn setup_tick(situation: Situation) -> TickCase {
 #[bench::pp_ramp(args = (Situation::PpRamp), setup = setup_tick)]
 #[bench::after_retarget_extend(args = (Situation::AfterRetarget(400_000)), setup = setup_tick)]
 #[bench::after_retarget_reverse(args = (Situation::AfterRetarget(-4096)), setup = setup_tick)]
+#[bench::pvt(args = (Situation::Pvt), setup = setup_tick)]
 fn tick(mut case: TickCase) -> Outputs {
     black_box(case.drive.tick(black_box(case.at)))
 }
@@ -274,13 +317,13 @@ fn tick(mut case: TickCase) -> Outputs {
 /// A frame in a fixed buffer: nothing to free inside the measured function.
 #[derive(Clone, Copy)]
 struct Frame {
-    buf: [u8; 16],
+    buf: [u8; 32],
     len: usize,
 }
 
 impl Frame {
     fn new(bytes: &[u8]) -> Self {
-        let mut buf = [0; 16];
+        let mut buf = [0; 32];
         buf[..bytes.len()].copy_from_slice(bytes);
         Self { buf, len: bytes.len() }
     }
@@ -296,6 +339,8 @@ enum Write {
     Retarget(i32),
     /// 0x6074 (PP target) in native mode: stored, nothing else.
     Plain,
+    /// A PVT point pushed into a running mode 3 FIFO.
+    PvtPoint,
 }
 
 /// A cruising drive, a write frame and when it arrives (right after a tick).
@@ -306,10 +351,23 @@ struct WriteCase {
 }
 
 fn setup_write(write: Write) -> WriteCase {
+    if let Write::PvtPoint = write {
+        let mut rig = pvt_rig(2);
+        rig.run(10_000);
+        // The last point queued, then one more on the same line at rest.
+        let frame = write_point(4000, 0, 100);
+        let mut probe = rig.clone();
+        let queued = probe.drive.state().read(Obj::PvtCount);
+        probe.drive.on_rx(at(rig.now), &frame);
+        probe.drive.on_timer(at(rig.now + T35_US));
+        check_echo(&frame, probe.drive.take_reply().expect("answered"));
+        assert_eq!(probe.drive.state().read(Obj::PvtCount), queued + 1);
+        return WriteCase { at: at(rig.now), drive: rig.drive, frame: Frame::new(&frame) };
+    }
     let rig = cruising_to_first_target();
     let frame = match write {
         Write::Retarget(target) => write32(0x6044, target),
-        Write::Plain => write32(0x6074, 12_345),
+        Write::Plain | Write::PvtPoint => write32(0x6074, 12_345),
     };
     // Dry run on a copy, exactly as measured: the echo, and the drive goes where it is told.
     let mut probe = rig.clone();
@@ -321,7 +379,7 @@ fn setup_write(write: Write) -> WriteCase {
     probe.run_until_still(60_000_000);
     let end = match write {
         Write::Retarget(target) => target,
-        Write::Plain => {
+        Write::Plain | Write::PvtPoint => {
             assert_eq!(probe.drive.state().read_i32(Obj::PpTarget), 12_345);
             FIRST_TARGET
         }
@@ -334,6 +392,7 @@ fn setup_write(write: Write) -> WriteCase {
 #[bench::retarget_extend(args = (Write::Retarget(400_000)), setup = setup_write)]
 #[bench::retarget_reverse(args = (Write::Retarget(-4096)), setup = setup_write)]
 #[bench::plain(args = (Write::Plain), setup = setup_write)]
+#[bench::pvt_point(args = (Write::PvtPoint), setup = setup_write)]
 fn write(mut case: WriteCase) -> usize {
     let t = black_box(case.at);
     case.drive.on_rx(t, black_box(case.frame.bytes()));

@@ -13,6 +13,8 @@
 //!   be planned (speed 0), a position set while moving, and a resolution change while moving.
 //! - The jerk of the S-curve is the larger of the acceleration and deceleration divided by the
 //!   jerk time 0x2101 (our object, ms): the time the acceleration takes to build up.
+//!
+//! PVT (0x6007 = 2), synchronous positioning and group starts are in [`crate::pvt`].
 
 use crate::drive::{DriveState, STATUS_BUSY};
 use crate::motion::axis::{Axis, Setpoint};
@@ -46,7 +48,7 @@ pub(crate) const fn has_effect(obj: Obj) -> bool {
             | Obj::Microsteps
             | Obj::ControlWord
             | Obj::PpRunSpeed
-    )
+    ) || crate::pvt::is_pvt_command(obj)
 }
 
 /// Controlword bit 4: a new set-point, on its rising edge.
@@ -105,23 +107,23 @@ pub struct Outputs {
 const DECAY: [U0F16; 4] = [U0F16::ZERO, U0F16::lit("0.5"), U0F16::lit("0.75"), U0F16::lit("0.875")];
 
 impl DriveState {
-    fn param(&self, obj: Obj) -> u32 {
+    pub(crate) fn param(&self, obj: Obj) -> u32 {
         self.params.get(obj as usize).copied().unwrap_or(0)
     }
 
-    fn set_param(&mut self, obj: Obj, value: u32) {
+    pub(crate) fn set_param(&mut self, obj: Obj, value: u32) {
         if let Some(p) = self.params.get_mut(obj as usize) {
             *p = value;
         }
     }
 
     /// Whether the drive may start a motion: enabled, and no error or stop bit set.
-    fn may_move(&self) -> bool {
+    pub(crate) fn may_move(&self) -> bool {
         self.param(Obj::Enable) == 1 && self.status.error == 0 && self.status.controller & !STATUS_BUSY == 0
     }
 
     /// The S-curve limits of the native position and velocity modes, for a speed of `speed`.
-    fn scurve_limits(&self, speed: f64) -> Limits {
+    pub(crate) fn scurve_limits(&self, speed: f64) -> Limits {
         let level = |obj| LEVELS.get((self.param(obj) as usize).wrapping_sub(1)).map(|&a| f64::from(a));
         // Level 0 disables the ramp: the motor jumps to speed and stops from it.
         let (a, d) = (level(Obj::AccelLevel).unwrap_or(1e12), level(Obj::DecelLevel).unwrap_or(1e12));
@@ -130,7 +132,7 @@ impl DriveState {
     }
 
     /// Start and stop speeds: the jumps from and to rest (all of the speed without a ramp).
-    fn jumps(&self, speed: f64) -> (f64, f64) {
+    pub(crate) fn jumps(&self, speed: f64) -> (f64, f64) {
         let ramp = |obj, speed_obj| if self.param(obj) == 0 { speed } else { f64::from(self.param(speed_obj)) };
         (ramp(Obj::AccelLevel, Obj::StartSpeed), ramp(Obj::DecelLevel, Obj::StopSpeed))
     }
@@ -288,11 +290,17 @@ impl DriveState {
 
     /// Checks a write to a motion object: refused when the drive cannot act on it now.
     pub(crate) fn check_motion(&self, obj: Obj, value: u32) -> Result<(), ObjError> {
+        if crate::pvt::is_pvt_command(obj) {
+            return self.check_pvt(obj, value);
+        }
         self.plan_motion(obj, value).map(|_| ())
     }
 
     /// Writes a motion object, which [`DriveState::check_motion`] accepted.
     pub(crate) fn apply_motion(&mut self, obj: Obj, value: u32) {
+        if crate::pvt::is_pvt_command(obj) {
+            return self.apply_pvt(obj, value);
+        }
         let planned = self.plan_motion(obj, value);
         match obj {
             // Writing a signed speed sets the direction of relative moves (see the module doc).
@@ -305,6 +313,9 @@ impl DriveState {
         if let Ok(Some((axis, pp))) = planned {
             self.axis = axis;
             self.pp = pp;
+            if matches!(obj, Obj::Stop | Obj::Enable) {
+                self.pvt.cancel();
+            }
         }
     }
 
@@ -339,6 +350,7 @@ impl DriveState {
     pub fn tick(&mut self, now: Instant) -> Outputs {
         self.now = now;
         self.pp_tick(now);
+        self.pvt_tick(now);
         let (setpoint, steps) = self.axis.tick(now);
         // Standstill current reduction once the motor has stood for the delay.
         let still = self.axis.is_still();

@@ -4,8 +4,10 @@ use crate::control::{Outputs, Pp, has_effect};
 use crate::crc;
 use crate::ident::Identity;
 use crate::motion::axis::Axis;
+use crate::motion::cubic::Table;
 use crate::od::{Access, NativeMap, OBJECTS, Obj, ObjError, ObjectDef, RegisterMap, Storage};
 use crate::pdu::{Exception, MAX_READ, Request, Words};
+use crate::pvt::Pvt;
 use crate::rtu::{Framer, MAX_FRAME, RxError};
 use crate::units::{Baud, Instant, SlaveAddr};
 
@@ -147,6 +149,25 @@ pub struct DriveState {
     pub(crate) pp: Pp,
     /// Since when the axis has stood still (for the standstill current).
     pub(crate) still_since: Option<Instant>,
+    /// The PVT run and which slots of `table` hold points.
+    pub(crate) pvt: Pvt,
+    /// The PVT points (10 KB: kept out of [`Checkpoint`]).
+    pub(crate) table: Table,
+}
+
+/// Everything of a [`DriveState`] but the PVT point table: what a multi-object write restores
+/// when a later object of it is refused. (A table slot written by such a write lies beyond the
+/// restored count of points, so it is not a point.)
+#[derive(Clone, Debug)]
+pub struct Checkpoint {
+    params: [u32; Obj::COUNT],
+    status: Status,
+    request: Option<SystemRequest>,
+    now: Instant,
+    axis: Axis,
+    pp: Pp,
+    still_since: Option<Instant>,
+    pvt: Pvt,
 }
 
 impl DriveState {
@@ -162,7 +183,33 @@ impl DriveState {
             axis: Axis::new(0),
             pp: Pp::default(),
             still_since: None,
+            pvt: Pvt::default(),
+            table: Table::default(),
         }
+    }
+
+    /// Everything but the PVT table, to [`DriveState::restore`] later.
+    pub fn checkpoint(&self) -> Checkpoint {
+        // Naming every field: a new one must be decided on here.
+        let Self { params, status, identity: _, can_save: _, request, now, axis, pp, still_since, pvt, table: _ } =
+            self;
+        Checkpoint {
+            params: *params,
+            status: *status,
+            request: *request,
+            now: *now,
+            axis: *axis,
+            pp: *pp,
+            still_since: *still_since,
+            pvt: *pvt,
+        }
+    }
+
+    /// Goes back to `c`.
+    pub fn restore(&mut self, c: Checkpoint) {
+        let Checkpoint { params, status, request, now, axis, pp, still_since, pvt } = c;
+        (self.params, self.status, self.request, self.now) = (params, status, request, now);
+        (self.axis, self.pp, self.still_since, self.pvt) = (axis, pp, still_since, pvt);
     }
 
     /// The running status.
@@ -234,7 +281,11 @@ impl DriveState {
             // The axis's own state, not a copy: the register shows the low 32 bits of the setpoint.
             Obj::Position => self.axis.setpoint().whole as u32,
             Obj::ErrorStatus => u32::from(s.error),
-            Obj::ControllerStatus => u32::from(s.controller | if self.axis.is_still() { 0 } else { STATUS_BUSY }),
+            Obj::ControllerStatus => {
+                u32::from(s.controller | self.fifo_status() | if self.axis.is_still() { 0 } else { STATUS_BUSY })
+            }
+            Obj::PvtCount => u32::from(self.pvt.count()),
+            Obj::PvtFault => u32::from(self.pvt.fault),
             Obj::NotifyStatus => u32::from(s.notify),
             Obj::GpioValue => u32::from(s.gpio),
             Obj::AnalogIn => u32::from(s.analog_in),
@@ -315,6 +366,7 @@ impl DriveState {
             Obj::ControllerStatus => s.controller &= !(value as u8 & !STATUS_BUSY),
             Obj::NotifyStatus => s.notify &= !(value as u8),
             Obj::StorageStatus => s.storage &= !(value as u8 & !STORAGE_SAVING),
+            Obj::PvtFault => self.pvt.fault &= !(value as u8),
             Obj::GpioValue => {
                 // Only outputs take the written level.
                 let outputs = self.params.get(Obj::GpioDirection as usize).copied().unwrap_or(0) as u16;

@@ -27,6 +27,7 @@ pub mod ident;
 pub mod motion;
 pub mod od;
 pub mod pdu;
+pub mod pvt;
 pub mod rtu;
 pub mod store;
 pub mod units;

@@ -59,7 +59,9 @@ mod app {
         // The parameters are loaded before the drive answers anything.
         let loaded = store.power_up(fset_low).await;
         let config = DriveConfig { identity: IDENTITY, can_save: true, ..DriveConfig::default() };
-        let drive = Drive::boot(config, &loaded.params, loaded.status);
+        // One static drive (its PVT table is 10 KB): a task taking it by value would keep a copy
+        // in its future and in main's.
+        let drive = unwrap!(cortex_m::singleton!(: Drive = Drive::boot(config, &loaded.params, loaded.status)));
         board::set_serial(&mut uart, drive.baud(), drive.state().read(Obj::Parity));
         info!(
             "drive up: node {}, {} baud, storage status {:#x}",
@@ -90,7 +92,7 @@ mod app {
     /// (RTOF, reachable through `unstable-pac`) would time the silence in hardware; that is a later
     /// issue, and needs its own interrupt handler because the buffered driver clears RTOF unseen.
     #[embassy_executor::task]
-    async fn modbus(mut uart: BufferedUart<'static>, mut drive: Drive, mut store: FlashStore) -> ! {
+    async fn modbus(mut uart: BufferedUart<'static>, drive: &'static mut Drive, mut store: FlashStore) -> ! {
         let mut buf = [0u8; 64];
         loop {
             let deadline = drive.deadline();
@@ -113,7 +115,7 @@ mod app {
                 warn!("uart: {}", e);
             }
             // After the reply: a save blocks this task for up to ~25 ms (a page erase).
-            match store.serve(&mut drive).await {
+            match store.serve(drive).await {
                 Some((SystemRequest::Save, Err(_))) => warn!("parameter save failed"),
                 Some((SystemRequest::SavePosition(_), Err(_))) => warn!("power-down position not saved"),
                 _ => {}

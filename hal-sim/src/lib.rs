@@ -1,5 +1,11 @@
-//! One simulated drive ([`drive_core::Drive`]) on a pseudo-terminal or a TCP port, in real time,
-//! where any Modbus-RTU master can reach it.
+//! Simulated drives ([`drive_core::Drive`]) on a pseudo-terminal or a TCP port, in real time,
+//! where any Modbus-RTU master can reach them.
+//!
+//! With [`SimOptions::axes`] several drives, each with its own motor (and trace), share one
+//! simulated RS-485 bus behind the one endpoint: every drive receives every byte at the same
+//! instant, only the addressed drive answers, a broadcast reaches all. Replies are not echoed to
+//! the other drives: a master on a pseudo-terminal or TCP does not keep the line's silence after a
+//! reply, so the others would see reply and next request as one garbled frame.
 //!
 //! The loop stamps each chunk of bytes it reads with the monotonic time since [`Simulator::run`]
 //! started and hands it to [`Drive::on_rx`]; between chunks it waits (`poll(2)`) until more bytes
@@ -107,6 +113,20 @@ pub struct SimOptions {
     pub flash: Option<PathBuf>,
     /// FSET held low at power-up (as for 5 s or more): factory settings are restored and saved.
     pub fset_low: bool,
+    /// Several drives on one bus, at these addresses, each with its own motor (the same model)
+    /// and its own trace ([`axis_trace_path`]). Empty: one drive, at `address`.
+    pub axes: Vec<u8>,
+}
+
+/// The trace or flash file of the drive at `address` when several share the bus: `-axisN`
+/// before the extension (`run.csv` → `run-axis2.csv`).
+pub fn axis_trace_path(path: &Path, address: u8) -> PathBuf {
+    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    let name = match path.extension() {
+        Some(ext) => format!("{stem}-axis{address}.{}", ext.to_string_lossy()),
+        None => format!("{stem}-axis{address}"),
+    };
+    path.with_file_name(name)
 }
 
 /// Which motor the drive turns, and what it turns.
@@ -140,14 +160,15 @@ pub struct Snapshot {
     pub setpoint: i64,
 }
 
-/// One simulated drive with its endpoint open, ready to run.
+/// Simulated drives (one, or several on one bus) with their endpoint open, ready to run.
 #[derive(Debug)]
 pub struct Simulator {
-    plant: Plant,
-    store: Store<SimFlash>,
+    plants: Vec<Plant>,
+    /// Each drive's parameter store, in the order of the plants.
+    stores: Vec<Store<SimFlash>>,
     port: Port,
     endpoint: String,
-    snapshot: Arc<Mutex<Snapshot>>,
+    snapshots: Vec<Arc<Mutex<Snapshot>>>,
 }
 
 /// The open endpoint.
@@ -167,21 +188,7 @@ impl Simulator {
     /// or a bound TCP listener. An address or baud rate the drive does not take is an
     /// [`ErrorKind::InvalidInput`] error.
     pub fn bind(opts: SimOptions) -> io::Result<Simulator> {
-        let config = drive_config(&opts)?;
-        let flash = match &opts.flash {
-            Some(path) => SimFlash::open(path).map_err(|e| annotate(e, path.display()))?,
-            None => SimFlash::erased(PAGES),
-        };
-        let mut store = store(flash)?;
-        let drive = boot(&mut store, DriveConfig { can_save: true, ..config }, opts.fset_low);
-        let params = MotorCatalog::builtin()
-            .get(&opts.motor.name)
-            .cloned()
-            .ok_or_else(|| invalid(format!("no motor {:?} in the catalogue", opts.motor.name)))?;
-        let mut plant = Plant::new(drive, Motor::new(params, opts.motor.inputs));
-        if let Some((path, every)) = &opts.motor.trace {
-            plant.trace_to(path, *every).map_err(|e| annotate(e, path.display()))?;
-        }
+        let (plants, stores): (Vec<_>, Vec<_>) = powered(&opts)?.into_iter().unzip();
         let (port, endpoint) = match opts.endpoint {
             Endpoint::Pty { link } => open_pty(link.as_deref())?,
             Endpoint::Tcp(addr) => {
@@ -190,7 +197,8 @@ impl Simulator {
                 (Port::Tcp(listener), at)
             }
         };
-        Ok(Simulator { plant, store, port, endpoint, snapshot: Arc::default() })
+        let snapshots = plants.iter().map(|_| Arc::default()).collect();
+        Ok(Simulator { plants, stores, port, endpoint, snapshots })
     }
 
     /// Where masters reach the drive: `/dev/pts/N`, or the bound `HOST:PORT`.
@@ -198,19 +206,29 @@ impl Simulator {
         &self.endpoint
     }
 
-    /// The drive, as it will start.
+    /// The (first) drive, as it will start.
     pub fn drive(&self) -> &Drive {
-        self.plant.drive()
+        self.plants.first().map(Plant::drive).unwrap_or_else(|| unreachable!("a simulator has a drive"))
     }
 
-    /// The drive, to set up before it runs (its state, its status); the loop owns it then.
+    /// The (first) drive, to set up before it runs (its state, its status); the loop owns it then.
     pub fn drive_mut(&mut self) -> &mut Drive {
-        self.plant.drive_mut()
+        self.plants.first_mut().map(Plant::drive_mut).unwrap_or_else(|| unreachable!("a simulator has a drive"))
     }
 
-    /// What the running loop publishes of the motor and the drive.
+    /// Every drive and its motor, in the order of [`SimOptions::axes`], to set up before it runs.
+    pub fn plants_mut(&mut self) -> &mut [Plant] {
+        &mut self.plants
+    }
+
+    /// What the running loop publishes of the (first) motor and drive.
     pub fn snapshot(&self) -> Arc<Mutex<Snapshot>> {
-        Arc::clone(&self.snapshot)
+        self.snapshots.first().map(Arc::clone).unwrap_or_default()
+    }
+
+    /// What the running loop publishes of each motor and drive, in the order of the axes.
+    pub fn snapshots(&self) -> Vec<Arc<Mutex<Snapshot>>> {
+        self.snapshots.clone()
     }
 
     /// Runs the drive on a new thread, forever (see [`Simulator::run`]).
@@ -238,9 +256,9 @@ impl Simulator {
     /// [`Simulator::run`] until `off` is set (seen within a millisecond while a master is
     /// connected, at the next connection attempt while none is over TCP).
     fn run_until(self, off: &AtomicBool) -> io::Result<()> {
-        let Simulator { mut plant, mut store, port, snapshot, .. } = self;
+        let Simulator { mut plants, mut stores, port, snapshots, .. } = self;
         let clock = Clock(std::time::Instant::now());
-        let mut sim = Sim { plant: &mut plant, store: &mut store, snapshot: &snapshot, off };
+        let mut sim = Sim { plants: &mut plants, stores: &mut stores, snapshots: &snapshots, off };
         match port {
             Port::Pty { master, slave } => {
                 let mut line = PtyLine { master, slave };
@@ -316,6 +334,62 @@ pub fn serve_request(drive: &mut Drive, store: &mut Store<SimFlash>) {
             eprintln!("hal-sim: {request:?} failed: {e:?}");
         }
     }
+}
+
+/// The drives and motors `opts` ask for, traces open, without parameter stores (a save is
+/// refused with 04): for batch runs.
+pub fn plants(opts: &SimOptions) -> io::Result<Vec<Plant>> {
+    Ok(build(opts, |_, config| Ok((Drive::new(config), ())))?.into_iter().map(|(plant, ())| plant).collect())
+}
+
+/// The drives and motors `opts` ask for, traces open, each powered up from its own store: the
+/// `--flash` file (`-axisN` added with several axes), or erased flash in memory.
+fn powered(opts: &SimOptions) -> io::Result<Vec<(Plant, Store<SimFlash>)>> {
+    build(opts, |address, config| {
+        let flash = match &opts.flash {
+            Some(path) => {
+                let path = match address {
+                    Some(a) if !opts.axes.is_empty() => axis_trace_path(path, a),
+                    _ => path.clone(),
+                };
+                SimFlash::open(&path).map_err(|e| annotate(e, path.display()))?
+            }
+            None => SimFlash::erased(PAGES),
+        };
+        let mut store = store(flash)?;
+        let drive = boot(&mut store, DriveConfig { can_save: true, ..config }, opts.fset_low);
+        Ok((drive, store))
+    })
+}
+
+/// One plant per address of `opts`, its drive from `power_up(address, config)`.
+fn build<T>(
+    opts: &SimOptions,
+    mut power_up: impl FnMut(Option<u8>, DriveConfig) -> io::Result<(Drive, T)>,
+) -> io::Result<Vec<(Plant, T)>> {
+    let params = MotorCatalog::builtin()
+        .get(&opts.motor.name)
+        .cloned()
+        .ok_or_else(|| invalid(format!("no motor {:?} in the catalogue", opts.motor.name)))?;
+    let addresses =
+        if opts.axes.is_empty() { vec![opts.address] } else { opts.axes.iter().map(|&a| Some(a)).collect() };
+    let mut plants = Vec::new();
+    for (i, &address) in addresses.iter().enumerate() {
+        if addresses.get(..i).is_some_and(|before| before.contains(&address)) {
+            return Err(invalid(format!("address {} twice on the bus", address.unwrap_or(0))));
+        }
+        let (drive, extra) = power_up(address, drive_config(&SimOptions { address, ..opts.clone() })?)?;
+        let mut plant = Plant::new(drive, Motor::new(params.clone(), opts.motor.inputs));
+        if let Some((path, every)) = &opts.motor.trace {
+            let path = match address {
+                Some(a) if !opts.axes.is_empty() => axis_trace_path(path, a),
+                _ => path.clone(),
+            };
+            plant.trace_to(&path, *every).map_err(|e| annotate(e, path.display()))?;
+        }
+        plants.push((plant, extra));
+    }
+    Ok(plants)
 }
 
 /// The drive configuration `opts` ask for, if the drive takes it.
@@ -415,29 +489,70 @@ trait Line: AsFd {
     fn send(&mut self, frame: &[u8]) -> io::Result<()>;
 }
 
-/// The plant, its store and what it publishes, as the loop sees them.
+/// The plants on the bus, their stores and what they publish, as the loop sees them.
 struct Sim<'a> {
-    plant: &'a mut Plant,
-    store: &'a mut Store<SimFlash>,
-    snapshot: &'a Mutex<Snapshot>,
+    plants: &'a mut [Plant],
+    stores: &'a mut [Store<SimFlash>],
+    snapshots: &'a [Arc<Mutex<Snapshot>>],
     /// The power switch: set, the loop ends.
     off: &'a AtomicBool,
 }
 
 impl Sim<'_> {
-    /// Brings the simulated motor and drive up to `now`, and publishes the result.
-    fn catch_up(&mut self, now: Instant) -> &mut Drive {
-        self.plant.advance_to(now);
-        // A trace is read while the simulator runs (and after it is killed): keep the file current.
-        let _ = self.plant.flush_trace();
-        if let Ok(mut s) = self.snapshot.lock() {
-            *s = Snapshot {
-                time_us: now.as_micros(),
-                rotor_microsteps: self.plant.rotor_microsteps(),
-                setpoint: self.plant.outputs().map_or(0, |o| o.setpoint.whole),
-            };
+    /// Brings every simulated motor and drive up to `now`, and publishes the result.
+    fn catch_up(&mut self, now: Instant) {
+        for (plant, snapshot) in self.plants.iter_mut().zip(self.snapshots) {
+            plant.advance_to(now);
+            // A trace is read while the simulator runs (and after it is killed): keep it current.
+            let _ = plant.flush_trace();
+            if let Ok(mut s) = snapshot.lock() {
+                *s = Snapshot {
+                    time_us: now.as_micros(),
+                    rotor_microsteps: plant.rotor_microsteps(),
+                    setpoint: plant.outputs().map_or(0, |o| o.setpoint.whole),
+                };
+            }
         }
-        self.plant.drive_mut()
+    }
+
+    /// The earliest time a drive's framer has something to do.
+    fn deadline(&self) -> Option<Instant> {
+        self.plants.iter().filter_map(|p| p.drive().deadline()).min()
+    }
+
+    /// Bytes on the bus at `now`, after the motors have caught up: every drive receives them.
+    /// Sends what the drives answer; `Err` when the master has gone.
+    fn receive(&mut self, now: Instant, bytes: &[u8], line: &mut impl Line) -> io::Result<()> {
+        self.catch_up(now);
+        for plant in self.plants.iter_mut() {
+            let drive = plant.drive_mut();
+            drive.on_rx(now, bytes);
+            // A frame that had ended before these bytes came was answered first.
+            if let Some(reply) = drive.take_reply() {
+                line.send(reply)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Does what the drives ask of their platform (saves), each with its own store.
+    fn serve_requests(&mut self) {
+        for (plant, store) in self.plants.iter_mut().zip(self.stores.iter_mut()) {
+            serve_request(plant.drive_mut(), store);
+        }
+    }
+
+    /// Time passes: frames that have ended are served, replies sent (or dropped without `line`).
+    fn timer<L: Line>(&mut self, now: Instant, mut line: Option<&mut L>) -> io::Result<()> {
+        self.catch_up(now);
+        for plant in self.plants.iter_mut() {
+            let drive = plant.drive_mut();
+            drive.on_timer(now);
+            if let (Some(reply), Some(line)) = (drive.take_reply(), line.as_mut()) {
+                line.send(reply)?;
+            }
+        }
+        Ok(())
     }
 }
 
@@ -451,7 +566,7 @@ fn serve(sim: &mut Sim<'_>, clock: &Clock, line: &mut impl Line) -> io::Result<(
     while !sim.off.load(Ordering::Relaxed) {
         let ready = {
             let mut fds = [PollFd::new(line.as_fd(), PollFlags::POLLIN)];
-            let deadline = sim.plant.drive().deadline();
+            let deadline = sim.deadline();
             let pace = clock.now().plus_micros(PACE.as_micros() as u64);
             let wake = deadline.map_or(pace, |d| d.min(pace));
             match poll(&mut fds, poll_timeout(Some(wake), clock.now())) {
@@ -463,44 +578,31 @@ fn serve(sim: &mut Sim<'_>, clock: &Clock, line: &mut impl Line) -> io::Result<(
         if ready {
             match line.recv(&mut buf) {
                 Recv::Data(n) => {
-                    let now = clock.now();
-                    let drive = sim.catch_up(now);
-                    drive.on_rx(now, buf.get(..n).unwrap_or_default());
-                    if let Some(reply) = drive.take_reply() {
-                        // A frame that had ended before these bytes came was answered first.
-                        if line.send(reply).is_err() {
-                            return Ok(());
-                        }
+                    if sim.receive(clock.now(), buf.get(..n).unwrap_or_default(), line).is_err() {
+                        return Ok(());
                     }
                 }
                 Recv::Nothing => {}
                 Recv::Closed => return Ok(()),
             }
         }
-        let now = clock.now();
-        let drive = sim.catch_up(now);
-        drive.on_timer(now);
-        if let Some(reply) = drive.take_reply()
-            && line.send(reply).is_err()
-        {
+        if sim.timer(clock.now(), Some(&mut *line)).is_err() {
             return Ok(());
         }
         // After the reply: the save runs here, on the I/O side; the motor catches up after it.
-        serve_request(sim.plant.drive_mut(), sim.store);
+        sim.serve_requests();
     }
     Ok(())
 }
 
 /// Ends the frame a master left unfinished when it went away; its reply has nowhere to go.
 fn settle(sim: &mut Sim<'_>, clock: &Clock) {
-    while let Some(deadline) = sim.plant.drive().deadline() {
+    while let Some(deadline) = sim.deadline() {
         let now = clock.now();
         match deadline.since(now) {
             0 => {
-                let drive = sim.catch_up(now);
-                drive.on_timer(now);
-                let _ = drive.take_reply();
-                serve_request(sim.plant.drive_mut(), sim.store);
+                let _ = sim.timer::<TcpLine>(now, None);
+                sim.serve_requests();
             }
             wait => thread::sleep(Duration::from_micros(wait)),
         }

@@ -1,4 +1,5 @@
-//! `hal-sim`: one simulated drive on a pseudo-terminal (default) or a TCP port.
+//! `hal-sim`: one simulated drive on a pseudo-terminal (default) or a TCP port; with `--axes`,
+//! several on one simulated bus behind it.
 //!
 //! Prints `listening on <endpoint>` as its first line on stdout, then serves masters until killed.
 //! Exit code 2: a bad command line (including an address or baud rate the drive does not take).
@@ -33,6 +34,10 @@ struct Args {
     /// Slave address, 1-127 [default: the drive's node id, factory 1].
     #[arg(long, value_name = "N")]
     address: Option<u8>,
+    /// Several drives on one simulated RS-485 bus: N drives at addresses 1..=N, or a list of
+    /// addresses (`2,5,9`). Each has its own motor and its own trace (`FILE-axisA.csv`).
+    #[arg(long, value_name = "N|A,B,..", value_parser = parse_axes, conflicts_with_all = ["address", "script"])]
+    axes: Option<Axes>,
     /// Baud rate the frame timing (t1.5, t3.5) follows [default: the drive's, factory 9600].
     #[arg(long, value_name = "B")]
     baud: Option<u32>,
@@ -73,6 +78,21 @@ struct Args {
     plot: Option<Vec<PathBuf>>,
 }
 
+/// The addresses of `--axes`.
+#[derive(Clone, Debug)]
+struct Axes(Vec<u8>);
+
+/// `N` (addresses 1..=N) or a comma-separated list of addresses.
+fn parse_axes(s: &str) -> Result<Axes, String> {
+    let number = |t: &str| t.trim().parse::<u8>().map_err(|e| format!("{t:?}: {e}"));
+    let list = if s.contains(',') {
+        s.split(',').map(number).collect::<Result<Vec<_>, _>>()?
+    } else {
+        (1..=number(s)?).collect()
+    };
+    if list.is_empty() { Err("no axis".into()) } else { Ok(Axes(list)) }
+}
+
 fn main() -> ExitCode {
     let args = Args::parse();
     if let Some([csv, png]) = args.plot.as_deref() {
@@ -109,6 +129,7 @@ fn main() -> ExitCode {
         motor,
         flash: args.flash,
         fset_low: args.fset_low,
+        axes: args.axes.map(|a| a.0).unwrap_or_default(),
     };
     let sim = match Simulator::bind(opts) {
         Ok(sim) => sim,

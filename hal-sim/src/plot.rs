@@ -179,3 +179,55 @@ pub fn plot_trace_csv(csv: impl AsRef<Path>, png: impl AsRef<Path>) -> Result<()
     let title = csv.file_name().map_or_else(|| csv.display().to_string(), |n| n.to_string_lossy().into_owned());
     plot_trace(&rows, png, &title)
 }
+
+/// Draws the path of two axes against each other (x from `x`, y from `y`, row by row: traces of
+/// two drives on one bus, recorded at the same ticks) to a square PNG (900 × 900 pixels): the
+/// commanded path and the rotors' path.
+pub fn plot_xy(x: &[TraceRow], y: &[TraceRow], png: impl AsRef<Path>, title: &str) -> Result<(), PlotError> {
+    if x.is_empty() || y.is_empty() {
+        return Err(PlotError("a trace is empty".into()));
+    }
+    register_fonts()?;
+    let path = |f: fn(&TraceRow) -> f64| x.iter().zip(y).map(|(a, b)| (f(a), f(b))).collect::<Vec<_>>();
+    let commanded = path(|r| r.commanded_position_usteps);
+    let rotor = path(|r| r.rotor_position_usteps);
+    // One scale on both axes, so that a circle looks round.
+    let (xr, yr) = (padded(commanded.iter().map(|p| p.0)), padded(commanded.iter().map(|p| p.1)));
+    let half = (xr.end - xr.start).max(yr.end - yr.start) / 2.0;
+    let (cx, cy) = ((xr.start + xr.end) / 2.0, (yr.start + yr.end) / 2.0);
+    let root = BitMapBackend::new(png.as_ref(), (900, 900)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, (FONT, 24).into_font().style(FontStyle::Bold))
+        .margin(16)
+        .x_label_area_size(50)
+        .y_label_area_size(80)
+        .build_cartesian_2d((cx - half)..(cx + half), (cy - half)..(cy + half))
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("axis 1 (µsteps)")
+        .y_desc("axis 2 (µsteps)")
+        .label_style((FONT, 15))
+        .axis_desc_style((FONT, 16))
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()
+        .map_err(err)?;
+    for (label, color, width, points) in [("commanded", COMMANDED, 4, commanded), ("rotor", ROTOR, 1, rotor)] {
+        let style = color.stroke_width(width);
+        chart
+            .draw_series(LineSeries::new(points, style))
+            .map_err(err)?
+            .label(label)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style));
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .label_font((FONT, 15))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)?;
+    root.present().map_err(err)
+}

@@ -38,12 +38,11 @@
 use std::fmt;
 use std::io::{self, Write};
 
+use drive_core::Instant;
 use drive_core::crc::crc16;
-use drive_core::{Drive, Instant};
 
-use crate::motor::{Motor, MotorCatalog};
 use crate::plant::Plant;
-use crate::{SimOptions, annotate, drive_config, invalid};
+use crate::{SimOptions, invalid};
 
 /// One command of a script.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -100,16 +99,9 @@ pub struct Summary {
 /// catalogue with its supply and load, and the trace file if any. The endpoint is not opened, and
 /// there is no parameter store: a script's 0x200F = 2 is refused (04). Options the drive or the catalogue do not take are [`io::ErrorKind::InvalidInput`] errors.
 pub fn plant(opts: &SimOptions) -> io::Result<Plant> {
-    let drive = Drive::new(drive_config(opts)?);
-    let params = MotorCatalog::builtin()
-        .get(&opts.motor.name)
-        .cloned()
-        .ok_or_else(|| invalid(format!("no motor {:?} in the catalogue", opts.motor.name)))?;
-    let mut plant = Plant::new(drive, Motor::new(params, opts.motor.inputs));
-    if let Some((path, every)) = &opts.motor.trace {
-        plant.trace_to(path, *every).map_err(|e| annotate(e, path.display()))?;
-    }
-    Ok(plant)
+    // One drive: a script talks to one.
+    let single = SimOptions { axes: Vec::new(), ..opts.clone() };
+    crate::plants(&single)?.into_iter().next().ok_or_else(|| invalid("no drive".into()))
 }
 
 /// Parses a whole script; the first line that is not a command is the error.

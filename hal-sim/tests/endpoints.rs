@@ -357,3 +357,53 @@ fn saved_parameters_survive_a_kill_and_fset_low_restores_the_factory_ones() {
     let mut master = connect(&sim.endpoint);
     assert_eq!(ask(&mut master, &READ, 9), REPLY, "the factory values were saved");
 }
+
+/// Reads 0x600C from `node`; `None` if nothing answers.
+fn resolution_of(line: &mut (impl Read + Write + AsFd), node: u8) -> Option<u16> {
+    line.write_all(&frame(&[node, 0x03, 0x60, 0x0C, 0x00, 0x01])).expect("send");
+    let reply = read_for(line, 7, QUIET);
+    if reply.is_empty() {
+        return None;
+    }
+    assert_eq!(reply, frame(&[node, 0x03, 0x02, reply[3], reply[4]]), "answered by node {node} alone");
+    Some(u16::from_be_bytes([reply[3], reply[4]]))
+}
+
+#[test]
+fn axes_share_one_bus_each_answering_its_own_address() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let trace = dir.path().join("bus.csv");
+    let sim = start(&["--tcp", "127.0.0.1:0", "--axes", "2,5,9", "--trace", trace.to_str().expect("utf-8")]);
+    let mut master = connect(&sim.endpoint);
+    // A broadcast reaches every drive and gets no answer.
+    ask_silence(&mut master, &frame(&[0x00, 0x06, 0x60, 0x0C, 0x00, 16]));
+    // One drive answers its own write; the others keep the broadcast value.
+    let write = frame(&[0x05, 0x06, 0x60, 0x0C, 0x00, 32]);
+    assert_eq!(ask(&mut master, &write, 8), write);
+    assert_eq!([2, 5, 9].map(|n| resolution_of(&mut master, n)), [Some(16), Some(32), Some(16)]);
+    // Nobody at 1: silence.
+    assert_eq!(resolution_of(&mut master, 1), None);
+    // Each drive has its own trace.
+    for n in [2, 5, 9] {
+        let path = hal_sim::axis_trace_path(&trace, n);
+        assert!(path.ends_with(format!("bus-axis{n}.csv")), "{}", path.display());
+        assert!(std::fs::metadata(&path).expect("trace file").len() > 0);
+    }
+}
+
+#[test]
+fn axes_are_counted_or_listed() {
+    let sim = start(&["--tcp", "127.0.0.1:0", "--axes", "3"]);
+    let mut master = connect(&sim.endpoint);
+    assert_eq!([1, 2, 3, 4].map(|n| resolution_of(&mut master, n)), [Some(0), Some(0), Some(0), None]);
+    // The same address twice, or 0, is a bad command line.
+    for bad in ["1,1", "0,2", "x"] {
+        let status = Command::new(env!("CARGO_BIN_EXE_hal-sim"))
+            .args(["--tcp", "127.0.0.1:0", "--axes", bad])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .status()
+            .expect("run hal-sim");
+        assert_eq!(status.code(), Some(2), "--axes {bad}");
+    }
+}

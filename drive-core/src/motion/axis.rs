@@ -5,7 +5,9 @@
 //! so the offset stays small and a move ends exactly on its (integer) target however far the
 //! axis has travelled: nothing drifts over 2^31 microsteps.
 
+use super::cubic::Cubic;
 use super::scurve::{Limits, PlanError, Profile, State};
+use crate::control::TICK_MICROS;
 use crate::units::Instant;
 use fixed::types::U0F32;
 
@@ -29,6 +31,9 @@ enum Segment {
     Profile { profile: Profile, start: Instant, then: Then },
     /// Constant speed `v` from `start`, where the position was `p0` (relative to the anchor).
     Cruise { start: Instant, p0: f64, v: f64 },
+    /// A PVT segment from the anchor, started at the control tick `start`. Evaluated exactly in
+    /// integers; held on its end point until the next segment replaces it or the run ends.
+    Cubic { start: Instant, cubic: Cubic },
 }
 
 /// The setpoint of one tick.
@@ -56,6 +61,14 @@ pub struct Axis {
 /// Seconds from `start` to `now`.
 fn seconds(start: Instant, now: Instant) -> f64 {
     now.since(start) as f64 * 1e-6
+}
+
+/// 2^-32: the weight of a fraction's lowest bit.
+const TWO_POW_M32: f64 = 1.0 / 4_294_967_296.0;
+
+/// Whole control ticks from `start` to `now` (a PVT segment starts on a tick).
+fn cubic_tick(start: Instant, now: Instant) -> u64 {
+    now.since(start) / TICK_MICROS
 }
 
 /// Whole part (floor) and fraction of a position offset; `f64 as i64` saturates, never panics.
@@ -102,6 +115,35 @@ impl Axis {
             Segment::Still => State { p: 0.0, v: 0.0, a: 0.0 },
             Segment::Profile { profile, start, .. } => profile.at(seconds(*start, now)),
             Segment::Cruise { start, p0, v } => State { p: p0 + v * seconds(*start, now), v: *v, a: 0.0 },
+            Segment::Cubic { start, cubic } => {
+                let k = cubic_tick(*start, now);
+                let o = cubic.at(k);
+                let p = o.whole as f64 + f64::from(o.fraction) * TWO_POW_M32;
+                State { p, v: cubic.velocity(k), a: cubic.acceleration(k) }
+            }
+        }
+    }
+
+    /// Follows the PVT segment `cubic` from the control tick `start` on (from wherever the axis
+    /// is: the caller joins segments end to start).
+    pub fn follow(&mut self, start: Instant, cubic: Cubic) {
+        self.anchor = cubic.p0;
+        self.segment = Segment::Cubic { start, cubic };
+    }
+
+    /// Ends a PVT segment that has arrived at rest: the axis stands exactly on its end point.
+    pub fn stand_on_cubic_end(&mut self) {
+        if let Segment::Cubic { cubic, .. } = self.segment {
+            self.anchor = cubic.p1();
+            self.segment = Segment::Still;
+        }
+    }
+
+    /// The PVT segment being followed and its start tick.
+    pub fn cubic(&self) -> Option<(Instant, Cubic)> {
+        match &self.segment {
+            &Segment::Cubic { start, cubic } => Some((start, cubic)),
+            _ => None,
         }
     }
 
@@ -233,6 +275,17 @@ impl Axis {
                 self.anchor = whole;
                 self.segment = Segment::Cruise { start: now, p0: frac, v };
                 State { p: frac, ..s }
+            }
+            Segment::Cubic { start, cubic } => {
+                // Exact: whole microsteps and fraction straight from the integer evaluation.
+                let k = cubic_tick(*start, now);
+                let o = cubic.at(k);
+                let whole = cubic.p0.saturating_add(o.whole);
+                let moved = whole.saturating_sub(self.last.whole);
+                let fraction = U0F32::from_bits(o.fraction);
+                self.last =
+                    Setpoint { whole, fraction, velocity: cubic.velocity(k), acceleration: cubic.acceleration(k) };
+                return (self.last, moved);
             }
             _ => self.state_at(now),
         };

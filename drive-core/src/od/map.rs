@@ -181,14 +181,18 @@ impl RegisterMap for NativeMap {
         if commands && plan.len() > 1 {
             // A command may depend on values written before it in the same request (a speed,
             // then a move): check each on a copy that has taken the ones before, then commit.
-            let mut scratch = drive.clone();
+            // The drive itself takes them, and goes back to the checkpoint if one is refused
+            // (a clone would copy the 10 KB PVT table).
+            let saved = drive.checkpoint();
             for &(d, op) in plan.iter() {
                 if let Op::Commit(v) = op {
-                    scratch.check_def(d, v).map_err(native_exception)?;
-                    scratch.apply_def(d, v);
+                    if let Err(e) = drive.check_def(d, v) {
+                        drive.restore(saved);
+                        return Err(native_exception(e));
+                    }
+                    drive.apply_def(d, v);
                 }
             }
-            *drive = scratch;
             for &(d, op) in plan.iter() {
                 self.set_staged(d.obj, if let Op::Stage(hi) = op { Some(hi) } else { None });
             }

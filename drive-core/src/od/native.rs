@@ -86,7 +86,7 @@ objects! {
     HardwareVersion @ 0x1022: Str(4), Ro, Const, Any, default 0, None, "hardware version";
     /// Software version, 4 ASCII characters (`major.minor` as `VMmm`, e.g. `V001`).
     SoftwareVersion @ 0x1024: Str(4), Ro, Const, Any, default 0, None, "software version";
-    /// Group id for group-synchronous starts by broadcast. 0: in no group.
+    /// Group id for group-synchronous starts by broadcast (0x2113, 0x2114). 0: in no group.
     GroupId @ 0x200E: U8, Rw, Rom, Span(0, 127), default 0, None, "group id";
     /// System control. 2 saves every ROM object the master can write (one record, so a power cut
     /// leaves the old set or the new one, never a mix); 3 restores their factory values and saves
@@ -116,6 +116,22 @@ objects! {
     /// Standstill delay (our object, as seed 002's 0x0245): how long the motor stands before the
     /// current drops to 0x2102.
     IdleDelay @ 0x2103: U16, Rw, Rom, Span(1, 32767), default 500, Millis, "standstill delay";
+    /// PVT points stored (modes 1 and 2) or queued in the FIFO (mode 3), our object: what a
+    /// streaming master reads to know how many points it may send.
+    PvtCount @ 0x2110: U16, Ro, Live, PVT_INDEX, default 0, None, "PVT points stored";
+    /// PVT faults (our object), write 1 to clear: bit 0 the FIFO ran dry while the axis moved
+    /// (it then decelerated to rest with the ramp of 0x600B).
+    PvtFault @ 0x2111: U8, W1c, Live, Bits(0x01), default 0, None, "PVT fault";
+    /// PVT push on time (our object): 1 makes completing the time 0x602B..2C push the point, as
+    /// 0x6017 = 2 does, so one write of 0x6027..0x602C is one point.
+    PvtAutoPush @ 0x2112: U8, Rw, Ram, Span(0, 1), default 0, None, "PVT push on time";
+    /// Group start (our object): writing g, usually by broadcast (`00 06 21 13 00 gg`), starts
+    /// every drive whose group id 0x200E is g at the next control tick: the PVT run in PVT mode,
+    /// the synchronous move (0x6047, 0x6049) in position mode. Other drives ignore it.
+    GroupStart @ 0x2113: U8, Cmd, Ram, Span(1, 127), default 0, None, "group start";
+    /// Group stop (our object): writing g makes every drive of group g decelerate to rest, as
+    /// 0x6017 = 0 does.
+    GroupStop @ 0x2114: U8, Cmd, Ram, Span(1, 127), default 0, None, "group stop";
     /// Storage status (our object), write 1 to clear (bit 3 excepted): bit 0 no saved parameters
     /// at power-up, 1 saved parameters unreadable at power-up (both: factory values in use), 2 FSET
     /// held low at power-up (factory values restored and saved), 3 save in progress, 4 last save
@@ -165,14 +181,18 @@ objects! {
     ExtStopTrigger @ 0x6014: U8, Rw, Rom, Bits(0x13), default 0, None, "external stop trigger";
     /// Sensor type: 0 NPN (pull-down on rising, pull-up on falling), 1 PNP (the opposite).
     SensorType @ 0x6015: U8, Rw, Rom, Span(0, 1), default 0, None, "sensor type";
-    /// PVT operation (chapter 5 prints 0x6016): 0 stop, 1 start, 2 push the point 0x6027..2C
-    /// into the queue, 3 clear the queue.
+    /// PVT operation (chapter 5 prints 0x6016): 0 stop (decelerate to rest), 1 start at the next
+    /// control tick, 2 push the point 0x6027..2C into the queue (refused, 04, when full or when
+    /// its segment from the previous point would exceed 200 kpps or jump), 3 clear the queue
+    /// (refused while running). See `drive-core/src/pvt.rs` for runs and their checks.
     PvtControl @ 0x6017: U8, Cmd, Ram, Span(0, 3), default 0, None, "PVT operation";
-    /// PVT mode: 0 mode 1 (single run), 1 mode 2 (loop), 2 mode 3 (FIFO).
+    /// PVT mode: 0 mode 1 (single run), 1 mode 2 (loop), 2 mode 3 (FIFO). Changing it clears
+    /// the points; refused while a run is active.
     PvtMode @ 0x6018: U8, Rw, Ram, Span(0, 2), default 0, None, "PVT mode";
-    /// Maximum number of PVT points.
+    /// Maximum number of PVT points in modes 1 and 2 (0: the whole table, 1000).
     PvtMaxPoints @ 0x6019: U16, Rw, Ram, PVT_INDEX, default 0, None, "PVT maximum points";
-    /// Current PVT point index.
+    /// Current PVT point index: the table (or ring) index of the point the running segment
+    /// heads to.
     PvtPointer @ 0x601A: U16, Ro, Live, PVT_INDEX, default 0, None, "PVT pointer";
     /// PVT mode 1: first point.
     PvtM1Start @ 0x601B: U16, Rw, Ram, PVT_INDEX, default 0, None, "PVT mode 1 start index";
@@ -186,13 +206,13 @@ objects! {
     PvtM2LoopStart @ 0x601F: U16, Rw, Ram, PVT_INDEX, default 0, None, "PVT mode 2 loop start";
     /// PVT mode 2: last point of the loop phase.
     PvtM2LoopEnd @ 0x6020: U16, Rw, Ram, PVT_INDEX, default 0, None, "PVT mode 2 loop end";
-    /// PVT mode 2: how many times the loop phase runs.
+    /// PVT mode 2: how many times the loop phase runs (0: skipped).
     PvtM2Loops @ 0x6021: U16, Rw, Ram, Any, default 0, None, "PVT mode 2 loop count";
     /// PVT mode 2: first point of the deceleration phase.
     PvtM2DecStart @ 0x6022: U16, Rw, Ram, PVT_INDEX, default 0, None, "PVT mode 2 deceleration start";
     /// PVT mode 2: last point of the deceleration phase.
     PvtM2DecEnd @ 0x6023: U16, Rw, Ram, PVT_INDEX, default 0, None, "PVT mode 2 deceleration end";
-    /// PVT mode 3: FIFO depth.
+    /// PVT mode 3: FIFO depth, the most points queued (0: 1000).
     PvtFifoDepth @ 0x6024: U16, Rw, Ram, PVT_INDEX, default 0, None, "PVT FIFO depth";
     /// PVT mode 3: below this many points the low-mark status bit is set.
     PvtFifoLow @ 0x6025: U16, Rw, Ram, PVT_INDEX, default 0, None, "PVT FIFO low mark";
@@ -202,8 +222,8 @@ objects! {
     PvtPosition @ 0x6027: S32, Rw, Ram, S32_ANY, default 0, Steps, "PVT position";
     /// PVT point: velocity.
     PvtVelocity @ 0x6029: S32, Rw, Ram, S32_ANY, default 0, Pps, "PVT velocity";
-    /// PVT point: time since the previous point.
-    PvtTime @ 0x602B: S32, Rw, Ram, Span(0, i32::MAX as i64), default 0, Millis, "PVT time";
+    /// PVT point: time since the previous point. The table keeps 16 bits: at most 65.535 s.
+    PvtTime @ 0x602B: S32, Rw, Ram, Span(0, 65_535), default 0, Millis, "PVT time";
     /// GPIO direction, 1 output: bits 0-6 GPIO1-7, 11 GPIO8. Bits 7-10 (EXT1-3, ENC2) are
     /// inputs and cannot be set.
     GpioDirection @ 0x602E: U16, Rw, Rom, Bits(0x087F), default 0, None, "GPIO direction";

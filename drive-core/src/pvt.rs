@@ -1,0 +1,466 @@
+//! PVT mode (seed 000 §5.10), synchronous positioning (§5.9) and group starts (0x200E).
+//!
+//! Points are written to 0x6027..0x602C and pushed with 0x6017 = 2 (or, with 0x2112 = 1, by
+//! completing the time 0x602B..2C, so one 0x10 write of six registers is one point). Between
+//! points the position follows the cubic Hermite polynomial of the two points' positions and
+//! velocities ([`crate::motion::cubic`]), evaluated exactly at every control tick.
+//!
+//! Decisions where the manual is silent:
+//! - **The first point of a run** is reached from where the axis stands, at rest, in the point's
+//!   time; its time may be 0 only if the axis already stands on it. Only the first point pushed
+//!   (after a clear) may have time 0, and a mode 2 loop of that point alone is refused, so a
+//!   run never has more than a few segments of no time in a row (all pass in one tick).
+//! - **Storage.** Modes 1 and 2 append pushed points at indices 0, 1, ... (0x601B-0x6023 index
+//!   them, inclusive); mode 3 is a ring over the same 1000 slots, each point leaving it when its
+//!   segment starts. The capacity is 0x6019 in modes 1 and 2 and the FIFO depth 0x6024 in mode 3
+//!   (0 in either: the whole table, 1000). 0x2110 says how many points are stored or queued.
+//!   Changing the PVT mode 0x6018 clears the points; 0x6018 and a clear (0x6017 = 3) are refused
+//!   while a run is active.
+//! - **Infeasible points are refused**, with exception 04 and nothing stored: a point whose
+//!   segment from the previously pushed point would move faster than 200 kpps somewhere (the
+//!   manual's top speed), or that takes no time and is not the first point. A start
+//!   is refused (04) when the drive cannot move (disabled, an error or stop bit, already moving),
+//!   0x6007 is not 2, the run's indices lie outside the stored points, a junction between phases
+//!   of mode 2 or the approach to the first point is infeasible, or (modes 1 and 2) the last
+//!   point's velocity is not 0.
+//! - **Mode 2** runs the acceleration phase once, the loop phase 0x6021 times (0: not at all), the
+//!   deceleration phase once; each phase from its start index to its end index inclusive.
+//! - **End of a run, underflow.** A run ends when no point follows. On a point of velocity 0 the
+//!   axis stands exactly on it. Otherwise (mode 3: the FIFO ran dry while moving) it is an
+//!   underflow: 0x2111 bit 0 is set and the axis decelerates from the point's velocity to rest
+//!   with the deceleration of 0x600B (a trapezoid: the segment's acceleration may be beyond what
+//!   the S-curve's jerk could take back soon), with no jump in position or velocity.
+//! - Controller status bits 5-7 (FIFO empty, below the low mark, above the high mark) show the
+//!   FIFO's state in mode 3 (0x6018 = 2) and are 0 otherwise; writing 1 to them does nothing.
+//! - 0x6017 = 0 stops a run by decelerating as an underflow does (0x6053 stops at once).
+//! - 0x601A reads the table index of the point the running segment heads to.
+//!
+//! **Group start.** Writing a group number g (1-127) to 0x2113, by broadcast (address 0) or to one
+//! drive, starts every drive whose group id 0x200E is g: in PVT mode (0x6007 = 2) its PVT run, in
+//! position mode (0x6007 = 0) the synchronous move to 0x6049..4A at the speed 0x6047..48 (§5.9),
+//! with the S-curve of the position mode. One broadcast frame, `00 06 21 13 00 gg CRC`, starts a
+//! whole group. Drives of other groups (and of group 0) ignore it; a member that cannot start
+//! refuses it as a start would (04, or nothing if broadcast). 0x2114 = g stops the group as
+//! 0x6017 = 0 does. Any start, including 0x6017 = 1, takes effect at the next control tick after
+//! the frame, so every drive that receives one frame starts in the same tick.
+
+use crate::control::TICK_MICROS;
+use crate::drive::DriveState;
+use crate::motion::axis::Axis;
+use crate::motion::cubic::{Cubic, Point, TABLE_SIZE, V_MAX};
+use crate::motion::scurve::Limits;
+use crate::od::{Obj, ObjError};
+use crate::units::Instant;
+
+/// Controller status bit 5: the mode 3 FIFO is empty.
+pub const STATUS_FIFO_EMPTY: u8 = 1 << 5;
+/// Controller status bit 6: the mode 3 FIFO holds fewer points than the low mark 0x6025.
+pub const STATUS_FIFO_LOW: u8 = 1 << 6;
+/// Controller status bit 7: the mode 3 FIFO holds more points than the high mark 0x6026.
+pub const STATUS_FIFO_HIGH: u8 = 1 << 7;
+/// 0x2111 bit 0: the FIFO ran dry while the axis was moving.
+pub const FAULT_UNDERFLOW: u8 = 1;
+
+/// Segments started in one tick at most. Only a few of no time can follow each other (see the
+/// module documentation); the bound keeps a tick's work bounded whatever the table holds.
+const SEGMENTS_PER_TICK: usize = 16;
+
+/// The 0x6017 operations.
+const OP_STOP: u32 = 0;
+const OP_START: u32 = 1;
+const OP_PUSH: u32 = 2;
+const OP_CLEAR: u32 = 3;
+
+/// What starts at the next control tick.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Start {
+    /// The PVT run of 0x6018.
+    Pvt,
+    /// The synchronous move of 0x6047/0x6049.
+    Sync,
+}
+
+/// One phase of a table run: indices `first..=last`, `times` times.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct Phase {
+    first: u16,
+    last: u16,
+    times: u16,
+}
+
+/// Where the points of a run come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Source {
+    /// Modes 1 and 2: phases of the table; `phase` is the current one, `next` its next index,
+    /// `left` how many more times it runs, this one included.
+    Table { phases: [Phase; 3], phase: usize, next: u16, left: u16 },
+    /// Mode 3: the ring.
+    Fifo,
+}
+
+/// A PVT run in progress.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Run {
+    source: Source,
+    /// The point the running segment heads to.
+    to: Point,
+}
+
+/// The PVT state: which slots of the table hold points, the run, a start due at the next tick.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct Pvt {
+    /// First stored point (mode 3's ring; 0 in modes 1 and 2).
+    head: u16,
+    /// Points stored (modes 1, 2) or queued (mode 3).
+    len: u16,
+    /// The last point pushed: the next one's segment starts there.
+    last: Option<Point>,
+    run: Option<Run>,
+    pending: Option<Start>,
+    /// 0x2111.
+    pub(crate) fault: u8,
+}
+
+impl Pvt {
+    /// Points stored or queued (0x2110).
+    pub(crate) fn count(&self) -> u16 {
+        self.len
+    }
+
+    /// Forgets the run and any start due (the axis was stopped).
+    pub(crate) fn cancel(&mut self) {
+        self.run = None;
+        self.pending = None;
+    }
+}
+
+/// Whether `obj` is one of the objects this module acts on.
+pub(crate) const fn is_pvt_command(obj: Obj) -> bool {
+    matches!(obj, Obj::PvtControl | Obj::PvtMode | Obj::PvtTime | Obj::GroupStart | Obj::GroupStop)
+}
+
+/// What an accepted PVT write does.
+#[derive(Clone, Copy, Debug)]
+enum Effect {
+    None,
+    Push(Point),
+    Clear,
+    Start(Start),
+    /// Decelerate to rest from what the axis does now.
+    Stop,
+}
+
+impl Phase {
+    fn new(first: u32, last: u32, times: u32) -> Self {
+        Self { first: first as u16, last: last as u16, times: times as u16 }
+    }
+}
+
+impl Source {
+    fn table(phases: [Phase; 3]) -> Self {
+        let mut s = Source::Table { phases, phase: 0, next: 0, left: 0 };
+        s.enter(0);
+        s
+    }
+
+    /// The next table index of the run, if any is left.
+    fn next_index(&mut self) -> Option<u16> {
+        loop {
+            let Source::Table { phases, phase, next, left } = self else { return None };
+            let ph = phases.get(*phase).copied()?;
+            if *left == 0 {
+                let k = *phase + 1;
+                self.enter(k);
+            } else if *next <= ph.last {
+                *next += 1;
+                return Some(*next - 1);
+            } else {
+                *left -= 1;
+                *next = ph.first;
+            }
+        }
+    }
+
+    fn enter(&mut self, k: usize) {
+        if let Source::Table { phases, phase, next, left } = self {
+            *phase = k;
+            let p = phases.get(k).copied().unwrap_or_default();
+            (*next, *left) = (p.first, p.times);
+        }
+    }
+}
+
+impl DriveState {
+    fn pvt_mode(&self) -> u32 {
+        self.param(Obj::PvtMode)
+    }
+
+    /// How many points may be stored now.
+    fn capacity(&self) -> u16 {
+        let limit = if self.pvt_mode() == 2 { self.param(Obj::PvtFifoDepth) } else { self.param(Obj::PvtMaxPoints) };
+        if limit == 0 { TABLE_SIZE as u16 } else { limit.min(TABLE_SIZE as u32) as u16 }
+    }
+
+    /// The stored point `i` of the table (modes 1, 2) or the ring's `i`-th slot.
+    fn stored(&self, i: u16) -> Option<Point> {
+        self.table.get(usize::from(i))
+    }
+
+    /// The point in the PVT registers 0x6027..0x602C.
+    fn point_registers(&self) -> Point {
+        Point {
+            position: self.param(Obj::PvtPosition) as i32,
+            velocity: self.param(Obj::PvtVelocity) as i32,
+            time_ms: self.param(Obj::PvtTime) as u16,
+        }
+    }
+
+    /// Controller status bits 5-7 (mode 3 only).
+    pub(crate) fn fifo_status(&self) -> u8 {
+        if self.pvt_mode() != 2 {
+            return 0;
+        }
+        let n = u32::from(self.pvt.len);
+        let bit = |on: bool, b: u8| if on { b } else { 0 };
+        bit(n == 0, STATUS_FIFO_EMPTY)
+            | bit(n < self.param(Obj::PvtFifoLow), STATUS_FIFO_LOW)
+            | bit(n > self.param(Obj::PvtFifoHigh), STATUS_FIFO_HIGH)
+    }
+
+    /// Whether `p` may be pushed now.
+    fn check_push(&self, p: Point) -> Result<(), ObjError> {
+        let refuse = |ok: bool| if ok { Ok(()) } else { Err(ObjError::Refused) };
+        refuse(self.pvt.len < self.capacity())?;
+        refuse(f64::from(p.velocity).abs() <= V_MAX)?;
+        match self.pvt.last {
+            // Only a first point may take no time (a run's start where the axis stands).
+            Some(prev) => refuse(p.time_ms > 0 && Cubic::between(prev, p).feasible()),
+            None => Ok(()),
+        }
+    }
+
+    /// The source and first point of the run that a start would begin now, or why not.
+    fn plan_run(&self) -> Result<(Source, u16, Point), ObjError> {
+        let refuse = |ok: bool| if ok { Ok(()) } else { Err(ObjError::Refused) };
+        refuse(self.param(Obj::Mode) == 2 && self.may_move() && self.axis.is_still() && self.pvt.run.is_none())?;
+        let len = self.pvt.len;
+        let (source, first) = if self.pvt_mode() == 2 {
+            refuse(len > 0)?;
+            (Source::Fifo, self.pvt.head)
+        } else {
+            let p = |a, b, n| Phase::new(self.param(a), self.param(b), n);
+            let phases = if self.pvt_mode() == 0 {
+                [p(Obj::PvtM1Start, Obj::PvtM1End, 1), Phase::default(), Phase::default()]
+            } else {
+                [
+                    p(Obj::PvtM2AccStart, Obj::PvtM2AccEnd, 1),
+                    p(Obj::PvtM2LoopStart, Obj::PvtM2LoopEnd, self.param(Obj::PvtM2Loops)),
+                    p(Obj::PvtM2DecStart, Obj::PvtM2DecEnd, 1),
+                ]
+            };
+            for ph in phases.iter().filter(|ph| ph.times > 0) {
+                refuse(ph.first <= ph.last && ph.last < len)?;
+            }
+            // Points within a phase follow each other in the table, checked when pushed; the
+            // junctions between phases are checked here.
+            let at = |i: u16| self.stored(i).ok_or(ObjError::Refused);
+            let joins = |a: u16, b: u16| -> Result<(), ObjError> { refuse(Cubic::between(at(a)?, at(b)?).feasible()) };
+            let [acc, lp, dec] = phases;
+            let last = if self.pvt_mode() == 0 {
+                acc.last
+            } else {
+                if lp.times > 0 {
+                    // A loop of no time would pass its points endlessly within one tick.
+                    refuse(lp.first < lp.last || at(lp.first)?.time_ms > 0)?;
+                    joins(acc.last, lp.first)?;
+                    joins(lp.last, dec.first)?;
+                    if lp.times > 1 {
+                        joins(lp.last, lp.first)?;
+                    }
+                } else {
+                    joins(acc.last, dec.first)?;
+                }
+                dec.last
+            };
+            refuse(at(last)?.velocity == 0)?;
+            (Source::table(phases), acc.first)
+        };
+        let p = self.stored(first).ok_or(ObjError::Refused)?;
+        refuse(Cubic::new(self.axis.setpoint().whole, 0, p).feasible())?;
+        Ok((source, first, p))
+    }
+
+    /// The synchronous move that a start would begin now: the axis planned, or why not.
+    fn plan_sync(&self, now: Instant) -> Result<Axis, ObjError> {
+        let speed = f64::from(self.param(Obj::SyncSpeed) as i32);
+        let ok = self.param(Obj::Mode) == 0 && self.may_move() && self.axis.is_still() && speed != 0.0;
+        if !ok {
+            return Err(ObjError::Refused);
+        }
+        let target = i64::from(self.param(Obj::SyncPosition) as i32);
+        let (depart, arrive) = self.jumps(speed.abs());
+        let mut axis = self.axis;
+        axis.move_to(now, target, depart, arrive, &self.scurve_limits(speed)).map_err(|_| ObjError::Refused)?;
+        Ok(axis)
+    }
+
+    /// The axis decelerating to rest from what it does at `now` (0x600B's ramp).
+    fn plan_stop(&self, now: Instant) -> Axis {
+        let mut axis = self.axis;
+        if axis.is_still() {
+            return axis;
+        }
+        let v = axis.setpoint().velocity.abs().max(1.0);
+        // No jerk limit: a PVT segment may end with more acceleration than the ramp's jerk could
+        // take back in time; the acceleration steps to the deceleration, velocity stays smooth.
+        let limits = Limits { jerk: None, ..self.scurve_limits(v) };
+        if axis.run_at(now, 0.0, 0.0, &limits).is_err() {
+            // Beyond what the ramp can plan from: stop where it stands.
+            axis.halt();
+        }
+        axis
+    }
+
+    /// What a start (0x6017 = 1, or a group start) does in the present work mode.
+    fn plan_start(&self) -> Result<Effect, ObjError> {
+        match self.param(Obj::Mode) {
+            2 => self.plan_run().map(|_| Effect::Start(Start::Pvt)),
+            0 => self.plan_sync(self.now).map(|_| Effect::Start(Start::Sync)),
+            _ => Err(ObjError::Refused),
+        }
+    }
+
+    /// What writing `value` to the PVT object `obj` does, or why it is refused.
+    fn plan_pvt(&self, obj: Obj, value: u32) -> Result<Effect, ObjError> {
+        let running = self.pvt.run.is_some() || self.pvt.pending.is_some();
+        let member = self.param(Obj::GroupId) != 0 && self.param(Obj::GroupId) == value;
+        match (obj, value) {
+            (Obj::PvtControl, OP_STOP) => Ok(self.stop_effect()),
+            (Obj::PvtControl, OP_START) => self.plan_start(),
+            (Obj::PvtControl, OP_PUSH) => {
+                self.check_push(self.point_registers()).map(|()| Effect::Push(self.point_registers()))
+            }
+            (Obj::PvtControl, OP_CLEAR) | (Obj::PvtMode, _) if running => Err(ObjError::Refused),
+            (Obj::PvtControl, _) => Ok(Effect::Clear),
+            (Obj::PvtMode, v) if v != self.pvt_mode() => Ok(Effect::Clear),
+            (Obj::PvtTime, _) if self.param(Obj::PvtAutoPush) == 1 => {
+                let p = Point { time_ms: value as u16, ..self.point_registers() };
+                self.check_push(p).map(|()| Effect::Push(p))
+            }
+            (Obj::GroupStart, _) if member => self.plan_start(),
+            (Obj::GroupStop, _) if member => Ok(self.stop_effect()),
+            _ => Ok(Effect::None),
+        }
+    }
+
+    fn stop_effect(&self) -> Effect {
+        let moving = self.pvt.run.is_some() || (self.param(Obj::Mode) == 0 && !self.axis.is_still());
+        if moving || self.pvt.pending.is_some() { Effect::Stop } else { Effect::None }
+    }
+
+    /// Checks a write to a PVT object.
+    pub(crate) fn check_pvt(&self, obj: Obj, value: u32) -> Result<(), ObjError> {
+        self.plan_pvt(obj, value).map(|_| ())
+    }
+
+    /// Writes a PVT object, which [`DriveState::check_pvt`] accepted.
+    pub(crate) fn apply_pvt(&mut self, obj: Obj, value: u32) {
+        let effect = self.plan_pvt(obj, value);
+        self.set_param(obj, value);
+        let pvt = &mut self.pvt;
+        match effect {
+            Ok(Effect::Push(p)) => {
+                let slot = (usize::from(pvt.head) + usize::from(pvt.len)) % TABLE_SIZE;
+                self.table.set(slot, p);
+                pvt.len += 1;
+                pvt.last = Some(p);
+            }
+            Ok(Effect::Clear) => {
+                (pvt.head, pvt.len, pvt.last) = (0, 0, None);
+            }
+            Ok(Effect::Start(s)) => pvt.pending = Some(s),
+            Ok(Effect::Stop) => {
+                pvt.cancel();
+                self.axis = self.plan_stop(self.now);
+            }
+            Ok(Effect::None) | Err(_) => {}
+        }
+    }
+
+    /// The next point of a run, and its index; a FIFO point leaves the queue.
+    fn next_point(&mut self, source: &mut Source) -> Option<(u16, Point)> {
+        let index = match source {
+            Source::Fifo => {
+                let pvt = &mut self.pvt;
+                if pvt.len == 0 {
+                    return None;
+                }
+                let i = pvt.head;
+                pvt.head = ((usize::from(i) + 1) % TABLE_SIZE) as u16;
+                pvt.len -= 1;
+                i
+            }
+            Source::Table { .. } => source.next_index()?,
+        };
+        self.stored(index).map(|p| (index, p))
+    }
+
+    /// Starts what is due at the control tick `now`.
+    fn start_pending(&mut self, now: Instant) {
+        match self.pvt.pending.take() {
+            Some(Start::Pvt) => {
+                let Ok((mut source, _, _)) = self.plan_run() else { return };
+                if let Some((i, p)) = self.next_point(&mut source) {
+                    self.axis.follow(now, Cubic::new(self.axis.setpoint().whole, 0, p));
+                    self.pvt.run = Some(Run { source, to: p });
+                    self.status.pvt_pointer = i;
+                }
+            }
+            Some(Start::Sync) => {
+                if let Ok(axis) = self.plan_sync(now) {
+                    self.axis = axis;
+                }
+            }
+            None => {}
+        }
+    }
+
+    /// The PVT part of a control tick at `now`: a due start, then the next segment whenever the
+    /// running one has ended (starting exactly at its end, so time does not drift either).
+    pub(crate) fn pvt_tick(&mut self, now: Instant) {
+        self.start_pending(now);
+        let Some(mut run) = self.pvt.run else { return };
+        let Some((mut start, mut cubic)) = self.axis.cubic() else {
+            // Stopped by something else (0x6053, disable).
+            self.pvt.run = None;
+            return;
+        };
+        for _ in 0..SEGMENTS_PER_TICK {
+            let length = cubic.ticks() * TICK_MICROS;
+            if now.since(start) < length || now < start {
+                break;
+            }
+            let end = start.plus_micros(length);
+            match self.next_point(&mut run.source) {
+                Some((i, p)) => {
+                    cubic = Cubic::new(cubic.p1(), run.to.velocity, p);
+                    start = end;
+                    self.axis.follow(start, cubic);
+                    run.to = p;
+                    self.status.pvt_pointer = i;
+                }
+                None => {
+                    if run.to.velocity == 0 {
+                        self.axis.stand_on_cubic_end();
+                    } else {
+                        self.pvt.fault |= FAULT_UNDERFLOW;
+                        self.axis = self.plan_stop(now);
+                    }
+                    self.pvt.run = None;
+                    return;
+                }
+            }
+        }
+        self.pvt.run = Some(run);
+    }
+}
