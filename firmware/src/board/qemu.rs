@@ -55,6 +55,11 @@ impl embedded_io_async::Write for Serial {
         }
         Ok(buf.len())
     }
+
+    async fn flush(&mut self) -> Result<(), Infallible> {
+        while !pac::USART1.isr().read().tc() {}
+        Ok(())
+    }
 }
 
 /// USART1's receive interrupt: every byte into the pipe (a full pipe drops it, like an overrun).
