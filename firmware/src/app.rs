@@ -29,7 +29,12 @@ pub static TICKS: AtomicU32 = AtomicU32::new(0);
 
 /// Who this firmware says it is (0x1022 hardware version from the board).
 fn identity(hardware: &'static str) -> Identity {
-    Identity { model_name: "OSD-42", user_application_name: "firmware", hardware_version: hardware, ..Identity::SIMULATOR }
+    Identity {
+        model_name: "OSD-42",
+        user_application_name: "firmware",
+        hardware_version: hardware,
+        ..Identity::SIMULATOR
+    }
 }
 
 /// Builds the drive with factory settings (no parameter storage yet: saving is refused).

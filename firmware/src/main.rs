@@ -101,7 +101,10 @@ mod run {
 
     /// Every millisecond: the encoder into 0x6089; every 10 ms: the ADC into 0x605F; the
     /// watchdog is fed only while the control tick runs.
-    async fn sense_loop(mut sense: Sense, mut watchdog: embassy_stm32::wdg::IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>) -> ! {
+    async fn sense_loop(
+        mut sense: Sense,
+        mut watchdog: embassy_stm32::wdg::IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
+    ) -> ! {
         let mut ticker = Ticker::every(Duration::from_millis(1));
         let mut last_count = sense.encoder.count();
         let mut last_ticks = app::TICKS.load(Ordering::Relaxed);
@@ -113,7 +116,7 @@ mod run {
             let delta = count.wrapping_sub(last_count) as i16;
             last_count = count;
             n = n.wrapping_add(1);
-            let analog = if n % 10 == 0 { Some(sense.read_adc()) } else { None };
+            let analog = if n.is_multiple_of(10) { Some(sense.read_adc()) } else { None };
             app::with_drive(|d| {
                 let s = d.state_mut().status_mut();
                 s.encoder = s.encoder.wrapping_add(i32::from(delta));
@@ -122,7 +125,7 @@ mod run {
                 }
             });
             if let Some((v, t, _)) = analog
-                && n % 1000 == 0
+                && n.is_multiple_of(1000)
             {
                 let cost = board::TICK_CYCLES_MAX.load(Ordering::Relaxed);
                 info!("bus voltage code {}, temperature code {}, longest tick {} cycles", v, t, cost);

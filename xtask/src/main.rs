@@ -88,7 +88,9 @@ fn ci() -> Result<(), String> {
     step("firmware build and size");
     firmware()?;
     step("QEMU firmware build and clippy");
-    run(cargo().args(firmware_args("clippy", &["--no-default-features", "--features", "qemu"])).args(["--", "-D", "warnings"]))?;
+    run(cargo()
+        .args(firmware_args("clippy", &["--no-default-features", "--features", "qemu"]))
+        .args(["--", "-D", "warnings"]))?;
     step("HIL suite build");
     hil()?;
     step("tokio-modbus against the firmware under QEMU");

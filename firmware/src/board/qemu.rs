@@ -117,7 +117,8 @@ fn micros() -> u64 {
         // is not pending, `before` was read before any wrap; if it is, `after` is read after it.
         let wrapped = cortex_m::peripheral::SCB::is_pendst_pending();
         let after = cortex_m::peripheral::SYST::get_current();
-        let (ms, count) = if wrapped { (MILLIS.borrow(cs).get() + 1, after) } else { (MILLIS.borrow(cs).get(), before) };
+        let (ms, count) =
+            if wrapped { (MILLIS.borrow(cs).get() + 1, after) } else { (MILLIS.borrow(cs).get(), before) };
         ms * 1000 + u64::from((RELOAD - count.min(RELOAD)) / (CORE_HZ / 1_000_000))
     })
 }
