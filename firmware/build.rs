@@ -7,6 +7,8 @@ use std::{env, fs, path::PathBuf};
 fn main() {
     println!("cargo:rerun-if-changed=../memory.x");
     println!("cargo:rerun-if-changed=../memory-l475.x");
+    // embedded-test's macro tests this cfg.
+    println!("cargo::rustc-check-cfg=cfg(rust_analyzer)");
     // The host stub links like any host program.
     if env::var("CARGO_CFG_TARGET_OS").as_deref() != Ok("none") {
         return;
@@ -15,4 +17,6 @@ fn main() {
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
     fs::copy(src, out.join("memory.x")).expect("memory description at the workspace root");
     println!("cargo:rustc-link-search={}", out.display());
+    // The HIL suite's harness (embedded-test, a dev-dependency) brings its own linker script.
+    println!("cargo:rustc-link-arg-tests=-Tembedded-test.x");
 }

@@ -131,6 +131,10 @@ pub async fn modbus(mut serial: Serial) -> ! {
 /// inside a frame.
 #[cfg(feature = "qemu")]
 const SILENCE: embassy_time::Duration = embassy_time::Duration::from_millis(20);
+/// Silence that ends a request known to be incomplete: a loaded host can stall QEMU's serial
+/// line for tens of milliseconds inside a frame.
+#[cfg(feature = "qemu")]
+const SILENCE_PARTIAL: embassy_time::Duration = embassy_time::Duration::from_millis(250);
 
 /// The RTU slave on a line without baud timing (QEMU): a request ends by its length (see
 /// `frames`) or by a long silence, then goes to the drive in one burst t3.5 before now.
@@ -141,7 +145,8 @@ pub async fn modbus(mut serial: Serial) -> ! {
     let mut reply = [0u8; MAX_FRAME];
     let mut frame = crate::frames::Assembler::new();
     loop {
-        let n = match select(serial.read(&mut buf), Timer::after(SILENCE)).await {
+        let silence = if frame.expects_more() { SILENCE_PARTIAL } else { SILENCE };
+        let n = match select(serial.read(&mut buf), Timer::after(silence)).await {
             Either::First(Ok(n)) => {
                 let mut sent = None;
                 for &b in buf.get(..n).unwrap_or_default() {

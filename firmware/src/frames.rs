@@ -1,6 +1,7 @@
 //! Framing by logic for a line without baud timing (QEMU's serial port paces bytes about 1 ms
 //! apart whatever the baud rate, far beyond t1.5): a request ends when it holds as many bytes
-//! as its function code says, or after a silence long enough for any real pause.
+//! as its function code says, or after a silence long enough for any real pause (the caller's
+//! choice; longer while [`Assembler::expects_more`], since the host may stall the line).
 //!
 //! The frame is then handed to the drive as if it had arrived in one burst, t3.5 before "now",
 //! so drive-core's own framer, CRC check and counters see a well-timed frame.
@@ -63,6 +64,11 @@ impl Assembler {
         self.buf.get(..self.len).unwrap_or_default()
     }
 
+    /// Whether the bytes so far start a request whose length is known and not yet reached.
+    pub fn expects_more(&self) -> bool {
+        request_len(self.bytes()).is_some_and(|n| self.len < n)
+    }
+
     /// Whether nothing has been received.
     pub fn is_empty(&self) -> bool {
         self.len == 0
@@ -99,6 +105,20 @@ mod tests {
         g[1] = 0x17;
         g[10] = 2;
         assert_eq!(complete_after(&g), Some(15));
+    }
+
+    #[test]
+    fn a_partial_request_of_known_length_expects_more() {
+        let mut a = Assembler::new();
+        assert!(!a.expects_more());
+        a.push(1);
+        assert!(!a.expects_more(), "the function code is not known yet");
+        a.push(3);
+        assert!(a.expects_more());
+        a.clear();
+        a.push(1);
+        a.push(0x41);
+        assert!(!a.expects_more(), "unknown code: silence ends it");
     }
 
     #[test]

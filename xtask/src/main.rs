@@ -7,6 +7,7 @@
 //! - `firmware`: cross-build the firmware, print its size, fail over the budget.
 //! - `qemu --tcp HOST:PORT`: build the QEMU variant and run it with its USART on that port.
 //! - `hil`: build the hardware-in-the-loop suite (`probe-rs` runs it on a board).
+//! - `tick-cost`: the control tick's instruction count under QEMU (`-icount`).
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{TcpListener, TcpStream};
@@ -33,7 +34,10 @@ fn main() -> ExitCode {
         "firmware" => firmware(),
         "qemu" => qemu(&std::env::args().skip(2).collect::<Vec<_>>()),
         "hil" => hil(),
-        _ => Err(format!("usage: cargo xtask <ci|docs|masters|firmware|qemu --tcp HOST:PORT|hil>, not {task:?}")),
+        "tick-cost" => tick_cost(),
+        _ => Err(format!(
+            "usage: cargo xtask <ci|docs|masters|firmware|qemu --tcp HOST:PORT|hil|tick-cost>, not {task:?}"
+        )),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -176,17 +180,7 @@ fn qemu(args: &[String]) -> Result<(), String> {
     };
     let elf = build_qemu()?;
     let started = Instant::now();
-    let child = Command::new("qemu-system-arm")
-        .args(["-M", "b-l475e-iot01a", "-nographic", "-monitor", "none", "-kernel"])
-        .arg(&elf)
-        .arg("-serial")
-        .arg(format!("tcp:{host}:{port},server=on,wait=off"))
-        // Not our stdout: whoever reads the `listening on` line may close it afterwards.
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .spawn()
-        .map_err(|e| format!("qemu-system-arm (QEMU 10, .ci/install installs it): {e}"))?;
-    let mut qemu = Qemu(child);
+    let mut qemu = spawn_qemu(&elf, host, port, &["-monitor", "none"])?;
     let first_answer = probe(host, port, &mut qemu.0)?;
     eprintln!(
         "QEMU: first answer {:.1} ms after launch; a read request's round trip {:.2} ms",
@@ -202,6 +196,105 @@ fn qemu(args: &[String]) -> Result<(), String> {
     }
     let status = qemu.0.wait().map_err(|e| e.to_string())?;
     if status.success() { Ok(()) } else { Err(format!("qemu: {status}")) }
+}
+
+/// Boots `elf` on QEMU's b-l475e-iot01a with USART1 a TCP server on `host:port`.
+fn spawn_qemu(elf: &Path, host: &str, port: u16, extra: &[&str]) -> Result<Qemu, String> {
+    let child = Command::new("qemu-system-arm")
+        .args(["-M", "b-l475e-iot01a", "-nographic", "-kernel"])
+        .arg(elf)
+        .arg("-serial")
+        .arg(format!("tcp:{host}:{port},server=on,wait=off"))
+        .args(extra)
+        // Not our stdout: whoever reads the `listening on` line may close it afterwards.
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .spawn()
+        .map_err(|e| format!("qemu-system-arm (QEMU 10, .ci/install installs it): {e}"))?;
+    Ok(Qemu(child))
+}
+
+fn free_port() -> Result<u16, String> {
+    TcpListener::bind(("127.0.0.1", 0)).and_then(|l| l.local_addr()).map(|a| a.port()).map_err(|e| e.to_string())
+}
+
+/// One raw RTU request (CRC appended) and its `reply_len`-byte reply.
+fn transact(s: &mut TcpStream, body: &[u8], reply_len: usize) -> Result<Vec<u8>, String> {
+    let crc = drive_core::crc::crc16(body).to_le_bytes();
+    s.write_all(body).and_then(|()| s.write_all(&crc)).map_err(|e| e.to_string())?;
+    let mut reply = vec![0u8; reply_len];
+    s.read_exact(&mut reply).map_err(|e| format!("reply to {body:02x?}: {e}"))?;
+    Ok(reply)
+}
+
+/// `-icount` shift of `tick-cost`: an instruction takes 2^4 = 16 virtual ns, so a count of the
+/// 4 MHz SysTick (250 ns) is 15.6 instructions. Shifts 3 and 4 agree (idle 500, stepping ~2700);
+/// with shifts 0-2 QEMU 10.0 reads the same SysTick value before and after most ticks.
+const ICOUNT_SHIFT: u32 = 4;
+
+/// The control tick's cost in instructions: the QEMU build under `-icount` (instructions set the
+/// virtual clock) counts SysTick across each tick into `TICK_COST`, read here through QEMU's
+/// monitor while idle and during a move.
+fn tick_cost() -> Result<(), String> {
+    let elf = build_qemu()?;
+    let nm = Command::new("arm-none-eabi-nm").arg(&elf).output().map_err(|e| format!("arm-none-eabi-nm: {e}"))?;
+    let addr = String::from_utf8_lossy(&nm.stdout)
+        .lines()
+        .find_map(|l| l.strip_suffix(" TICK_COST").and_then(|l| l.split_whitespace().next()).map(str::to_string))
+        .ok_or("no TICK_COST symbol")?;
+    let (port, mon) = (free_port()?, free_port()?);
+    let monitor = format!("tcp:127.0.0.1:{mon},server=on,wait=off");
+    let mut qemu = spawn_qemu(
+        &elf,
+        "127.0.0.1",
+        port,
+        &["-icount", &format!("shift={ICOUNT_SHIFT},align=off"), "-monitor", &monitor],
+    )?;
+    probe("127.0.0.1", port, &mut qemu.0)?;
+    let read_stats = || -> Result<Vec<u64>, String> {
+        let mut m = TcpStream::connect(("127.0.0.1", mon)).map_err(|e| e.to_string())?;
+        m.set_read_timeout(Some(Duration::from_millis(500))).map_err(|e| e.to_string())?;
+        m.write_all(format!("xp /5wx 0x{addr}\n").as_bytes()).map_err(|e| e.to_string())?;
+        let mut text = String::new();
+        let mut buf = [0u8; 512];
+        while let Ok(n) = m.read(&mut buf) {
+            if n == 0 {
+                break;
+            }
+            text.push_str(&String::from_utf8_lossy(&buf[..n]));
+        }
+        // QEMU prints four words a line, each line after its address and a colon.
+        let words: Vec<u64> = text
+            .lines()
+            .filter_map(|l| l.split_once(": ").filter(|(a, _)| a.trim().len() == 16).map(|(_, w)| w))
+            .flat_map(|w| w.split_whitespace().map(|x| u64::from_str_radix(x.trim_start_matches("0x"), 16)))
+            .collect::<Result<_, _>>()
+            .map_err(|e| format!("{text}: {e}"))?;
+        if words.len() == 5 { Ok(words) } else { Err(format!("unexpected monitor output {text:?}")) }
+    };
+    std::thread::sleep(Duration::from_millis(500));
+    let idle = read_stats()?;
+    let mut s = TcpStream::connect(("127.0.0.1", port)).map_err(|e| e.to_string())?;
+    s.set_read_timeout(Some(Duration::from_secs(2))).map_err(|e| e.to_string())?;
+    // 4000 pps forward, then a relative move of 2000 steps (native map, node 1).
+    for (reg, v) in [(0x6003u16, 0u16), (0x6004, 4000), (0x6002, 0), (0x6005, 0), (0x6006, 2000)] {
+        let [rh, rl] = reg.to_be_bytes();
+        let [vh, vl] = v.to_be_bytes();
+        transact(&mut s, &[1, 6, rh, rl, vh, vl], 8)?;
+    }
+    // Virtual time crawls under -icount (bytes too): sample the ticks of the running move.
+    std::thread::sleep(Duration::from_secs(3));
+    let after = read_stats()?;
+    drop(qemu);
+    let per_count = 250.0 / f64::from(1u32 << ICOUNT_SHIFT);
+    let per_tick = |n: u64, sum: u64| if n == 0 { 0.0 } else { sum as f64 * per_count / n as f64 };
+    let (idle_n, idle_sum) = (idle.first().copied().unwrap_or(0), idle.get(1).copied().unwrap_or(0));
+    let (moving_n, moving_sum) = (after.get(2).copied().unwrap_or(0), after.get(3).copied().unwrap_or(0));
+    println!("control tick under QEMU -icount (resolution {per_count:.1} instructions, averaged):");
+    println!("  idle:     {:.0} instructions per tick ({idle_n} ticks)", per_tick(idle_n, idle_sum));
+    println!("  stepping: {:.0} instructions per tick ({moving_n} ticks)", per_tick(moving_n, moving_sum));
+    println!("  longest:  {:.0} instructions or fewer", (after.get(4).copied().unwrap_or(0) + 1) as f64 * per_count);
+    Ok(())
 }
 
 /// QEMU, killed when dropped.
@@ -227,8 +320,9 @@ fn probe(host: &str, port: u16, qemu: &mut Child) -> Result<Duration, String> {
             std::thread::sleep(Duration::from_millis(5));
             continue;
         };
-        s.set_read_timeout(Some(Duration::from_millis(200))).map_err(|e| e.to_string())?;
-        for _ in 0..50 {
+        // Generous: under -icount (tick-cost) a reply takes a few hundred ms.
+        s.set_read_timeout(Some(Duration::from_millis(1000))).map_err(|e| e.to_string())?;
+        for _ in 0..20 {
             let sent = Instant::now();
             s.write_all(&request).map_err(|e| e.to_string())?;
             let mut reply = [0u8; 9];

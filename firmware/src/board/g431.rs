@@ -56,9 +56,9 @@ bind_interrupts!(struct Irqs {
 /// What the 0x1022 hardware version says.
 pub const HARDWARE: &str = "G431";
 /// Timer clock (PCLK1 = PCLK2 = SYSCLK).
-const TIMER_HZ: u32 = 170_000_000;
-/// Timer counts in one control tick.
-const TICK_COUNTS: u32 = TIMER_HZ / TICK_HZ;
+pub const TIMER_HZ: u32 = 170_000_000;
+/// Timer counts (and core cycles) in one control tick.
+pub const TICK_COUNTS: u32 = TIMER_HZ / TICK_HZ;
 /// The share of a tick step pulses may fill: the rest is margin for the tick's own jitter.
 const PULSE_WINDOW: u32 = TICK_COUNTS * 15 / 16;
 /// Shortest step period in timer counts (1 µs: 1 Mpps, five times seed 000's 200 kpps).
@@ -183,6 +183,12 @@ static STAGE: Mutex<RefCell<Option<StepDir>>> = Mutex::new(RefCell::new(None));
 pub static TICK_CYCLES: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
 /// The longest control tick so far, in cycles.
 pub static TICK_CYCLES_MAX: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
+/// Shortest and longest time between the starts of two control ticks, in cycles (the jitter).
+pub static TICK_PERIOD_MIN: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(u32::MAX);
+/// See [`TICK_PERIOD_MIN`].
+pub static TICK_PERIOD_MAX: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
+/// Cycle count at the start of the last tick (0: none yet).
+static TICK_LAST_START: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
 
 /// The 20 kHz control tick on TIM6's update interrupt.
 struct TickHandler;
@@ -192,6 +198,12 @@ impl interrupt::typelevel::Handler<interrupt::typelevel::TIM6_DAC> for TickHandl
         use core::sync::atomic::Ordering::Relaxed;
         pac::TIM6.sr().write(|w| w.set_uif(false));
         let start = cortex_m::peripheral::DWT::cycle_count();
+        let last = TICK_LAST_START.swap(start, Relaxed);
+        if last != 0 {
+            let period = start.wrapping_sub(last);
+            TICK_PERIOD_MIN.fetch_min(period, Relaxed);
+            TICK_PERIOD_MAX.fetch_max(period, Relaxed);
+        }
         critical_section::with(|cs| {
             if let Some(stage) = STAGE.borrow_ref_mut(cs).as_mut() {
                 crate::app::control_tick(crate::app::now(), stage);

@@ -13,6 +13,7 @@
 
 use core::cell::{Cell, RefCell};
 use core::convert::Infallible;
+use core::sync::atomic::{AtomicU32, Ordering};
 use core::task::Waker;
 
 use critical_section::Mutex;
@@ -144,13 +145,24 @@ impl embassy_time_driver::Driver for SysTickDriver {
 
 embassy_time_driver::time_driver_impl!(static DRIVER: SysTickDriver = SysTickDriver);
 
-/// The emulated chip's power stage: none. The drive core counts the steps itself.
-struct NoStage;
+/// The emulated chip's power stage: none. The drive core counts the steps itself; this only
+/// notes whether the tick stepped, for the cost figures.
+struct NoStage {
+    moving: bool,
+}
 
 impl PowerStage for NoStage {
-    fn step(&mut self, _steps: i64) {}
+    fn step(&mut self, steps: i64) {
+        self.moving = steps != 0;
+    }
     fn set_current(&mut self, _milliamps: u16) {}
 }
+
+/// The control tick's cost in SysTick counts (a count is 250 virtual ns, 15.6 instructions under
+/// `qemu -icount shift=4`), read by `cargo xtask tick-cost` through QEMU's monitor: [idle ticks, their total counts, ticks that stepped, their total counts, most counts
+/// of one tick].
+#[unsafe(no_mangle)]
+static TICK_COST: [AtomicU32; 5] = [const { AtomicU32::new(0) }; 5];
 
 /// Every millisecond: time, then the control tick, then the timers due.
 #[cortex_m_rt::exception]
@@ -160,7 +172,19 @@ fn SysTick() {
         m.set(m.get() + 1);
     });
     let now = micros();
-    crate::app::control_tick(drive_core::Instant::from_micros(now), &mut NoStage);
+    let mut stage = NoStage { moving: false };
+    let before = cortex_m::peripheral::SYST::get_current();
+    crate::app::control_tick(drive_core::Instant::from_micros(now), &mut stage);
+    // SysTick counts down and has just reloaded: no wrap within the tick.
+    let spent = before.saturating_sub(cortex_m::peripheral::SYST::get_current());
+    let at = if stage.moving { 2 } else { 0 };
+    if let (Some(n), Some(sum)) = (TICK_COST.get(at), TICK_COST.get(at + 1)) {
+        n.fetch_add(1, Ordering::Relaxed);
+        sum.fetch_add(spent, Ordering::Relaxed);
+    }
+    if let Some(max) = TICK_COST.get(4) {
+        max.fetch_max(spent, Ordering::Relaxed);
+    }
     critical_section::with(|cs| {
         let mut q = QUEUE.borrow_ref_mut(cs);
         let (queue, next) = &mut *q;
