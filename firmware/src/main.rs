@@ -160,16 +160,44 @@ mod run {
 
 #[cfg(all(target_os = "none", feature = "qemu"))]
 mod run {
+    use core::sync::atomic::{AtomicBool, Ordering};
+
     use defmt::unwrap;
     use defmt_rtt as _;
-    use embassy_executor::Spawner;
+    use embassy_executor::raw::Executor;
 
     use crate::{app, board};
 
-    #[embassy_executor::main]
-    async fn main(spawner: Spawner) {
+    /// Set when a task was woken: the executor has work.
+    static WORK: AtomicBool = AtomicBool::new(true);
+
+    /// Called by embassy when a task is woken (from a task or an interrupt).
+    #[unsafe(export_name = "__pender")]
+    fn pender(_context: *mut ()) {
+        WORK.store(true, Ordering::Release);
+    }
+
+    /// The raw executor, sleeping with WFI: QEMU runs WFE (the thread executor's sleep) as a
+    /// no-op, which would spin the host CPU and starve QEMU's serial I/O.
+    #[cortex_m_rt::entry]
+    fn main() -> ! {
         app::start(board::HARDWARE);
         let serial = board::init();
-        spawner.spawn(unwrap!(app::modbus(serial)));
+        let Some(executor) = cortex_m::singleton!(: Executor = Executor::new(core::ptr::null_mut())) else {
+            defmt::panic!("executor created twice");
+        };
+        let executor: &'static Executor = executor;
+        executor.spawner().spawn(unwrap!(app::modbus(serial)));
+        loop {
+            WORK.store(false, Ordering::Release);
+            // SAFETY: polled from this one thread only, never re-entered.
+            unsafe { executor.poll() };
+            // A wake after the poll sets WORK; with interrupts masked WFI still wakes on one.
+            cortex_m::interrupt::free(|_| {
+                if !WORK.load(Ordering::Acquire) {
+                    cortex_m::asm::wfi();
+                }
+            });
+        }
     }
 }

@@ -115,6 +115,8 @@ async fn tokio_modbus_drives_the_firmware_under_qemu() {
     }
     let (_fw, at) = boot();
     let stream = TcpStream::connect(&at).await.expect("connect to QEMU's USART");
+    // A request must not wait for the ACK of an earlier piece (Nagle against delayed ACK: 40 ms).
+    stream.set_nodelay(true).expect("TCP_NODELAY");
     let mut ctx = rtu::attach_slave(coalesced(stream), Slave(1));
 
     let id = timeout(LIMIT, ctx.read_device_identification(ReadCode::Basic, 0))

@@ -181,10 +181,10 @@ fn qemu(args: &[String]) -> Result<(), String> {
     let elf = build_qemu()?;
     let started = Instant::now();
     let mut qemu = spawn_qemu(&elf, host, port, &["-monitor", "none"])?;
-    let first_answer = probe(host, port, &mut qemu.0)?;
+    let first_answer = probe(host, port, &mut qemu.0, Duration::from_millis(100))?;
     eprintln!(
-        "QEMU: first answer {:.1} ms after launch; a read request's round trip {:.2} ms",
-        started.elapsed().as_secs_f64() * 1e3,
+        "QEMU: first answer {:.1} ms after launch (100 ms retries); that read's round trip {:.2} ms",
+        (started.elapsed() - Duration::from_millis(100)).as_secs_f64() * 1e3,
         first_answer.as_secs_f64() * 1e3
     );
     println!("listening on {host}:{port}");
@@ -204,7 +204,7 @@ fn spawn_qemu(elf: &Path, host: &str, port: u16, extra: &[&str]) -> Result<Qemu,
         .args(["-M", "b-l475e-iot01a", "-nographic", "-kernel"])
         .arg(elf)
         .arg("-serial")
-        .arg(format!("tcp:{host}:{port},server=on,wait=off"))
+        .arg(format!("tcp:{host}:{port},server=on,wait=off,nodelay=on"))
         .args(extra)
         // Not our stdout: whoever reads the `listening on` line may close it afterwards.
         .stdin(Stdio::null())
@@ -220,8 +220,9 @@ fn free_port() -> Result<u16, String> {
 
 /// One raw RTU request (CRC appended) and its `reply_len`-byte reply.
 fn transact(s: &mut TcpStream, body: &[u8], reply_len: usize) -> Result<Vec<u8>, String> {
-    let crc = drive_core::crc::crc16(body).to_le_bytes();
-    s.write_all(body).and_then(|()| s.write_all(&crc)).map_err(|e| e.to_string())?;
+    let mut frame = body.to_vec();
+    frame.extend_from_slice(&drive_core::crc::crc16(body).to_le_bytes());
+    s.write_all(&frame).map_err(|e| e.to_string())?;
     let mut reply = vec![0u8; reply_len];
     s.read_exact(&mut reply).map_err(|e| format!("reply to {body:02x?}: {e}"))?;
     Ok(reply)
@@ -250,7 +251,8 @@ fn tick_cost() -> Result<(), String> {
         port,
         &["-icount", &format!("shift={ICOUNT_SHIFT},align=off"), "-monitor", &monitor],
     )?;
-    probe("127.0.0.1", port, &mut qemu.0)?;
+    // Generous: under -icount a reply takes a few hundred ms.
+    probe("127.0.0.1", port, &mut qemu.0, Duration::from_millis(1000))?;
     let read_stats = || -> Result<Vec<u64>, String> {
         let mut m = TcpStream::connect(("127.0.0.1", mon)).map_err(|e| e.to_string())?;
         m.set_read_timeout(Some(Duration::from_millis(500))).map_err(|e| e.to_string())?;
@@ -307,9 +309,10 @@ impl Drop for Qemu {
     }
 }
 
-/// Reads 0x600C..0x600D until the drive answers (QEMU boots in tens of ms); returns the round
-/// trip of the answered read.
-fn probe(host: &str, port: u16, qemu: &mut Child) -> Result<Duration, String> {
+/// Reads 0x600C..0x600D until the drive answers (QEMU boots in tens of ms; a request sent before
+/// the USART is on is lost), waiting `patience` for each answer; returns the round trip of the
+/// answered read.
+fn probe(host: &str, port: u16, qemu: &mut Child, patience: Duration) -> Result<Duration, String> {
     let request = [0x01, 0x03, 0x60, 0x0C, 0x00, 0x02, 0x1A, 0x08];
     let deadline = Instant::now() + Duration::from_secs(20);
     while Instant::now() < deadline {
@@ -320,14 +323,21 @@ fn probe(host: &str, port: u16, qemu: &mut Child) -> Result<Duration, String> {
             std::thread::sleep(Duration::from_millis(5));
             continue;
         };
-        // Generous: under -icount (tick-cost) a reply takes a few hundred ms.
-        s.set_read_timeout(Some(Duration::from_millis(1000))).map_err(|e| e.to_string())?;
-        for _ in 0..20 {
+        eprintln!(
+            "QEMU: serial port open after {:.1} ms",
+            (Instant::now() + Duration::from_secs(20) - deadline).as_secs_f64() * 1e3
+        );
+        s.set_read_timeout(Some(patience)).map_err(|e| e.to_string())?;
+        for _ in 0..50 {
             let sent = Instant::now();
             s.write_all(&request).map_err(|e| e.to_string())?;
             let mut reply = [0u8; 9];
             if s.read_exact(&mut reply).is_ok() && reply.get(..3) == Some(&[0x01, 0x03, 0x04][..]) {
-                return Ok(sent.elapsed());
+                let rtt = sent.elapsed();
+                // Let a late answer to an earlier attempt arrive here, not at the next client.
+                std::thread::sleep(patience);
+                let _ = s.read(&mut [0u8; 64]);
+                return Ok(rtt);
             }
             // A partial or garbled answer: let the drive's silence timeout clear its receiver.
             std::thread::sleep(Duration::from_millis(50));
