@@ -127,6 +127,9 @@ mod tests {
         const STEPS: u32 = 40_000;
         app::with_drive(|d| {
             let s = d.state_mut();
+            // Level 0: no ramp, the whole move at 200 kpps (10 steps a tick).
+            s.apply(Obj::AccelLevel, 0);
+            s.apply(Obj::DecelLevel, 0);
             s.apply(Obj::MaxSpeed, 200_000);
             s.apply(Obj::RelativeMove, STEPS);
         });
