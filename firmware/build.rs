@@ -1,15 +1,22 @@
-//! Puts the workspace's `memory.x` on the linker search path for the microcontroller build, so
-//! that file is the one description of the chip's memory (`cortex-m-rt`'s `link.x` includes it).
+//! Puts the chip's memory description on the linker search path for the microcontroller build:
+//! the workspace's `memory.x` (STM32G431CB) or, with the `qemu` feature, `memory-l475.x`
+//! (QEMU's STM32L475VG). `cortex-m-rt`'s `link.x` includes it as `memory.x`.
 
 use std::{env, fs, path::PathBuf};
 
 fn main() {
     println!("cargo:rerun-if-changed=../memory.x");
+    println!("cargo:rerun-if-changed=../memory-l475.x");
+    // embedded-test's macro tests this cfg.
+    println!("cargo::rustc-check-cfg=cfg(rust_analyzer)");
     // The host stub links like any host program.
     if env::var("CARGO_CFG_TARGET_OS").as_deref() != Ok("none") {
         return;
     }
+    let src = if env::var_os("CARGO_FEATURE_QEMU").is_some() { "../memory-l475.x" } else { "../memory.x" };
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
-    fs::copy("../memory.x", out.join("memory.x")).expect("memory.x at the workspace root");
+    fs::copy(src, out.join("memory.x")).expect("memory description at the workspace root");
     println!("cargo:rustc-link-search={}", out.display());
+    // The HIL suite's harness (embedded-test, a dev-dependency) brings its own linker script.
+    println!("cargo:rustc-link-arg-tests=-Tembedded-test.x");
 }

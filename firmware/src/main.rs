@@ -1,7 +1,10 @@
-//! The drive on an STM32G431CB: Embassy wires the board's peripherals to `drive-core`.
+//! The drive on an STM32: Embassy wires the board's peripherals to `drive-core`.
 //!
-//! All the drive's logic lives in `drive-core`; this crate only moves bytes and time into it and
-//! replies out. Built for `thumbv7em-none-eabihf` (see `board` for the pin map).
+//! All the drive's logic lives in `drive-core`; this crate only moves bytes and time into it,
+//! replies out, and the control tick's outputs to the power stage. Two boards share the
+//! application (`app`): the STM32G431CB drive (feature `g431`, the default, `board::g431`) and
+//! QEMU's b-l475e-iot01a (feature `qemu`, `board::qemu`), which has no timers and no baud timing
+//! and so gets its own small board layer on the PAC.
 //!
 //! On the host the crate is an empty program: its embedded dependencies are target-only, so
 //! `cargo test --workspace` can build every member without a cross toolchain.
@@ -11,130 +14,190 @@
 #[cfg(not(target_os = "none"))]
 fn main() {}
 
-#[cfg(target_os = "none")]
-mod board;
+#[cfg_attr(not(feature = "qemu"), allow(dead_code, reason = "used by the QEMU build and the host tests"))]
+mod frames;
 
 #[cfg(target_os = "none")]
-mod app {
-    use defmt::{info, unwrap, warn};
+mod app;
+#[cfg(target_os = "none")]
+mod power;
+
+#[cfg(all(target_os = "none", feature = "g431", feature = "qemu"))]
+compile_error!("features `g431` and `qemu` select different chips: build with `--no-default-features --features qemu`");
+
+#[cfg(target_os = "none")]
+mod board {
+    #[cfg(feature = "g431")]
+    mod g431;
+    #[cfg(feature = "g431")]
+    pub use g431::*;
+    #[cfg(feature = "qemu")]
+    mod qemu;
+    #[cfg(feature = "qemu")]
+    pub use qemu::*;
+}
+
+/// Panics and faults: the power stage goes off before anything else, then the core halts until
+/// the independent watchdog (or, under QEMU, nothing) restarts it.
+#[cfg(target_os = "none")]
+mod fault {
+    use crate::board;
+
+    #[panic_handler]
+    fn panic(info: &core::panic::PanicInfo) -> ! {
+        board::power_off();
+        match info.location() {
+            Some(l) => defmt::error!("panic at {=str}:{=u32}", l.file(), l.line()),
+            None => defmt::error!("panic"),
+        }
+        halt()
+    }
+
+    #[defmt::panic_handler]
+    fn defmt_panic() -> ! {
+        board::power_off();
+        halt()
+    }
+
+    #[cortex_m_rt::exception]
+    unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+        board::power_off();
+        defmt::error!("hard fault");
+        halt()
+    }
+
+    fn halt() -> ! {
+        cortex_m::interrupt::disable();
+        loop {
+            cortex_m::asm::wfi();
+        }
+    }
+}
+
+#[cfg(all(target_os = "none", feature = "g431"))]
+mod run {
+    use core::sync::atomic::Ordering;
+
+    use defmt::{info, unwrap};
     use defmt_rtt as _;
-    use drive_core::ident::Identity;
-    use drive_core::od::Obj;
-    use drive_core::store::Store;
-    use drive_core::{Drive, DriveConfig, Instant, SystemRequest};
-    use embassy_embedded_hal::adapter::BlockingAsync;
     use embassy_executor::Spawner;
-    use embassy_futures::select::{Either, select, select4};
-    use embassy_stm32::exti::ExtiInput;
-    use embassy_stm32::flash::{Blocking, Flash};
-    use embassy_stm32::mode::Async;
-    use embassy_stm32::usart::BufferedUart;
-    use embassy_time::{Duration, Timer};
-    use embedded_io_async::{Read, Write};
-    use panic_probe as _;
+    use embassy_futures::select::select4;
+    use embassy_time::{Duration, Ticker};
 
-    use crate::board::{self, Board, Inputs};
-
-    /// Who this board says it is (0x1022 hardware version "G431").
-    const IDENTITY: Identity = Identity {
-        model_name: "OSD-42 G431",
-        user_application_name: "firmware",
-        hardware_version: "G431",
-        ..Identity::SIMULATOR
-    };
-
-    /// The parameter store on the flash's last pages.
-    type FlashStore = Store<BlockingAsync<Flash<'static, Blocking>>>;
-
-    /// How long FSET must be held low at power-up to restore the factory settings (§3.11).
-    const FSET_HOLD: Duration = Duration::from_secs(5);
+    use crate::app;
+    use crate::board::{self, Board, Inputs, Sense};
 
     #[embassy_executor::main]
     async fn main(spawner: Spawner) {
-        let Board { flash, mut uart, motor, mut inputs } = board::init();
-        let fset_low = fset_held(&mut inputs.fset).await;
-        let Ok(mut store) = Store::new(BlockingAsync::new(flash), board::STORE) else {
-            defmt::panic!("the store's flash range is not whole pages");
-        };
-        // The parameters are loaded before the drive answers anything.
-        let loaded = store.power_up(fset_low).await;
-        let config = DriveConfig { identity: IDENTITY, can_save: true, ..DriveConfig::default() };
-        // One static drive (its PVT table is 10 KB): a task taking it by value would keep a copy
-        // in its future and in main's.
-        let drive = unwrap!(cortex_m::singleton!(: Drive = Drive::boot(config, &loaded.params, loaded.status)));
-        board::set_serial(&mut uart, drive.baud(), drive.state().read(Obj::Parity));
-        info!(
-            "drive up: node {}, {} baud, storage status {:#x}",
-            drive.address().get(),
-            drive.baud().get(),
-            loaded.status
-        );
-        spawner.spawn(unwrap!(modbus(uart, drive, store)));
-        // Held, not dropped: a dropped pin returns to analog mode and the driver's inputs would float.
-        let _motor = motor;
-        watch_inputs(inputs).await
+        let baud = app::start(board::HARDWARE);
+        let Board { uart, stage, inputs, sense, mut watchdog } = board::init(baud);
+        info!("drive up: {} baud", baud.get());
+        board::start_tick(stage);
+        watchdog.unleash();
+        spawner.spawn(unwrap!(app::modbus(uart)));
+        spawner.spawn(unwrap!(watch_inputs(inputs)));
+        sense_loop(sense, watchdog).await
     }
 
-    /// Whether FSET is held low from power-up for [`FSET_HOLD`] (released earlier: no reset).
-    async fn fset_held(fset: &mut ExtiInput<'static, Async>) -> bool {
-        // Let the pull-up charge the pin before reading it.
-        Timer::after_millis(1).await;
-        if fset.is_high() {
-            return false;
-        }
-        info!("FSET low at power-up: factory settings if held {} s", FSET_HOLD.as_secs());
-        matches!(select(fset.wait_for_high(), Timer::after(FSET_HOLD)).await, Either::Second(()))
-    }
-
-    /// The RTU slave: bytes in with their arrival time, t3.5 from a timer, replies out.
-    ///
-    /// t3.5 comes from an embassy-time timer on `drive.deadline()`. The USART's receiver timeout
-    /// (RTOF, reachable through `unstable-pac`) would time the silence in hardware; that is a later
-    /// issue, and needs its own interrupt handler because the buffered driver clears RTOF unseen.
-    #[embassy_executor::task]
-    async fn modbus(mut uart: BufferedUart<'static>, drive: &'static mut Drive, mut store: FlashStore) -> ! {
-        let mut buf = [0u8; 64];
+    /// Every millisecond: the encoder into 0x6089; every 10 ms: the ADC into 0x605F; the
+    /// watchdog is fed only while the control tick runs.
+    async fn sense_loop(
+        mut sense: Sense,
+        mut watchdog: embassy_stm32::wdg::IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
+    ) -> ! {
+        let mut ticker = Ticker::every(Duration::from_millis(1));
+        let mut last_count = sense.encoder.count();
+        let mut last_ticks = app::TICKS.load(Ordering::Relaxed);
+        let mut n: u32 = 0;
         loop {
-            let deadline = drive.deadline();
-            let timeout = async {
-                match deadline {
-                    Some(at) => Timer::at(embassy_time::Instant::from_micros(at.as_micros())).await,
-                    None => core::future::pending().await,
+            ticker.next().await;
+            // 16-bit counter extended by the signed difference: fine below 32767 counts per ms.
+            let count = sense.encoder.count();
+            let delta = count.wrapping_sub(last_count) as i16;
+            last_count = count;
+            n = n.wrapping_add(1);
+            let analog = if n.is_multiple_of(10) { Some(sense.read_adc()) } else { None };
+            app::with_drive(|d| {
+                let s = d.state_mut().status_mut();
+                s.encoder = s.encoder.wrapping_add(i32::from(delta));
+                if let Some((_, _, a)) = analog {
+                    s.analog_in = a;
                 }
-            };
-            match select(uart.read(&mut buf), timeout).await {
-                // A chunk shares one stamp: with a read woken per byte, chunks are one byte unless
-                // the task ran late, and then the stamp is late by at most that delay.
-                Either::First(Ok(n)) => drive.on_rx(now(), buf.get(..n).unwrap_or_default()),
-                Either::First(Err(e)) => warn!("uart: {}", e),
-                Either::Second(()) => drive.on_timer(now()),
-            }
-            if let Some(reply) = drive.take_reply()
-                && let Err(e) = uart.write_all(reply).await
+            });
+            if let Some((v, t, _)) = analog
+                && n.is_multiple_of(1000)
             {
-                warn!("uart: {}", e);
+                let cost = board::TICK_CYCLES_MAX.load(Ordering::Relaxed);
+                info!("bus voltage code {}, temperature code {}, longest tick {} cycles", v, t, cost);
             }
-            // After the reply: a save blocks this task for up to ~25 ms (a page erase).
-            match store.serve(drive).await {
-                Some((SystemRequest::Save, Err(_))) => warn!("parameter save failed"),
-                Some((SystemRequest::SavePosition(_), Err(_))) => warn!("power-down position not saved"),
-                _ => {}
+            let ticks = app::TICKS.load(Ordering::Relaxed);
+            if ticks != last_ticks {
+                watchdog.pet();
             }
+            last_ticks = ticks;
         }
     }
 
-    /// Now, on the drive's clock (embassy-time's, in microseconds).
-    fn now() -> Instant {
-        Instant::from_micros(embassy_time::Instant::now().as_micros())
-    }
-
-    /// Logs input changes; they reach the GPIO object (0x6031) in a later issue.
+    /// EXT1..3 into 0x6031 bits 7..9 (inverted: 1 is a low level); FSET is logged.
+    #[embassy_executor::task]
     async fn watch_inputs(inputs: Inputs) -> ! {
         let Inputs { ext: [mut e1, mut e2, mut e3], mut fset } = inputs;
         loop {
+            let low = [e1.is_low(), e2.is_low(), e3.is_low()];
+            let bits = low.iter().enumerate().fold(0u16, |acc, (i, &l)| acc | (u16::from(l) << (7 + i)));
+            app::with_drive(|d| {
+                let s = d.state_mut().status_mut();
+                s.gpio = (s.gpio & !(0b111 << 7)) | bits;
+            });
             select4(e1.wait_for_any_edge(), e2.wait_for_any_edge(), e3.wait_for_any_edge(), fset.wait_for_any_edge())
                 .await;
-            info!("inputs: EXT1..3 {} {} {}, FSET {}", e1.is_high(), e2.is_high(), e3.is_high(), fset.is_high());
+            if fset.is_low() {
+                info!("FSET pressed");
+            }
+        }
+    }
+}
+
+#[cfg(all(target_os = "none", feature = "qemu"))]
+mod run {
+    use core::sync::atomic::{AtomicBool, Ordering};
+
+    use defmt::unwrap;
+    use defmt_rtt as _;
+    use embassy_executor::raw::Executor;
+
+    use crate::{app, board};
+
+    /// Set when a task was woken: the executor has work.
+    static WORK: AtomicBool = AtomicBool::new(true);
+
+    /// Called by embassy when a task is woken (from a task or an interrupt).
+    #[unsafe(export_name = "__pender")]
+    fn pender(_context: *mut ()) {
+        WORK.store(true, Ordering::Release);
+    }
+
+    /// The raw executor, sleeping with WFI: QEMU runs WFE (the thread executor's sleep) as a
+    /// no-op, which would spin the host CPU and starve QEMU's serial I/O.
+    #[cortex_m_rt::entry]
+    fn main() -> ! {
+        app::start(board::HARDWARE);
+        let serial = board::init();
+        let Some(executor) = cortex_m::singleton!(: Executor = Executor::new(core::ptr::null_mut())) else {
+            defmt::panic!("executor created twice");
+        };
+        let executor: &'static Executor = executor;
+        executor.spawner().spawn(unwrap!(app::modbus(serial)));
+        loop {
+            WORK.store(false, Ordering::Release);
+            // SAFETY: polled from this one thread only, never re-entered.
+            unsafe { executor.poll() };
+            // A wake after the poll sets WORK; with interrupts masked WFI still wakes on one.
+            cortex_m::interrupt::free(|_| {
+                if !WORK.load(Ordering::Acquire) {
+                    cortex_m::asm::wfi();
+                }
+            });
         }
     }
 }

@@ -47,7 +47,8 @@ macro_rules! objects {
                 range: $range,
                 default: ($def as i64) as u32,
                 unit: Unit::$unit,
-                doc: concat!($($doc, "\n"),*),
+                // Without the `docs` feature (the firmware) the texts stay out of flash.
+                doc: if cfg!(feature = "docs") { concat!($($doc, "\n"),*) } else { "" },
             }, )*
         ];
 

@@ -1,0 +1,179 @@
+//! The application, the same on every board: the drive shared between the control tick and the
+//! Modbus task, the tick itself and the RTU slave task.
+//!
+//! The drive sits in a critical-section mutex: the tick (a timer interrupt above every other
+//! one) and the bus task each take it for one short call. The bus task never holds it across an
+//! await, so the tick is at most delayed by one `on_rx`/`on_timer` call, never blocked on I/O.
+
+use core::cell::RefCell;
+use core::sync::atomic::{AtomicU32, Ordering};
+
+use critical_section::Mutex;
+use defmt::warn;
+use drive_core::ident::Identity;
+use drive_core::{Drive, DriveConfig, Instant};
+use embassy_futures::select::{Either, select};
+use embassy_time::Timer;
+use embedded_io_async::{Read, Write};
+
+use crate::board::Serial;
+use crate::frames::MAX_FRAME;
+use crate::power::PowerStage;
+
+/// The drive, once `start` has built it. A reference, so the mutex's initial value (`None`) is
+/// zero and lives in .bss: an `Option<Drive>` would copy 2.3 KB of initial image from flash.
+static DRIVE: Mutex<RefCell<Option<&'static mut Drive>>> = Mutex::new(RefCell::new(None));
+
+/// Control ticks run since power-up (the watchdog is fed only while this advances).
+pub static TICKS: AtomicU32 = AtomicU32::new(0);
+
+/// Who this firmware says it is (0x1022 hardware version from the board).
+fn identity(hardware: &'static str) -> Identity {
+    Identity {
+        model_name: "OSD-42",
+        user_application_name: "firmware",
+        hardware_version: hardware,
+        ..Identity::SIMULATOR
+    }
+}
+
+/// Builds the drive with factory settings (no parameter storage yet: saving is refused).
+pub fn start(hardware: &'static str) -> drive_core::Baud {
+    let drive = Drive::new(DriveConfig { identity: identity(hardware), can_save: false, ..DriveConfig::default() });
+    let baud = drive.baud();
+    // singleton! keeps the drive in uninitialised (.bss) memory and yields it once.
+    let Some(drive) = cortex_m::singleton!(: Drive = drive) else {
+        defmt::panic!("app::start called twice");
+    };
+    critical_section::with(|cs| DRIVE.borrow_ref_mut(cs).replace(drive));
+    baud
+}
+
+/// Runs `f` on the drive, if it has been started.
+pub fn with_drive<R>(f: impl FnOnce(&mut Drive) -> R) -> Option<R> {
+    critical_section::with(|cs| DRIVE.borrow_ref_mut(cs).as_deref_mut().map(f))
+}
+
+/// One control tick at `now`: the drive's motion, then the power stage. Called from the tick
+/// interrupt; it takes no lock the bus could hold for longer than one drive call.
+pub fn control_tick(now: Instant, stage: &mut impl PowerStage) {
+    if let Some(out) = with_drive(|d| d.tick(now)) {
+        stage.apply(&out);
+    }
+    TICKS.fetch_add(1, Ordering::Relaxed);
+}
+
+/// Now, on the drive's clock (embassy-time's, in microseconds).
+pub fn now() -> Instant {
+    Instant::from_micros(embassy_time::Instant::now().as_micros())
+}
+
+/// Copies the drive's pending reply out of the lock, so it is sent without holding the drive.
+fn take_reply(d: &mut Drive, out: &mut [u8; MAX_FRAME]) -> usize {
+    match d.take_reply() {
+        Some(r) => out.get_mut(..r.len()).map_or(0, |dst| {
+            dst.copy_from_slice(r);
+            r.len()
+        }),
+        None => 0,
+    }
+}
+
+async fn send(serial: &mut Serial, reply: &[u8; MAX_FRAME], n: usize) {
+    if let Some(bytes) = reply.get(..n)
+        && !bytes.is_empty()
+        && serial.write_all(bytes).await.is_err()
+    {
+        warn!("uart: write failed");
+    }
+}
+
+/// The RTU slave on a line with baud timing: bytes in with their arrival time, t3.5 from a
+/// timer on `drive.deadline()`, replies out.
+#[cfg(not(feature = "qemu"))]
+#[embassy_executor::task]
+pub async fn modbus(mut serial: Serial) -> ! {
+    let mut buf = [0u8; 64];
+    let mut reply = [0u8; MAX_FRAME];
+    loop {
+        let deadline = with_drive(|d| d.deadline()).flatten();
+        let timeout = async {
+            match deadline {
+                Some(at) => Timer::at(embassy_time::Instant::from_micros(at.as_micros())).await,
+                None => core::future::pending().await,
+            }
+        };
+        let n = match select(serial.read(&mut buf), timeout).await {
+            // A chunk shares one stamp: with a read woken per byte, chunks are one byte unless
+            // the task ran late, and then the stamp is late by at most that delay.
+            Either::First(Ok(n)) => {
+                let bytes = buf.get(..n).unwrap_or_default();
+                with_drive(|d| {
+                    d.on_rx(now(), bytes);
+                    take_reply(d, &mut reply)
+                })
+            }
+            Either::First(Err(_)) => {
+                warn!("uart: receive error");
+                None
+            }
+            Either::Second(()) => with_drive(|d| {
+                d.on_timer(now());
+                take_reply(d, &mut reply)
+            }),
+        };
+        send(&mut serial, &reply, n.unwrap_or(0)).await;
+    }
+}
+
+/// Silence that ends a request whose length its function code does not tell (or garbage) on a
+/// line without baud timing. QEMU paces bytes about 1 ms apart; 20 ms is no pause a master makes
+/// inside a frame.
+#[cfg(feature = "qemu")]
+const SILENCE: embassy_time::Duration = embassy_time::Duration::from_millis(20);
+/// Silence that ends a request known to be incomplete: a loaded host can stall QEMU's serial
+/// line for tens of milliseconds inside a frame.
+#[cfg(feature = "qemu")]
+const SILENCE_PARTIAL: embassy_time::Duration = embassy_time::Duration::from_millis(250);
+
+/// The RTU slave on a line without baud timing (QEMU): a request ends by its length (see
+/// `frames`) or by a long silence, then goes to the drive in one burst t3.5 before now.
+#[cfg(feature = "qemu")]
+#[embassy_executor::task]
+pub async fn modbus(mut serial: Serial) -> ! {
+    let mut buf = [0u8; 64];
+    let mut reply = [0u8; MAX_FRAME];
+    let mut frame = crate::frames::Assembler::new();
+    loop {
+        let silence = if frame.expects_more() { SILENCE_PARTIAL } else { SILENCE };
+        let n = match select(serial.read(&mut buf), Timer::after(silence)).await {
+            Either::First(Ok(n)) => {
+                let mut sent = None;
+                for &b in buf.get(..n).unwrap_or_default() {
+                    if frame.push(b) {
+                        sent = deliver(&mut frame, &mut reply);
+                    }
+                }
+                sent
+            }
+            Either::First(Err(_)) => None,
+            Either::Second(()) if !frame.is_empty() => deliver(&mut frame, &mut reply),
+            Either::Second(()) => None,
+        };
+        send(&mut serial, &reply, n.unwrap_or(0)).await;
+    }
+}
+
+/// Hands a complete request to the drive as a burst that ended t3.5 ago, and takes its reply.
+#[cfg(feature = "qemu")]
+fn deliver(frame: &mut crate::frames::Assembler, reply: &mut [u8; MAX_FRAME]) -> Option<usize> {
+    let n = with_drive(|d| {
+        let t = now().as_micros();
+        let t35 = d.baud().t35_micros();
+        d.on_rx(Instant::from_micros(t.saturating_sub(t35)), frame.bytes());
+        d.on_timer(Instant::from_micros(t.max(t35)));
+        take_reply(d, reply)
+    });
+    frame.clear();
+    n
+}

@@ -1,0 +1,348 @@
+//! The STM32G431CB board: clocks, pin map and peripheral setup. Nothing else knows a pin name.
+//!
+//! | signal          | pin         | peripheral                  | notes                                      |
+//! |-----------------|-------------|-----------------------------|--------------------------------------------|
+//! | RS-485 TX       | PA9         | USART1_TX (AF7)             |                                            |
+//! | RS-485 RX       | PA10        | USART1_RX (AF7)             |                                            |
+//! | RS-485 DE       | PA12        | USART1_DE (AF7)             | driven by the USART; /RE tied to DE        |
+//! | STEP            | PB0         | TIM1_CH2N (AF6)             | pulses from the timer, idle low            |
+//! | DIR             | PB1         | GPIO out, push-pull         | idle low                                   |
+//! | ENABLE          | PB2         | GPIO out, push-pull         | active low on the usual drivers: high = off|
+//! | current ref     | PB6         | TIM4_CH1 (AF2), 100 kHz PWM | RC-filtered to the driver's VREF           |
+//! | encoder A / B   | PA0 / PA1   | TIM2_CH1 / CH2 (AF1)        | quadrature, ×4                             |
+//! | bus voltage     | PB12        | ADC1_IN11                   | divider to the supply                      |
+//! | analog in       | PB14        | ADC1_IN5                    | 0..3.3 V, 0x605F                           |
+//! | temperature     | (internal)  | ADC1 temperature sensor     |                                            |
+//! | EXT1 / 2 / 3    | PA4 / 5 / 6 | GPIO in, pull-up, EXTI4/5/6 | 0x6031 bits 7-9                            |
+//! | FSET            | PC13        | GPIO in, pull-up, EXTI13    | factory-settings button to ground          |
+//! | SWDIO / SWCLK   | PA13 / PA14 | debug                       | left alone for the probe (RTT logs)        |
+//!
+//! Clock: HSI16 / 4 × 85 / 2 = 170 MHz SYSCLK from the PLL, range-1 boost mode; AHB, APB1 and
+//! APB2 undivided, so USART1 and every timer count at 170 MHz.
+//!
+//! Timers: TIM3 is embassy-time's free-running 1 MHz clock (the time stamps of received bytes
+//! and the t3.5 timer); TIM6 is the 20 kHz control tick (interrupt priority 0, above all
+//! others); TIM1 emits step pulses; TIM4 the current reference; TIM2 counts the encoder.
+
+use core::cell::RefCell;
+
+use cortex_m::singleton;
+use critical_section::Mutex;
+use drive_core::Baud;
+use drive_core::control::TICK_HZ;
+use embassy_stm32::adc::{Adc, AdcConfig, SampleTime, Temperature};
+use embassy_stm32::exti::{self, ExtiInput};
+use embassy_stm32::gpio::{Level, Output, Pull, Speed};
+use embassy_stm32::interrupt::{self, InterruptExt, Priority};
+use embassy_stm32::mode::Async;
+use embassy_stm32::pac;
+use embassy_stm32::peripherals::{ADC1, PB12, PB14, TIM2};
+use embassy_stm32::rcc::{Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk};
+use embassy_stm32::timer::qei::{Config as QeiConfig, Qei};
+use embassy_stm32::usart::{self, BufferedUart};
+use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_stm32::{Peri, bind_interrupts, peripherals};
+
+use crate::power::PowerStage;
+
+bind_interrupts!(struct Irqs {
+    USART1 => usart::BufferedInterruptHandler<peripherals::USART1>;
+    EXTI4 => exti::InterruptHandler<interrupt::typelevel::EXTI4>;
+    EXTI9_5 => exti::InterruptHandler<interrupt::typelevel::EXTI9_5>;
+    EXTI15_10 => exti::InterruptHandler<interrupt::typelevel::EXTI15_10>;
+    TIM6_DAC => TickHandler;
+});
+
+/// What the 0x1022 hardware version says.
+pub const HARDWARE: &str = "G431";
+/// Timer clock (PCLK1 = PCLK2 = SYSCLK).
+pub const TIMER_HZ: u32 = 170_000_000;
+/// Timer counts (and core cycles) in one control tick.
+pub const TICK_COUNTS: u32 = TIMER_HZ / TICK_HZ;
+/// The share of a tick step pulses may fill: the rest is margin for the tick's own jitter.
+const PULSE_WINDOW: u32 = TICK_COUNTS * 15 / 16;
+/// Shortest step period in timer counts (1 µs: 1 Mpps, five times seed 000's 200 kpps).
+const MIN_STEP_PERIOD: u32 = TIMER_HZ / 1_000_000;
+/// Current reference PWM period in timer counts (100 kHz).
+const CURRENT_PWM_PERIOD: u32 = TIMER_HZ / 100_000;
+/// Phase current at 100 % reference duty (3.3 V on VREF).
+const FULL_SCALE_MA: u32 = 3000;
+
+/// Receive and transmit ring sizes: a whole RTU frame (256 bytes) fits either way.
+const RX_BUF: usize = 256;
+const TX_BUF: usize = 256;
+
+/// The RS-485 port.
+pub type Serial = BufferedUart<'static>;
+
+/// The board's peripherals, configured.
+pub struct Board {
+    /// The RS-485 port (USART1, driver enable in hardware).
+    pub uart: Serial,
+    /// The step/direction power stage.
+    pub stage: StepDir,
+    /// The digital inputs.
+    pub inputs: Inputs,
+    /// Encoder and analog inputs.
+    pub sense: Sense,
+    /// The independent watchdog, not yet started.
+    pub watchdog: IndependentWatchdog<'static, peripherals::IWDG>,
+}
+
+/// The digital inputs, with edge interrupts.
+pub struct Inputs {
+    /// EXT1..EXT3 (limit/home switches and general inputs).
+    pub ext: [ExtiInput<'static, Async>; 3],
+    /// The factory-settings button.
+    pub fset: ExtiInput<'static, Async>,
+}
+
+/// The encoder counter and the ADC with its channels.
+pub struct Sense {
+    /// The encoder's quadrature counter (16 bits, extended by whoever polls it).
+    pub encoder: Qei<'static, TIM2>,
+    /// ADC1.
+    pub adc: Adc<'static, ADC1>,
+    /// Bus voltage divider.
+    pub bus_voltage: Peri<'static, PB12>,
+    /// The analog input.
+    pub analog_in: Peri<'static, PB14>,
+    /// The internal temperature sensor.
+    pub temperature: Temperature,
+}
+
+impl Sense {
+    /// Raw 12-bit readings of the bus voltage, the temperature sensor and the analog input.
+    pub fn read_adc(&mut self) -> (u16, u16, u16) {
+        let t = SampleTime::CYCLES247_5; // high-impedance dividers, and the sensor's minimum 5 µs
+        let v = self.adc.blocking_read(&mut self.bus_voltage, t);
+        let temp = self.adc.blocking_read(&mut self.temperature, t);
+        let a = self.adc.blocking_read(&mut self.analog_in, t);
+        (v, temp, a)
+    }
+}
+
+/// STEP (TIM1 pulses), DIR and ENABLE to an external step/direction driver, and its current
+/// reference on TIM4's PWM.
+pub struct StepDir {
+    dir: Output<'static>,
+    enable: Output<'static>,
+    /// Steps asked for and not yet started (signed).
+    pending: i64,
+}
+
+impl StepDir {
+    /// Whether TIM1 is still emitting the previous tick's pulses.
+    fn busy() -> bool {
+        pac::TIM1.cr1().read().cen()
+    }
+}
+
+impl PowerStage for StepDir {
+    fn step(&mut self, steps: i64) {
+        self.pending = self.pending.saturating_add(steps);
+        if self.pending == 0 || Self::busy() {
+            return;
+        }
+        // DIR changes only between pulse trains, at least one period before the next rising edge.
+        self.dir.set_level(if self.pending < 0 { Level::High } else { Level::Low });
+        let max = u64::from(PULSE_WINDOW / MIN_STEP_PERIOD);
+        let n = self.pending.unsigned_abs().min(max);
+        let period = (u64::from(PULSE_WINDOW) / n.max(1)) as u32;
+        let t = pac::TIM1;
+        t.arr().write(|w| w.set_arr((period - 1) as u16));
+        // PWM mode 2: low for the first half of each period, rising edge mid-period.
+        t.ccr(1).write(|w| w.set_ccr((period / 2) as u16));
+        // One-pulse mode stops the counter after RCR + 1 periods: exactly n pulses.
+        t.rcr().write(|w| w.set_rep((n - 1) as u16));
+        t.egr().write(|w| w.set_ug(true));
+        t.cr1().modify(|w| w.set_cen(true));
+        let done = n as i64;
+        self.pending -= if self.pending < 0 { -done } else { done };
+    }
+
+    fn set_current(&mut self, milliamps: u16) {
+        let duty = (u32::from(milliamps).min(FULL_SCALE_MA) * CURRENT_PWM_PERIOD / FULL_SCALE_MA) as u16;
+        pac::TIM4.ccr(0).write(|w| w.set_ccr(duty));
+        self.enable.set_level(if milliamps == 0 { Level::High } else { Level::Low });
+    }
+}
+
+/// Cuts the power stage with raw register writes, whatever state the drivers are in: ENABLE
+/// high (off), pulse timer stopped, current reference 0. For the panic and fault handlers.
+pub fn power_off() {
+    pac::GPIOB.bsrr().write(|w| w.set_bs(2, true));
+    pac::TIM1.cr1().modify(|w| w.set_cen(false));
+    pac::TIM4.ccr(0).write(|w| w.set_ccr(0));
+}
+
+/// The power stage the tick interrupt drives, handed over by [`start_tick`].
+static STAGE: Mutex<RefCell<Option<StepDir>>> = Mutex::new(RefCell::new(None));
+
+/// Cycles the last control tick took (DWT cycle counter), and the most any took.
+pub static TICK_CYCLES: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
+/// The longest control tick so far, in cycles.
+pub static TICK_CYCLES_MAX: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
+/// Shortest and longest time between the starts of two control ticks, in cycles (the jitter).
+pub static TICK_PERIOD_MIN: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(u32::MAX);
+/// See [`TICK_PERIOD_MIN`].
+pub static TICK_PERIOD_MAX: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
+/// Cycle count at the start of the last tick (0: none yet).
+static TICK_LAST_START: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
+
+/// The 20 kHz control tick on TIM6's update interrupt.
+struct TickHandler;
+
+impl interrupt::typelevel::Handler<interrupt::typelevel::TIM6_DAC> for TickHandler {
+    unsafe fn on_interrupt() {
+        use core::sync::atomic::Ordering::Relaxed;
+        pac::TIM6.sr().write(|w| w.set_uif(false));
+        let start = cortex_m::peripheral::DWT::cycle_count();
+        let last = TICK_LAST_START.swap(start, Relaxed);
+        if last != 0 {
+            let period = start.wrapping_sub(last);
+            TICK_PERIOD_MIN.fetch_min(period, Relaxed);
+            TICK_PERIOD_MAX.fetch_max(period, Relaxed);
+        }
+        critical_section::with(|cs| {
+            if let Some(stage) = STAGE.borrow_ref_mut(cs).as_mut() {
+                crate::app::control_tick(crate::app::now(), stage);
+            }
+        });
+        let cycles = cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start);
+        TICK_CYCLES.store(cycles, Relaxed);
+        TICK_CYCLES_MAX.fetch_max(cycles, Relaxed);
+    }
+}
+
+/// Hands the power stage to the control tick and starts TIM6 at [`TICK_HZ`].
+pub fn start_tick(stage: StepDir) {
+    critical_section::with(|cs| STAGE.borrow_ref_mut(cs).replace(stage));
+    pac::RCC.apb1enr1().modify(|w| w.set_tim6en(true));
+    let t = pac::TIM6;
+    t.psc().write_value(0);
+    t.arr().write(|w| w.set_arr((TICK_COUNTS - 1) as u16));
+    t.egr().write(|w| w.set_ug(true));
+    t.sr().write(|w| w.set_uif(false));
+    t.dier().write(|w| w.set_uie(true));
+    interrupt::TIM6_DAC.set_priority(Priority::P0);
+    interrupt::TIM6_DAC.unpend();
+    // SAFETY: the handler (TickHandler) only touches STAGE and the drive through their mutexes.
+    unsafe { interrupt::TIM6_DAC.enable() };
+    t.cr1().modify(|w| w.set_cen(true));
+}
+
+/// Sets up clocks and peripherals; the UART runs 8N1 at `baud` (the drive's power-up setting).
+pub fn init(baud: Baud) -> Board {
+    let mut config = embassy_stm32::Config::default();
+    let rcc = &mut config.rcc;
+    rcc.pll = Some(Pll {
+        source: PllSource::HSI,
+        prediv: PllPreDiv::DIV4, // 4 MHz PLL input
+        mul: PllMul::MUL85,      // 340 MHz VCO
+        divp: None,
+        divq: None,
+        divr: Some(PllRDiv::DIV2), // 170 MHz
+    });
+    rcc.sys = Sysclk::PLL1_R;
+    rcc.boost = true; // required above 150 MHz
+    let p = embassy_stm32::init(config);
+
+    // The tick's cost is measured with the cycle counter.
+    if let Some(mut core) = cortex_m::Peripherals::take() {
+        core.DCB.enable_trace();
+        core.DWT.enable_cycle_counter();
+    }
+
+    let mut uart_config = usart::Config::default();
+    uart_config.baudrate = baud.get();
+    // Wake the reader at every byte so each one is time-stamped close to its arrival (t1.5/t3.5).
+    uart_config.eager_reads = Some(1);
+    // embassy-stm32 0.6 writes DEDT from `de_assertion_time` too: keep both the same.
+    uart_config.de_assertion_time = 16; // one bit time of DE before the start bit
+    uart_config.de_deassertion_time = 16;
+    // Each singleton! yields once; a second `init` already panicked in `embassy_stm32::init`.
+    let (Some(tx_buf), Some(rx_buf)) =
+        (singleton!(: [u8; TX_BUF] = [0; TX_BUF]), singleton!(: [u8; RX_BUF] = [0; RX_BUF]))
+    else {
+        defmt::panic!("board::init called twice");
+    };
+    let uart =
+        defmt::unwrap!(BufferedUart::new_with_de(p.USART1, p.PA10, p.PA9, p.PA12, Irqs, tx_buf, rx_buf, uart_config));
+    // Below the control tick: a burst of bytes delays the tick by one short handler at most.
+    interrupt::USART1.set_priority(Priority::P2);
+    for irq in [interrupt::EXTI4, interrupt::EXTI9_5, interrupt::EXTI15_10] {
+        irq.set_priority(Priority::P3);
+    }
+
+    // Held by the stage, not dropped: a dropped pin returns to analog and the driver's inputs float.
+    let stage = StepDir {
+        dir: Output::new(p.PB1, Level::Low, Speed::Low),
+        enable: Output::new(p.PB2, Level::High, Speed::Low), // motor off until told otherwise
+        pending: 0,
+    };
+    let _ = (p.TIM1, p.TIM4, p.PB0, p.PB6); // owned by the raw timer setup below
+    setup_step_timer();
+    setup_current_pwm();
+
+    let inputs = Inputs {
+        ext: [
+            ExtiInput::new(p.PA4, p.EXTI4, Pull::Up, Irqs),
+            ExtiInput::new(p.PA5, p.EXTI5, Pull::Up, Irqs),
+            ExtiInput::new(p.PA6, p.EXTI6, Pull::Up, Irqs),
+        ],
+        fset: ExtiInput::new(p.PC13, p.EXTI13, Pull::Up, Irqs),
+    };
+    let adc = Adc::new(p.ADC1, AdcConfig::default());
+    let temperature = adc.enable_temperature();
+    let sense = Sense {
+        encoder: Qei::new(p.TIM2, p.PA0, p.PA1, QeiConfig::default()),
+        adc,
+        bus_voltage: p.PB12,
+        analog_in: p.PB14,
+        temperature,
+    };
+    let watchdog = IndependentWatchdog::new(p.IWDG, 500_000);
+    Board { uart, stage, inputs, sense, watchdog }
+}
+
+/// Puts `pin` of GPIOB on alternate function `af`, fast.
+fn gpiob_af(pin: usize, af: u8) {
+    let g = pac::GPIOB;
+    g.ospeedr().modify(|w| w.set_ospeedr(pin, pac::gpio::vals::Ospeedr::VERY_HIGH_SPEED));
+    g.afr(pin / 8).modify(|w| w.set_afr(pin % 8, af));
+    g.moder().modify(|w| w.set_moder(pin, pac::gpio::vals::Moder::ALTERNATE));
+}
+
+/// TIM1 channel 2N on PB0: one-pulse mode with the repetition counter, PWM mode 2.
+fn setup_step_timer() {
+    pac::RCC.apb2enr().modify(|w| w.set_tim1en(true));
+    let t = pac::TIM1;
+    t.cr1().write(|w| w.set_opm(true));
+    t.psc().write_value(0);
+    t.ccmr_output(0).modify(|w| {
+        w.set_ocm(1, pac::timer::vals::Ocm::PWM_MODE2);
+        w.set_ocpe(1, true);
+    });
+    // Only the N output enabled: it follows OC2REF uninverted.
+    t.ccer().modify(|w| w.set_ccne(1, true));
+    t.bdtr().modify(|w| w.set_moe(true));
+    gpiob_af(0, 6);
+}
+
+/// TIM4 channel 1 on PB6: 100 kHz PWM, duty 0 until the drive asks for current.
+fn setup_current_pwm() {
+    pac::RCC.apb1enr1().modify(|w| w.set_tim4en(true));
+    let t = pac::TIM4;
+    t.psc().write_value(0);
+    t.arr().write(|w| w.set_arr((CURRENT_PWM_PERIOD - 1) as u16));
+    t.ccr(0).write(|w| w.set_ccr(0));
+    t.ccmr_output(0).modify(|w| {
+        w.set_ocm(0, pac::timer::vals::Ocm::PWM_MODE1);
+        w.set_ocpe(0, true);
+    });
+    t.ccer().modify(|w| w.set_cce(0, true));
+    t.egr().write(|w| w.set_ug(true));
+    t.cr1().modify(|w| w.set_cen(true));
+    gpiob_af(6, 2);
+}

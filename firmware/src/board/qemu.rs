@@ -1,0 +1,195 @@
+//! QEMU's b-l475e-iot01a (STM32L475VG), on the PAC: the same application as the G431 board
+//! over what QEMU 10 models.
+//!
+//! QEMU models RCC, GPIO, EXTI and the USARTs of this chip but not its timers, DMA or PWR, and
+//! its USART takes 32-bit accesses only; embassy-stm32's `init` and UART driver do not run there
+//! (see the README). So this layer is small and direct:
+//! - USART1 (QEMU's first serial port) with 32-bit register access, the RXNE interrupt filling
+//!   a pipe, and transmission by polling TXE;
+//! - SysTick at 1 kHz from the 4 MHz MSI reset clock: the embassy-time driver (microseconds,
+//!   interpolated from the SysTick counter) and the control tick. `drive-core` evaluates the
+//!   motion at the time it is given, so a slower tick only batches more steps per tick;
+//! - no step timer: the drive core counts the steps (the position advances as on the board).
+
+use core::cell::{Cell, RefCell};
+use core::convert::Infallible;
+use core::sync::atomic::{AtomicU32, Ordering};
+use core::task::Waker;
+
+use critical_section::Mutex;
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::pipe::Pipe;
+use embassy_time_queue_utils::Queue;
+use stm32_metapac as pac;
+
+use crate::power::PowerStage;
+
+/// What the 0x1022 hardware version says.
+pub const HARDWARE: &str = "QEMU L475";
+/// SysTick clock: the core clock at reset (MSI, 4 MHz), which nothing here changes.
+const CORE_HZ: u32 = 4_000_000;
+/// SysTick counts in one millisecond.
+const RELOAD: u32 = CORE_HZ / 1000 - 1;
+
+/// Received bytes, from the RXNE interrupt to the Modbus task.
+static RX: Pipe<CriticalSectionRawMutex, 256> = Pipe::new();
+
+/// USART1 as the RS-485 port (QEMU's line has no transceiver and no baud timing).
+pub struct Serial(());
+
+impl embedded_io_async::ErrorType for Serial {
+    type Error = Infallible;
+}
+
+impl embedded_io_async::Read for Serial {
+    async fn read(&mut self, buf: &mut [u8]) -> Result<usize, Infallible> {
+        Ok(RX.read(buf).await)
+    }
+}
+
+impl embedded_io_async::Write for Serial {
+    async fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
+        let u = pac::USART1;
+        for &b in buf {
+            while !u.isr().read().txe() {}
+            u.tdr().write(|w| w.set_dr(u16::from(b)));
+        }
+        Ok(buf.len())
+    }
+
+    async fn flush(&mut self) -> Result<(), Infallible> {
+        while !pac::USART1.isr().read().tc() {}
+        Ok(())
+    }
+}
+
+/// USART1's receive interrupt: every byte into the pipe (a full pipe drops it, like an overrun).
+#[unsafe(no_mangle)]
+extern "C" fn USART1() {
+    let u = pac::USART1;
+    let isr = u.isr().read();
+    if isr.ore() {
+        // Only the overrun flag: writing the whole ISR value to ICR clears TXE in QEMU's model.
+        u.icr().write(|w| w.set_ore(true));
+    }
+    if isr.rxne() {
+        let b = u.rdr().read().dr() as u8;
+        let _ = RX.try_write(&[b]);
+    }
+}
+
+/// Starts SysTick (time and control tick) and USART1 with its receive interrupt.
+pub fn init() -> Serial {
+    // SAFETY: called once, before anything else uses the core peripherals.
+    let mut core = unsafe { cortex_m::Peripherals::steal() };
+    core.SYST.set_clock_source(cortex_m::peripheral::syst::SystClkSource::Core);
+    core.SYST.set_reload(RELOAD);
+    core.SYST.clear_current();
+    core.SYST.enable_interrupt();
+    core.SYST.enable_counter();
+
+    pac::RCC.apb2enr().modify(|w| w.set_usart1en(true));
+    let u = pac::USART1;
+    u.brr().write(|w| w.set_brr((CORE_HZ / 115_200) as u16));
+    u.cr1().write(|w| {
+        w.set_re(true);
+        w.set_te(true);
+        w.set_rxneie(true);
+        w.set_ue(true);
+    });
+    // SAFETY: the handler only touches USART1 and the pipe (a critical-section mutex).
+    unsafe { cortex_m::peripheral::NVIC::unmask(pac::Interrupt::USART1) };
+    Serial(())
+}
+
+/// Nothing to cut under QEMU: no power stage.
+pub fn power_off() {}
+
+/// Milliseconds since boot, counted by the SysTick handler.
+static MILLIS: Mutex<Cell<u64>> = Mutex::new(Cell::new(0));
+/// The timers of embassy-time's queue, and the next time one is due.
+static QUEUE: Mutex<RefCell<(Queue, u64)>> = Mutex::new(RefCell::new((Queue::new(), u64::MAX)));
+
+/// Microseconds since boot: the millisecond count plus SysTick's progress through the next one.
+fn micros() -> u64 {
+    critical_section::with(|cs| {
+        let before = cortex_m::peripheral::SYST::get_current();
+        // Interrupts are off: a wrap since the last handler run shows as a pending SysTick. If it
+        // is not pending, `before` was read before any wrap; if it is, `after` is read after it.
+        let wrapped = cortex_m::peripheral::SCB::is_pendst_pending();
+        let after = cortex_m::peripheral::SYST::get_current();
+        let (ms, count) =
+            if wrapped { (MILLIS.borrow(cs).get() + 1, after) } else { (MILLIS.borrow(cs).get(), before) };
+        ms * 1000 + u64::from((RELOAD - count.min(RELOAD)) / (CORE_HZ / 1_000_000))
+    })
+}
+
+/// embassy-time's driver on SysTick.
+struct SysTickDriver;
+
+impl embassy_time_driver::Driver for SysTickDriver {
+    fn now(&self) -> u64 {
+        micros()
+    }
+
+    fn schedule_wake(&self, at: u64, waker: &Waker) {
+        critical_section::with(|cs| {
+            let mut q = QUEUE.borrow_ref_mut(cs);
+            let (queue, next) = &mut *q;
+            if queue.schedule_wake(at, waker) {
+                *next = queue.next_expiration(micros());
+            }
+        });
+    }
+}
+
+embassy_time_driver::time_driver_impl!(static DRIVER: SysTickDriver = SysTickDriver);
+
+/// The emulated chip's power stage: none. The drive core counts the steps itself; this only
+/// notes whether the tick stepped, for the cost figures.
+struct NoStage {
+    moving: bool,
+}
+
+impl PowerStage for NoStage {
+    fn step(&mut self, steps: i64) {
+        self.moving = steps != 0;
+    }
+    fn set_current(&mut self, _milliamps: u16) {}
+}
+
+/// The control tick's cost in SysTick counts (a count is 250 virtual ns, 15.6 instructions under
+/// `qemu -icount shift=4`), read by `cargo xtask tick-cost` through QEMU's monitor: [idle ticks, their total counts, ticks that stepped, their total counts, most counts
+/// of one tick].
+#[unsafe(no_mangle)]
+static TICK_COST: [AtomicU32; 5] = [const { AtomicU32::new(0) }; 5];
+
+/// Every millisecond: time, then the control tick, then the timers due.
+#[cortex_m_rt::exception]
+fn SysTick() {
+    critical_section::with(|cs| {
+        let m = MILLIS.borrow(cs);
+        m.set(m.get() + 1);
+    });
+    let now = micros();
+    let mut stage = NoStage { moving: false };
+    let before = cortex_m::peripheral::SYST::get_current();
+    crate::app::control_tick(drive_core::Instant::from_micros(now), &mut stage);
+    // SysTick counts down and has just reloaded: no wrap within the tick.
+    let spent = before.saturating_sub(cortex_m::peripheral::SYST::get_current());
+    let at = if stage.moving { 2 } else { 0 };
+    if let (Some(n), Some(sum)) = (TICK_COST.get(at), TICK_COST.get(at + 1)) {
+        n.fetch_add(1, Ordering::Relaxed);
+        sum.fetch_add(spent, Ordering::Relaxed);
+    }
+    if let Some(max) = TICK_COST.get(4) {
+        max.fetch_max(spent, Ordering::Relaxed);
+    }
+    critical_section::with(|cs| {
+        let mut q = QUEUE.borrow_ref_mut(cs);
+        let (queue, next) = &mut *q;
+        if now >= *next {
+            *next = queue.next_expiration(now);
+        }
+    });
+}

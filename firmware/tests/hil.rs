@@ -1,0 +1,153 @@
+//! Hardware-in-the-loop tests on a real STM32G431CB board, run by probe-rs (embedded-test
+//! harness; every test starts from a reset):
+//!
+//! ```sh
+//! cargo test -p firmware --target thumbv7em-none-eabihf --profile firmware --test hil
+//! ```
+//!
+//! The fixture: the board's RS-485 transceiver with /RE held low (jumper off DE), so it echoes
+//! what it drives; STEP (PB0) wired to encoder A (PA0), where TIM2 counts its rising edges.
+//! Flash save and reload waits for the parameter store (persistence issue).
+#![cfg_attr(target_os = "none", no_std, no_main)]
+
+/// Host stub: the suite runs on the board only.
+#[cfg(not(target_os = "none"))]
+fn main() {}
+
+#[cfg(target_os = "none")]
+#[path = "../src/app.rs"]
+#[allow(dead_code, reason = "the suite uses part of the application")]
+mod app;
+#[cfg(target_os = "none")]
+#[path = "../src/board/g431.rs"]
+#[allow(dead_code, reason = "the suite uses part of the board")]
+mod board;
+#[cfg(target_os = "none")]
+#[path = "../src/frames.rs"]
+#[allow(dead_code, reason = "only its frame size is used")]
+mod frames;
+#[cfg(target_os = "none")]
+#[path = "../src/power.rs"]
+mod power;
+
+#[cfg(target_os = "none")]
+#[defmt::panic_handler]
+fn defmt_panic() -> ! {
+    board::power_off();
+    core::panic!("defmt panic")
+}
+
+#[cfg(all(test, target_os = "none"))]
+#[embedded_test::tests]
+mod tests {
+    use core::sync::atomic::Ordering::Relaxed;
+
+    use defmt::{assert, assert_eq, info};
+    use defmt_rtt as _;
+    use drive_core::control::TICK_HZ;
+    use drive_core::od::Obj;
+    use embassy_stm32::pac;
+    use embassy_time::{Duration, Instant, Timer, with_timeout};
+    use embedded_io_async::{Read, Write};
+
+    use crate::app;
+    use crate::board::{self, Board};
+
+    #[init]
+    fn init() -> Board {
+        let baud = app::start(board::HARDWARE);
+        board::init(baud)
+    }
+
+    /// Bytes written to the USART come back through the transceiver, DE switching around them.
+    #[test]
+    #[timeout(5)]
+    async fn usart_loopback_through_the_transceiver(board: Board) {
+        let mut uart = board.uart;
+        let sent = *b"\x01\x03\x60\x0C\x00\x02\x1A\x08 loopback";
+        uart.write_all(&sent).await.ok();
+        let mut got = [0u8; 18];
+        let mut n = 0;
+        while n < got.len() {
+            let r = with_timeout(Duration::from_millis(100), uart.read(&mut got[n..])).await;
+            match r {
+                Ok(Ok(k)) => n += k,
+                _ => break,
+            }
+        }
+        assert_eq!(&got[..n], &sent[..], "echo");
+    }
+
+    /// 20 kHz: the tick count over 200 ms, the spread of the period, and the tick's own cost.
+    #[test]
+    #[timeout(5)]
+    async fn control_tick_period_and_jitter(board: Board) {
+        board::start_tick(board.stage);
+        Timer::after_millis(10).await;
+        let (t0, n0) = (Instant::now(), app::TICKS.load(Relaxed));
+        Timer::after_millis(200).await;
+        let (t1, n1) = (Instant::now(), app::TICKS.load(Relaxed));
+        let expected = (t1 - t0).as_micros() * u64::from(TICK_HZ) / 1_000_000;
+        let ticks = u64::from(n1.wrapping_sub(n0));
+        let (min, max) = (board::TICK_PERIOD_MIN.load(Relaxed), board::TICK_PERIOD_MAX.load(Relaxed));
+        let cost = board::TICK_CYCLES_MAX.load(Relaxed);
+        info!(
+            "{} ticks in {} us; period {}..{} cycles; longest tick {} cycles",
+            ticks,
+            (t1 - t0).as_micros(),
+            min,
+            max,
+            cost
+        );
+        assert!(ticks.abs_diff(expected) <= 2, "tick rate");
+        // The timer reloads in hardware: only the entry latency varies (< 1 µs).
+        let nominal = board::TICK_COUNTS;
+        assert!(min >= nominal - 170 && max <= nominal + 170, "jitter under 1 us");
+        // QEMU counts about 2700 instructions for a stepping tick: well inside the period.
+        assert!(cost < nominal * 3 / 4, "a tick leaves a quarter of its period to the rest");
+    }
+
+    /// A relative move at seed 000's top speed: the output timer's pulses, counted by TIM2 from
+    /// the STEP wire, are exactly the move's steps, and the drive's position agrees.
+    #[test]
+    #[timeout(10)]
+    async fn step_count_on_the_output_timer(board: Board) {
+        // TIM2 counts rising edges on TI1 (PA0, wired to STEP): external clock mode 1.
+        let t = pac::TIM2;
+        t.cr1().modify(|w| w.set_cen(false));
+        t.smcr().write(|w| {
+            w.set_sms(pac::timer::vals::Sms::EXT_CLOCK_MODE);
+            w.set_ts(pac::timer::vals::Ts::TI1FP1);
+        });
+        t.arr().write_value(u32::MAX);
+        t.cnt().write_value(0);
+        t.cr1().modify(|w| w.set_cen(true));
+
+        board::start_tick(board.stage);
+        const STEPS: u32 = 40_000;
+        app::with_drive(|d| {
+            let s = d.state_mut();
+            // Level 0: no ramp, the whole move at 200 kpps (10 steps a tick).
+            s.apply(Obj::AccelLevel, 0);
+            s.apply(Obj::DecelLevel, 0);
+            s.apply(Obj::MaxSpeed, 200_000);
+            s.apply(Obj::RelativeMove, STEPS);
+        });
+        let start = Instant::now();
+        while app::with_drive(|d| d.state().status().controller & drive_core::drive::STATUS_BUSY != 0) == Some(true) {
+            assert!(start.elapsed() < Duration::from_secs(5), "move ends");
+            Timer::after_millis(5).await;
+        }
+        Timer::after_millis(5).await; // the last pulse train
+        let counted = t.cnt().read();
+        let position = app::with_drive(|d| d.state().position());
+        info!("{} pulses counted, position {}, in {} ms", counted, position, start.elapsed().as_millis());
+        assert_eq!(counted, STEPS);
+        assert_eq!(position, Some(i64::from(STEPS)));
+    }
+
+    /// Saving parameters to flash and reading them back after a reset.
+    #[test]
+    #[ignore = "needs the parameter store of the persistence issue"]
+    fn flash_save_and_reload() {}
+}
