@@ -19,6 +19,7 @@ use embedded_io_async::{Read, Write};
 use crate::board::Serial;
 use crate::frames::MAX_FRAME;
 use crate::power::PowerStage;
+use static_cell::StaticCell;
 
 /// The drive, once `start` has built it. A reference, so the mutex's initial value (`None`) is
 /// zero and lives in .bss: an `Option<Drive>` would copy 2.3 KB of initial image from flash.
@@ -38,13 +39,18 @@ fn identity(hardware: &'static str) -> Identity {
 }
 
 /// Builds the drive with factory settings (no parameter storage yet: saving is refused).
+// Not inlined: whatever its frame holds is given back before the tasks run on that stack.
+#[inline(never)]
 pub fn start(hardware: &'static str) -> drive_core::Baud {
-    let drive = Drive::new(DriveConfig { identity: identity(hardware), can_save: false, ..DriveConfig::default() });
-    let baud = drive.baud();
-    // singleton! keeps the drive in uninitialised (.bss) memory and yields it once.
-    let Some(drive) = cortex_m::singleton!(: Drive = drive) else {
+    // Built in place in .bss: the drive is 12 KB (its PVT table), and a copy on the way would
+    // stay in main's frame, which never returns, at the bottom of a stack of 17 KB.
+    static SLOT: StaticCell<Drive> = StaticCell::new();
+    let Some(slot) = SLOT.try_uninit() else {
         defmt::panic!("app::start called twice");
     };
+    let drive: &'static mut Drive =
+        slot.write(Drive::new(DriveConfig { identity: identity(hardware), can_save: false, ..DriveConfig::default() }));
+    let baud = drive.baud();
     critical_section::with(|cs| DRIVE.borrow_ref_mut(cs).replace(drive));
     baud
 }
