@@ -4,6 +4,7 @@ use crate::control::{Outputs, Pp, has_effect};
 use crate::crc;
 use crate::ident::Identity;
 use crate::motion::axis::Axis;
+use crate::od::map::is_command;
 use crate::od::{Access, NativeMap, OBJECTS, Obj, ObjError, ObjectDef, RegisterMap, Storage};
 use crate::pdu::{Exception, MAX_READ, Request, Words};
 use crate::rtu::{Framer, MAX_FRAME, RxError};
@@ -192,7 +193,7 @@ impl DriveState {
             // No storage on this platform yet, and no boot loader to jump to.
             (Obj::SystemControl, 2) if !self.can_save => Err(ObjError::Refused),
             (Obj::SystemControl, 1) => Err(ObjError::Refused),
-            (obj, _) if has_effect(obj) => self.check_motion(obj, value),
+            (obj, _) if is_command(obj) => self.check_motion(obj, value),
             _ => Ok(()),
         }
     }
@@ -200,7 +201,7 @@ impl DriveState {
     /// Writes `value` to the object `d` declares, which [`DriveState::check`] accepted.
     #[inline(always)]
     pub fn apply_def(&mut self, d: &ObjectDef, value: u32) {
-        if d.access == Access::Rw && d.storage != Storage::Live && !has_effect(d.obj) {
+        if d.access == Access::Rw && d.storage != Storage::Live && !is_command(d.obj) {
             // A plain setting: stored.
             if let Some(p) = self.params.get_mut(d.obj as usize) {
                 *p = value;

@@ -78,15 +78,16 @@ impl Framer {
             self.error.get_or_insert(RxError::Gap);
         }
         self.last = Some(now);
-        let room = MAX_FRAME - self.len;
-        let (fits, over) = bytes.split_at(bytes.len().min(room));
-        if let Some(dst) = self.buf.get_mut(self.len..self.len + fits.len()) {
-            dst.copy_from_slice(fits);
-            self.len += fits.len();
-            self.crc = fits.iter().fold(self.crc, |c, &b| crate::crc::update(c, b));
-        }
-        if !over.is_empty() {
-            self.error = Some(RxError::Overrun);
+        // Byte by byte: a frame's last byte usually comes alone (a receive interrupt), where a
+        // call to memcpy would cost more than the copy.
+        for &b in bytes {
+            let Some(slot) = self.buf.get_mut(self.len) else {
+                self.error = Some(RxError::Overrun);
+                return;
+            };
+            *slot = b;
+            self.len += 1;
+            self.crc = crate::crc::update(self.crc, b);
         }
     }
 

@@ -1,6 +1,7 @@
 //! Register maps: how the registers of a vendor's protocol reach the drive's objects.
 
-use super::{Access, OBJECTS, Obj, ObjError, ObjectDef, Type, index};
+use super::index;
+use super::{Access, OBJECTS, Obj, ObjError, ObjectDef, Type};
 use crate::control::has_effect;
 use crate::drive::DriveState;
 use crate::pdu::{Exception, MAX_WRITE, Words};
@@ -76,38 +77,16 @@ impl NativeMap {
         }
     }
 
-    /// What `values` (written from register `addr`) do to the object `d`, which starts at or
-    /// before register `reg` and is the first object of the write or follows the previous one.
-    #[inline]
-    fn op(&self, drive: &DriveState, d: &ObjectDef, addr: u32, reg: u32, values: Words<'_>) -> Result<Op, ObjError> {
-        let word = |r: u32| values.get((r - addr) as usize).map(u32::from).ok_or(ObjError::Unknown);
-        match d.ty {
-            Type::U8 | Type::U16 => Ok(Op::Commit(word(reg)?)),
-            Type::U32 | Type::S32 => {
-                let low = u32::from(d.addr) + 1;
-                if reg == low {
-                    let hi = match self.staged(d.obj) {
-                        Some(hi) => u32::from(hi),
-                        None => drive.read_def(d) >> 16,
-                    };
-                    Ok(Op::Commit(hi << 16 | word(low)?))
-                } else if low < addr + values.len() as u32 {
-                    Ok(Op::Commit(word(reg)? << 16 | word(low)?))
-                } else {
-                    Ok(Op::Stage(word(reg)? as u16))
-                }
-            }
-            Type::Str(_) => Err(ObjError::ReadOnly),
-        }
-    }
-
     /// Decodes a write of `values` from `addr` object by object, noting what to do to each; the
     /// addresses and access are checked here, the values by the caller.
     /// Whether any of them is a command (an object whose write does more than store it).
+    #[inline]
     fn plan(&self, drive: &DriveState, addr: u16, values: Words<'_>, plan: &mut Plan) -> Result<bool, ObjError> {
         let first = index::locate(addr, values.len() as u16).ok_or(ObjError::Unknown)?;
-        let (addr, end) = (u32::from(addr), u32::from(addr) + values.len() as u32);
-        let mut reg = addr;
+        let end = u32::from(addr) + values.len() as u32;
+        // The objects of a write are contiguous, so they take the words in order.
+        let mut words = values.iter().map(u32::from);
+        let mut reg = u32::from(addr);
         let mut commands = false;
         for d in OBJECTS.get(first..).unwrap_or_default() {
             if reg >= end {
@@ -119,12 +98,66 @@ impl NativeMap {
             if d.access == Access::Ro {
                 return Err(ObjError::ReadOnly);
             }
-            let op = self.op(drive, d, addr, reg, values)?;
-            commands |= has_effect(d.obj);
+            let mut word = || words.next().ok_or(ObjError::Unknown);
+            let op = match d.ty {
+                Type::U8 | Type::U16 => Op::Commit(word()?),
+                Type::U32 | Type::S32 => {
+                    if reg > u32::from(d.addr) {
+                        // The low word alone completes the value with the staged high word, or
+                        // the present one if none is staged.
+                        let hi = match self.staged(d.obj) {
+                            Some(hi) => u32::from(hi),
+                            None => drive.read_def(d) >> 16,
+                        };
+                        Op::Commit(hi << 16 | word()?)
+                    } else if reg + 1 < end {
+                        let hi = word()?;
+                        Op::Commit(hi << 16 | word()?)
+                    } else {
+                        Op::Stage(word()? as u16)
+                    }
+                }
+                Type::Str(_) => return Err(ObjError::ReadOnly),
+            };
+            commands |= is_command(d.obj);
             plan.push((d, op)).map_err(|_| ObjError::Unknown)?;
             reg = d.end();
         }
         if reg < end { Err(ObjError::Unknown) } else { Ok(commands) }
+    }
+}
+
+/// Whether writing each object does more than store it ([`has_effect`]), by object index: one
+/// load instead of a chain of comparisons, on every object of every write.
+static COMMAND: [bool; Obj::COUNT] = {
+    let mut table = [false; Obj::COUNT];
+    let mut i = 0;
+    while i < Obj::COUNT {
+        #[allow(clippy::indexing_slicing)] // const evaluation: out of bounds is a compile error
+        {
+            table[i] = has_effect(Obj::ALL[i]);
+        }
+        i += 1;
+    }
+    table
+};
+
+/// Whether writing `obj` does more than store the value: [`has_effect`], by table.
+#[inline(always)]
+pub(crate) fn is_command(obj: Obj) -> bool {
+    COMMAND.get(obj as usize).copied().unwrap_or(true)
+}
+
+/// Register `reg` of the `i`th object, a live value or a text.
+#[inline(never)]
+fn other_word(drive: &DriveState, i: usize, reg: u32) -> u16 {
+    let Some(d) = OBJECTS.get(i) else { return 0 };
+    let Some(k) = reg.checked_sub(u32::from(d.addr)) else { return 0 };
+    match d.ty {
+        Type::U8 | Type::U16 => drive.read_def(d) as u16,
+        // High word first.
+        Type::U32 | Type::S32 => drive.read_def(d).wrapping_shr(16 * (1 - k.min(1))) as u16,
+        Type::Str(_) => drive.text_word(d.obj, k as usize),
     }
 }
 
@@ -134,36 +167,15 @@ type Plan = Vec<(&'static ObjectDef, Op), { MAX_WRITE as usize }>;
 impl RegisterMap for NativeMap {
     #[inline]
     fn read(&self, drive: &DriveState, addr: u16, out: &mut [u8]) -> Result<(), Exception> {
-        let first = index::locate(addr, (out.len() / 2) as u16).ok_or(Exception::IllegalDataAddress)?;
-        let (base, end) = (u32::from(addr), u32::from(addr) + (out.len() / 2) as u32);
-        // Reserved registers between objects read as 0.
-        out.fill(0);
-        let mut put = |reg: u32, w: u16| {
-            if reg >= base {
-                let at = 2 * (reg - base) as usize;
-                if let Some(slot) = out.get_mut(at..at + 2) {
-                    slot.copy_from_slice(&w.to_be_bytes());
-                }
-            }
-        };
-        for d in OBJECTS.get(first..).unwrap_or_default() {
-            let at = u32::from(d.addr);
-            if at >= end {
-                break;
-            }
-            match d.ty {
-                Type::U8 | Type::U16 => put(at, drive.read_def(d) as u16),
-                Type::U32 | Type::S32 => {
-                    let v = drive.read_def(d);
-                    put(at, (v >> 16) as u16);
-                    put(at + 1, v as u16);
-                }
-                Type::Str(_) => {
-                    for k in 0..d.words() {
-                        put(at + u32::from(k), drive.text_word(d.obj, usize::from(k)));
-                    }
-                }
-            }
+        let regs = index::registers(addr, (out.len() / 2) as u16).ok_or(Exception::IllegalDataAddress)?;
+        for ((slot, &e), reg) in out.chunks_exact_mut(2).zip(regs).zip(u32::from(addr)..) {
+            // A stored value, or a reserved register (shifted out), as the index entry says;
+            // OTHER is past the end of `params`.
+            let w = match drive.params.get(usize::from(e as u8)) {
+                Some(&p) => (u64::from(p) >> (e >> 8 & 63)) as u16,
+                None => other_word(drive, usize::from(e >> 8), reg),
+            };
+            slot.copy_from_slice(&w.to_be_bytes());
         }
         Ok(())
     }
