@@ -180,6 +180,17 @@ impl DriveState {
         self.check_def(obj.def(), value)
     }
 
+    /// Whether `d` is a plain setting: [`DriveState::check_def`] accepts any value in its range
+    /// whatever the drive's state, and [`DriveState::apply_def`] stores it. The write path checks
+    /// these against a precomputed interval (`od::map`): an object with a check beyond its range
+    /// must not be plain (a test compares the two).
+    pub(crate) const fn plain(d: &ObjectDef) -> bool {
+        matches!(d.access, Access::Rw)
+            && matches!(d.storage, Storage::Ram | Storage::Rom)
+            && !has_effect(d.obj)
+            && !matches!(d.obj, Obj::SystemControl)
+    }
+
     /// [`DriveState::check`] for the object `d` declares.
     #[inline(always)]
     pub fn check_def(&self, d: &ObjectDef, value: u32) -> Result<(), ObjError> {
@@ -509,6 +520,8 @@ impl<M: RegisterMap> Server<'_, M> {
     }
 
     /// Executes `req`, writing the reply's data (after the function code) into `out`.
+    // Inlined into the request path: a call here costs more than a short request's work.
+    #[inline(always)]
     fn execute(&mut self, req: &Request<'_>, out: &mut [u8]) -> Result<Outcome, Exception> {
         match *req {
             Request::ReadHolding { addr, qty } | Request::ReadInput { addr, qty } => self.read(addr, qty, out),
@@ -535,6 +548,7 @@ impl<M: RegisterMap> Server<'_, M> {
         }
     }
 
+    #[inline(always)]
     fn read(&mut self, addr: u16, qty: u16, out: &mut [u8]) -> Result<Outcome, Exception> {
         let n = 2 * usize::from(qty.min(MAX_READ));
         let (count, data) = out.split_first_mut().ok_or(Exception::ServerDeviceFailure)?;

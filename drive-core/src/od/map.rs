@@ -1,7 +1,7 @@
 //! Register maps: how the registers of a vendor's protocol reach the drive's objects.
 
 use super::index;
-use super::{Access, OBJECTS, Obj, ObjError, ObjectDef, Type};
+use super::{Access, OBJECTS, Obj, ObjError, ObjectDef, Range, Type};
 use crate::control::has_effect;
 use crate::drive::DriveState;
 use crate::pdu::{Exception, MAX_WRITE, Words};
@@ -77,11 +77,22 @@ impl NativeMap {
         }
     }
 
-    /// Decodes a write of `values` from `addr` object by object, noting what to do to each; the
-    /// addresses and access are checked here, the values by the caller.
-    /// Whether any of them is a command (an object whose write does more than store it).
+    /// Decodes a write of `values` from `addr` object by object, noting what to do to each, and
+    /// checks the addresses and access. Whether any of them is a command (an object whose write
+    /// does more than store it).
+    ///
+    /// Each complete value is also checked against `drive` as it stands, in the same pass, and
+    /// the first refusal goes to `refused`: an address error anywhere in the request still comes
+    /// first, and a request with commands among several objects is checked again by the caller.
     #[inline]
-    fn plan(&self, drive: &DriveState, addr: u16, values: Words<'_>, plan: &mut Plan) -> Result<bool, ObjError> {
+    fn plan(
+        &self,
+        drive: &DriveState,
+        addr: u16,
+        values: Words<'_>,
+        plan: &mut Plan,
+        refused: &mut Option<ObjError>,
+    ) -> Result<bool, ObjError> {
         let first = index::locate(addr, values.len() as u16).ok_or(ObjError::Unknown)?;
         let end = u32::from(addr) + values.len() as u32;
         // The objects of a write are contiguous, so they take the words in order.
@@ -120,11 +131,72 @@ impl NativeMap {
                 Type::Str(_) => return Err(ObjError::ReadOnly),
             };
             commands |= is_command(d.obj);
+            if let Op::Commit(v) = op
+                && refused.is_none()
+            {
+                *refused = match PLAIN.get(d.obj as usize) {
+                    Some(&Some((lo, hi))) => (!(lo..=hi).contains(&v)).then_some(ObjError::OutOfRange),
+                    _ => drive.check_def(d, v).err(),
+                };
+            }
             plan.push((d, op)).map_err(|_| ObjError::Unknown)?;
             reg = d.end();
         }
         if reg < end { Err(ObjError::Unknown) } else { Ok(commands) }
     }
+}
+
+/// The raw values a plain object ([`DriveState::plain`]) accepts, as `lo..=hi`: the same as its
+/// [`Range::accepts`](super::Range::accepts) for its type, in two comparisons instead of two
+/// matches on its type and range. `None` for other objects, and where the values are not one
+/// interval (sets, bit masks, magnitudes, a signed span across zero).
+static PLAIN: [Option<(u32, u32)>; Obj::COUNT] = {
+    let mut table = [None; Obj::COUNT];
+    let mut i = 0;
+    while i < Obj::COUNT {
+        #[allow(clippy::indexing_slicing)] // const evaluation: out of bounds is a compile error
+        {
+            if DriveState::plain(&OBJECTS[i]) {
+                table[i] = interval(OBJECTS[i].ty, OBJECTS[i].range);
+            }
+        }
+        i += 1;
+    }
+    table
+};
+
+/// The raw register values `range` accepts for `ty` as one interval, if they are one.
+const fn interval(ty: Type, range: Range) -> Option<(u32, u32)> {
+    let max = match ty {
+        Type::U8 => u8::MAX as i64,
+        Type::U16 => u16::MAX as i64,
+        Type::U32 => u32::MAX as i64,
+        // Signed: only a span on one side of zero is an interval of raw values.
+        Type::S32 => {
+            return match range {
+                Range::Any => Some((0, u32::MAX)),
+                Range::Span(lo, hi) if lo >= 0 => Some(clamp(lo, hi, 0, i32::MAX as i64)),
+                Range::Span(lo, hi) if hi < 0 => {
+                    let (lo, hi) = clamp(lo, hi, i32::MIN as i64, -1);
+                    Some((lo as i32 as u32, hi as i32 as u32))
+                }
+                _ => None,
+            };
+        }
+        Type::Str(_) => return None,
+    };
+    match range {
+        Range::Any => Some((0, max as u32)),
+        Range::Span(lo, hi) => Some(clamp(lo, hi, 0, max)),
+        _ => None,
+    }
+}
+
+/// `lo..=hi` within `min..=max`, as raw values (an empty interval stays empty).
+const fn clamp(lo: i64, hi: i64, min: i64, max: i64) -> (u32, u32) {
+    let lo = if lo < min { min } else { lo };
+    let hi = if hi > max { max } else { hi };
+    if lo > hi { (1, 0) } else { (lo as u32, hi as u32) }
 }
 
 /// Whether writing each object does more than store it ([`has_effect`]), by object index: one
@@ -165,7 +237,7 @@ fn other_word(drive: &DriveState, i: usize, reg: u32) -> u16 {
 type Plan = Vec<(&'static ObjectDef, Op), { MAX_WRITE as usize }>;
 
 impl RegisterMap for NativeMap {
-    #[inline]
+    #[inline(always)]
     fn read(&self, drive: &DriveState, addr: u16, out: &mut [u8]) -> Result<(), Exception> {
         let regs = index::registers(addr, (out.len() / 2) as u16).ok_or(Exception::IllegalDataAddress)?;
         for ((slot, &e), reg) in out.chunks_exact_mut(2).zip(regs).zip(u32::from(addr)..) {
@@ -189,7 +261,8 @@ impl RegisterMap for NativeMap {
     fn write(&mut self, drive: &mut DriveState, addr: u16, values: Words<'_>) -> Result<(), Exception> {
         // Everything is checked before anything changes: all or nothing.
         let mut plan = Plan::new();
-        let commands = self.plan(drive, addr, values, &mut plan).map_err(native_exception)?;
+        let mut refused = None;
+        let commands = self.plan(drive, addr, values, &mut plan, &mut refused).map_err(native_exception)?;
         if commands && plan.len() > 1 {
             // A command may depend on values written before it in the same request (a speed,
             // then a move): check each on a copy that has taken the ones before, then commit.
@@ -206,11 +279,9 @@ impl RegisterMap for NativeMap {
             }
             return Ok(());
         }
-        // Values independent of each other: check them all, then apply them.
-        for &(d, op) in plan.iter() {
-            if let Op::Commit(v) = op {
-                drive.check_def(d, v).map_err(native_exception)?;
-            }
+        // Values independent of each other, all checked by the plan: apply them.
+        if let Some(e) = refused {
+            return Err(native_exception(e));
         }
         for &(d, op) in plan.iter() {
             match op {
@@ -222,5 +293,31 @@ impl RegisterMap for NativeMap {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The precomputed intervals agree with the declarations, and a plain object is checked for
+    /// its range only.
+    #[test]
+    fn plain_intervals_match_check_def() {
+        let drive = DriveState::new(crate::ident::Identity::SIMULATOR, false);
+        let mut plain = 0;
+        for (d, bounds) in OBJECTS.iter().zip(PLAIN.iter()) {
+            let Some((lo, hi)) = *bounds else { continue };
+            plain += 1;
+            let probes =
+                [0, 1, 2, 3, 100, 255, 256, 1000, 6000, 6001, 0xFFFF, 0x1_0000, 0x7FFF_FFFF, 0x8000_0000, u32::MAX];
+            let edges = [lo.wrapping_sub(1), lo, lo.wrapping_add(1), hi.wrapping_sub(1), hi, hi.wrapping_add(1)];
+            for v in probes.into_iter().chain(edges) {
+                let fast = (lo..=hi).contains(&v);
+                assert_eq!(fast, d.range.accepts(d.ty, v), "{} {v:#X}", d.name);
+                assert_eq!(fast, drive.check_def(d, v).is_ok(), "{} {v:#X}", d.name);
+            }
+        }
+        assert!(plain > 20, "{plain} plain objects");
     }
 }
