@@ -477,6 +477,7 @@ impl<M: RegisterMap> Drive<M> {
 }
 
 /// Appends the CRC to the first `n` bytes of `buf`; the frame's length, or 0 if it does not fit.
+#[inline(always)]
 fn seal(buf: &mut [u8], n: usize) -> usize {
     let sum = crc::crc16(buf.get(..n).unwrap_or_default());
     match buf.get_mut(n..n + 2) {

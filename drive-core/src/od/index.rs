@@ -111,7 +111,7 @@ static INDEX: [u16; SPAN] = {
 };
 
 /// The [`INDEX`] entries of `qty` registers from `addr`, if they lie in one page's span.
-#[inline]
+#[inline(always)]
 fn entries(addr: u16, qty: u16) -> Option<&'static [u16]> {
     let page = PAGE_OF.get(usize::from(addr >> 8)).and_then(|&p| PAGES.get(usize::from(p)))?;
     let (addr, end) = (u32::from(addr), u32::from(addr) + u32::from(qty));
