@@ -106,6 +106,17 @@ impl NativeMap {
             if u32::from(d.addr) > reg {
                 return Err(ObjError::Unknown);
             }
+            // The common case, a plain one-register setting, by one table entry: writable, no
+            // command, its value checked against an interval.
+            if let Some(&Some((lo, hi))) = PLAIN.get(d.obj as usize) {
+                let v = words.next().ok_or(ObjError::Unknown)?;
+                if refused.is_none() && !(lo..=hi).contains(&v) {
+                    *refused = Some(ObjError::OutOfRange);
+                }
+                plan.push((d, Op::Commit(v))).map_err(|_| ObjError::Unknown)?;
+                reg += 1;
+                continue;
+            }
             if d.access == Access::Ro {
                 return Err(ObjError::ReadOnly);
             }
@@ -134,10 +145,7 @@ impl NativeMap {
             if let Op::Commit(v) = op
                 && refused.is_none()
             {
-                *refused = match PLAIN.get(d.obj as usize) {
-                    Some(&Some((lo, hi))) => (!(lo..=hi).contains(&v)).then_some(ObjError::OutOfRange),
-                    _ => drive.check_def(d, v).err(),
-                };
+                *refused = drive.check_def(d, v).err();
             }
             plan.push((d, op)).map_err(|_| ObjError::Unknown)?;
             reg = d.end();
@@ -146,17 +154,17 @@ impl NativeMap {
     }
 }
 
-/// The raw values a plain object ([`DriveState::plain`]) accepts, as `lo..=hi`: the same as its
-/// [`Range::accepts`](super::Range::accepts) for its type, in two comparisons instead of two
-/// matches on its type and range. `None` for other objects, and where the values are not one
-/// interval (sets, bit masks, magnitudes, a signed span across zero).
+/// The raw values a plain object ([`DriveState::plain`]) of one register accepts, as `lo..=hi`:
+/// the same as its [`Range::accepts`](super::Range::accepts) for its type, in two comparisons
+/// instead of two matches on its type and range. `None` for other objects, and where the values
+/// are not one interval (sets, bit masks, magnitudes).
 static PLAIN: [Option<(u32, u32)>; Obj::COUNT] = {
     let mut table = [None; Obj::COUNT];
     let mut i = 0;
     while i < Obj::COUNT {
         #[allow(clippy::indexing_slicing)] // const evaluation: out of bounds is a compile error
         {
-            if DriveState::plain(&OBJECTS[i]) {
+            if DriveState::plain(&OBJECTS[i]) && OBJECTS[i].words() == 1 {
                 table[i] = interval(OBJECTS[i].ty, OBJECTS[i].range);
             }
         }
@@ -165,38 +173,23 @@ static PLAIN: [Option<(u32, u32)>; Obj::COUNT] = {
     table
 };
 
-/// The raw register values `range` accepts for `ty` as one interval, if they are one.
+/// The raw values `range` accepts for a one-register `ty` as one interval, if they are one.
 const fn interval(ty: Type, range: Range) -> Option<(u32, u32)> {
     let max = match ty {
         Type::U8 => u8::MAX as i64,
         Type::U16 => u16::MAX as i64,
-        Type::U32 => u32::MAX as i64,
-        // Signed: only a span on one side of zero is an interval of raw values.
-        Type::S32 => {
-            return match range {
-                Range::Any => Some((0, u32::MAX)),
-                Range::Span(lo, hi) if lo >= 0 => Some(clamp(lo, hi, 0, i32::MAX as i64)),
-                Range::Span(lo, hi) if hi < 0 => {
-                    let (lo, hi) = clamp(lo, hi, i32::MIN as i64, -1);
-                    Some((lo as i32 as u32, hi as i32 as u32))
-                }
-                _ => None,
-            };
-        }
-        Type::Str(_) => return None,
+        _ => return None,
     };
     match range {
         Range::Any => Some((0, max as u32)),
-        Range::Span(lo, hi) => Some(clamp(lo, hi, 0, max)),
+        // Within the type; an empty span stays empty.
+        Range::Span(lo, hi) => {
+            let lo = if lo < 0 { 0 } else { lo };
+            let hi = if hi > max { max } else { hi };
+            if lo > hi { Some((1, 0)) } else { Some((lo as u32, hi as u32)) }
+        }
         _ => None,
     }
-}
-
-/// `lo..=hi` within `min..=max`, as raw values (an empty interval stays empty).
-const fn clamp(lo: i64, hi: i64, min: i64, max: i64) -> (u32, u32) {
-    let lo = if lo < min { min } else { lo };
-    let hi = if hi > max { max } else { hi };
-    if lo > hi { (1, 0) } else { (lo as u32, hi as u32) }
 }
 
 /// Whether writing each object does more than store it ([`has_effect`]), by object index: one
@@ -233,6 +226,28 @@ fn other_word(drive: &DriveState, i: usize, reg: u32) -> u16 {
     }
 }
 
+impl NativeMap {
+    /// Commits a plan with commands among several objects. A command may depend on values
+    /// written before it in the same request (a speed, then a move): each is checked on a copy
+    /// of the drive that has taken the ones before, and the copy is committed if all pass.
+    // Out of line: the copy of the drive would otherwise weigh on every write's stack frame.
+    #[inline(never)]
+    fn commit_in_order(&mut self, drive: &mut DriveState, plan: &Plan) -> Result<(), Exception> {
+        let mut scratch = drive.clone();
+        for &(d, op) in plan.iter() {
+            if let Op::Commit(v) = op {
+                scratch.check_def(d, v).map_err(native_exception)?;
+                scratch.apply_def(d, v);
+            }
+        }
+        *drive = scratch;
+        for &(d, op) in plan.iter() {
+            self.set_staged(d.obj, if let Op::Stage(hi) = op { Some(hi) } else { None });
+        }
+        Ok(())
+    }
+}
+
 /// The objects a write touches and what it does to each, checked before anything changes.
 type Plan = Vec<(&'static ObjectDef, Op), { MAX_WRITE as usize }>;
 
@@ -259,25 +274,27 @@ impl RegisterMap for NativeMap {
     }
 
     fn write(&mut self, drive: &mut DriveState, addr: u16, values: Words<'_>) -> Result<(), Exception> {
+        // One register of a plain setting (0x06 to a parameter), the commonest write: the same
+        // checks as the plan below makes, without the plan.
+        if values.len() == 1
+            && let Some(v) = values.get(0).map(u32::from)
+            && let Some(d) = index::locate(addr, 1).and_then(|i| OBJECTS.get(i))
+            && d.addr == addr
+            && let Some(&Some((lo, hi))) = PLAIN.get(d.obj as usize)
+        {
+            if !(lo..=hi).contains(&v) {
+                return Err(native_exception(ObjError::OutOfRange));
+            }
+            self.set_staged(d.obj, None);
+            drive.apply_def(d, v);
+            return Ok(());
+        }
         // Everything is checked before anything changes: all or nothing.
         let mut plan = Plan::new();
         let mut refused = None;
         let commands = self.plan(drive, addr, values, &mut plan, &mut refused).map_err(native_exception)?;
         if commands && plan.len() > 1 {
-            // A command may depend on values written before it in the same request (a speed,
-            // then a move): check each on a copy that has taken the ones before, then commit.
-            let mut scratch = drive.clone();
-            for &(d, op) in plan.iter() {
-                if let Op::Commit(v) = op {
-                    scratch.check_def(d, v).map_err(native_exception)?;
-                    scratch.apply_def(d, v);
-                }
-            }
-            *drive = scratch;
-            for &(d, op) in plan.iter() {
-                self.set_staged(d.obj, if let Op::Stage(hi) = op { Some(hi) } else { None });
-            }
-            return Ok(());
+            return self.commit_in_order(drive, &plan);
         }
         // Values independent of each other, all checked by the plan: apply them.
         if let Some(e) = refused {
@@ -319,5 +336,30 @@ mod tests {
             }
         }
         assert!(plain > 20, "{plain} plain objects");
+    }
+
+    /// A one-register write to a plain setting (the short path) stores exactly the values its
+    /// declaration accepts, refuses the others with 03 and leaves the drive unchanged.
+    #[test]
+    fn single_plain_writes_follow_the_declaration() {
+        for (d, bounds) in OBJECTS.iter().zip(PLAIN.iter()) {
+            if bounds.is_none() {
+                continue;
+            }
+            for v in [0u16, 1, 2, 3, 7, 100, 255, 256, 600, 1000, 6000, 6001, 0x7FFF, 0xFFFF] {
+                let mut map = NativeMap::new();
+                let mut drive = DriveState::new(crate::ident::Identity::SIMULATOR, false);
+                let before = drive.params;
+                let bytes = v.to_be_bytes();
+                let result = map.write(&mut drive, d.addr, Words::new(&bytes));
+                if d.range.accepts(d.ty, u32::from(v)) {
+                    assert_eq!(result, Ok(()), "{} {v}", d.name);
+                    assert_eq!(drive.read_def(d), u32::from(v), "{} {v}", d.name);
+                } else {
+                    assert_eq!(result, Err(Exception::IllegalDataValue), "{} {v}", d.name);
+                    assert_eq!(drive.params, before, "{} {v}", d.name);
+                }
+            }
+        }
     }
 }
