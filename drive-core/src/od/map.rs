@@ -152,6 +152,26 @@ impl NativeMap {
         }
         if reg < end { Err(ObjError::Unknown) } else { Ok(commands) }
     }
+
+    /// Commits a plan with commands among several objects. A command may depend on values
+    /// written before it in the same request (a speed, then a move): each is checked on a copy
+    /// of the drive that has taken the ones before, and the copy is committed if all pass.
+    // Out of line: the copy of the drive would otherwise weigh on every write's stack frame.
+    #[inline(never)]
+    fn commit_in_order(&mut self, drive: &mut DriveState, plan: &Plan) -> Result<(), Exception> {
+        let mut scratch = drive.clone();
+        for &(d, op) in plan.iter() {
+            if let Op::Commit(v) = op {
+                scratch.check_def(d, v).map_err(native_exception)?;
+                scratch.apply_def(d, v);
+            }
+        }
+        *drive = scratch;
+        for &(d, op) in plan.iter() {
+            self.set_staged(d.obj, if let Op::Stage(hi) = op { Some(hi) } else { None });
+        }
+        Ok(())
+    }
 }
 
 /// The raw values a plain object ([`DriveState::plain`]) of one register accepts, as `lo..=hi`:
@@ -226,28 +246,6 @@ fn other_word(drive: &DriveState, i: usize, reg: u32) -> u16 {
     }
 }
 
-impl NativeMap {
-    /// Commits a plan with commands among several objects. A command may depend on values
-    /// written before it in the same request (a speed, then a move): each is checked on a copy
-    /// of the drive that has taken the ones before, and the copy is committed if all pass.
-    // Out of line: the copy of the drive would otherwise weigh on every write's stack frame.
-    #[inline(never)]
-    fn commit_in_order(&mut self, drive: &mut DriveState, plan: &Plan) -> Result<(), Exception> {
-        let mut scratch = drive.clone();
-        for &(d, op) in plan.iter() {
-            if let Op::Commit(v) = op {
-                scratch.check_def(d, v).map_err(native_exception)?;
-                scratch.apply_def(d, v);
-            }
-        }
-        *drive = scratch;
-        for &(d, op) in plan.iter() {
-            self.set_staged(d.obj, if let Op::Stage(hi) = op { Some(hi) } else { None });
-        }
-        Ok(())
-    }
-}
-
 /// The objects a write touches and what it does to each, checked before anything changes.
 type Plan = Vec<(&'static ObjectDef, Op), { MAX_WRITE as usize }>;
 
@@ -258,9 +256,9 @@ impl RegisterMap for NativeMap {
         for ((slot, &e), reg) in out.chunks_exact_mut(2).zip(regs).zip(u32::from(addr)..) {
             // A stored value, or a reserved register (shifted out), as the index entry says;
             // OTHER is past the end of `params`.
-            let w = match drive.params.get(usize::from(e as u8)) {
-                Some(&p) => (u64::from(p) >> (e >> 8 & 63)) as u16,
-                None => other_word(drive, usize::from(e >> 8), reg),
+            let w = match drive.params.get(usize::from(e >> 8)) {
+                Some(&p) => (u64::from(p) >> (e & 63)) as u16,
+                None => other_word(drive, usize::from(e & 0xFF), reg),
             };
             slot.copy_from_slice(&w.to_be_bytes());
         }
@@ -336,6 +334,51 @@ mod tests {
             }
         }
         assert!(plain > 20, "{plain} plain objects");
+    }
+
+    /// The word a register shows, from the declarations: 0 where no object is.
+    fn declared(drive: &DriveState, reg: u16) -> u16 {
+        let Some(d) = OBJECTS.iter().find(|d| d.addr <= reg && u32::from(reg) < d.end()) else { return 0 };
+        let k = reg - d.addr;
+        match d.ty {
+            Type::Str(_) => drive.text_word(d.obj, usize::from(k)),
+            Type::U32 | Type::S32 if k == 0 => (drive.read_def(d) >> 16) as u16,
+            _ => drive.read_def(d) as u16,
+        }
+    }
+
+    /// Reads through the compile-time register index show what the declarations say, register by
+    /// register and in long reads across reserved registers, live objects and texts included.
+    #[test]
+    fn reads_match_the_declarations() {
+        let mut drive = DriveState::new(crate::ident::Identity::SIMULATOR, false);
+        for (k, p) in drive.params.iter_mut().enumerate() {
+            *p = 0x0102_0304u32.wrapping_mul(k as u32 + 1);
+        }
+        *drive.status_mut() = crate::drive::Status {
+            error: 3,
+            controller: 5,
+            notify: 1,
+            gpio: 0x1234,
+            analog_in: 777,
+            pvt_pointer: 9,
+            encoder: -5,
+        };
+        let map = NativeMap::new();
+        for d in OBJECTS.iter() {
+            for reg in d.addr..d.addr + d.words() {
+                let mut out = [0u8; 2];
+                assert_eq!(map.read(&drive, reg, &mut out), Ok(()), "{reg:#06X}");
+                assert_eq!(u16::from_be_bytes(out), declared(&drive, reg), "{reg:#06X}");
+            }
+            let mut out = [0u8; 250];
+            let qty = (0..=125u16).rev().find(|&q| index::locate(d.addr, q).is_some()).unwrap_or(0);
+            let out = out.get_mut(..2 * usize::from(qty)).unwrap_or_default();
+            assert_eq!(map.read(&drive, d.addr, out), Ok(()), "{:#06X}+{qty}", d.addr);
+            for (reg, w) in (d.addr..).zip(out.as_chunks::<2>().0) {
+                assert_eq!(u16::from_be_bytes(*w), declared(&drive, reg), "{reg:#06X}");
+            }
+        }
     }
 
     /// A one-register write to a plain setting (the short path) stores exactly the values its
