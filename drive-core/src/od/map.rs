@@ -172,6 +172,33 @@ impl NativeMap {
         }
         Ok(())
     }
+
+    /// Writes `values` from `addr` through a plan: everything is checked before anything
+    /// changes, all or nothing.
+    // Out of line, with its plan on the stack: a one-register write does without both.
+    #[inline(never)]
+    fn write_planned(&mut self, drive: &mut DriveState, addr: u16, values: Words<'_>) -> Result<(), Exception> {
+        let mut plan = Plan::new();
+        let mut refused = None;
+        let commands = self.plan(drive, addr, values, &mut plan, &mut refused).map_err(native_exception)?;
+        if commands && plan.len() > 1 {
+            return self.commit_in_order(drive, &plan);
+        }
+        // Values independent of each other, all checked by the plan: apply them.
+        if let Some(e) = refused {
+            return Err(native_exception(e));
+        }
+        for &(d, op) in plan.iter() {
+            match op {
+                Op::Commit(v) => {
+                    self.set_staged(d.obj, None);
+                    drive.apply_def(d, v);
+                }
+                Op::Stage(hi) => self.set_staged(d.obj, Some(hi)),
+            }
+        }
+        Ok(())
+    }
 }
 
 /// The raw values a plain object ([`DriveState::plain`]) of one register accepts, as `lo..=hi`:
@@ -271,9 +298,10 @@ impl RegisterMap for NativeMap {
         index::locate(addr, qty).map(|_| ()).ok_or(Exception::IllegalDataAddress)
     }
 
+    #[inline(always)]
     fn write(&mut self, drive: &mut DriveState, addr: u16, values: Words<'_>) -> Result<(), Exception> {
         // One register of a plain setting (0x06 to a parameter), the commonest write: the same
-        // checks as the plan below makes, without the plan.
+        // checks as the plan of `write_planned` makes, without the plan.
         if values.len() == 1
             && let Some(v) = values.get(0).map(u32::from)
             && let Some(d) = index::locate(addr, 1).and_then(|i| OBJECTS.get(i))
@@ -287,27 +315,7 @@ impl RegisterMap for NativeMap {
             drive.apply_def(d, v);
             return Ok(());
         }
-        // Everything is checked before anything changes: all or nothing.
-        let mut plan = Plan::new();
-        let mut refused = None;
-        let commands = self.plan(drive, addr, values, &mut plan, &mut refused).map_err(native_exception)?;
-        if commands && plan.len() > 1 {
-            return self.commit_in_order(drive, &plan);
-        }
-        // Values independent of each other, all checked by the plan: apply them.
-        if let Some(e) = refused {
-            return Err(native_exception(e));
-        }
-        for &(d, op) in plan.iter() {
-            match op {
-                Op::Commit(v) => {
-                    self.set_staged(d.obj, None);
-                    drive.apply_def(d, v);
-                }
-                Op::Stage(hi) => self.set_staged(d.obj, Some(hi)),
-            }
-        }
-        Ok(())
+        self.write_planned(drive, addr, values)
     }
 }
 
