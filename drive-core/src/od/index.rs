@@ -134,7 +134,7 @@ pub(crate) fn registers(addr: u16, qty: u16) -> Option<&'static [u16]> {
 /// assert_eq!(locate(0x6000, 0x8C), None); // past the page's last object
 /// assert_eq!(locate(0x0000, 1), None);
 /// ```
-#[inline]
+#[inline(always)]
 pub fn locate(addr: u16, qty: u16) -> Option<usize> {
     let e = *registers(addr, qty)?.first()?;
     Some(usize::from(if (e >> 8) as u8 == OTHER { e & 0xFF } else { e >> 8 }))
