@@ -74,16 +74,19 @@ impl Framer {
         }
         self.last = now;
         // Byte by byte: a frame's last byte usually comes alone (a receive interrupt), where a
-        // call to memcpy would cost more than the copy.
+        // call to memcpy, or a loop set up for many bytes, would cost more than the copy. Length
+        // and CRC in locals, so that the compiler keeps them in registers.
+        let (mut len, mut crc) = (self.len, self.crc);
         for &b in bytes {
-            let Some(slot) = self.buf.get_mut(self.len) else {
+            let Some(slot) = self.buf.get_mut(len) else {
                 self.error = Some(RxError::Overrun);
-                return;
+                break;
             };
             *slot = b;
-            self.len += 1;
-            self.crc = crate::crc::update(self.crc, b);
+            len += 1;
+            crc = crate::crc::update(crc, b);
         }
+        (self.len, self.crc) = (len, crc);
     }
 
     /// The received frame (whatever its state), and what went wrong while receiving it.
