@@ -300,22 +300,30 @@ impl RegisterMap for NativeMap {
 
     #[inline(always)]
     fn write(&mut self, drive: &mut DriveState, addr: u16, values: Words<'_>) -> Result<(), Exception> {
-        // One register of a plain setting (0x06 to a parameter), the commonest write: the same
-        // checks as the plan of `write_planned` makes, without the plan.
-        if values.len() == 1
-            && let Some(v) = values.get(0).map(u32::from)
-            && let Some(d) = index::locate(addr, 1).and_then(|i| OBJECTS.get(i))
-            && d.addr == addr
-            && let Some(&Some((lo, hi))) = PLAIN.get(d.obj as usize)
-        {
-            if !(lo..=hi).contains(&v) {
-                return Err(native_exception(ObjError::OutOfRange));
-            }
-            self.set_staged(d.obj, None);
-            drive.apply_def(d, v);
-            return Ok(());
+        // Registers that are all plain one-register settings (0x06 to a parameter, a block of
+        // parameters), the commonest writes: the same checks as the plan of `write_planned`
+        // makes, without the plan. Anything else (or an address error) goes there.
+        let Some(regs) = index::registers(addr, values.len() as u16).filter(|r| !r.is_empty()) else {
+            return self.write_planned(drive, addr, values);
+        };
+        let plain = |e: u16| if e & 0xFF == 0 { PLAIN.get(usize::from(e >> 8)).copied().flatten() } else { None };
+        let mut refused = false;
+        for (&e, v) in regs.iter().zip(values.iter()) {
+            let Some((lo, hi)) = plain(e) else {
+                return self.write_planned(drive, addr, values);
+            };
+            refused |= !(lo..=hi).contains(&u32::from(v));
         }
-        self.write_planned(drive, addr, values)
+        if refused {
+            return Err(native_exception(ObjError::OutOfRange));
+        }
+        for (&e, v) in regs.iter().zip(values.iter()) {
+            if let Some(d) = OBJECTS.get(usize::from(e >> 8)) {
+                self.set_staged(d.obj, None);
+                drive.apply_def(d, u32::from(v));
+            }
+        }
+        Ok(())
     }
 }
 
@@ -387,6 +395,28 @@ mod tests {
                 assert_eq!(u16::from_be_bytes(*w), declared(&drive, reg), "{reg:#06X}");
             }
         }
+    }
+
+    /// A block of plain settings is written whole or not at all, and a block that is not all
+    /// plain settings keeps the address errors before the value errors.
+    #[test]
+    fn plain_blocks_are_all_or_nothing() {
+        let mut map = NativeMap::new();
+        let mut drive = DriveState::new(crate::ident::Identity::SIMULATOR, false);
+        let words = |vs: &[u16]| vs.iter().flat_map(|v| v.to_be_bytes()).collect::<heapless::Vec<u8, 64>>();
+        // 0x601B..=0x6024: PVT indices, 0..=1000.
+        let bad = words(&[1, 2, 3, 4, 1001, 6, 7, 8, 9, 10]);
+        let before = drive.params;
+        assert_eq!(map.write(&mut drive, 0x601B, Words::new(&bad)), Err(Exception::IllegalDataValue));
+        assert_eq!(drive.params, before);
+        let good = words(&[1, 2, 3, 4, 5, 6, 7, 8, 9, 10]);
+        assert_eq!(map.write(&mut drive, 0x601B, Words::new(&good)), Ok(()));
+        assert_eq!(drive.read(Obj::PvtFifoDepth), 10);
+        // 0x6019..=0x601B runs over the read-only PVT pointer: 02 despite the bad value before it.
+        let mixed = words(&[1001, 0, 0]);
+        let before = drive.params;
+        assert_eq!(map.write(&mut drive, 0x6019, Words::new(&mixed)), Err(Exception::IllegalDataAddress));
+        assert_eq!(drive.params, before);
     }
 
     /// A one-register write to a plain setting (the short path) stores exactly the values its
