@@ -5,6 +5,7 @@ use crate::crc;
 use crate::ident::Identity;
 use crate::motion::axis::Axis;
 use crate::motion::cubic::Table;
+use crate::od::map::is_command;
 use crate::od::{Access, NativeMap, OBJECTS, Obj, ObjError, ObjectDef, RegisterMap, Storage};
 use crate::pdu::{Exception, MAX_READ, Request, Words};
 use crate::pvt::Pvt;
@@ -327,6 +328,17 @@ impl DriveState {
         self.check_def(obj.def(), value)
     }
 
+    /// Whether `d` is a plain setting: [`DriveState::check_def`] accepts any value in its range
+    /// whatever the drive's state, and [`DriveState::apply_def`] stores it. The write path checks
+    /// these against a precomputed interval (`od::map`): an object with a check beyond its range
+    /// must not be plain (a test compares the two).
+    pub(crate) const fn plain(d: &ObjectDef) -> bool {
+        matches!(d.access, Access::Rw)
+            && matches!(d.storage, Storage::Ram | Storage::Rom)
+            && !has_effect(d.obj)
+            && !matches!(d.obj, Obj::SystemControl)
+    }
+
     /// [`DriveState::check`] for the object `d` declares.
     #[inline(always)]
     pub fn check_def(&self, d: &ObjectDef, value: u32) -> Result<(), ObjError> {
@@ -345,7 +357,7 @@ impl DriveState {
             (Obj::SystemControl, 2 | 3) if !self.axis.is_still() || self.status.storage & STORAGE_SAVING != 0 => {
                 Err(ObjError::Refused)
             }
-            (obj, _) if has_effect(obj) => self.check_motion(obj, value),
+            (obj, _) if is_command(obj) => self.check_motion(obj, value),
             _ => Ok(()),
         }
     }
@@ -353,7 +365,7 @@ impl DriveState {
     /// Writes `value` to the object `d` declares, which [`DriveState::check`] accepted.
     #[inline(always)]
     pub fn apply_def(&mut self, d: &ObjectDef, value: u32) {
-        if d.access == Access::Rw && d.storage != Storage::Live && !has_effect(d.obj) {
+        if d.access == Access::Rw && d.storage != Storage::Live && !is_command(d.obj) {
             // A plain setting: stored.
             if let Some(p) = self.params.get_mut(d.obj as usize) {
                 *p = value;
@@ -675,6 +687,7 @@ impl<M: RegisterMap> Drive<M> {
 }
 
 /// Appends the CRC to the first `n` bytes of `buf`; the frame's length, or 0 if it does not fit.
+#[inline(always)]
 fn seal(buf: &mut [u8], n: usize) -> usize {
     let sum = crc::crc16(buf.get(..n).unwrap_or_default());
     match buf.get_mut(n..n + 2) {
@@ -718,6 +731,8 @@ impl<M: RegisterMap> Server<'_, M> {
     }
 
     /// Executes `req`, writing the reply's data (after the function code) into `out`.
+    // Inlined into the request path: a call here costs more than a short request's work.
+    #[inline(always)]
     fn execute(&mut self, req: &Request<'_>, out: &mut [u8]) -> Result<Outcome, Exception> {
         match *req {
             Request::ReadHolding { addr, qty } | Request::ReadInput { addr, qty } => self.read(addr, qty, out),
@@ -744,6 +759,7 @@ impl<M: RegisterMap> Server<'_, M> {
         }
     }
 
+    #[inline(always)]
     fn read(&mut self, addr: u16, qty: u16, out: &mut [u8]) -> Result<Outcome, Exception> {
         let n = 2 * usize::from(qty.min(MAX_READ));
         let (count, data) = out.split_first_mut().ok_or(Exception::ServerDeviceFailure)?;

@@ -22,7 +22,8 @@ pub enum RxError {
 pub struct Framer {
     buf: [u8; MAX_FRAME],
     len: usize,
-    last: Option<Instant>,
+    /// When the last byte arrived; meaningful while `len > 0`.
+    last: Instant,
     error: Option<RxError>,
     /// CRC register over the bytes received so far: computed as they arrive, so that the check
     /// at the end of the frame costs nothing (as a receive interrupt would do it).
@@ -37,7 +38,7 @@ impl Framer {
         Self {
             buf: [0; MAX_FRAME],
             len: 0,
-            last: None,
+            last: Instant::from_micros(0),
             error: None,
             crc: crate::crc::INIT,
             t15: baud.t15_micros(),
@@ -52,15 +53,12 @@ impl Framer {
 
     /// Whether the frame being received has ended: the line has been quiet for t3.5 at `now`.
     pub fn ended(&self, now: Instant) -> bool {
-        matches!(self.last, Some(last) if self.len > 0 && now.since(last) >= self.t35)
+        self.len > 0 && now.since(self.last) >= self.t35
     }
 
     /// When the frame being received ends if nothing more arrives.
     pub fn deadline(&self) -> Option<Instant> {
-        match self.last {
-            Some(last) if self.len > 0 => Some(last.plus_micros(self.t35)),
-            _ => None,
-        }
+        (self.len > 0).then(|| self.last.plus_micros(self.t35))
     }
 
     /// Adds one byte received at `now`. The caller first takes an ended frame ([`Framer::ended`]).
@@ -71,23 +69,24 @@ impl Framer {
     /// Adds bytes received together at `now` (no silence between them). The caller first takes
     /// an ended frame ([`Framer::ended`]).
     pub fn extend(&mut self, now: Instant, bytes: &[u8]) {
-        if let Some(last) = self.last
-            && self.len > 0
-            && now.since(last) > self.t15
-        {
+        if self.len > 0 && now.since(self.last) > self.t15 {
             self.error.get_or_insert(RxError::Gap);
         }
-        self.last = Some(now);
-        let room = MAX_FRAME - self.len;
-        let (fits, over) = bytes.split_at(bytes.len().min(room));
-        if let Some(dst) = self.buf.get_mut(self.len..self.len + fits.len()) {
-            dst.copy_from_slice(fits);
-            self.len += fits.len();
-            self.crc = fits.iter().fold(self.crc, |c, &b| crate::crc::update(c, b));
+        self.last = now;
+        // Byte by byte: a frame's last byte usually comes alone (a receive interrupt), where a
+        // call to memcpy, or a loop set up for many bytes, would cost more than the copy. Length
+        // and CRC in locals, so that the compiler keeps them in registers.
+        let (mut len, mut crc) = (self.len, self.crc);
+        for &b in bytes {
+            let Some(slot) = self.buf.get_mut(len) else {
+                self.error = Some(RxError::Overrun);
+                break;
+            };
+            *slot = b;
+            len += 1;
+            crc = crate::crc::update(crc, b);
         }
-        if !over.is_empty() {
-            self.error = Some(RxError::Overrun);
-        }
+        (self.len, self.crc) = (len, crc);
     }
 
     /// The received frame (whatever its state), and what went wrong while receiving it.

@@ -4,7 +4,7 @@
 //! object to the end of its last; every register of that span knows the index of the object at or
 //! after it. Reserved registers between objects thus lead to the next object.
 
-use super::OBJECTS;
+use super::{OBJECTS, Storage, Type};
 
 /// One page's span of registers.
 #[derive(Clone, Copy)]
@@ -52,16 +52,39 @@ const PAGES: [Page; N_PAGES] = {
     pages
 };
 
+/// The page of each high address byte, as an index in [`PAGES`]; `N_PAGES` where there is none.
+/// A table rather than a search: one load finds the page.
+#[allow(clippy::indexing_slicing)]
+static PAGE_OF: [u8; 256] = {
+    assert!(N_PAGES < 256);
+    let mut of = [N_PAGES as u8; 256];
+    let mut p = 0;
+    while p < N_PAGES {
+        of[(PAGES[p].first >> 8) as usize] = p as u8;
+        p += 1;
+    }
+    of
+};
+
 #[allow(clippy::indexing_slicing)]
 const SPAN: usize = {
     let last = PAGES[N_PAGES - 1];
     last.offset + (last.end - last.first) as usize
 };
 
+/// The high byte of an [`INDEX`] entry whose register a read takes from the drive state (a
+/// live object, a text), not from a stored value; the low byte is then the object's index.
+pub(crate) const OTHER: u8 = u8::MAX;
+
+/// Every register of every page's span. A read takes a register from the stored value of object
+/// `e >> 8` shifted right by `e as u8` (0 or 16 for the low or high word; 32, giving 0, for a
+/// reserved register, whose high byte is the object after it), unless the high byte is
+/// [`OTHER`]. So reads cost one entry per register, and an out-of-range index is the only branch.
+/// (The shift in the low byte is where x86's shift instruction takes its count.)
 #[allow(clippy::indexing_slicing)]
-static INDEX: [u8; SPAN] = {
-    assert!(OBJECTS.len() < 256);
-    let mut index = [0u8; SPAN];
+static INDEX: [u16; SPAN] = {
+    assert!(OBJECTS.len() < OTHER as usize);
+    let mut index = [0u16; SPAN];
     let mut p = 0;
     let mut i = 0;
     while p < N_PAGES {
@@ -71,13 +94,34 @@ static INDEX: [u8; SPAN] = {
             while OBJECTS[i].end() <= reg {
                 i += 1;
             }
-            index[page.offset + (reg - page.first) as usize] = i as u8;
+            let d = &OBJECTS[i];
+            let stored = matches!(d.storage, Storage::Ram | Storage::Rom);
+            let entry = match d.ty {
+                _ if d.addr as u32 > reg => (i as u16) << 8 | 32,
+                Type::U8 | Type::U16 if stored => (i as u16) << 8,
+                // High word first.
+                Type::U32 | Type::S32 if stored => (i as u16) << 8 | ((d.addr as u32 + 1 - reg) * 16) as u16,
+                _ => (OTHER as u16) << 8 | i as u16,
+            };
+            index[page.offset + (reg - page.first) as usize] = entry;
             reg += 1;
         }
         p += 1;
     }
     index
 };
+
+/// The [`INDEX`] entries of `qty` registers from `addr`, if they lie in one page's span.
+#[inline(always)]
+pub(crate) fn registers(addr: u16, qty: u16) -> Option<&'static [u16]> {
+    let page = PAGE_OF.get(usize::from(addr >> 8)).and_then(|&p| PAGES.get(usize::from(p)))?;
+    let (addr, end) = (u32::from(addr), u32::from(addr) + u32::from(qty));
+    if addr < page.first || end > page.end {
+        return None;
+    }
+    let at = page.offset + (addr - page.first) as usize;
+    INDEX.get(at..at + (end - addr) as usize)
+}
 
 /// For `qty` registers from `addr` that lie in one page's span, the index in [`OBJECTS`] of the
 /// object at or after `addr`.
@@ -90,11 +134,8 @@ static INDEX: [u8; SPAN] = {
 /// assert_eq!(locate(0x6000, 0x8C), None); // past the page's last object
 /// assert_eq!(locate(0x0000, 1), None);
 /// ```
+#[inline(always)]
 pub fn locate(addr: u16, qty: u16) -> Option<usize> {
-    let (addr, end) = (u32::from(addr), u32::from(addr) + u32::from(qty));
-    let page = PAGES.iter().find(|p| p.first >> 8 == addr >> 8)?;
-    if addr < page.first || end > page.end {
-        return None;
-    }
-    INDEX.get(page.offset + (addr - page.first) as usize).map(|&i| usize::from(i))
+    let e = *registers(addr, qty)?.first()?;
+    Some(usize::from(if (e >> 8) as u8 == OTHER { e & 0xFF } else { e >> 8 }))
 }
