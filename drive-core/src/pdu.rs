@@ -59,9 +59,12 @@ impl<'a> Words<'a> {
     }
     /// The words in order.
     pub fn iter(&self) -> impl Iterator<Item = u16> + 'a {
-        self.0
-            .chunks_exact(2)
-            .map(|c| u16::from_be_bytes([c.first().copied().unwrap_or(0), c.get(1).copied().unwrap_or(0)]))
+        self.pairs().iter().map(|&p| u16::from_be_bytes(p))
+    }
+    /// The words as big-endian byte pairs: a slice, so that zipping it with another slice makes
+    /// an indexed loop without bounds checks.
+    pub fn pairs(&self) -> &'a [[u8; 2]] {
+        self.0.as_chunks::<2>().0
     }
 }
 

@@ -108,7 +108,7 @@ impl NativeMap {
             }
             // The common case, a plain one-register setting, by one table entry: writable, no
             // command, its value checked against an interval.
-            if let Some(&Some((lo, hi))) = PLAIN.get(d.obj as usize) {
+            if let Some(&(lo, hi)) = PLAIN.get(d.obj as usize).filter(|&&b| b != NOT_PLAIN) {
                 let v = words.next().ok_or(ObjError::Unknown)?;
                 if refused.is_none() && !(lo..=hi).contains(&v) {
                     *refused = Some(ObjError::OutOfRange);
@@ -206,22 +206,28 @@ impl NativeMap {
 
 /// The raw values a plain object ([`DriveState::plain`]) of one register accepts, as `lo..=hi`:
 /// the same as its [`Range::accepts`](super::Range::accepts) for its type, in two comparisons
-/// instead of two matches on its type and range. `None` for other objects, and where the values
-/// are not one interval (sets, bit masks, magnitudes).
-static PLAIN: [Option<(u32, u32)>; Obj::COUNT] = {
-    let mut table = [None; Obj::COUNT];
+/// instead of two matches on its type and range. Empty ([`NOT_PLAIN`]) for other objects, and
+/// where the values are not one interval (sets, bit masks, magnitudes).
+static PLAIN: [(u32, u32); Obj::COUNT] = {
+    let mut table = [NOT_PLAIN; Obj::COUNT];
     let mut i = 0;
     while i < Obj::COUNT {
         #[allow(clippy::indexing_slicing)] // const evaluation: out of bounds is a compile error
         {
-            if DriveState::plain(&OBJECTS[i]) && OBJECTS[i].words() == 1 {
-                table[i] = interval(OBJECTS[i].ty, OBJECTS[i].range);
+            if DriveState::plain(&OBJECTS[i])
+                && OBJECTS[i].words() == 1
+                && let Some(bounds) = interval(OBJECTS[i].ty, OBJECTS[i].range)
+            {
+                table[i] = bounds;
             }
         }
         i += 1;
     }
     table
 };
+
+/// The interval of an object that is not plain: empty.
+const NOT_PLAIN: (u32, u32) = (1, 0);
 
 /// The raw values `range` accepts for a one-register `ty` as one interval, if they are one.
 const fn interval(ty: Type, range: Range) -> Option<(u32, u32)> {
@@ -309,21 +315,25 @@ impl RegisterMap for NativeMap {
         let Some(regs) = index::registers(addr, values.len() as u16).filter(|r| !r.is_empty()) else {
             return self.write_planned(drive, addr, values);
         };
-        let plain = |e: u16| if e & 0xFF == 0 { PLAIN.get(usize::from(e >> 8)).copied().flatten() } else { None };
-        let mut refused = false;
-        for (&e, v) in regs.iter().zip(values.iter()) {
-            let Some((lo, hi)) = plain(e) else {
-                return self.write_planned(drive, addr, values);
-            };
-            refused |= !(lo..=hi).contains(&u32::from(v));
+        // Each register the first of a plain one-register object (shift 0; other objects have
+        // an empty interval) with its value inside the interval, or the plan decides, and finds
+        // the exception to give.
+        let mut plain = true;
+        for (&e, &v) in regs.iter().zip(values.pairs()) {
+            let (lo, hi) = PLAIN.get(usize::from(e >> 8)).copied().unwrap_or(NOT_PLAIN);
+            let v = u32::from(u16::from_be_bytes(v));
+            plain &= (e & 0xFF == 0) & (lo <= v) & (v <= hi);
         }
-        if refused {
-            return Err(native_exception(ObjError::OutOfRange));
+        if !plain {
+            return self.write_planned(drive, addr, values);
         }
-        for (&e, v) in regs.iter().zip(values.iter()) {
-            if let Some(d) = OBJECTS.get(usize::from(e >> 8)) {
-                self.set_staged(d.obj, None);
-                drive.apply_def(d, u32::from(v));
+        // A plain setting is stored and nothing else (what `apply_def` does for it); its index
+        // entry holds its object index, which is its place in `params` and `staged`.
+        for (&e, &v) in regs.iter().zip(values.pairs()) {
+            let i = usize::from(e >> 8);
+            if let (Some(p), Some(s)) = (drive.params.get_mut(i), self.staged.get_mut(i)) {
+                *p = u32::from(u16::from_be_bytes(v));
+                *s = None;
             }
         }
         Ok(())
@@ -341,7 +351,10 @@ mod tests {
         let drive = DriveState::new(crate::ident::Identity::SIMULATOR, false);
         let mut plain = 0;
         for (d, bounds) in OBJECTS.iter().zip(PLAIN.iter()) {
-            let Some((lo, hi)) = *bounds else { continue };
+            if *bounds == NOT_PLAIN {
+                continue;
+            }
+            let (lo, hi) = *bounds;
             plain += 1;
             let probes =
                 [0, 1, 2, 3, 100, 255, 256, 1000, 6000, 6001, 0xFFFF, 0x1_0000, 0x7FFF_FFFF, 0x8000_0000, u32::MAX];
@@ -428,7 +441,7 @@ mod tests {
     #[test]
     fn single_plain_writes_follow_the_declaration() {
         for (d, bounds) in OBJECTS.iter().zip(PLAIN.iter()) {
-            if bounds.is_none() {
+            if *bounds == NOT_PLAIN {
                 continue;
             }
             for v in [0u16, 1, 2, 3, 7, 100, 255, 256, 600, 1000, 6000, 6001, 0x7FFF, 0xFFFF] {
