@@ -262,6 +262,7 @@ impl<S: NorFlash> Store<S> {
 /// A request taken from the drive together with what the flash operation needs, so that the
 /// platform can release the drive (a lock the control tick also takes) while the flash is written.
 #[derive(Clone, Debug, PartialEq, Eq)]
+#[allow(clippy::large_enum_variant, reason = "no heap to box into; one job exists at a time")]
 pub enum Job {
     /// Save this set: the drive's parameters when the request was taken.
     Save(Params),

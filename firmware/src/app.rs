@@ -4,14 +4,17 @@
 //! The drive sits in a critical-section mutex: the tick (a timer interrupt above every other
 //! one) and the bus task each take it for one short call. The bus task never holds it across an
 //! await, so the tick is at most delayed by one `on_rx`/`on_timer` call, never blocked on I/O.
+//! A parameter save works the same way: the request and a copy of the parameters are taken
+//! under the lock, the flash is written without it, and the result is reported under it.
 
 use core::cell::RefCell;
+use core::mem::MaybeUninit;
 use core::sync::atomic::{AtomicU32, Ordering};
 
 use critical_section::Mutex;
 use defmt::warn;
 use drive_core::ident::Identity;
-use drive_core::{Drive, DriveConfig, Instant};
+use drive_core::{Baud, Drive, DriveConfig, Instant, Params};
 use embassy_futures::select::{Either, select};
 use embassy_time::Timer;
 use embedded_io_async::{Read, Write};
@@ -37,16 +40,24 @@ fn identity(hardware: &'static str) -> Identity {
     }
 }
 
-/// Builds the drive with factory settings (no parameter storage yet: saving is refused).
-pub fn start(hardware: &'static str) -> drive_core::Baud {
-    let drive = Drive::new(DriveConfig { identity: identity(hardware), can_save: false, ..DriveConfig::default() });
-    let baud = drive.baud();
-    // singleton! keeps the drive in uninitialised (.bss) memory and yields it once.
-    let Some(drive) = cortex_m::singleton!(: Drive = drive) else {
+/// Builds the drive from the parameters power-up loaded (`params`, storage status bits
+/// `status`); `can_save` if the board has a parameter store (else 0x200F = 2 is refused).
+/// Returns the serial line settings in force: the baud rate and the parity (0x2100).
+///
+/// Out of line: the drive (12 KB, mostly the PVT table) passes through one stack temporary on
+/// its way into static memory, which must not stay in the frame of a caller that lives forever
+/// (`main`) under the interrupts' stack.
+#[inline(never)]
+pub fn start(hardware: &'static str, params: &Params, status: u8, can_save: bool) -> (Baud, u32) {
+    let config = DriveConfig { identity: identity(hardware), can_save, ..DriveConfig::default() };
+    // singleton! yields its memory once; uninitialised, it is .bss with no flash image.
+    let Some(slot) = cortex_m::singleton!(: MaybeUninit<Drive> = MaybeUninit::uninit()) else {
         defmt::panic!("app::start called twice");
     };
+    let drive = slot.write(Drive::boot(config, params, status));
+    let line = (drive.baud(), drive.state().read(drive_core::od::Obj::Parity));
     critical_section::with(|cs| DRIVE.borrow_ref_mut(cs).replace(drive));
-    baud
+    line
 }
 
 /// Runs `f` on the drive, if it has been started.
@@ -88,11 +99,33 @@ async fn send(serial: &mut Serial, reply: &[u8; MAX_FRAME], n: usize) {
     }
 }
 
+/// Carries out what the drive asked of its platform (a save), after the reply went out. The job
+/// (request and parameter copy) is taken under the lock and the flash written without it, so the
+/// control tick keeps its interrupt; a page erase still stalls every flash fetch for ~22 ms,
+/// which is why the drive refuses saves while the axis moves.
+#[cfg(not(feature = "qemu"))]
+pub fn serve_store(store: &mut crate::board::ParamStore) {
+    use drive_core::store::Job;
+    while let Some(job) = with_drive(Job::take).flatten() {
+        // The flash driver is blocking, so the save completes in one poll. Polled here, not
+        // awaited, the job and the save's state (about 1.7 KB) sit on the stack for the moment
+        // instead of in the task's static storage.
+        let done = embassy_futures::block_on(store.run(&job));
+        with_drive(|d| job.finish(d, done.is_ok()));
+        match (job, done) {
+            (Job::Save(_), Err(_)) => warn!("parameter save failed"),
+            (Job::SavePosition(_), Err(_)) => warn!("power-down position not saved"),
+            // The drive refuses 0x200F = 1: there is no boot loader to jump to yet.
+            _ => {}
+        }
+    }
+}
+
 /// The RTU slave on a line with baud timing: bytes in with their arrival time, t3.5 from a
-/// timer on `drive.deadline()`, replies out.
+/// timer on `drive.deadline()`, replies out, then the saves a request asked for into `store`.
 #[cfg(not(feature = "qemu"))]
 #[embassy_executor::task]
-pub async fn modbus(mut serial: Serial) -> ! {
+pub async fn modbus(mut serial: Serial, mut store: crate::board::ParamStore) -> ! {
     let mut buf = [0u8; 64];
     let mut reply = [0u8; MAX_FRAME];
     loop {
@@ -123,6 +156,7 @@ pub async fn modbus(mut serial: Serial) -> ! {
             }),
         };
         send(&mut serial, &reply, n.unwrap_or(0)).await;
+        serve_store(&mut store);
     }
 }
 

@@ -22,7 +22,7 @@ const TARGET: &str = "thumbv7em-none-eabihf";
 const FLASH_BUDGET: u64 = 64 * 1024;
 /// RAM budget: statics plus the stack allowance below.
 const RAM_BUDGET: u64 = 24 * 1024;
-/// What the chip holds: the flash below the parameter store's last 8 KiB (memory.x), and its
+/// What the chip holds: the flash below the parameter store's last 8 KiB (memory-g431.x), and its
 /// 32 KiB of RAM. Over these the build cannot run, and the task fails.
 const FLASH_CAPACITY: u64 = 120 * 1024;
 const RAM_CAPACITY: u64 = 32 * 1024;
