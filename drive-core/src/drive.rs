@@ -173,9 +173,19 @@ pub struct Checkpoint {
 impl DriveState {
     /// Factory state.
     pub fn new(identity: Identity, can_save: bool) -> Self {
+        Self::booted(identity, can_save, Params::factory().values, 0)
+    }
+
+    /// The state at power-up with the object values `params` and the storage status `storage`.
+    ///
+    /// One struct expression, out of line: the state (12 KB with the PVT table) is written
+    /// straight into the caller's place. Built in a local and then modified, it would be copied
+    /// out, and a microcontroller's stack does not hold the second copy.
+    #[inline(never)]
+    fn booted(identity: Identity, can_save: bool, params: [u32; Obj::COUNT], storage: u8) -> Self {
         Self {
-            params: Params::factory().values,
-            status: Status::default(),
+            params,
+            status: Status { storage, ..Status::default() },
             identity,
             can_save,
             request: None,
@@ -184,7 +194,7 @@ impl DriveState {
             pp: Pp::default(),
             still_since: None,
             pvt: Pvt::default(),
-            table: Table::default(),
+            table: Table::EMPTY,
         }
     }
 
@@ -484,22 +494,31 @@ impl<M: RegisterMap> Drive<M> {
     /// [`Drive::boot`] with the registers laid out by `map`. The node id and baud rate in force
     /// are those of `params` unless `config` overrides them (and the override is what the objects
     /// then show, and what a save stores).
+    #[inline(never)]
     pub fn boot_with_map(config: DriveConfig, map: M, params: &Params, storage: u8) -> Self {
-        let mut state = DriveState::new(config.identity, config.can_save);
-        state.load(params);
-        if let Some(p) = state.params.get_mut(Obj::SavedPosition as usize) {
-            *p = params.get(Obj::SavedPosition);
+        // The values are settled first and the drive is one struct expression (as the state is,
+        // `DriveState::booted`), so that nothing of 12 KB is built aside and copied.
+        let mut values = Params::factory().values;
+        for ((v, p), d) in values.iter_mut().zip(params.values.iter()).zip(OBJECTS.iter()) {
+            if Params::covers(d) || d.obj == Obj::SavedPosition {
+                *v = *p;
+            }
         }
-        state.status.storage = storage & !STORAGE_SAVING;
+        let mut set = |obj: Obj, value: u32| {
+            if let Some(v) = values.get_mut(obj as usize) {
+                *v = value;
+            }
+        };
         if let Some(a) = config.address {
-            state.apply(Obj::NodeId, u32::from(a.get()));
+            set(Obj::NodeId, u32::from(a.get()));
         }
         if let Some(b) = config.baud {
-            state.apply(Obj::BaudRate, b.get());
+            set(Obj::BaudRate, b.get());
         }
+        let get = |obj: Obj| values.get(obj as usize).copied().unwrap_or(0);
         // The serial settings in force are those of power-up; writes take effect at the next one.
-        let address = SlaveAddr::new(state.read(Obj::NodeId) as u8).unwrap_or(SlaveAddr::BROADCAST);
-        let baud = Baud::new(state.read(Obj::BaudRate)).unwrap_or(Baud::FACTORY);
+        let address = SlaveAddr::new(get(Obj::NodeId) as u8).unwrap_or(SlaveAddr::BROADCAST);
+        let baud = Baud::new(get(Obj::BaudRate)).unwrap_or(Baud::FACTORY);
         Self {
             framer: Framer::new(baud),
             address,
@@ -509,7 +528,7 @@ impl<M: RegisterMap> Drive<M> {
             tx: [0; MAX_FRAME],
             tx_len: 0,
             map,
-            state,
+            state: DriveState::booted(config.identity, config.can_save, values, storage & !STORAGE_SAVING),
         }
     }
 

@@ -43,21 +43,25 @@ fn identity(hardware: &'static str) -> Identity {
 /// Builds the drive from the parameters power-up loaded (`params`, storage status bits
 /// `status`); `can_save` if the board has a parameter store (else 0x200F = 2 is refused).
 /// Returns the serial line settings in force: the baud rate and the parity (0x2100).
-///
-/// Out of line: the drive (12 KB, mostly the PVT table) passes through one stack temporary on
-/// its way into static memory, which must not stay in the frame of a caller that lives forever
-/// (`main`) under the interrupts' stack.
-#[inline(never)]
 pub fn start(hardware: &'static str, params: &Params, status: u8, can_save: bool) -> (Baud, u32) {
     let config = DriveConfig { identity: identity(hardware), can_save, ..DriveConfig::default() };
     // singleton! yields its memory once; uninitialised, it is .bss with no flash image.
     let Some(slot) = cortex_m::singleton!(: MaybeUninit<Drive> = MaybeUninit::uninit()) else {
         defmt::panic!("app::start called twice");
     };
-    let drive = slot.write(Drive::boot(config, params, status));
+    // Opaque to the optimiser, which would otherwise see the static through the argument.
+    let drive = boot_into(core::hint::black_box(slot), config, params, status);
     let line = (drive.baud(), drive.state().read(drive_core::od::Obj::Parity));
     critical_section::with(|cs| DRIVE.borrow_ref_mut(cs).replace(drive));
     line
+}
+
+/// Builds the drive in `slot`. The drive is 12 KB (mostly the PVT table) and the G431's stack
+/// about 16 KB: it must be built where it stays, not on the stack and copied. `slot` is a
+/// `&mut` argument here, which the compiler may write through directly (a static it may not).
+#[inline(never)]
+fn boot_into<'a>(slot: &'a mut MaybeUninit<Drive>, config: DriveConfig, params: &Params, status: u8) -> &'a mut Drive {
+    slot.write(Drive::boot(config, params, status))
 }
 
 /// Runs `f` on the drive, if it has been started.

@@ -98,11 +98,9 @@ mod run {
     #[embassy_executor::main]
     async fn main(spawner: Spawner) {
         let Board { flash, mut uart, stage, mut inputs, sense, mut watchdog } = board::init();
-        // Power-up, before the drive answers anything: the FSET check, the parameters from flash,
-        // then the UART at their baud rate and parity. Nothing else runs yet (no task spawned, the
-        // watchdog not started), so it is polled to completion here rather than awaited: its
-        // state (about 2 KB with the board's peripherals) stays out of this task's static storage.
-        let (store, loaded) = embassy_futures::block_on(power_up(flash, &mut inputs.fset));
+        // Power-up, before the drive answers anything: the FSET check and the parameters from
+        // flash, then the drive, then the UART at their baud rate and parity.
+        let (store, loaded) = power_up(flash, &mut inputs.fset);
         let (baud, parity) = app::start(board::HARDWARE, &loaded.params, loaded.status, true);
         board::set_serial(&mut uart, baud, parity);
         info!("drive up: {} baud, parity {}, storage status {:#x}", baud.get(), parity, loaded.status);
@@ -113,14 +111,21 @@ mod run {
         sense_loop(sense, watchdog).await
     }
 
-    /// The FSET check, then the store's power-up (with `fset_low`, factory values saved).
-    async fn power_up(flash: Flash<'static, Blocking>, fset: &mut ExtiInput<'static, Async>) -> (ParamStore, Loaded) {
-        let fset_low = fset_held(fset).await;
-        let Ok(mut store) = Store::new(BlockingAsync::new(flash), board::STORE) else {
-            defmt::panic!("the store's flash range is not whole pages");
-        };
-        let loaded = store.power_up(fset_low).await;
-        (store, loaded)
+    /// The FSET check, then the store's power-up (with FSET held, factory values saved).
+    ///
+    /// Nothing else runs yet (no task spawned, the watchdog not started), so this is polled to
+    /// completion rather than awaited, and out of line: its state (about 2 KB) is on the stack for
+    /// this call only, neither in the main task's static storage nor in its poll frame.
+    #[inline(never)]
+    fn power_up(flash: Flash<'static, Blocking>, fset: &mut ExtiInput<'static, Async>) -> (ParamStore, Loaded) {
+        embassy_futures::block_on(async {
+            let fset_low = fset_held(fset).await;
+            let Ok(mut store) = Store::new(BlockingAsync::new(flash), board::STORE) else {
+                defmt::panic!("the store's flash range is not whole pages");
+            };
+            let loaded = store.power_up(fset_low).await;
+            (store, loaded)
+        })
     }
 
     /// Whether FSET is held low from power-up for [`FSET_HOLD`]; released earlier, nothing is reset.

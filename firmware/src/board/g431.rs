@@ -251,6 +251,9 @@ pub fn start_tick(stage: StepDir) {
 
 /// Sets up clocks and peripherals; the UART runs 8N1 at the factory 9600 baud until
 /// [`set_serial`] sets the drive's (known once the parameters are loaded from flash).
+// Out of line: inlined, its temporaries would enlarge the main task's poll frame, which is on
+// the stack under the drive's construction (`app::start`).
+#[inline(never)]
 pub fn init() -> Board {
     let mut config = embassy_stm32::Config::default();
     let rcc = &mut config.rcc;
