@@ -49,16 +49,16 @@ pub fn start(hardware: &'static str, params: &Params, status: u8, can_save: bool
     let Some(slot) = cortex_m::singleton!(: MaybeUninit<Drive> = MaybeUninit::uninit()) else {
         defmt::panic!("app::start called twice");
     };
-    // Opaque to the optimiser, which would otherwise see the static through the argument.
-    let drive = boot_into(core::hint::black_box(slot), config, params, status);
+    let drive = boot_into(slot, config, params, status);
     let line = (drive.baud(), drive.state().read(drive_core::od::Obj::Parity));
     critical_section::with(|cs| DRIVE.borrow_ref_mut(cs).replace(drive));
     line
 }
 
 /// Builds the drive in `slot`. The drive is 12 KB (mostly the PVT table) and the G431's stack
-/// about 16 KB: it must be built where it stays, not on the stack and copied. `slot` is a
-/// `&mut` argument here, which the compiler may write through directly (a static it may not).
+/// about 16 KB: `Drive::boot` builds it in one place, but the compiler still copies it once
+/// through this frame into the static. Out of line, so that copy is on the stack only for this
+/// call, and with nothing else of size under it (see `board::init`, `run::power_up`).
 #[inline(never)]
 fn boot_into<'a>(slot: &'a mut MaybeUninit<Drive>, config: DriveConfig, params: &Params, status: u8) -> &'a mut Drive {
     slot.write(Drive::boot(config, params, status))
