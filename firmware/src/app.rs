@@ -125,6 +125,13 @@ pub fn serve_store(store: &mut crate::board::ParamStore) {
     }
 }
 
+/// Whether the drive asked for a parameter save that has not been carried out yet (0x2120 bit 3).
+#[cfg(not(feature = "qemu"))]
+fn save_pending() -> bool {
+    use drive_core::drive::STORAGE_SAVING;
+    with_drive(|d| d.state().read(drive_core::od::Obj::StorageStatus) as u8 & STORAGE_SAVING != 0).unwrap_or(false)
+}
+
 /// The RTU slave on a line with baud timing: bytes in with their arrival time, t3.5 from a
 /// timer on `drive.deadline()`, replies out, then the saves a request asked for into `store`.
 #[cfg(not(feature = "qemu"))]
@@ -160,6 +167,12 @@ pub async fn modbus(mut serial: Serial, mut store: crate::board::ParamStore) -> 
             }),
         };
         send(&mut serial, &reply, n.unwrap_or(0)).await;
+        // The reply must be on the wire before a page erase stalls the flash: the USART
+        // interrupt that feeds the transmitter runs from flash too, and a stalled reply would
+        // reach the master with a gap that breaks its frame.
+        if save_pending() && serial.flush().await.is_err() {
+            warn!("uart: flush failed");
+        }
         serve_store(&mut store);
     }
 }
