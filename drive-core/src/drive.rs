@@ -174,11 +174,16 @@ pub struct Checkpoint {
 impl DriveState {
     /// Factory state.
     pub fn new(identity: Identity, can_save: bool) -> Self {
-        Self::with_values(identity, can_save, Params::factory().values, 0)
+        Self::booted(identity, can_save, Params::factory().values, 0)
     }
 
-    /// A state with these object values and storage status bits (0x2120), standing at 0.
-    fn with_values(identity: Identity, can_save: bool, params: [u32; Obj::COUNT], storage: u8) -> Self {
+    /// The state at power-up with the object values `params` and the storage status `storage`.
+    ///
+    /// One struct expression, out of line: the state (12 KB with the PVT table) is written
+    /// straight into the caller's place. Built in a local and then modified, it would be copied
+    /// out, and a microcontroller's stack does not hold the second copy.
+    #[inline(never)]
+    fn booted(identity: Identity, can_save: bool, params: [u32; Obj::COUNT], storage: u8) -> Self {
         Self {
             params,
             status: Status { storage, ..Status::default() },
@@ -190,7 +195,7 @@ impl DriveState {
             pp: Pp::default(),
             still_since: None,
             pvt: Pvt::default(),
-            table: Table::default(),
+            table: Table::EMPTY,
         }
     }
 
@@ -501,16 +506,19 @@ impl<M: RegisterMap> Drive<M> {
     /// [`Drive::boot`] with the registers laid out by `map`. The node id and baud rate in force
     /// are those of `params` unless `config` overrides them (and the override is what the objects
     /// then show, and what a save stores).
+    #[inline(never)]
     pub fn boot_with_map(config: DriveConfig, map: M, params: &Params, storage: u8) -> Self {
+        // The values are settled first and the drive is one struct expression (as the state is,
+        // `DriveState::booted`), so that nothing of 12 KB is built aside and copied.
         let mut values = Params::factory().values;
-        for ((p, v), d) in values.iter_mut().zip(params.values.iter()).zip(OBJECTS.iter()) {
+        for ((v, p), d) in values.iter_mut().zip(params.values.iter()).zip(OBJECTS.iter()) {
             if Params::covers(d) || d.obj == Obj::SavedPosition {
-                *p = *v;
+                *v = *p;
             }
         }
         let mut set = |obj: Obj, value: u32| {
-            if let Some(p) = values.get_mut(obj as usize) {
-                *p = value;
+            if let Some(v) = values.get_mut(obj as usize) {
+                *v = value;
             }
         };
         if let Some(a) = config.address {
@@ -519,12 +527,10 @@ impl<M: RegisterMap> Drive<M> {
         if let Some(b) = config.baud {
             set(Obj::BaudRate, b.get());
         }
+        let get = |obj: Obj| values.get(obj as usize).copied().unwrap_or(0);
         // The serial settings in force are those of power-up; writes take effect at the next one.
-        let value = |obj: Obj| values.get(obj as usize).copied().unwrap_or(0);
-        let address = SlaveAddr::new(value(Obj::NodeId) as u8).unwrap_or(SlaveAddr::BROADCAST);
-        let baud = Baud::new(value(Obj::BaudRate)).unwrap_or(Baud::FACTORY);
-        // One struct expression, no named drive or state on the way: the drive is 12 KB (its PVT
-        // table), and the firmware builds it on a small stack straight into its static slot.
+        let address = SlaveAddr::new(get(Obj::NodeId) as u8).unwrap_or(SlaveAddr::BROADCAST);
+        let baud = Baud::new(get(Obj::BaudRate)).unwrap_or(Baud::FACTORY);
         Self {
             framer: Framer::new(baud),
             address,
@@ -534,7 +540,7 @@ impl<M: RegisterMap> Drive<M> {
             tx: [0; MAX_FRAME],
             tx_len: 0,
             map,
-            state: DriveState::with_values(config.identity, config.can_save, values, storage & !STORAGE_SAVING),
+            state: DriveState::booted(config.identity, config.can_save, values, storage & !STORAGE_SAVING),
         }
     }
 

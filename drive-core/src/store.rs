@@ -14,7 +14,10 @@
 //!
 //! The functions are async as the flash traits are; the drive state machine is not: the platform
 //! [`Store::load`]s before it builds the [`Drive`](crate::Drive) and performs the saves that
-//! [`Drive::take_system_request`](crate::Drive::take_system_request) asks for.
+//! [`Drive::take_system_request`](crate::Drive::take_system_request) asks for: with
+//! [`Store::serve`] if it can lend the drive for the flash operation, or as a [`Job`] taken from
+//! the drive, run on the flash without it, then reported back, if the drive sits behind a lock
+//! that the control tick also takes.
 
 use core::ops::Range;
 
@@ -188,26 +191,28 @@ impl<S: NorFlash> Store<S> {
         Loaded { params, status: STORAGE_FSET | failed }
     }
 
-    /// Performs the request `drive` makes of its platform, if any: a save of its parameters
-    /// (reported to the drive with [`Drive::save_done`]) or of the power-down position. Returns
-    /// the request and how it went; [`SystemRequest::BootLoader`] is the platform's to act on.
-    /// Call it outside the control tick, after the reply to the request has been sent.
+    /// Performs the request `drive` makes of its platform, if any: [`Job::take`], [`Store::run`]
+    /// and [`Job::finish`] in one call, for a platform that can lend the drive for the flash
+    /// operation. Returns the request and how it went; [`SystemRequest::BootLoader`] is the
+    /// platform's to act on. Call it outside the control tick, after the reply has been sent.
     pub async fn serve<M: RegisterMap>(
         &mut self,
         drive: &mut Drive<M>,
     ) -> Option<(SystemRequest, Result<(), Error<S>>)> {
-        let request = drive.take_system_request()?;
-        let done = match request {
-            SystemRequest::Save => {
-                let params = drive.state().params();
-                let saved = self.save(&params).await;
-                drive.save_done(saved.is_ok());
-                saved
-            }
-            SystemRequest::SavePosition(position) => self.save_position(position).await,
-            SystemRequest::BootLoader => Ok(()),
-        };
-        Some((request, done))
+        let job = Job::take(drive)?;
+        let done = self.run(&job).await;
+        job.finish(drive, done.is_ok());
+        Some((job.request(), done))
+    }
+
+    /// Carries out `job` on the flash, without the drive; report the result with [`Job::finish`].
+    /// A boot loader request has nothing to write here.
+    pub async fn run(&mut self, job: &Job) -> Result<(), Error<S>> {
+        match job {
+            Job::Save(params) => self.save(params).await,
+            Job::SavePosition(position) => self.save_position(*position).await,
+            Job::BootLoader => Ok(()),
+        }
     }
 
     /// Whether every byte of the store's pages reads erased (0xFF); a failed read counts as not.
@@ -251,6 +256,48 @@ impl<S: NorFlash> Store<S> {
     /// Ends the store, giving back its flash.
     pub fn into_flash(self) -> S {
         self.map.destroy().0
+    }
+}
+
+/// A request taken from the drive together with what the flash operation needs, so that the
+/// platform can release the drive (a lock the control tick also takes) while the flash is written.
+#[derive(Clone, Debug, PartialEq, Eq)]
+#[allow(clippy::large_enum_variant, reason = "no heap to box into; one job exists at a time")]
+pub enum Job {
+    /// Save this set: the drive's parameters when the request was taken.
+    Save(Params),
+    /// Save this power-down position (0x6055).
+    SavePosition(i32),
+    /// Jump to the boot loader: the platform's to act on, nothing for the store.
+    BootLoader,
+}
+
+impl Job {
+    /// Takes the drive's pending request, if any, with a copy of its parameters for a save. The
+    /// drive shows the save in progress (0x2120 bit 3) and refuses another until [`Job::finish`].
+    pub fn take<M: RegisterMap>(drive: &mut Drive<M>) -> Option<Self> {
+        Some(match drive.take_system_request()? {
+            SystemRequest::Save => Job::Save(drive.state().params()),
+            SystemRequest::SavePosition(position) => Job::SavePosition(position),
+            SystemRequest::BootLoader => Job::BootLoader,
+        })
+    }
+
+    /// The request this job carries out.
+    pub fn request(&self) -> SystemRequest {
+        match self {
+            Job::Save(_) => SystemRequest::Save,
+            Job::SavePosition(position) => SystemRequest::SavePosition(*position),
+            Job::BootLoader => SystemRequest::BootLoader,
+        }
+    }
+
+    /// Tells the drive how the job went (`ok`: the flash holds what it was asked to hold). Only a
+    /// parameter save has a status in the drive (0x2120 bits 3 and 4).
+    pub fn finish<M: RegisterMap>(&self, drive: &mut Drive<M>, ok: bool) {
+        if matches!(self, Job::Save(_)) {
+            drive.save_done(ok);
+        }
     }
 }
 
@@ -304,6 +351,37 @@ mod tests {
         assert_eq!(decode(&[FORMAT, 0, 1, 0, 0x28, 0x20, 9], &mut p), Err(DecodeError::Length));
         assert_eq!(decode(&[FORMAT], &mut p), Err(DecodeError::Length));
         assert_eq!(p, before);
+    }
+
+    #[test]
+    fn a_job_holds_the_set_of_its_request_and_the_drive_shows_it_until_finished() {
+        use crate::drive::{STORAGE_SAVE_FAILED, STORAGE_SAVING};
+        use crate::{Drive, DriveConfig};
+        let mut drive = Drive::new(DriveConfig { can_save: true, ..DriveConfig::default() });
+        assert_eq!(Job::take(&mut drive), None);
+        drive.state_mut().apply(Obj::GroupId, 5);
+        drive.state_mut().apply(Obj::SystemControl, 2);
+        let job = Job::take(&mut drive);
+        assert_eq!(job.as_ref().map(Job::request), Some(SystemRequest::Save));
+        assert_eq!(Job::take(&mut drive), None, "taken once");
+        // A change after the request is not part of the set being written.
+        drive.state_mut().apply(Obj::GroupId, 6);
+        let saved = match &job {
+            Some(Job::Save(params)) => Some(params.get(Obj::GroupId)),
+            _ => None,
+        };
+        assert_eq!(saved, Some(5));
+        assert_eq!(drive.state().read(Obj::StorageStatus) as u8 & STORAGE_SAVING, STORAGE_SAVING);
+        if let Some(job) = &job {
+            job.finish(&mut drive, false);
+        }
+        assert_eq!(
+            drive.state().read(Obj::StorageStatus) as u8 & (STORAGE_SAVING | STORAGE_SAVE_FAILED),
+            STORAGE_SAVE_FAILED
+        );
+        // A position job leaves the parameter save status alone.
+        Job::SavePosition(7).finish(&mut drive, true);
+        assert_eq!(drive.state().read(Obj::StorageStatus) as u8 & STORAGE_SAVE_FAILED, STORAGE_SAVE_FAILED);
     }
 
     #[test]

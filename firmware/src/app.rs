@@ -4,14 +4,17 @@
 //! The drive sits in a critical-section mutex: the tick (a timer interrupt above every other
 //! one) and the bus task each take it for one short call. The bus task never holds it across an
 //! await, so the tick is at most delayed by one `on_rx`/`on_timer` call, never blocked on I/O.
+//! A parameter save works the same way: the request and a copy of the parameters are taken
+//! under the lock, the flash is written without it, and the result is reported under it.
 
 use core::cell::RefCell;
+use core::mem::MaybeUninit;
 use core::sync::atomic::{AtomicU32, Ordering};
 
 use critical_section::Mutex;
 use defmt::warn;
 use drive_core::ident::Identity;
-use drive_core::{Drive, DriveConfig, Instant};
+use drive_core::{Baud, Drive, DriveConfig, Instant, Params};
 use embassy_futures::select::{Either, select};
 use embassy_time::Timer;
 use embedded_io_async::{Read, Write};
@@ -19,7 +22,6 @@ use embedded_io_async::{Read, Write};
 use crate::board::Serial;
 use crate::frames::MAX_FRAME;
 use crate::power::PowerStage;
-use static_cell::StaticCell;
 
 /// The drive, once `start` has built it. A reference, so the mutex's initial value (`None`) is
 /// zero and lives in .bss: an `Option<Drive>` would copy 2.3 KB of initial image from flash.
@@ -38,21 +40,28 @@ fn identity(hardware: &'static str) -> Identity {
     }
 }
 
-/// Builds the drive with factory settings (no parameter storage yet: saving is refused).
-// Not inlined: whatever its frame holds is given back before the tasks run on that stack.
-#[inline(never)]
-pub fn start(hardware: &'static str) -> drive_core::Baud {
-    // Built in place in .bss: the drive is 12 KB (its PVT table), and a copy on the way would
-    // stay in main's frame, which never returns, at the bottom of a stack of 17 KB.
-    static SLOT: StaticCell<Drive> = StaticCell::new();
-    let Some(slot) = SLOT.try_uninit() else {
+/// Builds the drive from the parameters power-up loaded (`params`, storage status bits
+/// `status`); `can_save` if the board has a parameter store (else 0x200F = 2 is refused).
+/// Returns the serial line settings in force: the baud rate and the parity (0x2100).
+pub fn start(hardware: &'static str, params: &Params, status: u8, can_save: bool) -> (Baud, u32) {
+    let config = DriveConfig { identity: identity(hardware), can_save, ..DriveConfig::default() };
+    // singleton! yields its memory once; uninitialised, it is .bss with no flash image.
+    let Some(slot) = cortex_m::singleton!(: MaybeUninit<Drive> = MaybeUninit::uninit()) else {
         defmt::panic!("app::start called twice");
     };
-    let drive: &'static mut Drive =
-        slot.write(Drive::new(DriveConfig { identity: identity(hardware), can_save: false, ..DriveConfig::default() }));
-    let baud = drive.baud();
+    let drive = boot_into(slot, config, params, status);
+    let line = (drive.baud(), drive.state().read(drive_core::od::Obj::Parity));
     critical_section::with(|cs| DRIVE.borrow_ref_mut(cs).replace(drive));
-    baud
+    line
+}
+
+/// Builds the drive in `slot`. The drive is 12 KB (mostly the PVT table) and the G431's stack
+/// about 16 KB: `Drive::boot` builds it in one place, but the compiler still copies it once
+/// through this frame into the static. Out of line, so that copy is on the stack only for this
+/// call, and with nothing else of size under it (see `board::init`, `run::power_up`).
+#[inline(never)]
+fn boot_into<'a>(slot: &'a mut MaybeUninit<Drive>, config: DriveConfig, params: &Params, status: u8) -> &'a mut Drive {
+    slot.write(Drive::boot(config, params, status))
 }
 
 /// Runs `f` on the drive, if it has been started.
@@ -94,11 +103,40 @@ async fn send(serial: &mut Serial, reply: &[u8; MAX_FRAME], n: usize) {
     }
 }
 
+/// Carries out what the drive asked of its platform (a save), after the reply went out. The job
+/// (request and parameter copy) is taken under the lock and the flash written without it, so the
+/// control tick keeps its interrupt; a page erase still stalls every flash fetch for ~22 ms,
+/// which is why the drive refuses saves while the axis moves.
+#[cfg(not(feature = "qemu"))]
+pub fn serve_store(store: &mut crate::board::ParamStore) {
+    use drive_core::store::Job;
+    while let Some(job) = with_drive(Job::take).flatten() {
+        // The flash driver is blocking, so the save completes in one poll. Polled here, not
+        // awaited, the job and the save's state (about 1.7 KB) sit on the stack for the moment
+        // instead of in the task's static storage.
+        let done = embassy_futures::block_on(store.run(&job));
+        with_drive(|d| job.finish(d, done.is_ok()));
+        match (job, done) {
+            (Job::Save(_), Err(_)) => warn!("parameter save failed"),
+            (Job::SavePosition(_), Err(_)) => warn!("power-down position not saved"),
+            // The drive refuses 0x200F = 1: there is no boot loader to jump to yet.
+            _ => {}
+        }
+    }
+}
+
+/// Whether the drive asked for a parameter save that has not been carried out yet (0x2120 bit 3).
+#[cfg(not(feature = "qemu"))]
+fn save_pending() -> bool {
+    use drive_core::drive::STORAGE_SAVING;
+    with_drive(|d| d.state().read(drive_core::od::Obj::StorageStatus) as u8 & STORAGE_SAVING != 0).unwrap_or(false)
+}
+
 /// The RTU slave on a line with baud timing: bytes in with their arrival time, t3.5 from a
-/// timer on `drive.deadline()`, replies out.
+/// timer on `drive.deadline()`, replies out, then the saves a request asked for into `store`.
 #[cfg(not(feature = "qemu"))]
 #[embassy_executor::task]
-pub async fn modbus(mut serial: Serial) -> ! {
+pub async fn modbus(mut serial: Serial, mut store: crate::board::ParamStore) -> ! {
     let mut buf = [0u8; 64];
     let mut reply = [0u8; MAX_FRAME];
     loop {
@@ -129,6 +167,13 @@ pub async fn modbus(mut serial: Serial) -> ! {
             }),
         };
         send(&mut serial, &reply, n.unwrap_or(0)).await;
+        // The reply must be on the wire before a page erase stalls the flash: the USART
+        // interrupt that feeds the transmitter runs from flash too, and a stalled reply would
+        // reach the master with a gap that breaks its frame.
+        if save_pending() && serial.flush().await.is_err() {
+            warn!("uart: flush failed");
+        }
+        serve_store(&mut store);
     }
 }
 

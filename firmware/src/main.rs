@@ -80,23 +80,63 @@ mod run {
 
     use defmt::{info, unwrap};
     use defmt_rtt as _;
+    use drive_core::store::{Loaded, Store};
+    use embassy_embedded_hal::adapter::BlockingAsync;
     use embassy_executor::Spawner;
-    use embassy_futures::select::select4;
-    use embassy_time::{Duration, Ticker};
+    use embassy_futures::select::{Either, select, select4};
+    use embassy_stm32::exti::ExtiInput;
+    use embassy_stm32::flash::{Blocking, Flash};
+    use embassy_stm32::mode::Async;
+    use embassy_time::{Duration, Ticker, Timer};
 
     use crate::app;
-    use crate::board::{self, Board, Inputs, Sense};
+    use crate::board::{self, Board, Inputs, ParamStore, Sense};
+
+    /// How long FSET must be held low from power-up to restore the factory settings (§3.11).
+    const FSET_HOLD: Duration = Duration::from_secs(5);
 
     #[embassy_executor::main]
     async fn main(spawner: Spawner) {
-        let baud = app::start(board::HARDWARE);
-        let Board { uart, stage, inputs, sense, mut watchdog } = board::init(baud);
-        info!("drive up: {} baud", baud.get());
+        let Board { flash, mut uart, stage, mut inputs, sense, mut watchdog } = board::init();
+        // Power-up, before the drive answers anything: the FSET check and the parameters from
+        // flash, then the drive, then the UART at their baud rate and parity.
+        let (store, loaded) = power_up(flash, &mut inputs.fset);
+        let (baud, parity) = app::start(board::HARDWARE, &loaded.params, loaded.status, true);
+        board::set_serial(&mut uart, baud, parity);
+        info!("drive up: {} baud, parity {}, storage status {:#x}", baud.get(), parity, loaded.status);
         board::start_tick(stage);
         watchdog.unleash();
-        spawner.spawn(unwrap!(app::modbus(uart)));
+        spawner.spawn(unwrap!(app::modbus(uart, store)));
         spawner.spawn(unwrap!(watch_inputs(inputs)));
         sense_loop(sense, watchdog).await
+    }
+
+    /// The FSET check, then the store's power-up (with FSET held, factory values saved).
+    ///
+    /// Nothing else runs yet (no task spawned, the watchdog not started), so this is polled to
+    /// completion rather than awaited, and out of line: its state (about 2 KB) is on the stack for
+    /// this call only, neither in the main task's static storage nor in its poll frame.
+    #[inline(never)]
+    fn power_up(flash: Flash<'static, Blocking>, fset: &mut ExtiInput<'static, Async>) -> (ParamStore, Loaded) {
+        embassy_futures::block_on(async {
+            let fset_low = fset_held(fset).await;
+            let Ok(mut store) = Store::new(BlockingAsync::new(flash), board::STORE) else {
+                defmt::panic!("the store's flash range is not whole pages");
+            };
+            let loaded = store.power_up(fset_low).await;
+            (store, loaded)
+        })
+    }
+
+    /// Whether FSET is held low from power-up for [`FSET_HOLD`]; released earlier, nothing is reset.
+    async fn fset_held(fset: &mut ExtiInput<'static, Async>) -> bool {
+        // Let the pull-up charge the pin before reading it.
+        Timer::after_millis(1).await;
+        if fset.is_high() {
+            return false;
+        }
+        info!("FSET low at power-up: factory settings if held {} s", FSET_HOLD.as_secs());
+        matches!(select(fset.wait_for_high(), Timer::after(FSET_HOLD)).await, Either::Second(()))
     }
 
     /// Every millisecond: the encoder into 0x6089; every 10 ms: the ADC into 0x605F; the
@@ -138,7 +178,8 @@ mod run {
         }
     }
 
-    /// EXT1..3 into 0x6031 bits 7..9 (inverted: 1 is a low level); FSET is logged.
+    /// EXT1..3 into 0x6031 bits 7..9 (inverted: 1 is a low level); FSET after power-up is only
+    /// logged (it acts at power-up, `fset_held`).
     #[embassy_executor::task]
     async fn watch_inputs(inputs: Inputs) -> ! {
         let Inputs { ext: [mut e1, mut e2, mut e3], mut fset } = inputs;
@@ -181,7 +222,8 @@ mod run {
     /// no-op, which would spin the host CPU and starve QEMU's serial I/O.
     #[cortex_m_rt::entry]
     fn main() -> ! {
-        app::start(board::HARDWARE);
+        // QEMU does not model the flash: factory parameters, and saving is refused (04).
+        app::start(board::HARDWARE, &drive_core::Params::factory(), 0, false);
         let serial = board::init();
         let Some(executor) = cortex_m::singleton!(: Executor = Executor::new(core::ptr::null_mut())) else {
             defmt::panic!("executor created twice");

@@ -69,9 +69,15 @@ pub struct Table {
     slots: [Packed; TABLE_SIZE],
 }
 
+impl Table {
+    /// Every slot empty. A constant, so that a table is built where it is stored: built by a
+    /// function it would be a 10 KB stack temporary, more than a microcontroller's stack holds.
+    pub const EMPTY: Self = Self { slots: [Packed([0; 10]); TABLE_SIZE] };
+}
+
 impl Default for Table {
     fn default() -> Self {
-        Self { slots: [Packed::default(); TABLE_SIZE] }
+        Self::EMPTY
     }
 }
 

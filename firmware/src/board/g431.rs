@@ -17,6 +17,10 @@
 //! | FSET            | PC13        | GPIO in, pull-up, EXTI13    | factory-settings button to ground          |
 //! | SWDIO / SWCLK   | PA13 / PA14 | debug                       | left alone for the probe (RTT logs)        |
 //!
+//! Flash: the last four 2 KiB pages ([`STORE`], 0x0801E000..0x08020000) hold the parameter
+//! store; `memory.x` keeps the program below them. A page erase stalls code fetches for ~22 ms
+//! (one bank, and the handlers run from flash): the drive refuses saves while the axis moves.
+//!
 //! Clock: HSI16 / 4 × 85 / 2 = 170 MHz SYSCLK from the PLL, range-1 boost mode; AHB, APB1 and
 //! APB2 undivided, so USART1 and every timer count at 170 MHz.
 //!
@@ -25,13 +29,17 @@
 //! others); TIM1 emits step pulses; TIM4 the current reference; TIM2 counts the encoder.
 
 use core::cell::RefCell;
+use core::ops::Range;
 
 use cortex_m::singleton;
 use critical_section::Mutex;
 use drive_core::Baud;
 use drive_core::control::TICK_HZ;
+use drive_core::store::Store;
+use embassy_embedded_hal::adapter::BlockingAsync;
 use embassy_stm32::adc::{Adc, AdcConfig, SampleTime, Temperature};
 use embassy_stm32::exti::{self, ExtiInput};
+use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::gpio::{Level, Output, Pull, Speed};
 use embassy_stm32::interrupt::{self, InterruptExt, Priority};
 use embassy_stm32::mode::Async;
@@ -75,8 +83,17 @@ const TX_BUF: usize = 256;
 /// The RS-485 port.
 pub type Serial = BufferedUart<'static>;
 
+/// The parameter store's pages, as offsets from the start of flash: the last 8 KiB of the 128.
+pub const STORE: Range<u32> = 0x1E000..0x2_0000;
+
+/// The parameter store on the flash. The blocking driver's `NorFlash` programs and erases
+/// without a critical section, so interrupts (the control tick) stay enabled during a save.
+pub type ParamStore = Store<BlockingAsync<Flash<'static, Blocking>>>;
+
 /// The board's peripherals, configured.
 pub struct Board {
+    /// The flash, for the parameter store at [`STORE`].
+    pub flash: Flash<'static, Blocking>,
     /// The RS-485 port (USART1, driver enable in hardware).
     pub uart: Serial,
     /// The step/direction power stage.
@@ -232,8 +249,12 @@ pub fn start_tick(stage: StepDir) {
     t.cr1().modify(|w| w.set_cen(true));
 }
 
-/// Sets up clocks and peripherals; the UART runs 8N1 at `baud` (the drive's power-up setting).
-pub fn init(baud: Baud) -> Board {
+/// Sets up clocks and peripherals; the UART runs 8N1 at the factory 9600 baud until
+/// [`set_serial`] sets the drive's (known once the parameters are loaded from flash).
+// Out of line: inlined, its temporaries would enlarge the main task's poll frame, which is on
+// the stack under the drive's construction (`app::start`).
+#[inline(never)]
+pub fn init() -> Board {
     let mut config = embassy_stm32::Config::default();
     let rcc = &mut config.rcc;
     rcc.pll = Some(Pll {
@@ -254,13 +275,7 @@ pub fn init(baud: Baud) -> Board {
         core.DWT.enable_cycle_counter();
     }
 
-    let mut uart_config = usart::Config::default();
-    uart_config.baudrate = baud.get();
-    // Wake the reader at every byte so each one is time-stamped close to its arrival (t1.5/t3.5).
-    uart_config.eager_reads = Some(1);
-    // embassy-stm32 0.6 writes DEDT from `de_assertion_time` too: keep both the same.
-    uart_config.de_assertion_time = 16; // one bit time of DE before the start bit
-    uart_config.de_deassertion_time = 16;
+    let uart_config = uart_config(Baud::FACTORY, 0);
     // Each singleton! yields once; a second `init` already panicked in `embassy_stm32::init`.
     let (Some(tx_buf), Some(rx_buf)) =
         (singleton!(: [u8; TX_BUF] = [0; TX_BUF]), singleton!(: [u8; RX_BUF] = [0; RX_BUF]))
@@ -303,7 +318,32 @@ pub fn init(baud: Baud) -> Board {
         temperature,
     };
     let watchdog = IndependentWatchdog::new(p.IWDG, 500_000);
-    Board { uart, stage, inputs, sense, watchdog }
+    Board { flash: Flash::new_blocking(p.FLASH), uart, stage, inputs, sense, watchdog }
+}
+
+/// The UART settings for `baud` and `parity` (object 0x2100: 0 none, 1 even, 2 odd).
+fn uart_config(baud: Baud, parity: u32) -> usart::Config {
+    let mut config = usart::Config::default();
+    config.baudrate = baud.get();
+    // 8 data bits either way: with parity the USART frames 9 bits.
+    config.parity = match parity {
+        1 => usart::Parity::ParityEven,
+        2 => usart::Parity::ParityOdd,
+        _ => usart::Parity::ParityNone,
+    };
+    // Wake the reader at every byte so each one is time-stamped close to its arrival (t1.5/t3.5).
+    config.eager_reads = Some(1);
+    // embassy-stm32 0.6 writes DEDT from `de_assertion_time` too: keep both the same.
+    config.de_assertion_time = 16; // one bit time of DE before the start bit
+    config.de_deassertion_time = 16;
+    config
+}
+
+/// Runs the UART at the drive's power-up settings: `baud` and `parity` (0x2100).
+pub fn set_serial(uart: &mut Serial, baud: Baud, parity: u32) {
+    if uart.set_config(&uart_config(baud, parity)).is_err() {
+        defmt::warn!("uart: {} baud not reachable from the kernel clock", baud.get());
+    }
 }
 
 /// Puts `pin` of GPIOB on alternate function `af`, fast.
