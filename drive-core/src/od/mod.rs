@@ -176,6 +176,8 @@ pub enum Unit {
     Percent,
     /// Encoder counts.
     Counts,
+    /// Degrees Celsius.
+    Celsius,
 }
 
 impl Unit {
@@ -192,6 +194,7 @@ impl Unit {
             Unit::Baud => "bit/s",
             Unit::Percent => "%",
             Unit::Counts => "count",
+            Unit::Celsius => "°C",
         }
     }
 }
