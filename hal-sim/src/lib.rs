@@ -68,6 +68,7 @@ use crate::motor::{Motor, MotorCatalog, MotorInputs};
 use crate::plant::Plant;
 
 pub mod flash;
+pub mod inject;
 pub mod motor;
 pub mod plant;
 pub mod plot;
@@ -116,6 +117,8 @@ pub struct SimOptions {
     /// Several drives on one bus, at these addresses, each with its own motor (the same model)
     /// and its own trace ([`axis_trace_path`]). Empty: one drive, at `address`.
     pub axes: Vec<u8>,
+    /// Faults and disturbances at set times after power-up (`--fault`), on every axis.
+    pub faults: Vec<inject::Scheduled>,
 }
 
 /// The trace or flash file of the drive at `address` when several share the bus: `-axisN`
@@ -219,6 +222,11 @@ impl Simulator {
     /// Every drive and its motor, in the order of [`SimOptions::axes`], to set up before it runs.
     pub fn plants_mut(&mut self) -> &mut [Plant] {
         &mut self.plants
+    }
+
+    /// A handle to inject faults into the (first) plant while the simulator runs.
+    pub fn injector(&self) -> inject::Injector {
+        self.plants.first().map(Plant::injector).unwrap_or_default()
     }
 
     /// What the running loop publishes of the (first) motor and drive.
@@ -380,6 +388,7 @@ fn build<T>(
         }
         let (drive, extra) = power_up(address, drive_config(&SimOptions { address, ..opts.clone() })?)?;
         let mut plant = Plant::new(drive, Motor::new(params.clone(), opts.motor.inputs));
+        plant.schedule(opts.faults.clone());
         if let Some((path, every)) = &opts.motor.trace {
             let path = match address {
                 Some(a) if !opts.axes.is_empty() => axis_trace_path(path, a),
