@@ -10,7 +10,8 @@
 //!   A speed written while a position move runs re-plans it to the new speed.
 //! - A move while the motor is disabled (0x6011 = 0), while a fault is latched (0x6000, 0x2135),
 //!   while power loss frees the motor, or while a controller status bit (busy aside) is set is
-//!   refused with exception 04 and nothing moves; so is a move that cannot
+//!   refused with exception 04 and nothing moves (also while the communication timeout bit 0x2138
+//!   is set); so is a move that cannot
 //!   be planned (speed 0), a position set while moving, and a resolution change while moving.
 //! - The jerk of the S-curve is the larger of the acceleration and deceleration divided by the
 //!   jerk time 0x2101 (our object, ms): the time the acceleration takes to build up.
@@ -128,7 +129,24 @@ impl DriveState {
     /// Whether the drive may start a motion: the power stage on (enabled, no fault, not freed by
     /// power loss), and no stop bit set.
     pub(crate) fn may_move(&self) -> bool {
-        self.power_stage_on() && self.status.controller & !STATUS_BUSY == 0
+        self.power_stage_on() && self.status.controller & !STATUS_BUSY == 0 && self.status.comm == 0
+    }
+
+    /// Decelerates a moving axis to rest with the mode's deceleration, and ends any PP set-point
+    /// or PVT run; stops at once if no ramp can be planned.
+    pub(crate) fn decelerate_to_stop(&mut self) {
+        if !self.axis.is_still() {
+            let v = libm::fabs(self.axis.setpoint().velocity).max(1.0);
+            let limits = match self.param(Obj::Mode) {
+                4 | 5 => self.pp_setpoint(0, v).limits,
+                _ => self.scurve_limits(v),
+            };
+            if self.axis.run_at(self.now, 0.0, 0.0, &limits).is_err() {
+                self.axis.halt();
+            }
+        }
+        self.pp = Pp::default();
+        self.pvt.cancel();
     }
 
     /// Stops the axis where its setpoint is and ends any PP set-point or PVT run.

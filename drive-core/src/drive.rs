@@ -134,6 +134,8 @@ pub struct Status {
     pub storage: u8,
     /// Drive fault bits beyond 0x6000 (0x2135): `faults::FAULT_*`.
     pub faults: u8,
+    /// Communication status bits (0x2138): `faults::COMM_TIMEOUT`.
+    pub comm: u8,
 }
 
 /// Everything the object dictionary reads and writes.
@@ -321,6 +323,7 @@ impl DriveState {
             Obj::StorageStatus => u32::from(s.storage),
             Obj::AlarmCode => u32::from(self.alarm_code()),
             Obj::DriveFaults => u32::from(s.faults),
+            Obj::CommStatus => u32::from(s.comm),
             Obj::AlarmCount => u32::from(self.faults.count),
             Obj::FaultHistory0 => self.history(0),
             Obj::FaultHistory1 => self.history(1),
@@ -404,6 +407,7 @@ impl DriveState {
             Obj::NotifyStatus => s.notify &= !(value as u8),
             Obj::StorageStatus => s.storage &= !(value as u8 & !STORAGE_SAVING),
             Obj::DriveFaults => s.faults &= !(value as u8),
+            Obj::CommStatus => s.comm &= !(value as u8),
             Obj::PvtFault => self.pvt.fault &= !(value as u8),
             Obj::GpioValue => {
                 // Only outputs take the written level.
@@ -666,6 +670,7 @@ impl<M: RegisterMap> Drive<M> {
             return;
         }
         counters.slave_messages = counters.slave_messages.wrapping_add(1);
+        state.heard();
         let pdu = rest.get(..rest.len().saturating_sub(2)).unwrap_or_default();
         let function = pdu.first().copied().unwrap_or(0);
         if function & 0x80 != 0 {

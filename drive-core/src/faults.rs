@@ -37,6 +37,9 @@ pub const FAULT_OVER_VOLTAGE: u8 = 1 << 0;
 /// 0x2135 bit 1: overload, a phase current above 1.5 times 0x600D for 2 s.
 pub const FAULT_OVERLOAD: u8 = 1 << 1;
 
+/// 0x2138 bit 0: the communication timeout 0x2137 ran out.
+pub const COMM_TIMEOUT: u8 = 1 << 0;
+
 /// Seed 002's alarm codes.
 pub mod alarm {
     /// Motor phase over-current.
@@ -101,6 +104,8 @@ pub(crate) struct FaultLog {
     pub(crate) freed: bool,
     /// Power loss with 0x6082 bit 1: the brake is applied.
     pub(crate) braked: bool,
+    /// The last valid frame addressed to this drive or broadcast (none: power-up, time 0).
+    last_frame: Option<Instant>,
 }
 
 impl FaultLog {
@@ -158,6 +163,7 @@ impl DriveState {
         self.status.error |= error;
         self.status.faults |= faults;
         self.power_loss(inputs);
+        self.watchdog(now);
         if (self.faulted() || self.faults.freed) && !self.axis.is_still() {
             // The power stage is off: the setpoint stops where it is, any run is cancelled.
             self.stop_motion();
@@ -201,6 +207,22 @@ impl DriveState {
             None => self.faults.overload_since = None,
         }
         (error, faults)
+    }
+
+    /// A valid frame addressed to this drive (or broadcast) arrived: the communication watchdog
+    /// starts again.
+    pub(crate) fn heard(&mut self) {
+        self.faults.last_frame = Some(self.now);
+    }
+
+    /// The communication watchdog (0x2137): when it runs out, the status bit and a stop.
+    fn watchdog(&mut self, now: Instant) {
+        let limit = u64::from(self.param(Obj::CommTimeout)) * 100_000;
+        let since = now.since(self.faults.last_frame.unwrap_or(Instant::from_micros(0)));
+        if limit != 0 && since >= limit && self.status.comm & COMM_TIMEOUT == 0 {
+            self.status.comm |= COMM_TIMEOUT;
+            self.decelerate_to_stop();
+        }
     }
 
     /// Power-loss behaviour (0x6082..0x6084) and the power-down position save.

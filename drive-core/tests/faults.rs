@@ -7,7 +7,7 @@ use common::Bus;
 use drive_core::control::Outputs;
 use drive_core::faults::{Inputs, alarm};
 use drive_core::od::Obj;
-use drive_core::{Instant, SystemRequest};
+use drive_core::{Drive, DriveConfig, Instant, Params, SystemRequest};
 
 const NOMINAL: Inputs =
     Inputs { supply_mv: Some(24_000), temperature_c: Some(30), phase_ma: Some([0, 0]), coil_open: [false; 2] };
@@ -247,4 +247,61 @@ fn the_new_objects_reject_bad_writes() {
         assert_eq!(reply.get(1..3), Some(&[0x86, code][..]), "{addr:#x}");
     }
     assert_eq!(bus.snapshot(), before);
+}
+
+/// Reads 0x6001 (any valid frame to this drive restarts the watchdog).
+fn poll(bus: &mut Bus) {
+    assert!(bus.request(&[1, 3, 0x60, 0x01, 0, 1]).is_some());
+}
+
+#[test]
+fn the_watchdog_decelerates_a_moving_axis_and_sets_its_bit() {
+    let mut bus = drive();
+    // Off by default.
+    run(&mut bus, &NOMINAL, 2_000_000);
+    assert_eq!(read(&bus, Obj::CommStatus), 0);
+    assert!(write(&mut bus, 0x2137, 5));
+    assert!(write(&mut bus, 0x6007, 1));
+    assert_eq!(write32(&mut bus, 0x6003, 4000), None);
+    // Polled every 400 ms it runs on; a frame to another drive does not count.
+    for _ in 0..5 {
+        run(&mut bus, &NOMINAL, 390_000);
+        poll(&mut bus);
+    }
+    bus.send(&common::frame(&[2, 3, 0x60, 0x01, 0, 1]));
+    let out = run(&mut bus, &NOMINAL, 390_000);
+    assert_eq!(read(&bus, Obj::CommStatus), 0);
+    assert_eq!(out.setpoint.velocity, 4000.0);
+    // 500 ms after the last frame to it: the bit, and a ramp down (level 8, 5210 pps²), not a jump.
+    let out = run(&mut bus, &NOMINAL, 120_000);
+    assert_eq!(read(&bus, Obj::CommStatus), 1);
+    assert!(out.setpoint.velocity > 3000.0 && out.setpoint.velocity < 4000.0, "{}", out.setpoint.velocity);
+    let out = run(&mut bus, &NOMINAL, 1_500_000);
+    assert_eq!(out.setpoint.velocity, 0.0);
+    assert!(out.enabled, "the watchdog stops, it does not free the motor");
+    // Refused until cleared.
+    assert!(write(&mut bus, 0x6007, 0));
+    let before = bus.snapshot();
+    assert_eq!(write32(&mut bus, 0x6005, 100), Some(4));
+    assert_eq!(bus.snapshot(), before);
+    assert!(write(&mut bus, 0x2138, 1));
+    assert_eq!(write32(&mut bus, 0x6005, 100), None);
+}
+
+#[test]
+fn the_watchdog_counts_from_power_up() {
+    let mut params = Params::factory();
+    assert!(params.set(Obj::CommTimeout, 1));
+    let mut drive = Drive::boot(DriveConfig::default(), &params, 0);
+    let mut t = 0;
+    while t < 99_950 {
+        drive.tick_with(Instant::from_micros(t), &NOMINAL);
+        t += 50;
+    }
+    assert_eq!(drive.state().read(Obj::CommStatus), 0);
+    drive.tick_with(Instant::from_micros(100_000), &NOMINAL);
+    assert_eq!(drive.state().read(Obj::CommStatus), 1);
+    // At rest nothing else happens.
+    assert_eq!(drive.state().read(Obj::ErrorStatus), 0);
+    assert!(drive.tick_with(Instant::from_micros(100_050), &NOMINAL).enabled);
 }

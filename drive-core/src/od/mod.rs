@@ -178,6 +178,8 @@ pub enum Unit {
     Counts,
     /// Degrees Celsius.
     Celsius,
+    /// Tenths of a second.
+    DeciSeconds,
 }
 
 impl Unit {
@@ -195,6 +197,7 @@ impl Unit {
             Unit::Percent => "%",
             Unit::Counts => "count",
             Unit::Celsius => "°C",
+            Unit::DeciSeconds => "100 ms",
         }
     }
 }

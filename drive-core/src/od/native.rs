@@ -161,6 +161,14 @@ objects! {
     /// Alarms raised since power-up (our object), wrapping: a master polls it to see new entries
     /// in the fault history.
     AlarmCount @ 0x2136: U16, Ro, Live, Any, default 0, None, "alarm count";
+    /// Communication timeout (our object, as seed 004's P□602): 0 off, else the longest time
+    /// without a valid frame addressed to this drive (or broadcast), in 100 ms. When it runs out a
+    /// moving axis decelerates to rest (0x600B's level; PP/PV: 0x6069), 0x2138 bit 0 is set, and
+    /// moves are refused (04) until it is cleared. Counted from power-up and from every such frame.
+    CommTimeout @ 0x2137: U16, Rw, Rom, Any, default 0, DeciSeconds, "communication timeout";
+    /// Communication status (our object), write 1 to clear: bit 0 the communication timeout
+    /// 0x2137 ran out.
+    CommStatus @ 0x2138: U8, W1c, Live, Bits(0x01), default 0, None, "communication status";
     /// Fault history entry 0 (our object; 0 newest): bits 31-24 the alarm code, bits 23-0 when it
     /// was raised, in 100 ms since power-up (wraps after 19.4 days). 0: no entry.
     FaultHistory0 @ 0x213C: U32, Ro, Live, Any, default 0, None, "fault history 0";
