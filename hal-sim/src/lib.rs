@@ -161,6 +161,14 @@ pub struct Snapshot {
     pub rotor_microsteps: f64,
     /// The drive's position setpoint, whole microsteps.
     pub setpoint: i64,
+    /// The setpoint's velocity, microsteps per second.
+    pub velocity: f64,
+    /// Whether the drive's power stage is on.
+    pub enabled: bool,
+    /// The brake's PWM duty the drive outputs, % (0: applied).
+    pub brake_duty: u8,
+    /// The larger of the two phase currents' magnitudes in the motor, A.
+    pub current_a: f64,
 }
 
 /// Simulated drives (one, or several on one bus) with their endpoint open, ready to run.
@@ -515,10 +523,16 @@ impl Sim<'_> {
             // A trace is read while the simulator runs (and after it is killed): keep it current.
             let _ = plant.flush_trace();
             if let Ok(mut s) = snapshot.lock() {
+                let out = plant.outputs();
+                let (a, b) = plant.motor().phase_currents();
                 *s = Snapshot {
                     time_us: now.as_micros(),
                     rotor_microsteps: plant.rotor_microsteps(),
-                    setpoint: plant.outputs().map_or(0, |o| o.setpoint.whole),
+                    setpoint: out.map_or(0, |o| o.setpoint.whole),
+                    velocity: out.map_or(0.0, |o| o.setpoint.velocity),
+                    enabled: out.is_some_and(|o| o.enabled),
+                    brake_duty: out.map_or(0, |o| o.brake_duty),
+                    current_a: a.abs().max(b.abs()),
                 };
             }
         }
