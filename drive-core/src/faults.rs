@@ -150,22 +150,25 @@ impl DriveState {
     pub(crate) fn supervise(&mut self, now: Instant, inputs: &Inputs) {
         let (error, faults) = self.detect(now, inputs);
         let (new_error, new_faults) = (error & !self.status.error, faults & !self.status.faults);
-        for &(bit, code) in ERROR_ALARMS.iter() {
-            if new_error & bit != 0 {
-                self.faults.record(code, now);
+        if new_error | new_faults != 0 {
+            for &(bit, code) in ERROR_ALARMS.iter() {
+                if new_error & bit != 0 {
+                    self.faults.record(code, now);
+                }
             }
-        }
-        for &(bit, code) in FAULT_ALARMS.iter() {
-            if new_faults & bit != 0 {
-                self.faults.record(code, now);
+            for &(bit, code) in FAULT_ALARMS.iter() {
+                if new_faults & bit != 0 {
+                    self.faults.record(code, now);
+                }
             }
+            self.status.error |= error;
+            self.status.faults |= faults;
         }
-        self.status.error |= error;
-        self.status.faults |= faults;
         self.power_loss(inputs);
         self.watchdog(now);
-        if (self.faulted() || self.faults.freed) && !self.axis.is_still() {
-            // The power stage is off: the setpoint stops where it is, any run is cancelled.
+        if self.faulted() || self.faults.freed {
+            // The power stage is off: the setpoint stops where it is, and a run or set-point
+            // accepted before the fault does not start.
             self.stop_motion();
         }
     }
@@ -193,9 +196,10 @@ impl DriveState {
                 let limit = i64::from(self.param(Obj::OverCurrent));
                 let over = |i: i32| i64::from(i).abs() > limit;
                 error |= if over(a) { ERR_A_OVER_CURRENT } else { 0 } | if over(b) { ERR_B_OVER_CURRENT } else { 0 };
-                // Overload: either phase above 1.5 times the setting, continuously.
+                // Overload: either phase above 1.5 times the setting, continuously. With a
+                // setting of 0 there is no current to compare with (over-current still applies).
                 let load = i64::from(self.param(Obj::PhaseCurrent)) * 3 / 2;
-                if i64::from(a).abs().max(i64::from(b).abs()) > load {
+                if load > 0 && i64::from(a).abs().max(i64::from(b).abs()) > load {
                     let since = *self.faults.overload_since.get_or_insert(now);
                     if now.since(since) >= OVERLOAD_MICROS {
                         faults |= FAULT_OVERLOAD;

@@ -150,6 +150,38 @@ fn overload_after_two_seconds_above_one_and_a_half_times_the_setting() {
     assert!(!run(&mut bus, &high, 1_000).enabled);
     assert_eq!(read(&bus, Obj::DriveFaults), 1 << 1);
     assert_eq!(read(&bus, Obj::AlarmCode), u32::from(alarm::OVERLOAD));
+    // With no current set, a measured offset is no overload.
+    let mut bus = drive();
+    assert!(write(&mut bus, 0x600D, 0));
+    let offset = Inputs { phase_ma: Some([30, -20]), ..NOMINAL };
+    run(&mut bus, &offset, 3_000_000);
+    assert_eq!(read(&bus, Obj::DriveFaults), 0);
+}
+
+/// PVT mode 1 with two points (0, then 1000 microsteps 100 ms later), its start requested.
+fn pvt_started() -> Bus {
+    let mut bus = drive();
+    assert!(write(&mut bus, 0x6007, 2));
+    for (position, time) in [(0, 0), (1000, 100)] {
+        assert_eq!(write32(&mut bus, 0x6027, position), None);
+        assert_eq!(write32(&mut bus, 0x602B, time), None);
+        assert!(write(&mut bus, 0x6017, 2));
+    }
+    assert!(write(&mut bus, 0x601C, 1));
+    assert!(write(&mut bus, 0x6017, 1));
+    bus
+}
+
+#[test]
+fn a_pvt_start_accepted_before_a_fault_does_not_run() {
+    // Without a fault the run goes to its last point.
+    let mut bus = pvt_started();
+    assert_eq!(run(&mut bus, &NOMINAL, 300_000).setpoint.whole, 1000);
+    let mut bus = pvt_started();
+    let hot = Inputs { temperature_c: Some(100), ..NOMINAL };
+    assert_eq!(run(&mut bus, &hot, 300_000).setpoint.whole, 0);
+    assert!(write(&mut bus, 0x6000, 1));
+    assert_eq!(run(&mut bus, &NOMINAL, 300_000).setpoint.whole, 0, "the start was cancelled");
 }
 
 #[test]
