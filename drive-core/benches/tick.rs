@@ -16,6 +16,9 @@
 //!   farther on (`extend`) or behind (`reverse`).
 //! - `pvt`: PVT mode 1, inside a cubic segment (evaluated exactly in `i128`).
 //!
+//! `tick_measured`: the `idle` and `cruise` ticks given every measurement ([`Drive::tick_with`]),
+//! so that the fault checks, power loss and the watchdog run on all of them.
+//!
 //! `write`: the Modbus write that re-plans, for the tick does not plan: a complete 0x10 frame
 //! given to `on_rx` at once, `on_timer` at t3.5 and `take_reply`, with the drive cruising as in
 //! `after_retarget_*`. The absolute move's check plans on a copy of the axis (trial) and its
@@ -36,6 +39,7 @@ use std::hint::black_box;
 
 use drive_core::control::{Outputs, TICK_MICROS};
 use drive_core::crc::crc16;
+use drive_core::faults::Inputs;
 use drive_core::motion::scurve::{Limits, Profile, State};
 use drive_core::od::Obj;
 use drive_core::{Drive, Instant};
@@ -311,6 +315,17 @@ fn tick(mut case: TickCase) -> Outputs {
     black_box(case.drive.tick(black_box(case.at)))
 }
 
+/// What a drive that measures everything gives each tick: all within the thresholds.
+const MEASURED: Inputs =
+    Inputs { supply_mv: Some(24_000), temperature_c: Some(40), phase_ma: Some([700, -300]), coil_open: [false; 2] };
+
+#[library_benchmark]
+#[bench::idle(args = (Situation::Idle), setup = setup_tick)]
+#[bench::cruise(args = (Situation::Cruise), setup = setup_tick)]
+fn tick_measured(mut case: TickCase) -> Outputs {
+    black_box(case.drive.tick_with(black_box(case.at), black_box(&MEASURED)))
+}
+
 // ---------------------------------------------------------------------------------------------
 // write
 
@@ -475,7 +490,7 @@ fn setup_ruckig(which: &str) -> RuckigCase {
 
 library_benchmark_group!(
     name = control;
-    benchmarks = tick, write
+    benchmarks = tick, tick_measured, write
 );
 
 library_benchmark_group!(

@@ -8,8 +8,10 @@
 //! - A relative move while busy is ignored (normal reply, nothing changes), as §5.5.5 says. An
 //!   absolute move while busy re-targets the running move on line, with no step in acceleration.
 //!   A speed written while a position move runs re-plans it to the new speed.
-//! - A move while the motor is disabled (0x6011 = 0) or while an error or controller status bit
-//!   (busy aside) is set is refused with exception 04 and nothing moves; so is a move that cannot
+//! - A move while the motor is disabled (0x6011 = 0), while a fault is latched (0x6000, 0x2135),
+//!   while power loss frees the motor, or while a controller status bit (busy aside) is set is
+//!   refused with exception 04 and nothing moves (also while the communication timeout bit 0x2138
+//!   is set); so is a move that cannot
 //!   be planned (speed 0), a position set while moving, and a resolution change while moving.
 //! - The jerk of the S-curve is the larger of the acceleration and deceleration divided by the
 //!   jerk time 0x2101 (our object, ms): the time the acceleration takes to build up.
@@ -17,6 +19,7 @@
 //! PVT (0x6007 = 2), synchronous positioning and group starts are in [`crate::pvt`].
 
 use crate::drive::{DriveState, STATUS_BUSY};
+use crate::faults::Inputs;
 use crate::motion::axis::{Axis, Setpoint};
 use crate::motion::scurve::Limits;
 use crate::od::{Obj, ObjError};
@@ -97,6 +100,12 @@ pub struct Outputs {
     pub steps: i64,
     /// Phase current amplitude in mA; 0 frees the motor.
     pub current_ma: u16,
+    /// Whether the power stage is on: enabled (0x6011), no fault latched, not freed by power loss.
+    /// Off, the bridges are open and `current_ma` is 0.
+    pub enabled: bool,
+    /// The brake's PWM duty in percent: 0x6038 releases it while the power stage is on, 0 applies
+    /// it (see [`crate::faults`]).
+    pub brake_duty: u8,
     /// Microsteps per full step that positions count in (0x600C; 0 counts full steps).
     pub microsteps: u16,
     /// The share of fast decay in the chopper's off-time (0x6010).
@@ -117,9 +126,34 @@ impl DriveState {
         }
     }
 
-    /// Whether the drive may start a motion: enabled, and no error or stop bit set.
+    /// Whether the drive may start a motion: the power stage on (enabled, no fault, not freed by
+    /// power loss), and no stop bit set.
     pub(crate) fn may_move(&self) -> bool {
-        self.param(Obj::Enable) == 1 && self.status.error == 0 && self.status.controller & !STATUS_BUSY == 0
+        self.power_stage_on() && self.status.controller & !STATUS_BUSY == 0 && self.status.comm == 0
+    }
+
+    /// Decelerates a moving axis to rest with the mode's deceleration, and ends any PP set-point
+    /// or PVT run; stops at once if no ramp can be planned.
+    pub(crate) fn decelerate_to_stop(&mut self) {
+        if !self.axis.is_still() {
+            let v = libm::fabs(self.axis.setpoint().velocity).max(1.0);
+            let limits = match self.param(Obj::Mode) {
+                4 | 5 => self.pp_setpoint(0, v).limits,
+                _ => self.scurve_limits(v),
+            };
+            if self.axis.run_at(self.now, 0.0, 0.0, &limits).is_err() {
+                self.axis.halt();
+            }
+        }
+        self.pp = Pp::default();
+        self.pvt.cancel();
+    }
+
+    /// Stops the axis where its setpoint is and ends any PP set-point or PVT run.
+    pub(crate) fn stop_motion(&mut self) {
+        self.axis.halt();
+        self.pp = Pp::default();
+        self.pvt.cancel();
     }
 
     /// The S-curve limits of the native position and velocity modes, for a speed of `speed`.
@@ -346,9 +380,17 @@ impl DriveState {
         }
     }
 
-    /// One control tick at `now`: evaluates the motion and updates the live objects.
+    /// One control tick at `now` on a platform that measures nothing: [`DriveState::tick_with`]
+    /// with no measurement, so no fault is detected.
     pub fn tick(&mut self, now: Instant) -> Outputs {
+        self.tick_with(now, &Inputs::default())
+    }
+
+    /// One control tick at `now`: checks the measurements (see [`crate::faults`]), evaluates the
+    /// motion and updates the live objects.
+    pub fn tick_with(&mut self, now: Instant, inputs: &Inputs) -> Outputs {
         self.now = now;
+        self.supervise(now, inputs);
         self.pp_tick(now);
         self.pvt_tick(now);
         let (setpoint, steps) = self.axis.tick(now);
@@ -360,11 +402,13 @@ impl DriveState {
         }
         let idle = still && now.since(since) >= u64::from(self.param(Obj::IdleDelay)) * 1000;
         let current = self.param(Obj::PhaseCurrent) * if idle { self.param(Obj::IdleCurrent) } else { 100 } / 100;
-        let enabled = self.param(Obj::Enable) == 1;
+        let enabled = self.power_stage_on();
         Outputs {
             setpoint,
             steps,
             current_ma: if enabled { current as u16 } else { 0 },
+            enabled,
+            brake_duty: self.brake_duty(),
             microsteps: self.param(Obj::Microsteps) as u16,
             fast_decay: DECAY.get(self.param(Obj::CurrentDecay) as usize).copied().unwrap_or(U0F16::ZERO),
         }

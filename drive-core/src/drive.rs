@@ -2,6 +2,7 @@
 
 use crate::control::{Outputs, Pp, has_effect};
 use crate::crc;
+use crate::faults::{FaultLog, Inputs};
 use crate::ident::Identity;
 use crate::motion::axis::Axis;
 use crate::motion::cubic::Table;
@@ -132,6 +133,10 @@ pub struct Status {
     pub encoder: i32,
     /// Storage status bits (0x2120): `STORAGE_*`.
     pub storage: u8,
+    /// Drive fault bits beyond 0x6000 (0x2135): `faults::FAULT_*`.
+    pub faults: u8,
+    /// Communication status bits (0x2138): `faults::COMM_TIMEOUT`.
+    pub comm: u8,
 }
 
 /// Everything the object dictionary reads and writes.
@@ -154,6 +159,9 @@ pub struct DriveState {
     pub(crate) pvt: Pvt,
     /// The PVT points (10 KB: kept out of [`Checkpoint`]).
     pub(crate) table: Table,
+    /// The fault history and the supervision's memory (changed by the tick only, so kept out of
+    /// [`Checkpoint`]: a write cannot change it).
+    pub(crate) faults: FaultLog,
 }
 
 /// Everything of a [`DriveState`] but the PVT point table: what a multi-object write restores
@@ -196,14 +204,27 @@ impl DriveState {
             still_since: None,
             pvt: Pvt::default(),
             table: Table::EMPTY,
+            faults: FaultLog::default(),
         }
     }
 
     /// Everything but the PVT table, to [`DriveState::restore`] later.
     pub fn checkpoint(&self) -> Checkpoint {
         // Naming every field: a new one must be decided on here.
-        let Self { params, status, identity: _, can_save: _, request, now, axis, pp, still_since, pvt, table: _ } =
-            self;
+        let Self {
+            params,
+            status,
+            identity: _,
+            can_save: _,
+            request,
+            now,
+            axis,
+            pp,
+            still_since,
+            pvt,
+            table: _,
+            faults: _,
+        } = self;
         Checkpoint {
             params: *params,
             status: *status,
@@ -306,6 +327,20 @@ impl DriveState {
             Obj::RealSpeed => libm::round(self.axis.setpoint().velocity) as i32 as u32,
             Obj::EncoderPosition => s.encoder as u32,
             Obj::StorageStatus => u32::from(s.storage),
+            Obj::AlarmCode => u32::from(self.alarm_code()),
+            Obj::DriveFaults => u32::from(s.faults),
+            Obj::CommStatus => u32::from(s.comm),
+            Obj::AlarmCount => u32::from(self.faults.count),
+            Obj::FaultHistory0 => self.history(0),
+            Obj::FaultHistory1 => self.history(1),
+            Obj::FaultHistory2 => self.history(2),
+            Obj::FaultHistory3 => self.history(3),
+            Obj::FaultHistory4 => self.history(4),
+            Obj::FaultHistory5 => self.history(5),
+            Obj::FaultHistory6 => self.history(6),
+            Obj::FaultHistory7 => self.history(7),
+            Obj::FaultHistory8 => self.history(8),
+            Obj::FaultHistory9 => self.history(9),
             _ => self.params.get(obj as usize).copied().unwrap_or(0),
         }
     }
@@ -388,6 +423,8 @@ impl DriveState {
             Obj::ControllerStatus => s.controller &= !(value as u8 & !STATUS_BUSY),
             Obj::NotifyStatus => s.notify &= !(value as u8),
             Obj::StorageStatus => s.storage &= !(value as u8 & !STORAGE_SAVING),
+            Obj::DriveFaults => s.faults &= !(value as u8),
+            Obj::CommStatus => s.comm &= !(value as u8),
             Obj::PvtFault => self.pvt.fault &= !(value as u8),
             Obj::GpioValue => {
                 // Only outputs take the written level.
@@ -596,6 +633,11 @@ impl<M: RegisterMap> Drive<M> {
         self.state.tick(now)
     }
 
+    /// [`Drive::tick`] with what the drive measures: faults and protections are checked against it.
+    pub fn tick_with(&mut self, now: Instant, inputs: &Inputs) -> Outputs {
+        self.state.tick_with(now, inputs)
+    }
+
     /// When [`Drive::on_timer`] next has something to do.
     pub fn deadline(&self) -> Option<Instant> {
         self.framer.deadline()
@@ -646,6 +688,7 @@ impl<M: RegisterMap> Drive<M> {
             return;
         }
         counters.slave_messages = counters.slave_messages.wrapping_add(1);
+        state.heard();
         let pdu = rest.get(..rest.len().saturating_sub(2)).unwrap_or_default();
         let function = pdu.first().copied().unwrap_or(0);
         if function & 0x80 != 0 {

@@ -23,6 +23,7 @@
 pub mod control;
 pub mod crc;
 pub mod drive;
+pub mod faults;
 pub mod ident;
 pub mod motion;
 pub mod od;

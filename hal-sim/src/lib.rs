@@ -68,6 +68,7 @@ use crate::motor::{Motor, MotorCatalog, MotorInputs};
 use crate::plant::Plant;
 
 pub mod flash;
+pub mod inject;
 pub mod motor;
 pub mod plant;
 pub mod plot;
@@ -116,6 +117,8 @@ pub struct SimOptions {
     /// Several drives on one bus, at these addresses, each with its own motor (the same model)
     /// and its own trace ([`axis_trace_path`]). Empty: one drive, at `address`.
     pub axes: Vec<u8>,
+    /// Faults and disturbances at set times after power-up (`--fault`), on every axis.
+    pub faults: Vec<inject::Scheduled>,
 }
 
 /// The trace or flash file of the drive at `address` when several share the bus: `-axisN`
@@ -158,6 +161,14 @@ pub struct Snapshot {
     pub rotor_microsteps: f64,
     /// The drive's position setpoint, whole microsteps.
     pub setpoint: i64,
+    /// The setpoint's velocity, microsteps per second.
+    pub velocity: f64,
+    /// Whether the drive's power stage is on.
+    pub enabled: bool,
+    /// The brake's PWM duty the drive outputs, % (0: applied).
+    pub brake_duty: u8,
+    /// The larger of the two phase currents' magnitudes in the motor, A.
+    pub current_a: f64,
 }
 
 /// Simulated drives (one, or several on one bus) with their endpoint open, ready to run.
@@ -219,6 +230,11 @@ impl Simulator {
     /// Every drive and its motor, in the order of [`SimOptions::axes`], to set up before it runs.
     pub fn plants_mut(&mut self) -> &mut [Plant] {
         &mut self.plants
+    }
+
+    /// A handle to inject faults into the (first) plant while the simulator runs.
+    pub fn injector(&self) -> inject::Injector {
+        self.plants.first().map(Plant::injector).unwrap_or_default()
     }
 
     /// What the running loop publishes of the (first) motor and drive.
@@ -380,6 +396,7 @@ fn build<T>(
         }
         let (drive, extra) = power_up(address, drive_config(&SimOptions { address, ..opts.clone() })?)?;
         let mut plant = Plant::new(drive, Motor::new(params.clone(), opts.motor.inputs));
+        plant.schedule(opts.faults.clone());
         if let Some((path, every)) = &opts.motor.trace {
             let path = match address {
                 Some(a) if !opts.axes.is_empty() => axis_trace_path(path, a),
@@ -506,10 +523,16 @@ impl Sim<'_> {
             // A trace is read while the simulator runs (and after it is killed): keep it current.
             let _ = plant.flush_trace();
             if let Ok(mut s) = snapshot.lock() {
+                let out = plant.outputs();
+                let (a, b) = plant.motor().phase_currents();
                 *s = Snapshot {
                     time_us: now.as_micros(),
                     rotor_microsteps: plant.rotor_microsteps(),
-                    setpoint: plant.outputs().map_or(0, |o| o.setpoint.whole),
+                    setpoint: out.map_or(0, |o| o.setpoint.whole),
+                    velocity: out.map_or(0.0, |o| o.setpoint.velocity),
+                    enabled: out.is_some_and(|o| o.enabled),
+                    brake_duty: out.map_or(0, |o| o.brake_duty),
+                    current_a: a.abs().max(b.abs()),
                 };
             }
         }

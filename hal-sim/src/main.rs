@@ -62,6 +62,13 @@ struct Args {
     /// Constant load torque, N·m (positive opposes positive rotation).
     #[arg(long, value_name = "NM", default_value_t = 0.0)]
     load_torque: f64,
+    /// Inject a fault or disturbance MS ms after power-up (repeatable): `supply=V` (a step),
+    /// `supply=V/RAMP_MS` (a linear ramp from the present voltage), `load=NM` (a load-torque
+    /// step), `blocked` / `free` (rotor held / released), `open-a`, `open-b` (coil open),
+    /// `short-a`, `short-b` (bridge output shorted: over-current), `heal-a`, `heal-b` (repaired),
+    /// `temp=C` (driver temperature).
+    #[arg(long = "fault", value_name = "MS:SPEC")]
+    faults: Vec<hal_sim::inject::Scheduled>,
     /// Record time, commanded and rotor position and velocity, and phase currents as CSV.
     #[arg(long, value_name = "FILE.csv")]
     trace: Option<PathBuf>,
@@ -115,7 +122,8 @@ fn main() -> ExitCode {
         trace: args.trace.map(|path| (path, args.trace_every)),
     };
     if let Some(path) = &args.script {
-        let opts = SimOptions { address: args.address, baud: args.baud, motor, ..Default::default() };
+        let opts =
+            SimOptions { address: args.address, baud: args.baud, motor, faults: args.faults, ..Default::default() };
         return run_script(path, &opts);
     }
     let endpoint = match args.tcp {
@@ -130,6 +138,7 @@ fn main() -> ExitCode {
         flash: args.flash,
         fset_low: args.fset_low,
         axes: args.axes.map(|a| a.0).unwrap_or_default(),
+        faults: args.faults,
     };
     let sim = match Simulator::bind(opts) {
         Ok(sim) => sim,

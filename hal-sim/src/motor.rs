@@ -49,6 +49,14 @@
 //! supply drives current back into it through the same diodes. There is no torque then but detent,
 //! friction and the load.
 //!
+//! # Injected faults
+//!
+//! [`PhaseFault::Open`]: the winding carries no current whatever the bridge does; its terminals
+//! show the back-EMF. [`PhaseFault::Short`]: the bridge output is shorted (0.1 Ω, 5 µH of wiring),
+//! so the bridge current, which the drive measures, is limited by nothing but that and the supply,
+//! and the winding, bypassed, makes no torque. [`Motor::set_blocked`]: the rotor is held where it
+//! is (a jammed load), whatever the torque.
+//!
 //! # Integration
 //!
 //! Sub-steps of T / [`ChopperConfig::substeps`] (12.5 µs, 80 kHz, by default). The bridge voltage is
@@ -314,6 +322,23 @@ impl DriverCommand {
     }
 }
 
+/// What is wrong with one phase's winding or wiring (see the module documentation).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PhaseFault {
+    /// Healthy.
+    #[default]
+    None,
+    /// The winding is open (broken wire, unplugged).
+    Open,
+    /// The bridge output is shorted (across the winding, or a winding short).
+    Short,
+}
+
+/// Resistance of a shorted bridge output, Ω.
+const SHORT_OHM: f64 = 0.1;
+/// Inductance of a shorted bridge output, H.
+const SHORT_HENRY: f64 = 5e-6;
+
 /// One simulated motor with its chopper driver. See the module documentation for the model.
 #[derive(Clone, Debug)]
 pub struct Motor {
@@ -338,6 +363,10 @@ pub struct Motor {
     torque_e: f64,
     substep: u64,
     carry_s: f64,
+    // Injected faults.
+    phase_faults: [PhaseFault; 2],
+    blocked: bool,
+    short_decay_h: f64,
 }
 
 impl Motor {
@@ -378,6 +407,9 @@ impl Motor {
             torque_e: 0.0,
             substep: 0,
             carry_s: 0.0,
+            phase_faults: [PhaseFault::None; 2],
+            blocked: false,
+            short_decay_h: 0.0,
         };
         motor.derive();
         motor
@@ -389,6 +421,37 @@ impl Motor {
         self.decay_h = (-p.r_ohm * self.h / p.l_henry).exp();
         self.decay_pwm = (-p.r_ohm * self.chopper.pwm_period_s / p.l_henry).exp();
         self.inertia = p.rotor_inertia_kgm2 + self.inputs.load_inertia_kgm2.max(0.0);
+        self.short_decay_h = (-SHORT_OHM * self.h / SHORT_HENRY).exp();
+    }
+
+    /// Injects a fault into phase A (`phase` 0) or B (1) from now on; `PhaseFault::None` repairs it.
+    pub fn set_phase_fault(&mut self, phase: usize, fault: PhaseFault) {
+        if let Some(f) = self.phase_faults.get_mut(phase) {
+            *f = fault;
+        }
+    }
+
+    /// The faults of phases A and B.
+    pub fn phase_faults(&self) -> [PhaseFault; 2] {
+        self.phase_faults
+    }
+
+    /// Holds the rotor where it is (`true`, a blocked rotor) or lets it go.
+    pub fn set_blocked(&mut self, blocked: bool) {
+        self.blocked = blocked;
+        if blocked {
+            self.omega = 0.0;
+        }
+    }
+
+    /// Whether the rotor is held.
+    pub fn blocked(&self) -> bool {
+        self.blocked
+    }
+
+    /// Whether the bridges drove the phases over the last sub-step.
+    pub fn bridge_on(&self) -> bool {
+        self.bridge_on
     }
 
     /// The motor's constants.
@@ -465,29 +528,40 @@ impl Motor {
             }
         }
 
-        if self.bridge_on {
-            let (r, d) = (p.r_ohm, self.decay_h);
-            let exact = |i: f64, v: f64, e: f64| {
-                let i_inf = (v - e) / r;
-                i_inf + (i - i_inf) * d
+        let [fault_a, fault_b] = self.phase_faults;
+        let (short_decay, bridge_on) = (self.short_decay_h, self.bridge_on);
+        let phase = |i: f64, v: &mut f64, e: f64, fault: PhaseFault| {
+            // A shorted output is a bare R-L with no back-EMF; an open winding carries nothing.
+            let (r, d, e) = match fault {
+                PhaseFault::None => (p.r_ohm, self.decay_h, e),
+                PhaseFault::Short => (SHORT_OHM, short_decay, 0.0),
+                PhaseFault::Open => {
+                    *v = e.clamp(-supply, supply);
+                    return 0.0;
+                }
             };
-            self.i_a = exact(self.i_a, self.v_a, e_a);
-            self.i_b = exact(self.i_b, self.v_b, e_b);
-        } else {
-            self.v_a = freewheel_voltage(self.i_a, e_a, supply);
-            self.v_b = freewheel_voltage(self.i_b, e_b, supply);
-            self.i_a = freewheel(self.i_a, self.v_a, e_a, p.r_ohm, self.decay_h);
-            self.i_b = freewheel(self.i_b, self.v_b, e_b, p.r_ohm, self.decay_h);
-        }
+            if bridge_on {
+                let i_inf = (*v - e) / r;
+                i_inf + (i - i_inf) * d
+            } else {
+                *v = freewheel_voltage(i, e, supply);
+                freewheel(i, *v, e, r, d)
+            }
+        };
+        self.i_a = phase(self.i_a, &mut self.v_a, e_a, fault_a);
+        self.i_b = phase(self.i_b, &mut self.v_b, e_b, fault_b);
 
-        // Mechanics, with the new currents: semi-implicit Euler.
-        self.torque_e = km * (-self.i_a * s + self.i_b * c);
+        // Mechanics, with the new currents: semi-implicit Euler. A bypassed winding makes no torque.
+        let torque_current = |i: f64, fault: PhaseFault| if fault == PhaseFault::Short { 0.0 } else { i };
+        self.torque_e = km * (-torque_current(self.i_a, fault_a) * s + torque_current(self.i_b, fault_b) * c);
         // sin(4x) from sin x, cos x: 2 sin 2x cos 2x.
         let detent = -p.detent_nm * 2.0 * (2.0 * s * c) * (c * c - s * s);
         let torque = self.torque_e + detent - p.viscous_nms * self.omega - self.inputs.load_torque_nm;
         let coulomb = p.static_friction_nm + self.inputs.load_friction_nm.max(0.0);
         let j = self.inertia;
-        if self.omega == 0.0 {
+        if self.blocked {
+            self.omega = 0.0;
+        } else if self.omega == 0.0 {
             // At rest: friction holds the rotor as long as it can.
             if torque.abs() > coulomb {
                 self.omega = self.h * (torque - coulomb.copysign(torque)) / j;

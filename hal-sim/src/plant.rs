@@ -10,9 +10,11 @@ use std::io::{self, BufWriter, Write};
 use std::path::Path;
 
 use drive_core::control::{Outputs, TICK_MICROS};
+use drive_core::faults::Inputs;
 use drive_core::{Drive, Instant};
 
-use crate::motor::{DriverCommand, Motor};
+use crate::inject::{Change, Injector, Scheduled, Supply};
+use crate::motor::{DriverCommand, Motor, MotorInputs, PhaseFault};
 use crate::trace::{CSV_HEADER, Decimator, TraceRow};
 
 /// A drive driving a simulated motor.
@@ -24,7 +26,18 @@ pub struct Plant {
     next_tick: Instant,
     last: Option<Outputs>,
     trace: Option<(BufWriter<File>, Decimator)>,
+    /// The supply, steady or ramping.
+    supply: Supply,
+    /// The driver temperature the drive measures, °C.
+    temperature_c: f64,
+    /// Changes still to come, latest first.
+    schedule: Vec<Scheduled>,
+    /// Changes sent from another thread.
+    injector: Injector,
 }
+
+/// Driver temperature at power-up, °C.
+pub const AMBIENT_C: f64 = 25.0;
 
 /// Microsteps per full step that a resolution object value means (0: full steps).
 pub fn microsteps_per_step(resolution: u16) -> u32 {
@@ -34,7 +47,7 @@ pub fn microsteps_per_step(resolution: u16) -> u32 {
 /// The chopper command for the drive's outputs: the setpoint's electrical angle, with its
 /// fraction of a microstep, at the commanded current.
 pub fn driver_command(out: &Outputs) -> DriverCommand {
-    if out.current_ma == 0 {
+    if !out.enabled || out.current_ma == 0 {
         return DriverCommand::DISABLED;
     }
     let per_step = microsteps_per_step(out.microsteps);
@@ -50,7 +63,79 @@ pub fn driver_command(out: &Outputs) -> DriverCommand {
 impl Plant {
     /// `drive` and `motor`, at time 0.
     pub fn new(drive: Drive, motor: Motor) -> Self {
-        Self { drive, motor, next_tick: Instant::from_micros(0), last: None, trace: None }
+        let supply = Supply::steady(motor.inputs().supply_v);
+        Self {
+            drive,
+            motor,
+            next_tick: Instant::from_micros(0),
+            last: None,
+            trace: None,
+            supply,
+            temperature_c: AMBIENT_C,
+            schedule: Vec::new(),
+            injector: Injector::default(),
+        }
+    }
+
+    /// Applies `change` now (at the next tick's time).
+    pub fn inject(&mut self, change: Change) {
+        let t = self.next_tick.as_micros() as f64 * 1e-6;
+        let inputs = self.motor.inputs();
+        match change {
+            Change::Supply(v) => self.supply = Supply::steady(v),
+            Change::SupplyRamp { to_v, seconds } => {
+                self.supply = Supply::ramp(self.supply.at(t), to_v, t, seconds);
+            }
+            Change::LoadTorque(nm) => self.motor.set_inputs(MotorInputs { load_torque_nm: nm, ..inputs }),
+            Change::Blocked(b) => self.motor.set_blocked(b),
+            Change::Phase(k, fault) => self.motor.set_phase_fault(k, fault),
+            Change::DriverTemperature(c) => self.temperature_c = c,
+        }
+    }
+
+    /// Applies each change at its time after power-up (the simulated time 0).
+    pub fn schedule(&mut self, mut changes: Vec<Scheduled>) {
+        changes.sort_by_key(|c| std::cmp::Reverse(c.at_us));
+        self.schedule = changes;
+    }
+
+    /// A handle through which another thread injects changes while the plant runs.
+    pub fn injector(&self) -> Injector {
+        self.injector.clone()
+    }
+
+    /// What the drive measures now: the supply, the driver temperature, the bridge currents and
+    /// the power stage's open-load flags (an open winding while the bridge drives it).
+    pub fn measurements(&self) -> Inputs {
+        let (a, b) = self.motor.phase_currents();
+        let ma = |i: f64| (i * 1e3).round().clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32;
+        let open = |f: PhaseFault| f == PhaseFault::Open && self.motor.bridge_on();
+        let [fa, fb] = self.motor.phase_faults();
+        Inputs {
+            supply_mv: Some((self.motor.inputs().supply_v.max(0.0) * 1e3).round().min(f64::from(u32::MAX)) as u32),
+            temperature_c: Some(self.temperature_c.round().clamp(-40.0, 300.0) as i16),
+            phase_ma: Some([ma(a), ma(b)]),
+            coil_open: [open(fa), open(fb)],
+        }
+    }
+
+    /// Applies the changes that are due at the next tick, and the supply's ramp.
+    fn disturb(&mut self) {
+        for change in self.injector.take() {
+            self.inject(change);
+        }
+        while let Some(next) = self.schedule.last().copied() {
+            if next.at_us > self.next_tick.as_micros() {
+                break;
+            }
+            self.schedule.pop();
+            self.inject(next.change);
+        }
+        let v = self.supply.at(self.next_tick.as_micros() as f64 * 1e-6);
+        let inputs = self.motor.inputs();
+        if inputs.supply_v != v {
+            self.motor.set_inputs(MotorInputs { supply_v: v, ..inputs });
+        }
     }
 
     /// Records one row every `every` ticks into a CSV file at `path` from now on.
@@ -95,7 +180,8 @@ impl Plant {
     /// Runs every control tick up to and including `now`.
     pub fn advance_to(&mut self, now: Instant) {
         while self.next_tick <= now {
-            let out = self.drive.tick(self.next_tick);
+            self.disturb();
+            let out = self.drive.tick_with(self.next_tick, &self.measurements());
             let cmd = driver_command(&out);
             self.motor.advance(&cmd, TICK_MICROS as f64 * 1e-6);
             if let Some((file, every)) = &mut self.trace

@@ -178,19 +178,22 @@ impl Trace {
 }
 
 /// Reads the rows of a trace CSV (header first, as [`Trace::write_csv`] and [`TraceWriter`]
-/// write it). Blank lines are skipped.
-pub fn read_csv<R: BufRead>(input: R) -> io::Result<Vec<TraceRow>> {
+/// write it). Blank lines are skipped, and so is a last line without its newline.
+pub fn read_csv<R: BufRead>(mut input: R) -> io::Result<Vec<TraceRow>> {
     let bad = |what: String| io::Error::new(io::ErrorKind::InvalidData, what);
-    let mut lines = input.lines();
-    let header = lines.next().transpose()?.unwrap_or_default();
+    let mut text = String::new();
+    input.read_to_string(&mut text)?;
+    // Whole lines only: a trace is read while the simulator writes it, and its last row may be
+    // half written.
+    let mut lines = text.split_inclusive('\n').filter(|l| l.ends_with('\n'));
+    let header = lines.next().unwrap_or_default();
     if header.trim() != CSV_HEADER {
         return Err(bad(format!("not a trace CSV: header {header:?}")));
     }
     let mut rows = Vec::new();
     for line in lines {
-        let line = line?;
         if !line.trim().is_empty() {
-            rows.push(TraceRow::parse_csv_line(&line).map_err(bad)?);
+            rows.push(TraceRow::parse_csv_line(line).map_err(bad)?);
         }
     }
     Ok(rows)

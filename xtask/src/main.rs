@@ -298,6 +298,9 @@ fn tick_cost() -> Result<(), String> {
     Ok(())
 }
 
+/// How long `probe` tries to reach the drive under QEMU.
+const PROBE_FOR: Duration = Duration::from_secs(60);
+
 /// QEMU, killed when dropped.
 struct Qemu(Child);
 
@@ -313,7 +316,8 @@ impl Drop for Qemu {
 /// answered read.
 fn probe(host: &str, port: u16, qemu: &mut Child, patience: Duration) -> Result<Duration, String> {
     let request = [0x01, 0x03, 0x60, 0x0C, 0x00, 0x02, 0x1A, 0x08];
-    let deadline = Instant::now() + Duration::from_secs(20);
+    // Generous: a loaded machine slows QEMU's boot and its serial line.
+    let deadline = Instant::now() + PROBE_FOR;
     while Instant::now() < deadline {
         if let Ok(Some(status)) = qemu.try_wait() {
             return Err(format!("qemu exited: {status}"));
@@ -324,7 +328,7 @@ fn probe(host: &str, port: u16, qemu: &mut Child, patience: Duration) -> Result<
         };
         eprintln!(
             "QEMU: serial port open after {:.1} ms",
-            (Instant::now() + Duration::from_secs(20) - deadline).as_secs_f64() * 1e3
+            (Instant::now() + PROBE_FOR - deadline).as_secs_f64() * 1e3
         );
         s.set_read_timeout(Some(patience)).map_err(|e| e.to_string())?;
         for _ in 0..50 {
@@ -338,8 +342,11 @@ fn probe(host: &str, port: u16, qemu: &mut Child, patience: Duration) -> Result<
                 let _ = s.read(&mut [0u8; 64]);
                 return Ok(rtt);
             }
-            // A partial or garbled answer: let the drive's silence timeout clear its receiver.
-            std::thread::sleep(Duration::from_millis(50));
+            // A partial or garbled answer: let the drive's receiver clear. It waits up to 250 ms
+            // for the rest of a request of known length (firmware/src/frames.rs): a retry sooner
+            // would complete a request that lost its first bytes with the head of the next, and
+            // every retry after it would stay out of step.
+            std::thread::sleep(Duration::from_millis(300));
         }
     }
     Err(format!("the drive under QEMU did not answer on {host}:{port}"))

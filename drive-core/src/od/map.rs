@@ -396,6 +396,8 @@ mod tests {
             pvt_pointer: 9,
             encoder: -5,
             storage: 0x11,
+            faults: 0x03,
+            comm: 0x01,
         };
         let map = NativeMap::new();
         for d in OBJECTS.iter() {

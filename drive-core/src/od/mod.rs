@@ -176,6 +176,10 @@ pub enum Unit {
     Percent,
     /// Encoder counts.
     Counts,
+    /// Degrees Celsius.
+    Celsius,
+    /// Tenths of a second.
+    DeciSeconds,
 }
 
 impl Unit {
@@ -192,6 +196,8 @@ impl Unit {
             Unit::Baud => "bit/s",
             Unit::Percent => "%",
             Unit::Counts => "count",
+            Unit::Celsius => "°C",
+            Unit::DeciSeconds => "100 ms",
         }
     }
 }

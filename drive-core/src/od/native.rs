@@ -138,8 +138,71 @@ objects! {
     /// held low at power-up (factory values restored and saved), 3 save in progress, 4 last save
     /// failed (the flash keeps the set saved before it).
     StorageStatus @ 0x2120: U8, W1c, Live, Bits(0x1F), default 0, None, "storage status";
-    /// Error status, write 1 to clear: bit 0 over-temperature, 1 coil A open, 2 coil B open,
-    /// 3 A over-current, 4 B over-current, 5 under-voltage. Moves are refused while any is set.
+    /// Under-voltage threshold (our object): a supply below it latches 0x6000 bit 5, alarm 13
+    /// (seed 002 alarms under 18 V).
+    UnderVoltage @ 0x2130: U16, Rw, Rom, Any, default 18_000, MilliVolts, "under-voltage threshold";
+    /// Over-voltage threshold (our object): a supply above it latches 0x2135 bit 0, alarm 14
+    /// (seed 002 alarms above 60 V).
+    OverVoltage @ 0x2131: U16, Rw, Rom, Any, default 60_000, MilliVolts, "over-voltage threshold";
+    /// Over-temperature threshold (our object): a driver temperature above it latches 0x6000 bit 0,
+    /// alarm 15 (our code: seed 002 files over-temperature under "other").
+    OverTemperature @ 0x2132: U8, Rw, Rom, Span(40, 150), default 85, Celsius, "over-temperature threshold";
+    /// Over-current threshold (our object): a measured phase current beyond it latches 0x6000 bit 3
+    /// (phase A) or 4 (phase B), alarm 10. Above the largest phase current 0x600D accepts.
+    OverCurrent @ 0x2133: U16, Rw, Rom, Span(500, 10_000), default 8000, MilliAmps, "over-current threshold";
+    /// Alarm code (our object, seed 002's codes): the most severe latched alarm, 0 when none:
+    /// 10 over-current, 11 phase loss (coil open), 14 over-voltage, 13 under-voltage, 15
+    /// over-temperature, 26 overload, in that order of precedence. It clears with the bits.
+    AlarmCode @ 0x2134: U8, Ro, Live, Any, default 0, None, "alarm code";
+    /// Drive faults beyond 0x6000 (our object), write 1 to clear: bit 0 over-voltage (alarm 14),
+    /// bit 1 overload (alarm 26: a phase current above 1.5 times 0x600D for 2 s). Like the bits of
+    /// 0x6000 they disable the power stage and refuse moves until cleared.
+    DriveFaults @ 0x2135: U8, W1c, Live, Bits(0x03), default 0, None, "drive faults";
+    /// Alarms raised since power-up (our object), wrapping: a master polls it to see new entries
+    /// in the fault history.
+    AlarmCount @ 0x2136: U16, Ro, Live, Any, default 0, None, "alarm count";
+    /// Communication timeout (our object, as seed 004's P□602): 0 off, else the longest time
+    /// without a valid frame addressed to this drive (or broadcast), in 100 ms. When it runs out a
+    /// moving axis decelerates to rest (0x600B's level; PP/PV: 0x6069), 0x2138 bit 0 is set, and
+    /// moves are refused (04) until it is cleared. Counted from power-up and from every such frame.
+    CommTimeout @ 0x2137: U16, Rw, Rom, Any, default 0, DeciSeconds, "communication timeout";
+    /// Communication status (our object), write 1 to clear: bit 0 the communication timeout
+    /// 0x2137 ran out.
+    CommStatus @ 0x2138: U8, W1c, Live, Bits(0x01), default 0, None, "communication status";
+    /// Fault history entry 0 (our object; 0 newest): bits 31-24 the alarm code, bits 23-0 when it
+    /// was raised, in 100 ms since power-up (wraps after 19.4 days). 0: no entry.
+    FaultHistory0 @ 0x213C: U32, Ro, Live, Any, default 0, None, "fault history 0";
+    /// Fault history entry 1 (our object; 0 newest): bits 31-24 the alarm code, bits 23-0 when it
+    /// was raised, in 100 ms since power-up (wraps after 19.4 days). 0: no entry.
+    FaultHistory1 @ 0x213E: U32, Ro, Live, Any, default 0, None, "fault history 1";
+    /// Fault history entry 2 (our object; 0 newest): bits 31-24 the alarm code, bits 23-0 when it
+    /// was raised, in 100 ms since power-up (wraps after 19.4 days). 0: no entry.
+    FaultHistory2 @ 0x2140: U32, Ro, Live, Any, default 0, None, "fault history 2";
+    /// Fault history entry 3 (our object; 0 newest): bits 31-24 the alarm code, bits 23-0 when it
+    /// was raised, in 100 ms since power-up (wraps after 19.4 days). 0: no entry.
+    FaultHistory3 @ 0x2142: U32, Ro, Live, Any, default 0, None, "fault history 3";
+    /// Fault history entry 4 (our object; 0 newest): bits 31-24 the alarm code, bits 23-0 when it
+    /// was raised, in 100 ms since power-up (wraps after 19.4 days). 0: no entry.
+    FaultHistory4 @ 0x2144: U32, Ro, Live, Any, default 0, None, "fault history 4";
+    /// Fault history entry 5 (our object; 0 newest): bits 31-24 the alarm code, bits 23-0 when it
+    /// was raised, in 100 ms since power-up (wraps after 19.4 days). 0: no entry.
+    FaultHistory5 @ 0x2146: U32, Ro, Live, Any, default 0, None, "fault history 5";
+    /// Fault history entry 6 (our object; 0 newest): bits 31-24 the alarm code, bits 23-0 when it
+    /// was raised, in 100 ms since power-up (wraps after 19.4 days). 0: no entry.
+    FaultHistory6 @ 0x2148: U32, Ro, Live, Any, default 0, None, "fault history 6";
+    /// Fault history entry 7 (our object; 0 newest): bits 31-24 the alarm code, bits 23-0 when it
+    /// was raised, in 100 ms since power-up (wraps after 19.4 days). 0: no entry.
+    FaultHistory7 @ 0x214A: U32, Ro, Live, Any, default 0, None, "fault history 7";
+    /// Fault history entry 8 (our object; 0 newest): bits 31-24 the alarm code, bits 23-0 when it
+    /// was raised, in 100 ms since power-up (wraps after 19.4 days). 0: no entry.
+    FaultHistory8 @ 0x214C: U32, Ro, Live, Any, default 0, None, "fault history 8";
+    /// Fault history entry 9 (our object; 0 newest): bits 31-24 the alarm code, bits 23-0 when it
+    /// was raised, in 100 ms since power-up (wraps after 19.4 days). 0: no entry.
+    FaultHistory9 @ 0x214E: U32, Ro, Live, Any, default 0, None, "fault history 9";
+    /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
+    /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
+    /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake
+    /// applied, axis stopped, moves refused (04). A condition still present sets it again.
     ErrorStatus @ 0x6000: U8, W1c, Live, Bits(0x3F), default 0, None, "error status";
     /// Controller status, write 1 to clear (bit 3 excepted): bit 0 external stop 1, 1 external
     /// stop 2, 2 stall, 3 busy (moving), 4 external stop 3, 5 PVT FIFO empty, 6 FIFO below the low
@@ -236,7 +299,9 @@ objects! {
     GpioValue @ 0x6031: U16, Rw, Live, Bits(0x0FFF), default 0, None, "GPIO value";
     /// OCD1 (appendix only, meaning not documented): kept and returned.
     Ocd1 @ 0x6034: U8, Rw, Rom, Any, default 0, None, "OCD1";
-    /// Brake output PWM duty.
+    /// Brake output PWM duty: the release duty of a spring-applied brake. Output while the power
+    /// stage is on (released); 0 (applied) when disabled, on a fault, or in power loss below
+    /// 0x6084. 0: no brake fitted, the output stays 0.
     Brake @ 0x6038: U8, Rw, Ram, Span(0, 100), default 0, Percent, "brake control";
     /// Open-loop stall detection: bits 0-6 the threshold, signed; bits 7-15 reserved.
     StallParams @ 0x6039: U16, Rw, Rom, Bits(0x7F), default 0, None, "stall parameters";
@@ -314,7 +379,10 @@ objects! {
     AnalogMaxPos @ 0x607D: S32, Rw, Rom, S32_ANY, default 64000, Steps, "analog maximum position";
     /// Measured speed (closed loop). Read only: it is a measurement.
     RealSpeed @ 0x607F: S32, Ro, Live, Span(-300_000, 300_000), default 0, Pps, "real-time speed";
-    /// Power-loss behaviour: bit 0 free the motor, bit 1 apply the brake.
+    /// Power-loss behaviour: bit 0 free the motor (power stage off, axis stopped, moves refused)
+    /// below 0x6083, bit 1 apply the brake below 0x6084, while the supply stays below. Not
+    /// latched. Falling below the highest of the enabled levels and 0x2130 requests the
+    /// power-down position save (0x605E) once.
     PowerLossControl @ 0x6082: U16, Rw, Rom, Bits(0x03), default 0, None, "power-loss control";
     /// Power loss: supply voltage below which the motor is freed.
     PowerLossFreeVoltage @ 0x6083: U16, Rw, Rom, Any, default 0, MilliVolts, "power-loss free voltage";
