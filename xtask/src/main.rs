@@ -326,10 +326,7 @@ fn probe(host: &str, port: u16, qemu: &mut Child, patience: Duration) -> Result<
             std::thread::sleep(Duration::from_millis(5));
             continue;
         };
-        eprintln!(
-            "QEMU: serial port open after {:.1} ms",
-            (Instant::now() + PROBE_FOR - deadline).as_secs_f64() * 1e3
-        );
+        eprintln!("QEMU: serial port open after {:.1} ms", (Instant::now() + PROBE_FOR - deadline).as_secs_f64() * 1e3);
         s.set_read_timeout(Some(patience)).map_err(|e| e.to_string())?;
         for _ in 0..50 {
             let sent = Instant::now();
