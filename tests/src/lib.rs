@@ -1,1 +1,48 @@
-//! Workspace-level tests of the drive: see `tests/`.
+//! Workspace-level tests of the drive: see `tests/`. Here, what every test's master does: the
+//! requests of a real Modbus master (tokio-modbus), each bounded in time.
+
+use std::time::Duration;
+
+use tokio::time::timeout;
+use tokio_modbus::client::{Context, Reader, Writer};
+use tokio_modbus::prelude::{ExceptionCode, ReadCode};
+
+/// How long a request may take, answer included.
+pub const LIMIT: Duration = Duration::from_secs(3);
+
+/// Reads `n` holding registers from `addr`: the values, or the drive's exception.
+///
+/// # Panics
+/// If no answer comes within [`LIMIT`], or the transport fails.
+pub async fn read(ctx: &mut Context, addr: u16, n: u16) -> Result<Vec<u16>, ExceptionCode> {
+    timeout(LIMIT, ctx.read_holding_registers(addr, n)).await.expect("answer in time").expect("transport")
+}
+
+/// Writes one register (0x06).
+///
+/// # Panics
+/// As [`read`].
+pub async fn write(ctx: &mut Context, addr: u16, v: u16) -> Result<(), ExceptionCode> {
+    timeout(LIMIT, ctx.write_single_register(addr, v)).await.expect("answer in time").expect("transport")
+}
+
+/// Writes registers from `addr` (0x10).
+///
+/// # Panics
+/// As [`read`].
+pub async fn write_many(ctx: &mut Context, addr: u16, v: &[u16]) -> Result<(), ExceptionCode> {
+    timeout(LIMIT, ctx.write_multiple_registers(addr, v)).await.expect("answer in time").expect("transport")
+}
+
+/// The vendor name (object 0) of the basic device identification (0x2B / 0x0E).
+///
+/// # Panics
+/// As [`read`], and on an exception.
+pub async fn vendor_name(ctx: &mut Context) -> Option<Vec<u8>> {
+    let id = timeout(LIMIT, ctx.read_device_identification(ReadCode::Basic, 0))
+        .await
+        .expect("answer in time")
+        .expect("transport")
+        .expect("identification");
+    id.device_id_objects.iter().find(|o| o.id == 0).map(|o| o.value.to_vec())
+}

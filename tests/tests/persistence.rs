@@ -9,10 +9,10 @@ use std::time::Duration;
 use hal_sim::{Endpoint, PowerSwitch, SimOptions, Simulator};
 use tokio::net::TcpStream;
 use tokio::time::timeout;
-use tokio_modbus::client::{Context, Reader, Writer, rtu};
+use tokio_modbus::client::{Context, Reader, rtu};
 use tokio_modbus::prelude::{ExceptionCode, Slave};
 
-const LIMIT: Duration = Duration::from_secs(3);
+use drive_tests::{read, write, write_many};
 
 /// Storage status 0x2120 bits.
 const EMPTY: u16 = 1;
@@ -34,18 +34,6 @@ fn power_on(flash: &Path, fset_low: bool) -> PowerSwitch {
 async fn master(sim: &PowerSwitch, slave: u8) -> Context {
     let stream = TcpStream::connect(sim.endpoint()).await.expect("connect");
     rtu::attach_slave(stream, Slave(slave))
-}
-
-async fn read(ctx: &mut Context, addr: u16, n: u16) -> Result<Vec<u16>, ExceptionCode> {
-    timeout(LIMIT, ctx.read_holding_registers(addr, n)).await.expect("answer in time").expect("transport")
-}
-
-async fn write(ctx: &mut Context, addr: u16, v: u16) -> Result<(), ExceptionCode> {
-    timeout(LIMIT, ctx.write_single_register(addr, v)).await.expect("answer in time").expect("transport")
-}
-
-async fn write_many(ctx: &mut Context, addr: u16, v: &[u16]) -> Result<(), ExceptionCode> {
-    timeout(LIMIT, ctx.write_multiple_registers(addr, v)).await.expect("answer in time").expect("transport")
 }
 
 /// Saves and checks that the save ended well.

@@ -8,10 +8,11 @@ use std::path::Path;
 use std::process::{Child, ChildStdout, Command, Stdio};
 use std::time::{Duration, Instant};
 
+use drive_tests::vendor_name;
 use tokio::net::TcpStream;
 use tokio::time::timeout;
 use tokio_modbus::client::{Context, Reader, Writer, rtu};
-use tokio_modbus::prelude::{ExceptionCode, ReadCode, Slave};
+use tokio_modbus::prelude::{ExceptionCode, Slave};
 
 /// QEMU paces bytes about 1 ms apart: a short request and its reply take 10-30 ms.
 const LIMIT: Duration = Duration::from_secs(3);
@@ -119,13 +120,7 @@ async fn tokio_modbus_drives_the_firmware_under_qemu() {
     stream.set_nodelay(true).expect("TCP_NODELAY");
     let mut ctx = rtu::attach_slave(coalesced(stream), Slave(1));
 
-    let id = timeout(LIMIT, ctx.read_device_identification(ReadCode::Basic, 0))
-        .await
-        .expect("in time")
-        .expect("transport")
-        .expect("identification");
-    let vendor = id.device_id_objects.iter().find(|o| o.id == 0).map(|o| o.value.to_vec());
-    assert_eq!(vendor.as_deref(), Some(&b"OpenStep Motion"[..]));
+    assert_eq!(vendor_name(&mut ctx).await.as_deref(), Some(&b"OpenStep Motion"[..]));
     assert_eq!(read(&mut ctx, 0x600C, 2).await, vec![0, 658], "factory resolution and current");
 
     // Round trip of a two-register read (8-byte request, 9-byte reply).

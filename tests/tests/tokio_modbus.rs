@@ -10,7 +10,7 @@ use tokio::time::timeout;
 use tokio_modbus::client::{Client, Context, Reader, Writer, rtu};
 use tokio_modbus::prelude::{ExceptionCode, Request, Response, Slave};
 
-const LIMIT: Duration = Duration::from_secs(3);
+use drive_tests::{LIMIT, read, vendor_name, write, write_many};
 
 /// Starts a simulator on its own thread and returns its endpoint.
 fn start(endpoint: Endpoint) -> String {
@@ -28,18 +28,6 @@ async fn tcp_master(at: &str, slave: u8) -> Context {
 fn pty_master(path: &str, slave: u8) -> Context {
     let port = tokio_serial::SerialStream::open(&tokio_serial::new(path, 9600)).expect("open pty");
     rtu::attach_slave(port, Slave(slave))
-}
-
-async fn read(ctx: &mut Context, addr: u16, n: u16) -> Result<Vec<u16>, ExceptionCode> {
-    timeout(LIMIT, ctx.read_holding_registers(addr, n)).await.expect("answer in time").expect("transport")
-}
-
-async fn write(ctx: &mut Context, addr: u16, v: u16) -> Result<(), ExceptionCode> {
-    timeout(LIMIT, ctx.write_single_register(addr, v)).await.expect("answer in time").expect("transport")
-}
-
-async fn write_many(ctx: &mut Context, addr: u16, v: &[u16]) -> Result<(), ExceptionCode> {
-    timeout(LIMIT, ctx.write_multiple_registers(addr, v)).await.expect("answer in time").expect("transport")
 }
 
 /// Every register of every page of the native map, read through the master.
@@ -67,13 +55,7 @@ async fn conversation(ctx: &mut Context) {
         .expect("in time")
         .expect("transport");
     assert_eq!(rw, Ok(vec![700, 800, 8, 8]));
-    let id = timeout(LIMIT, ctx.read_device_identification(tokio_modbus::prelude::ReadCode::Basic, 0))
-        .await
-        .expect("in time")
-        .expect("transport")
-        .expect("identification");
-    let vendor = id.device_id_objects.iter().find(|o| o.id == 0).map(|o| o.value.to_vec());
-    assert_eq!(vendor.as_deref(), Some(&b"OpenStep Motion"[..]));
+    assert_eq!(vendor_name(ctx).await.as_deref(), Some(&b"OpenStep Motion"[..]));
 }
 
 #[tokio::test(flavor = "current_thread")]
