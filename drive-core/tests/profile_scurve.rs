@@ -394,6 +394,17 @@ fn regressions() {
         &lim,
     );
     assert!((prof.duration() - 103.74379751486312).abs() < 1e-6);
+    // Faster than v_max, decelerating, a jerk so low that a_max is never reached, target behind.
+    let lim = Limits {
+        v_max: 171.45437214782555,
+        a_max: 14982.770494690605,
+        d_max: 14982.770494690605,
+        jerk: Some(3238.047763503438),
+    };
+    let start = State { p: 0.0, v: 200.25657856756072, a: -1898.8848479672176 };
+    let prof = plan_pos(start, -238.20939373140456, 0.0, &lim);
+    let theirs = ruckig(start, -238.20939373140456, 0.0, &lim).unwrap().get_duration();
+    assert!(prof.duration() <= theirs * 1.005, "ours {} Ruckig {theirs}", prof.duration());
 }
 
 #[test]

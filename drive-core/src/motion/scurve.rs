@@ -762,7 +762,10 @@ impl Profile {
         // Braking from above v_max: one pulse whose deceleration eases off (dips towards a = 0)
         // as it passes ±v_max; a dip to zero is "brake to v_max, cruise", found above.
         if lim.smooth() && (fabs(v0) > vmax || fabs(vn) > vmax) {
-            let sigma = if fabs(v0) > vmax { v0 } else { vn };
+            // The pulse's envelope starts at v_nat whenever the start acceleration must first be
+            // ramped down (it then carries the speed there), so the limit it crosses while braking
+            // is the one on v_nat's side; a start above +v_max can be swept beyond -v_max.
+            let sigma = if fabs(vn) > vmax { vn } else { v0 };
             let vd = if sigma > 0.0 { vmax } else { -vmax };
             if let Some((a_lo, a_hi)) = dip_bounds(v0, a0, vf, &lim, vd)? {
                 let eval = |a: f64| dip_td(v0, a0, vf, &lim, Dip { v: vd, a });
