@@ -14,6 +14,7 @@ use std::path::Path;
 use std::sync::OnceLock;
 
 use plotters::prelude::*;
+use plotters::coord::types::RangedCoordf64;
 use plotters::style::register_font;
 
 use crate::trace::{TraceRow, load_csv};
@@ -151,22 +152,7 @@ pub fn plot_trace(rows: &[TraceRow], png: impl AsRef<Path>, title: &str) -> Resu
             .light_line_style(RGBColor(235, 235, 235))
             .draw()
             .map_err(err)?;
-        for (label, color, width, points) in &panel.series {
-            let style = color.stroke_width(*width);
-            chart
-                .draw_series(LineSeries::new(points.iter().copied(), style))
-                .map_err(err)?
-                .label(*label)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style));
-        }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .label_font((FONT, 15))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()
-            .map_err(err)?;
+        draw_lines(&mut chart, &panel.series, SeriesLabelPosition::UpperLeft)?;
     }
     root.present().map_err(err)
 }
@@ -213,21 +199,31 @@ pub fn plot_xy(x: &[TraceRow], y: &[TraceRow], png: impl AsRef<Path>, title: &st
         .light_line_style(RGBColor(235, 235, 235))
         .draw()
         .map_err(err)?;
-    for (label, color, width, points) in [("commanded", COMMANDED, 4, commanded), ("rotor", ROTOR, 1, rotor)] {
-        let style = color.stroke_width(width);
+    let series = [("commanded", COMMANDED, 4, commanded), ("rotor", ROTOR, 1, rotor)];
+    draw_lines(&mut chart, &series, SeriesLabelPosition::UpperRight)?;
+    root.present().map_err(err)
+}
+
+/// Draws each series as a line with its legend entry, then the legend at `position`.
+fn draw_lines<'a>(
+    chart: &mut ChartContext<'a, BitMapBackend<'a>, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    series: &[Series<'_>],
+    position: SeriesLabelPosition,
+) -> Result<(), PlotError> {
+    for (label, color, width, points) in series {
+        let style = color.stroke_width(*width);
         chart
-            .draw_series(LineSeries::new(points, style))
+            .draw_series(LineSeries::new(points.iter().copied(), style))
             .map_err(err)?
-            .label(label)
+            .label(*label)
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style));
     }
     chart
         .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
+        .position(position)
         .label_font((FONT, 15))
         .background_style(WHITE.mix(0.85))
         .border_style(BLACK)
         .draw()
-        .map_err(err)?;
-    root.present().map_err(err)
+        .map_err(err)
 }
