@@ -13,8 +13,8 @@ use std::ops::Range;
 use std::path::Path;
 use std::sync::OnceLock;
 
-use plotters::prelude::*;
 use plotters::coord::types::RangedCoordf64;
+use plotters::prelude::*;
 use plotters::style::register_font;
 
 use crate::trace::{TraceRow, load_csv};

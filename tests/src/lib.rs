@@ -18,6 +18,14 @@ pub async fn read(ctx: &mut Context, addr: u16, n: u16) -> Result<Vec<u16>, Exce
     timeout(LIMIT, ctx.read_holding_registers(addr, n)).await.expect("answer in time").expect("transport")
 }
 
+/// Reads `n` holding registers from `addr`, which must not be refused.
+///
+/// # Panics
+/// As [`read`], and on an exception.
+pub async fn read_values(ctx: &mut Context, addr: u16, n: u16) -> Vec<u16> {
+    read(ctx, addr, n).await.expect("no exception")
+}
+
 /// Writes one register (0x06).
 ///
 /// # Panics

@@ -8,14 +8,11 @@ use std::path::Path;
 use std::process::{Child, ChildStdout, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use drive_tests::vendor_name;
+use drive_tests::{read_values as read, vendor_name, write};
 use tokio::net::TcpStream;
 use tokio::time::timeout;
-use tokio_modbus::client::{Context, Reader, Writer, rtu};
+use tokio_modbus::client::rtu;
 use tokio_modbus::prelude::{ExceptionCode, Slave};
-
-/// QEMU paces bytes about 1 ms apart: a short request and its reply take 10-30 ms.
-const LIMIT: Duration = Duration::from_secs(3);
 
 fn qemu_10() -> bool {
     Command::new("qemu-system-arm")
@@ -90,18 +87,6 @@ fn coalesced(stream: TcpStream) -> tokio::io::DuplexStream {
     });
     tokio::spawn(async move { tokio::io::copy(&mut pipe_rx, &mut sock_tx).await });
     theirs
-}
-
-async fn read(ctx: &mut Context, addr: u16, n: u16) -> Vec<u16> {
-    timeout(LIMIT, ctx.read_holding_registers(addr, n))
-        .await
-        .expect("answer in time")
-        .expect("transport")
-        .expect("no exception")
-}
-
-async fn write(ctx: &mut Context, addr: u16, v: u16) -> Result<(), ExceptionCode> {
-    timeout(LIMIT, ctx.write_single_register(addr, v)).await.expect("answer in time").expect("transport")
 }
 
 fn position(words: &[u16]) -> i32 {

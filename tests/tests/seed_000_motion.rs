@@ -4,13 +4,12 @@
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use drive_tests::read_values as read;
 use hal_sim::{Endpoint, SimOptions, Simulator, Snapshot};
 use tokio::net::TcpStream;
-use tokio::time::{sleep, timeout};
-use tokio_modbus::client::{Context, Reader, Writer, rtu};
+use tokio::time::sleep;
+use tokio_modbus::client::{Context, rtu};
 use tokio_modbus::prelude::Slave;
-
-const LIMIT: Duration = Duration::from_secs(3);
 
 async fn start() -> (Context, Arc<Mutex<Snapshot>>) {
     let sim = Simulator::bind(SimOptions { endpoint: Endpoint::Tcp("127.0.0.1:0".into()), ..Default::default() })
@@ -23,16 +22,7 @@ async fn start() -> (Context, Arc<Mutex<Snapshot>>) {
 }
 
 async fn write(ctx: &mut Context, reg: u16, v: u16) {
-    let r = timeout(LIMIT, ctx.write_single_register(reg, v)).await.expect("in time").expect("transport");
-    assert_eq!(r, Ok(()), "write {reg:04X} = {v:04X}");
-}
-
-async fn read(ctx: &mut Context, reg: u16, n: u16) -> Vec<u16> {
-    timeout(LIMIT, ctx.read_holding_registers(reg, n))
-        .await
-        .expect("in time")
-        .expect("transport")
-        .expect("no exception")
+    assert_eq!(drive_tests::write(ctx, reg, v).await, Ok(()), "write {reg:04X} = {v:04X}");
 }
 
 /// Polls the busy bit (§9.4: read 0x6001, bit 3) until it clears.
