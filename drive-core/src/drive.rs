@@ -85,6 +85,16 @@ impl Params {
         d.storage == Storage::Rom && d.access == Access::Rw
     }
 
+    /// Copies the values of the objects a save covers into `values` (indexed by object), and
+    /// leaves the others.
+    fn copy_saved_into(&self, values: &mut [u32; Obj::COUNT]) {
+        for ((v, p), d) in values.iter_mut().zip(self.values.iter()).zip(OBJECTS.iter()) {
+            if Self::covers(d) {
+                *v = *p;
+            }
+        }
+    }
+
     /// The value of `obj`.
     pub fn get(&self, obj: Obj) -> u32 {
         self.values.get(obj as usize).copied().unwrap_or(0)
@@ -457,16 +467,7 @@ impl DriveState {
     /// Puts every object a save covers back to its factory value (RAM objects, 0x6055 and the
     /// status are untouched).
     pub fn restore_factory(&mut self) {
-        self.load(&Params::factory());
-    }
-
-    /// Takes the values of the objects a save covers from `params`.
-    fn load(&mut self, params: &Params) {
-        for ((p, v), d) in self.params.iter_mut().zip(params.values.iter()).zip(OBJECTS.iter()) {
-            if Params::covers(d) {
-                *p = *v;
-            }
-        }
+        Params::factory().copy_saved_into(&mut self.params);
     }
 
     /// The platform finished the save it was asked for ([`SystemRequest::Save`]); `ok` if the
@@ -548,16 +549,14 @@ impl<M: RegisterMap> Drive<M> {
         // The values are settled first and the drive is one struct expression (as the state is,
         // `DriveState::booted`), so that nothing of 12 KB is built aside and copied.
         let mut values = Params::factory().values;
-        for ((v, p), d) in values.iter_mut().zip(params.values.iter()).zip(OBJECTS.iter()) {
-            if Params::covers(d) || d.obj == Obj::SavedPosition {
-                *v = *p;
-            }
-        }
+        params.copy_saved_into(&mut values);
         let mut set = |obj: Obj, value: u32| {
             if let Some(v) = values.get_mut(obj as usize) {
                 *v = value;
             }
         };
+        // The power-down position is not in the saved set proper (it has its own record).
+        set(Obj::SavedPosition, params.get(Obj::SavedPosition));
         if let Some(a) = config.address {
             set(Obj::NodeId, u32::from(a.get()));
         }
