@@ -317,7 +317,7 @@ fn tick(mut case: TickCase) -> Outputs {
 
 /// What a drive that measures everything gives each tick: all within the thresholds.
 const MEASURED: Inputs =
-    Inputs { supply_mv: Some(24_000), temperature_c: Some(40), phase_ma: Some([700, -300]), coil_open: [false; 2] };
+    Inputs { supply_mv: Some(24_000), temperature_c: Some(40), phase_ma: Some([700, -300]), coil_open: [false; 2], phase_mv: None, encoder: None };
 
 #[library_benchmark]
 #[bench::idle(args = (Situation::Idle), setup = setup_tick)]

@@ -85,6 +85,16 @@ pub struct Inputs {
     pub phase_ma: Option<[i32; 2]>,
     /// The power stage's open-load flags for coils A and B.
     pub coil_open: [bool; 2],
+    /// The bridge voltages applied to phases A and B, averaged over the tick that just ended, mV
+    /// (signed; PWM duty times the supply). With `phase_ma` they feed the sensorless stall
+    /// detection: the back-EMF is what the winding's resistance and inductance do not explain.
+    pub phase_mv: Option<[i32; 2]>,
+    /// The encoder's raw reading, read by the closed loop (our object 0x2104 says which encoder):
+    /// an incremental encoder's quadrature counter in ×4 counts, wrapping at 2^32 (a platform with
+    /// a 16-bit counter extends it); an absolute single-turn encoder's 12-bit angle; a multi-turn
+    /// one's turns × 4096 + angle, wrapping at 2^32. `None` in closed loop: the encoder is lost
+    /// (line break, no answer).
+    pub encoder: Option<u32>,
 }
 
 /// The fault history and the supervision's memory between ticks.

@@ -10,7 +10,7 @@ use drive_core::od::Obj;
 use drive_core::{Drive, DriveConfig, Instant, Params, SystemRequest};
 
 const NOMINAL: Inputs =
-    Inputs { supply_mv: Some(24_000), temperature_c: Some(30), phase_ma: Some([0, 0]), coil_open: [false; 2] };
+    Inputs { supply_mv: Some(24_000), temperature_c: Some(30), phase_ma: Some([0, 0]), coil_open: [false; 2], phase_mv: None, encoder: None };
 
 /// A factory drive with a move speed set.
 fn drive() -> Bus {

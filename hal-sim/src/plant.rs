@@ -116,6 +116,7 @@ impl Plant {
             temperature_c: Some(self.temperature_c.round().clamp(-40.0, 300.0) as i16),
             phase_ma: Some([ma(a), ma(b)]),
             coil_open: [open(fa), open(fb)],
+            ..Inputs::default()
         }
     }
 
