@@ -19,6 +19,12 @@
 //! `tick_measured`: the `idle` and `cruise` ticks given every measurement ([`Drive::tick_with`]),
 //! so that the fault checks, power loss and the watchdog run on all of them.
 //!
+//! `tick_loop`: the `cruise` tick with the loops of `drive_core::servo` running on every
+//! measurement: `position_loop` and `servo_loop` are the closed loop (0x2104 = 1, a 1000-line
+//! encoder, 0x605D = 0 / 1) with the following-error check; `sensorless` is the open loop with the
+//! stall detection on (0x2107 = 1), fed phase currents and voltages of a motor turning 30°
+//! electrical behind its current.
+//!
 //! `write`: the Modbus write that re-plans, for the tick does not plan: a complete 0x10 frame
 //! given to `on_rx` at once, `on_timer` at t3.5 and `take_reply`, with the drive cruising as in
 //! `after_retarget_*`. The absolute move's check plans on a copy of the axis (trial) and its
@@ -42,7 +48,7 @@ use drive_core::crc::crc16;
 use drive_core::faults::Inputs;
 use drive_core::motion::scurve::{Limits, Profile, State};
 use drive_core::od::Obj;
-use drive_core::{Drive, Instant};
+use drive_core::{Drive, DriveConfig, Instant, Params};
 use gungraun::{library_benchmark, library_benchmark_group, main};
 use rsruckig::prelude::*;
 
@@ -111,13 +117,64 @@ const PVT_POINTS: [(i32, i32, u16); 4] = [(0, 0, 0), (1000, 20_000, 100), (3000,
 struct Rig {
     drive: Drive,
     now: u64,
+    /// What each tick measures.
+    feed: Feed,
+    /// The outputs of the last tick.
+    last: Option<Outputs>,
+}
+
+/// What a rig's ticks measure.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Feed {
+    /// Nothing ([`Drive::tick`]).
+    Nothing,
+    /// An encoder that follows the setpoint exactly.
+    Encoder,
+    /// Phase currents on the commutated angle and the voltages of a motor 30° behind them.
+    Phases,
+}
+
+/// The measurements of the next tick after `last` under `feed`.
+fn measure(feed: Feed, last: Option<&Outputs>) -> Inputs {
+    let Some(out) = last else {
+        // Power-up: the encoder reads 0, nothing turns yet.
+        return match feed {
+            Feed::Nothing => Inputs::default(),
+            Feed::Encoder => Inputs { encoder: Some(0), ..MEASURED },
+            Feed::Phases => MEASURED,
+        };
+    };
+    match feed {
+        Feed::Nothing => Inputs::default(),
+        Feed::Encoder => Inputs { encoder: Some(out.setpoint.whole as u32), ..MEASURED },
+        Feed::Phases => {
+            // 1/32 microsteps: a microstep is π/64 electrical.
+            let per = std::f64::consts::FRAC_PI_2 / 32.0;
+            let theta = (out.commutation.whole as f64 + out.commutation.fraction.to_num::<f64>()) * per;
+            let w = out.commutation.velocity * per;
+            let (r, l, km, i) = (1.4, 3.0e-3, 0.21, f64::from(out.current_ma) * 1e-3);
+            let rotor = theta - 30f64.to_radians();
+            let (ia, ib) = (i * theta.cos(), i * theta.sin());
+            let (dia, dib) = (-i * w * theta.sin(), i * w * theta.cos());
+            let emf = km * w / 50.0;
+            let va = r * ia + l * dia - emf * rotor.sin();
+            let vb = r * ib + l * dib + emf * rotor.cos();
+            let m = |x: f64| (x * 1e3).round() as i32;
+            Inputs { phase_ma: Some([m(ia), m(ib)]), phase_mv: Some([m(va), m(vb)]), ..MEASURED }
+        }
+    }
 }
 
 impl Rig {
     /// A factory drive at 1/32 microsteps and 1000 mA (seed 000 §9.4.1), having ticked once.
     fn new() -> Self {
-        let mut rig = Self { drive: Drive::factory(), now: 0 };
-        rig.drive.tick(at(0));
+        Self::booted(Params::factory(), Feed::Nothing)
+    }
+
+    /// [`Rig::new`] on a drive booted with `params`, measuring `feed`.
+    fn booted(params: Params, feed: Feed) -> Self {
+        let mut rig = Self { drive: Drive::boot(DriveConfig::default(), &params, 0), now: 0, feed, last: None };
+        rig.last = Some(rig.drive.tick_with(at(0), &measure(feed, None)));
         rig.request(&write16(0x600C, 32));
         rig.request(&write16(0x600D, 1000));
         rig
@@ -126,7 +183,9 @@ impl Rig {
     /// The next tick.
     fn tick(&mut self) -> Outputs {
         self.now += TICK_MICROS;
-        self.drive.tick(at(self.now))
+        let out = self.drive.tick_with(at(self.now), &measure(self.feed, self.last.as_ref()));
+        self.last = Some(out);
+        out
     }
 
     /// Ticks for `us` microseconds; the last outputs.
@@ -316,14 +375,68 @@ fn tick(mut case: TickCase) -> Outputs {
 }
 
 /// What a drive that measures everything gives each tick: all within the thresholds.
-const MEASURED: Inputs =
-    Inputs { supply_mv: Some(24_000), temperature_c: Some(40), phase_ma: Some([700, -300]), coil_open: [false; 2], phase_mv: None, encoder: None };
+const MEASURED: Inputs = Inputs {
+    supply_mv: Some(24_000),
+    temperature_c: Some(40),
+    phase_ma: Some([700, -300]),
+    coil_open: [false; 2],
+    phase_mv: None,
+    encoder: None,
+};
 
 #[library_benchmark]
 #[bench::idle(args = (Situation::Idle), setup = setup_tick)]
 #[bench::cruise(args = (Situation::Cruise), setup = setup_tick)]
 fn tick_measured(mut case: TickCase) -> Outputs {
     black_box(case.drive.tick_with(black_box(case.at), black_box(&MEASURED)))
+}
+
+/// The loops of `tick_loop`.
+#[derive(Clone, Copy, Debug)]
+enum Loop {
+    Position,
+    Servo,
+    Sensorless,
+}
+
+/// A drive about to tick at `at` with `inputs`.
+struct LoopCase {
+    drive: Drive,
+    at: Instant,
+    inputs: Inputs,
+}
+
+fn setup_loop(which: Loop) -> LoopCase {
+    let mut params = Params::factory();
+    let (settings, feed): (&[(Obj, u32)], Feed) = match which {
+        Loop::Position => (&[(Obj::Feedback, 1), (Obj::TorqueLoop, 0)], Feed::Encoder),
+        Loop::Servo => (&[(Obj::Feedback, 1), (Obj::TorqueLoop, 1)], Feed::Encoder),
+        Loop::Sensorless => (&[(Obj::StallDetect, 1)], Feed::Phases),
+    };
+    for &(obj, v) in settings {
+        assert!(params.set(obj, v));
+    }
+    let mut rig = Rig::booted(params, feed);
+    rig.request(&write16(0x600A, 1));
+    rig.request(&write32(0x6003, SPEED));
+    rig.request(&write32(0x6005, 10_000_000));
+    rig.run(1_000_000);
+    let inputs = measure(feed, rig.last.as_ref());
+    let mut probe = rig.clone();
+    let out = probe.tick();
+    // Cruising, powered, nothing detected: the loop runs its normal path.
+    assert!(busy(&rig.drive) && out.enabled && out.setpoint.velocity == f64::from(SPEED), "{out:?}");
+    let state = probe.drive.state();
+    assert_eq!((state.read(Obj::DriveFaults), state.read(Obj::ControllerStatus)), (0, 0x08), "{which:?}");
+    LoopCase { drive: rig.drive, at: at(rig.now + TICK_MICROS), inputs }
+}
+
+#[library_benchmark]
+#[bench::position_loop(args = (Loop::Position), setup = setup_loop)]
+#[bench::servo_loop(args = (Loop::Servo), setup = setup_loop)]
+#[bench::sensorless(args = (Loop::Sensorless), setup = setup_loop)]
+fn tick_loop(mut case: LoopCase) -> Outputs {
+    black_box(case.drive.tick_with(black_box(case.at), black_box(&case.inputs)))
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -490,7 +603,7 @@ fn setup_ruckig(which: &str) -> RuckigCase {
 
 library_benchmark_group!(
     name = control;
-    benchmarks = tick, tick_measured, write
+    benchmarks = tick, tick_measured, tick_loop, write
 );
 
 library_benchmark_group!(

@@ -51,6 +51,7 @@ pub(crate) const fn has_effect(obj: Obj) -> bool {
             | Obj::Microsteps
             | Obj::ControlWord
             | Obj::PpRunSpeed
+            | Obj::ZeroOffset
     ) || crate::pvt::is_pvt_command(obj)
 }
 
@@ -94,9 +95,14 @@ pub(crate) struct Pp {
 /// What the output stage is told at one tick.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Outputs {
-    /// The position setpoint, with its fraction of a microstep.
+    /// The position setpoint, with its fraction: microsteps in open loop, encoder counts in
+    /// closed loop (see [`crate::servo`]).
     pub setpoint: Setpoint,
-    /// Whole microsteps to step this tick (signed).
+    /// The electrical angle the power stage drives, in microsteps of `microsteps` a full step
+    /// (four full steps an electrical turn): the setpoint in open loop, the closed loop's
+    /// commutation otherwise.
+    pub commutation: Setpoint,
+    /// Whole microsteps of `commutation` to step this tick (signed): what a STEP/DIR stage emits.
     pub steps: i64,
     /// Phase current amplitude in mA; 0 frees the motor.
     pub current_ma: u16,
@@ -317,6 +323,13 @@ impl DriveState {
             }
             Obj::Enable => return Ok(None),
             Obj::Position | Obj::Microsteps => refuse(!busy)?,
+            Obj::ZeroOffset => {
+                refuse(!busy)?;
+                if self.servo.feedback.encoder().is_some() {
+                    // The position moves with the offset, and the axis stands on it.
+                    axis.set_position(self.servo.encoder.wrapping_add(i64::from(value as i32)));
+                }
+            }
             _ => return Ok(None),
         }
         Ok(Some((axis, pp)))
@@ -390,10 +403,14 @@ impl DriveState {
     /// motion and updates the live objects.
     pub fn tick_with(&mut self, now: Instant, inputs: &Inputs) -> Outputs {
         self.now = now;
+        self.sense(inputs);
         self.supervise(now, inputs);
         self.pp_tick(now);
         self.pvt_tick(now);
-        let (setpoint, steps) = self.axis.tick(now);
+        let (setpoint, moved) = self.axis.tick(now);
+        let (commutation, share) = self.commutate(now, &setpoint, moved, inputs);
+        let steps = commutation.whole.saturating_sub(self.servo.last_angle);
+        self.servo.last_angle = commutation.whole;
         // Standstill current reduction once the motor has stood for the delay.
         let still = self.axis.is_still();
         let since = *self.still_since.get_or_insert(now);
@@ -401,10 +418,12 @@ impl DriveState {
             self.still_since = None;
         }
         let idle = still && now.since(since) >= u64::from(self.param(Obj::IdleDelay)) * 1000;
-        let current = self.param(Obj::PhaseCurrent) * if idle { self.param(Obj::IdleCurrent) } else { 100 } / 100;
+        let full = self.param(Obj::PhaseCurrent) * if idle { self.param(Obj::IdleCurrent) } else { 100 } / 100;
+        let current = (full as f32 * share.clamp(0.0, 1.0)) as u32;
         let enabled = self.power_stage_on();
         Outputs {
             setpoint,
+            commutation,
             steps,
             current_ma: if enabled { current as u16 } else { 0 },
             enabled,

@@ -11,8 +11,11 @@ use crate::od::{Access, NativeMap, OBJECTS, Obj, ObjError, ObjectDef, RegisterMa
 use crate::pdu::{Exception, MAX_READ, Request, Words};
 use crate::pvt::Pvt;
 use crate::rtu::{Framer, MAX_FRAME, RxError};
+use crate::servo::{Feedback, Servo};
 use crate::units::{Baud, Instant, SlaveAddr};
 
+/// Controller status bit 2: a stall was detected (write 1 to clear; moves are refused while set).
+pub const STATUS_STALL: u8 = 1 << 2;
 /// Controller status bit 3: the motor is executing a move.
 pub const STATUS_BUSY: u8 = 1 << 3;
 
@@ -172,6 +175,8 @@ pub struct DriveState {
     /// The fault history and the supervision's memory (changed by the tick only, so kept out of
     /// [`Checkpoint`]: a write cannot change it).
     pub(crate) faults: FaultLog,
+    /// The closed loop and stall detection (changed by the tick only, as `faults`).
+    pub(crate) servo: Servo,
 }
 
 /// Everything of a [`DriveState`] but the PVT point table: what a multi-object write restores
@@ -202,6 +207,8 @@ impl DriveState {
     /// out, and a microcontroller's stack does not hold the second copy.
     #[inline(never)]
     fn booted(identity: Identity, can_save: bool, params: [u32; Obj::COUNT], storage: u8) -> Self {
+        let get = |obj: Obj| params.get(obj as usize).copied().unwrap_or(0);
+        let feedback = Feedback::from_objects(get(Obj::Feedback), get(Obj::EncoderCpr));
         Self {
             params,
             status: Status { storage, ..Status::default() },
@@ -215,6 +222,7 @@ impl DriveState {
             pvt: Pvt::default(),
             table: Table::EMPTY,
             faults: FaultLog::default(),
+            servo: Servo::new(feedback),
         }
     }
 
@@ -234,6 +242,7 @@ impl DriveState {
             pvt,
             table: _,
             faults: _,
+            servo: _,
         } = self;
         Checkpoint {
             params: *params,
@@ -333,8 +342,8 @@ impl DriveState {
             Obj::AnalogIn => u32::from(s.analog_in),
             Obj::StatusWord => u32::from(self.statusword()),
             Obj::PvtPointer => u32::from(s.pvt_pointer),
-            // Open loop: the commanded speed (the encoder's measurement comes with the closed loop).
-            Obj::RealSpeed => libm::round(self.axis.setpoint().velocity) as i32 as u32,
+            Obj::RealSpeed => self.real_speed() as u32,
+            Obj::FollowingError => self.servo.following as i32 as u32,
             Obj::EncoderPosition => s.encoder as u32,
             Obj::StorageStatus => u32::from(s.storage),
             Obj::AlarmCode => u32::from(self.alarm_code()),
@@ -442,7 +451,11 @@ impl DriveState {
                 s.gpio = (s.gpio & !outputs) | (value as u16 & outputs);
             }
             Obj::Position => {
-                let _ = self.axis.set_position(i64::from(value as i32));
+                let position = i64::from(value as i32);
+                if self.axis.set_position(position) && self.servo.feedback.encoder().is_some() {
+                    // Closed loop: the position is the encoder's plus the zero offset.
+                    self.set_param(Obj::ZeroOffset, position.wrapping_sub(self.servo.encoder) as u32);
+                }
             }
             obj if has_effect(obj) => self.apply_motion(obj, value),
             _ => {

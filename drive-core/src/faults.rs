@@ -36,6 +36,10 @@ pub const ERR_UNDER_VOLTAGE: u8 = 1 << 5;
 pub const FAULT_OVER_VOLTAGE: u8 = 1 << 0;
 /// 0x2135 bit 1: overload, a phase current above 1.5 times 0x600D for 2 s.
 pub const FAULT_OVERLOAD: u8 = 1 << 1;
+/// 0x2135 bit 2: position error, closed loop: a following error beyond 0x605C.
+pub const FAULT_POSITION: u8 = 1 << 2;
+/// 0x2135 bit 3: the encoder is lost (closed loop, no reading).
+pub const FAULT_ENCODER: u8 = 1 << 3;
 
 /// 0x2138 bit 0: the communication timeout 0x2137 ran out.
 pub const COMM_TIMEOUT: u8 = 1 << 0;
@@ -52,8 +56,12 @@ pub mod alarm {
     pub const OVER_VOLTAGE: u8 = 14;
     /// Driver over-temperature (our code: seed 002 files it under "other").
     pub const OVER_TEMPERATURE: u8 = 15;
+    /// Position error: the following error beyond its limit.
+    pub const POSITION_ERROR: u8 = 25;
     /// Overload: current above 1.5 times the setting for over 2 s.
     pub const OVERLOAD: u8 = 26;
+    /// Encoder lost (our code: seed 002 files it under "other").
+    pub const ENCODER: u8 = 27;
 }
 
 /// The 0x6000 bits with their alarm codes, most severe first.
@@ -66,7 +74,12 @@ const ERROR_ALARMS: [(u8, u8); 6] = [
     (ERR_OVER_TEMPERATURE, alarm::OVER_TEMPERATURE),
 ];
 /// The 0x2135 bits with their alarm codes, most severe first.
-const FAULT_ALARMS: [(u8, u8); 2] = [(FAULT_OVER_VOLTAGE, alarm::OVER_VOLTAGE), (FAULT_OVERLOAD, alarm::OVERLOAD)];
+const FAULT_ALARMS: [(u8, u8); 4] = [
+    (FAULT_OVER_VOLTAGE, alarm::OVER_VOLTAGE),
+    (FAULT_ENCODER, alarm::ENCODER),
+    (FAULT_POSITION, alarm::POSITION_ERROR),
+    (FAULT_OVERLOAD, alarm::OVERLOAD),
+];
 
 /// Entries in the fault history.
 pub const HISTORY_LEN: usize = 10;
@@ -159,21 +172,7 @@ impl DriveState {
     /// power-loss reactions to the motion.
     pub(crate) fn supervise(&mut self, now: Instant, inputs: &Inputs) {
         let (error, faults) = self.detect(now, inputs);
-        let (new_error, new_faults) = (error & !self.status.error, faults & !self.status.faults);
-        if new_error | new_faults != 0 {
-            for &(bit, code) in ERROR_ALARMS.iter() {
-                if new_error & bit != 0 {
-                    self.faults.record(code, now);
-                }
-            }
-            for &(bit, code) in FAULT_ALARMS.iter() {
-                if new_faults & bit != 0 {
-                    self.faults.record(code, now);
-                }
-            }
-            self.status.error |= error;
-            self.status.faults |= faults;
-        }
+        self.latch(now, error, faults);
         self.power_loss(inputs);
         self.watchdog(now);
         if self.faulted() || self.faults.freed {
@@ -181,6 +180,27 @@ impl DriveState {
             // accepted before the fault does not start.
             self.stop_motion();
         }
+    }
+
+    /// Latches the fault bits `error` (0x6000) and `faults` (0x2135), with a history entry for
+    /// each bit that was not latched yet.
+    pub(crate) fn latch(&mut self, now: Instant, error: u8, faults: u8) {
+        let (new_error, new_faults) = (error & !self.status.error, faults & !self.status.faults);
+        if new_error | new_faults == 0 {
+            return;
+        }
+        for &(bit, code) in ERROR_ALARMS.iter() {
+            if new_error & bit != 0 {
+                self.faults.record(code, now);
+            }
+        }
+        for &(bit, code) in FAULT_ALARMS.iter() {
+            if new_faults & bit != 0 {
+                self.faults.record(code, now);
+            }
+        }
+        self.status.error |= error;
+        self.status.faults |= faults;
     }
 
     /// The fault bits the measurements show at `now` (0x6000, 0x2135).
@@ -198,6 +218,9 @@ impl DriveState {
             && i64::from(t) > i64::from(self.param(Obj::OverTemperature))
         {
             error |= ERR_OVER_TEMPERATURE;
+        }
+        if self.servo.feedback.encoder().is_some() && inputs.encoder.is_none() {
+            faults |= FAULT_ENCODER;
         }
         let [open_a, open_b] = inputs.coil_open;
         error |= if open_a { ERR_COIL_A_OPEN } else { 0 } | if open_b { ERR_COIL_B_OPEN } else { 0 };

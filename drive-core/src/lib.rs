@@ -30,6 +30,7 @@ pub mod od;
 pub mod pdu;
 pub mod pvt;
 pub mod rtu;
+pub mod servo;
 pub mod store;
 pub mod units;
 

@@ -9,8 +9,14 @@ use drive_core::faults::{Inputs, alarm};
 use drive_core::od::Obj;
 use drive_core::{Drive, DriveConfig, Instant, Params, SystemRequest};
 
-const NOMINAL: Inputs =
-    Inputs { supply_mv: Some(24_000), temperature_c: Some(30), phase_ma: Some([0, 0]), coil_open: [false; 2], phase_mv: None, encoder: None };
+const NOMINAL: Inputs = Inputs {
+    supply_mv: Some(24_000),
+    temperature_c: Some(30),
+    phase_ma: Some([0, 0]),
+    coil_open: [false; 2],
+    phase_mv: None,
+    encoder: None,
+};
 
 /// A factory drive with a move speed set.
 fn drive() -> Bus {
@@ -270,9 +276,14 @@ fn the_new_objects_reject_bad_writes() {
     let mut bus = drive();
     let before = bus.snapshot();
     // Read-only history and alarm code (02), thresholds out of range (03).
-    for (addr, value, code) in
-        [(0x2134u16, 0u16, 2u8), (0x213C, 0, 2), (0x2136, 0, 2), (0x2132, 39, 3), (0x2133, 10_001, 3), (0x2135, 4, 3)]
-    {
+    for (addr, value, code) in [
+        (0x2134u16, 0u16, 2u8),
+        (0x213C, 0, 2),
+        (0x2136, 0, 2),
+        (0x2132, 39, 3),
+        (0x2133, 10_001, 3),
+        (0x2135, 0x10, 3),
+    ] {
         let [ah, al] = addr.to_be_bytes();
         let [vh, vl] = value.to_be_bytes();
         let reply = bus.request(&[1, 6, ah, al, vh, vl]).unwrap_or_default();

@@ -44,15 +44,16 @@ pub fn microsteps_per_step(resolution: u16) -> u32 {
     u32::from(resolution.max(1))
 }
 
-/// The chopper command for the drive's outputs: the setpoint's electrical angle, with its
+/// The chopper command for the drive's outputs: the electrical angle it commutates, with its
 /// fraction of a microstep, at the commanded current.
 pub fn driver_command(out: &Outputs) -> DriverCommand {
     if !out.enabled || out.current_ma == 0 {
         return DriverCommand::DISABLED;
     }
     let per_step = microsteps_per_step(out.microsteps);
-    let whole = DriverCommand::at_microstep(out.setpoint.whole, per_step, f64::from(out.current_ma) * 1e-3);
-    let fraction: f64 = out.setpoint.fraction.to_num();
+    let angle = &out.commutation;
+    let whole = DriverCommand::at_microstep(angle.whole, per_step, f64::from(out.current_ma) * 1e-3);
+    let fraction: f64 = angle.fraction.to_num();
     DriverCommand {
         theta_e: whole.theta_e + fraction * FRAC_PI_2 / f64::from(per_step),
         fast_decay: out.fast_decay.to_num(),

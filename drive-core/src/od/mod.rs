@@ -180,6 +180,10 @@ pub enum Unit {
     Celsius,
     /// Tenths of a second.
     DeciSeconds,
+    /// Milliohms.
+    MilliOhms,
+    /// Microhenries.
+    MicroHenries,
 }
 
 impl Unit {
@@ -198,6 +202,8 @@ impl Unit {
             Unit::Counts => "count",
             Unit::Celsius => "°C",
             Unit::DeciSeconds => "100 ms",
+            Unit::MilliOhms => "mΩ",
+            Unit::MicroHenries => "µH",
         }
     }
 }

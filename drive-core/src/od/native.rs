@@ -117,6 +117,23 @@ objects! {
     /// Standstill delay (our object, as seed 002's 0x0245): how long the motor stands before the
     /// current drops to 0x2102.
     IdleDelay @ 0x2103: U16, Rw, Rom, Span(1, 32767), default 500, Millis, "standstill delay";
+    /// Feedback (our object), read at power-up: 0 open loop; 1 closed loop on the encoder of
+    /// 0x6054 (a line count: incremental, ×4; 12: absolute 12-bit single-turn); 2 closed loop on a
+    /// 12-bit multi-turn absolute encoder. In closed loop positions count encoder counts (see
+    /// `drive_core::servo`).
+    Feedback @ 0x2104: U8, Rw, Rom, Span(0, 2), default 0, None, "feedback";
+    /// Following error (our object): setpoint − measured position, closed loop; 0 in open loop.
+    FollowingError @ 0x2105: S32, Ro, Live, S32_ANY, default 0, Counts, "following error";
+    /// Sensorless stall detection in open loop (our object): 1 on. Off until commissioned: it
+    /// needs the motor's resistance and inductance (0x2108, 0x2109) and the threshold 0x6039.
+    StallDetect @ 0x2107: U8, Rw, Rom, Span(0, 1), default 0, None, "stall detection";
+    /// Motor winding resistance (our object), for the back-EMF estimate of the stall detection.
+    MotorResistance @ 0x2108: U16, Rw, Rom, Span(10, 60_000), default 1400, MilliOhms, "motor resistance";
+    /// Motor winding inductance (our object), for the back-EMF estimate of the stall detection.
+    MotorInductance @ 0x2109: U16, Rw, Rom, Span(10, 60_000), default 3000, MicroHenries, "motor inductance";
+    /// Stall detection minimum speed (our object): below this commanded speed (full steps a
+    /// second) the back-EMF is too small to tell a stall, and nothing is detected.
+    StallMinSpeed @ 0x210A: U16, Rw, Rom, Span(1, 10_000), default 60, None, "stall minimum speed";
     /// PVT points stored (modes 1 and 2) or queued in the FIFO (mode 3), our object: what a
     /// streaming master reads to know how many points it may send.
     PvtCount @ 0x2110: U16, Ro, Live, PVT_INDEX, default 0, None, "PVT points stored";
@@ -155,9 +172,11 @@ objects! {
     /// over-temperature, 26 overload, in that order of precedence. It clears with the bits.
     AlarmCode @ 0x2134: U8, Ro, Live, Any, default 0, None, "alarm code";
     /// Drive faults beyond 0x6000 (our object), write 1 to clear: bit 0 over-voltage (alarm 14),
-    /// bit 1 overload (alarm 26: a phase current above 1.5 times 0x600D for 2 s). Like the bits of
-    /// 0x6000 they disable the power stage and refuse moves until cleared.
-    DriveFaults @ 0x2135: U8, W1c, Live, Bits(0x03), default 0, None, "drive faults";
+    /// bit 1 overload (alarm 26: a phase current above 1.5 times 0x600D for 2 s), bit 2 position
+    /// error (alarm 25: closed loop, a following error beyond 0x605C), bit 3 encoder lost (alarm
+    /// 27, ours). Like the bits of 0x6000 they disable the power stage and refuse moves until
+    /// cleared.
+    DriveFaults @ 0x2135: U8, W1c, Live, Bits(0x0F), default 0, None, "drive faults";
     /// Alarms raised since power-up (our object), wrapping: a master polls it to see new entries
     /// in the fault history.
     AlarmCount @ 0x2136: U16, Ro, Live, Any, default 0, None, "alarm count";
@@ -303,7 +322,9 @@ objects! {
     /// stage is on (released); 0 (applied) when disabled, on a fault, or in power loss below
     /// 0x6084. 0: no brake fitted, the output stays 0.
     Brake @ 0x6038: U8, Rw, Ram, Span(0, 100), default 0, Percent, "brake control";
-    /// Open-loop stall detection: bits 0-6 the threshold, signed; bits 7-15 reserved.
+    /// Open-loop stall detection: bits 0-6 the threshold, signed (typically -10..10): the load
+    /// angle limit is 110° − 4° × threshold, so a larger threshold detects sooner (see
+    /// `drive_core::servo`); bits 7-15 reserved. Detection itself is switched by 0x2107.
     StallParams @ 0x6039: U16, Rw, Rom, Bits(0x7F), default 0, None, "stall parameters";
     /// EXT1/2/3 debounce: the input is checked again this long after an edge.
     ExtDebounce @ 0x6042: U16, Rw, Rom, Span(0, 200), default 100, Millis, "EXT debounce";
@@ -323,17 +344,19 @@ objects! {
     /// Position saved at the last power loss (see 0x605E): its own small record in flash, loaded
     /// at power-up; a save (0x200F = 2) neither writes nor clears it.
     SavedPosition @ 0x6055: S32, Ro, Rom, S32_ANY, default 0, Steps, "power-down position";
-    /// Closed loop: proportional gain.
+    /// Closed loop: proportional gain; servo loop: KP/16 of the full current per full step of error.
     Kp @ 0x6057: U8, Rw, Rom, Span(1, 255), default 8, None, "KP";
-    /// Closed loop: integral gain.
+    /// Closed loop: integral gain; servo loop: 5·KI of the full current per full step·second.
     Ki @ 0x6058: U8, Rw, Rom, Span(1, 255), default 4, None, "KI";
-    /// Closed loop: derivative gain.
+    /// Closed loop: derivative gain; servo loop: KD/4 of the full current per full step per ms.
     Kd @ 0x6059: U8, Rw, Rom, Span(1, 255), default 8, None, "KD";
-    /// Closed loop: prefilter (no larger than the microstep resolution).
+    /// Closed loop: prefilter: the servo loop low-passes the error's rate over this many control
+    /// ticks (the manual: larger at high speed, no larger than the microstep resolution).
     PreFilter @ 0x605A: U8, Rw, Rom, Span(1, 128), default 32, None, "prefilter";
     /// Closed loop: postfilter (reserved by the manual).
     PostFilter @ 0x605B: U16, Rw, Rom, Span(1, 255), default 16, None, "postfilter";
-    /// Closed loop: following error that counts as a stall (chapter 5 prints 0x6028).
+    /// Closed loop: following error, in microsteps of 0x600C, that counts as a stall and latches
+    /// the position error (0x2135 bit 2, alarm 25) (chapter 5 prints 0x6028).
     StallLength @ 0x605C: U16, Rw, Rom, Span(1, 255), default 64, Steps, "stall length";
     /// Closed loop: 1 enables the torque (servo) loop with PID; 0 is the position loop.
     TorqueLoop @ 0x605D: U8, Rw, Rom, Span(0, 1), default 0, None, "torque loop enable";
@@ -377,7 +400,8 @@ objects! {
     AnalogMinPos @ 0x607B: S32, Rw, Rom, S32_ANY, default 0, Steps, "analog minimum position";
     /// Analog positioning: position at code 4095.
     AnalogMaxPos @ 0x607D: S32, Rw, Rom, S32_ANY, default 64000, Steps, "analog maximum position";
-    /// Measured speed (closed loop). Read only: it is a measurement.
+    /// Real-time speed: closed loop the encoder's, low-passed over ~13 ms (counts a second); open
+    /// loop the commanded speed. Read only.
     RealSpeed @ 0x607F: S32, Ro, Live, Span(-300_000, 300_000), default 0, Pps, "real-time speed";
     /// Power-loss behaviour: bit 0 free the motor (power stage off, axis stopped, moves refused)
     /// below 0x6083, bit 1 apply the brake below 0x6084, while the supply stays below. Not
@@ -388,7 +412,9 @@ objects! {
     PowerLossFreeVoltage @ 0x6083: U16, Rw, Rom, Any, default 0, MilliVolts, "power-loss free voltage";
     /// Power loss: supply voltage below which the brake is applied.
     PowerLossBrakeVoltage @ 0x6084: U16, Rw, Rom, Any, default 0, MilliVolts, "power-loss brake voltage";
-    /// Absolute encoder: zero offset; motor position = encoder position + zero offset.
+    /// Zero offset, closed loop: motor position = encoder position + zero offset. Writing the
+    /// position 0x600E sets it; written itself (only while standing, else 04) it moves the
+    /// position with it.
     ZeroOffset @ 0x6087: S32, Rw, Ram, S32_ANY, default 0, Counts, "zero calibration";
     /// Encoder position. Read only: it is a measurement.
     EncoderPosition @ 0x6089: S32, Ro, Live, S32_ANY, default 0, Counts, "encoder position";

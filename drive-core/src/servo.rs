@@ -1,0 +1,569 @@
+//! The closed loop (seed 000 §5.8) and stall detection (§5.5.20-21, §5.8.7): what the drive does
+//! with the encoder and the phase measurements of [`Inputs`](crate::faults::Inputs) at each tick.
+//!
+//! **Feedback** is our object 0x2104, read at power-up (as 0x6054: "restart after a change"):
+//! 0 open loop; 1 closed loop with the encoder 0x6054 names (a CPR: incremental, counted ×4;
+//! 12: absolute 12-bit single-turn); 2 closed loop with a 12-bit multi-turn absolute encoder.
+//! In closed loop every position, speed and acceleration object counts encoder counts
+//! (§5.5.5: 4 × CPR a turn, 4096 for the absolute encoder), 0x6089 is the encoder position,
+//! 0x600E = 0x6089 + 0x6087 (the zero offset; writing 0x600E sets 0x6087), 0x607F the measured
+//! speed. With an incremental encoder and 0x605E on, power-up takes 0x6055 as the position.
+//!
+//! **Commutation.** The drive drives the phases at an electrical angle, expressed in microsteps
+//! of 0x600C ([`Outputs::commutation`](crate::control::Outputs)); four full steps are one
+//! electrical turn (200 full steps a turn: a 1.8° motor). The encoder's electrical zero is the
+//! rotor's position at the first reading after power-up: the drive has not moved it and holds it
+//! at the angle of the setpoint, as an open-loop stepper does (a board whose rotor may sit off
+//! that angle runs an alignment at power-up; the simulated rotor starts on it).
+//! - Position loop (0x605D = 0, PID not used, §5.8.8): the phases follow the setpoint, except that
+//!   they never lead the measured rotor by more than one full step (90° electrical, where the
+//!   torque is largest): under a load beyond the open-loop pull-out torque the motor pushes with
+//!   its full torque instead of slipping, and catches up with the setpoint when it can. No step
+//!   is lost; a following error remains while the load holds the rotor back.
+//! - Servo loop (0x605D = 1): the phases lead the measured rotor by exactly one full step, forward
+//!   or back, with a current of `|u| × 0x600D` where u, clamped to ±1, is a PID on the following
+//!   error e in full steps: u = KP/16 · e + KI·5 · ∫e dt + KD/4 · ė (ė in full steps per ms),
+//!   with ė low-passed over 0x605A ticks (the prefilter) and the integral stopped while u is
+//!   saturated in its direction (anti-windup). At the defaults (8, 4, 8) a following error of two
+//!   full steps asks for the full current.
+//!
+//! **Stall.** Controller status bit 2 (write 1 to clear; while it is set, moves are refused).
+//! - Closed loop: a following error beyond 0x605C microsteps (of 0x600C) latches the position
+//!   error fault (0x2135 bit 2, alarm 25): the power stage goes off. A lost encoder (a reading of
+//!   `None`) latches 0x2135 bit 3 (alarm 27).
+//! - Open loop, sensorless (our 0x2107 = 1): from the phase currents and the bridge voltages the
+//!   drive estimates the back-EMF, e = v − R·i − L·di/dt (R, L: our 0x2108, 0x2109), whose angle
+//!   is the rotor's electrical angle plus 90°. The load angle δ between the current vector and
+//!   the rotor is atan2(e·i, −e×i) in the direction of motion: a hybrid stepper pulls out at 90°.
+//!   A stall is a |δ| beyond 110° − 4° × the signed threshold of 0x6039 bits 0-6 (clamped to
+//!   45°..175°: a positive threshold is more sensitive), or a back-EMF below 0.1 V (a blocked
+//!   rotor), for four ticks in a row, once the commanded speed has been at least our 0x210A full
+//!   steps per second for 10 ms (below that the back-EMF is too small to tell, as §5.5.21 warns).
+//!   With 0x6043 = 1 the axis then stops at once.
+
+use crate::control::TICK_MICROS;
+use crate::drive::{DriveState, STATUS_STALL};
+use crate::faults::{FAULT_POSITION, Inputs};
+use crate::motion::axis::Setpoint;
+use crate::od::Obj;
+use crate::units::Instant;
+use fixed::types::U0F32;
+
+/// Full steps in one turn of the motor (a 1.8° hybrid stepper).
+pub const STEPS_PER_REV: i64 = 200;
+/// Back-EMF below which a commanded motion counts as a blocked rotor, V.
+pub const EMF_FLOOR_V: f32 = 0.1;
+/// Ticks in a row a stall condition must hold.
+pub const STALL_TICKS: u8 = 4;
+/// How long the commanded speed must have been above the minimum before detection starts, µs.
+pub const STALL_SETTLE_MICROS: u64 = 10_000;
+/// The control tick in seconds.
+const TICK_S: f32 = TICK_MICROS as f32 * 1e-6;
+
+/// The feedback the drive runs with: fixed at power-up from 0x2104 and 0x6054.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Feedback {
+    /// Open loop: positions in microsteps, the encoder (if any) only shown in 0x6089.
+    Open,
+    /// Closed loop on an encoder.
+    Closed(Encoder),
+}
+
+/// An encoder and how its readings count.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Encoder {
+    /// Incremental: `counts` ×4 counts per turn, a counter wrapping at 2^32.
+    Incremental {
+        /// Counts per turn (4 × lines).
+        counts: u32,
+    },
+    /// Absolute 12-bit single-turn: the angle, wrapping at 4096.
+    SingleTurn,
+    /// Absolute 12-bit multi-turn: turns × 4096 + angle, wrapping at 2^32.
+    MultiTurn,
+}
+
+impl Encoder {
+    /// Counts in one turn.
+    pub const fn counts_per_rev(self) -> u32 {
+        match self {
+            Encoder::Incremental { counts } => counts,
+            Encoder::SingleTurn | Encoder::MultiTurn => 4096,
+        }
+    }
+
+    /// Counts moved from the reading `last` to `now` (shortest way round the reading's wrap).
+    fn delta(self, last: u32, now: u32) -> i64 {
+        match self {
+            Encoder::SingleTurn => i64::from(((now.wrapping_sub(last) << 20) as i32) >> 20),
+            _ => i64::from(now.wrapping_sub(last) as i32),
+        }
+    }
+
+    /// The encoder position of a first reading: counts since power-up for an incremental
+    /// encoder, the reading itself for an absolute one.
+    fn first(self, raw: u32) -> i64 {
+        match self {
+            Encoder::Incremental { .. } => 0,
+            Encoder::SingleTurn => i64::from(raw & 0xFFF),
+            Encoder::MultiTurn => i64::from(raw as i32),
+        }
+    }
+}
+
+impl Feedback {
+    /// The feedback of 0x2104 = `kind` with 0x6054 = `cpr` (12: the absolute encoder).
+    pub const fn from_objects(kind: u32, cpr: u32) -> Self {
+        match (kind, cpr) {
+            (0, _) => Feedback::Open,
+            (2, _) => Feedback::Closed(Encoder::MultiTurn),
+            (_, 12) => Feedback::Closed(Encoder::SingleTurn),
+            (_, lines) => Feedback::Closed(Encoder::Incremental { counts: lines.saturating_mul(4) }),
+        }
+    }
+
+    /// The encoder of the closed loop, if it runs.
+    pub const fn encoder(self) -> Option<Encoder> {
+        match self {
+            Feedback::Open => None,
+            Feedback::Closed(e) => Some(e),
+        }
+    }
+}
+
+/// An angle or offset in microsteps: whole microsteps and a fraction, as the setpoint carries.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Micro {
+    /// Whole microsteps (floor).
+    pub whole: i64,
+    /// The fraction in [0, 1).
+    pub fraction: f32,
+}
+
+impl Micro {
+    /// `counts` of an encoder with `per_rev` counts a turn, in microsteps of `per_step` a full
+    /// step, exactly: whole part by integer division, the remainder as the fraction.
+    pub fn from_counts(counts: i64, per_rev: u32, per_step: u32) -> Self {
+        let per_rev = i64::from(per_rev.max(1));
+        let num = counts.saturating_mul(STEPS_PER_REV * i64::from(per_step.max(1)));
+        let whole = num.div_euclid(per_rev);
+        Self { whole, fraction: num.rem_euclid(per_rev) as f32 / per_rev as f32 }
+    }
+
+    /// This angle moved by `by` microsteps (small: at most a few full steps).
+    pub fn plus(self, by: f32) -> Self {
+        let by = if by.is_finite() { by } else { 0.0 };
+        let f = self.fraction + by;
+        let floor = libm::floorf(f);
+        Self { whole: self.whole.saturating_add(floor as i64), fraction: (f - floor).clamp(0.0, 0.999_999_9) }
+    }
+}
+
+/// The sensorless stall detector's memory.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(crate) struct Sensorless {
+    /// Phase currents at the last tick, A.
+    last_i: Option<[f32; 2]>,
+    /// Low-passed e·i and e×i, W.
+    dot: f32,
+    cross: f32,
+    /// Low-passed back-EMF magnitude, V.
+    emf: f32,
+    /// Since when the commanded speed has been above the minimum.
+    fast_since: Option<Instant>,
+    /// Ticks in a row the stall condition has held.
+    count: u8,
+    /// The last estimated load angle, rad (for tests and traces).
+    pub(crate) load_angle: f32,
+}
+
+/// What the sensorless detector is told at one tick.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SensorlessInput {
+    /// Measured phase currents, A.
+    pub i: [f32; 2],
+    /// Bridge voltages averaged over the tick, V.
+    pub v: [f32; 2],
+    /// Winding resistance, Ω, and inductance, H.
+    pub r: f32,
+    pub l: f32,
+    /// Commanded speed, full steps per second (signed).
+    pub speed: f32,
+    /// The minimum speed for detection, full steps per second.
+    pub min_speed: f32,
+    /// The load angle beyond which the rotor has pulled out, rad.
+    pub limit: f32,
+}
+
+/// Low-pass weight of the detector's filters: about 0.4 ms at 20 kHz.
+const EMF_ALPHA: f32 = 1.0 / 8.0;
+
+impl Sensorless {
+    /// One tick; whether the rotor has stalled. `active` false (power stage off, no motion)
+    /// resets the detector.
+    pub(crate) fn update(&mut self, now: Instant, x: &SensorlessInput) -> bool {
+        let last = self.last_i.replace(x.i).unwrap_or(x.i);
+        let mid = [(x.i[0] + last[0]) * 0.5, (x.i[1] + last[1]) * 0.5];
+        let emf = |k: usize| {
+            let (v, i, m) = (x.v.get(k), x.i.get(k), mid.get(k));
+            let (v, i, m) = (v.copied().unwrap_or(0.0), i.copied().unwrap_or(0.0), m.copied().unwrap_or(0.0));
+            let l = last.get(k).copied().unwrap_or(0.0);
+            v - x.r * m - x.l * (i - l) / TICK_S
+        };
+        let (ea, eb) = (emf(0), emf(1));
+        let (dot, cross) = (ea * mid[0] + eb * mid[1], ea * mid[1] - eb * mid[0]);
+        self.dot += (dot - self.dot) * EMF_ALPHA;
+        self.cross += (cross - self.cross) * EMF_ALPHA;
+        self.emf += (libm::sqrtf(ea * ea + eb * eb) - self.emf) * EMF_ALPHA;
+        let s = if x.speed < 0.0 { -1.0 } else { 1.0 };
+        self.load_angle = libm::atan2f(s * self.dot, -s * self.cross);
+        if libm::fabsf(x.speed) < x.min_speed || x.min_speed <= 0.0 {
+            self.fast_since = None;
+            self.count = 0;
+            return false;
+        }
+        let since = *self.fast_since.get_or_insert(now);
+        if now.since(since) < STALL_SETTLE_MICROS {
+            return false;
+        }
+        let stalled = libm::fabsf(self.load_angle) > x.limit || self.emf < EMF_FLOOR_V;
+        self.count = if stalled { self.count.saturating_add(1) } else { 0 };
+        self.count >= STALL_TICKS
+    }
+
+    /// Forgets the motion: the next detection starts afresh.
+    pub(crate) fn reset(&mut self) {
+        *self = Self { last_i: None, ..Self::default() };
+    }
+}
+
+/// The load-angle limit of the stall threshold 0x6039 (bits 0-6, signed), rad.
+pub fn stall_limit(params: u32) -> f32 {
+    let t = (((params & 0x7F) as u8) << 1) as i8 >> 1;
+    let deg = (110.0 - 4.0 * f32::from(t)).clamp(45.0, 175.0);
+    deg.to_radians()
+}
+
+/// The closed loop's memory.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Servo {
+    /// The feedback in force (from power-up).
+    pub(crate) feedback: Feedback,
+    /// The last raw reading.
+    last_raw: Option<u32>,
+    /// Encoder position, counts (unwrapped).
+    pub(crate) encoder: i64,
+    /// The encoder position at the electrical zero (the first reading).
+    align: i64,
+    /// Measured speed, counts per second, low-passed over ~13 ms.
+    pub(crate) speed: f32,
+    /// PID integral, in units of the full current.
+    integral: f32,
+    /// Low-passed rate of the following error, full steps per second.
+    rate: f32,
+    /// The last following error, full steps.
+    last_error: f32,
+    /// The last following error, counts (setpoint − measured).
+    pub(crate) following: i64,
+    /// The sensorless stall detector.
+    pub(crate) sensorless: Sensorless,
+    /// The whole microsteps of the last tick's electrical angle.
+    pub(crate) last_angle: i64,
+    /// The resolution `last_angle` counts in, microsteps a full step.
+    last_per_step: u32,
+}
+
+/// What the closed loop asks of the power stage at one tick.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Drive {
+    /// The electrical angle to drive, microsteps.
+    pub angle: Micro,
+    /// The share of the phase current to drive, 0..=1.
+    pub current: f32,
+}
+
+/// The PID gains and filter of the servo loop, in physical units (see the module doc).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Gains {
+    /// Full current per full step of error.
+    pub kp: f32,
+    /// Full current per full step·second.
+    pub ki: f32,
+    /// Full current per full step per millisecond.
+    pub kd: f32,
+    /// The error rate's low-pass weight per tick.
+    pub alpha: f32,
+}
+
+impl Gains {
+    /// The gains of 0x6057..0x605A.
+    pub fn from_objects(kp: u32, ki: u32, kd: u32, prefilter: u32) -> Self {
+        Self { kp: kp as f32 / 16.0, ki: ki as f32 * 5.0, kd: kd as f32 / 4.0, alpha: 1.0 / prefilter.max(1) as f32 }
+    }
+}
+
+impl Servo {
+    /// The loop at power-up.
+    pub(crate) const fn new(feedback: Feedback) -> Self {
+        Self {
+            feedback,
+            last_raw: None,
+            encoder: 0,
+            align: 0,
+            speed: 0.0,
+            integral: 0.0,
+            rate: 0.0,
+            last_error: 0.0,
+            following: 0,
+            sensorless: Sensorless {
+                last_i: None,
+                dot: 0.0,
+                cross: 0.0,
+                emf: 0.0,
+                fast_since: None,
+                count: 0,
+                load_angle: 0.0,
+            },
+            last_angle: 0,
+            last_per_step: 1,
+        }
+    }
+
+    /// Counts a turn of the encoder in use (open loop: an incremental encoder of 0x6054 lines is
+    /// assumed for 0x6089).
+    pub(crate) fn encoder_kind(&self, cpr: u32) -> Encoder {
+        match self.feedback {
+            Feedback::Closed(e) => e,
+            Feedback::Open => Encoder::Incremental { counts: cpr.saturating_mul(4) },
+        }
+    }
+
+    /// Takes a reading; whether it was the first (the caller then places the axis).
+    pub(crate) fn read(&mut self, encoder: Encoder, raw: u32) -> bool {
+        let Some(last) = self.last_raw.replace(raw) else {
+            self.encoder = encoder.first(raw);
+            self.align = self.encoder;
+            return true;
+        };
+        let moved = encoder.delta(last, raw);
+        self.encoder = self.encoder.saturating_add(moved);
+        // About 13 ms of low-pass: a count a tick is 20 000 counts/s, and at slow speed counts
+        // come every few ticks.
+        self.speed += (moved as f32 / TICK_S - self.speed) * (1.0 / 256.0);
+        false
+    }
+
+    /// The rotor's electrical angle in microsteps of `per_step` a full step.
+    pub(crate) fn rotor_angle(&self, per_rev: u32, per_step: u32) -> Micro {
+        Micro::from_counts(self.encoder.saturating_sub(self.align), per_rev, per_step)
+    }
+
+    /// Forgets the PID's memory (the power stage is off, or the loop restarts).
+    pub(crate) fn relax(&mut self) {
+        (self.integral, self.rate, self.last_error, self.following) = (0.0, 0.0, 0.0, 0);
+    }
+
+    /// The position loop: the setpoint's angle, at most a full step ahead of or behind the
+    /// rotor. `error` is the following error in microsteps.
+    pub(crate) fn position_loop(&self, rotor: Micro, error: f32, per_step: u32) -> Drive {
+        let lead = per_step.max(1) as f32;
+        Drive { angle: rotor.plus(error.clamp(-lead, lead)), current: 1.0 }
+    }
+
+    /// The servo loop: the PID on `error` (full steps), a full step of lead in its direction.
+    pub(crate) fn servo_loop(&mut self, rotor: Micro, error: f32, per_step: u32, g: &Gains) -> Drive {
+        let rate = (error - self.last_error) / TICK_S;
+        self.last_error = error;
+        self.rate += (rate - self.rate) * g.alpha;
+        let unclamped = g.kp * error + self.integral + g.kd * self.rate * 1e-3;
+        // Anti-windup: integrate only while the output is not saturated in the error's direction.
+        if libm::fabsf(unclamped) < 1.0 || (unclamped > 0.0) != (error > 0.0) {
+            self.integral = (self.integral + g.ki * error * TICK_S).clamp(-1.0, 1.0);
+        }
+        let u = unclamped.clamp(-1.0, 1.0);
+        let lead = if u < 0.0 { -(per_step.max(1) as f32) } else { per_step.max(1) as f32 };
+        Drive { angle: rotor.plus(lead), current: libm::fabsf(u) }
+    }
+}
+
+impl DriveState {
+    /// The encoder reading of this tick: 0x6089, and in closed loop the measured position. The
+    /// first reading of a closed loop places the standing axis on the measured position.
+    pub(crate) fn sense(&mut self, inputs: &Inputs) {
+        let Some(raw) = inputs.encoder else { return };
+        let kind = self.servo.encoder_kind(self.param(Obj::EncoderCpr));
+        let first = self.servo.read(kind, raw);
+        self.status.encoder = self.servo.encoder as i32;
+        let Feedback::Closed(encoder) = self.servo.feedback else { return };
+        if first && matches!(encoder, Encoder::Incremental { .. }) && self.param(Obj::AutoSave) == 1 {
+            // §5.5.15: the incremental closed loop starts from the power-down position.
+            self.set_param(Obj::ZeroOffset, self.param(Obj::SavedPosition));
+        }
+        // While the power stage is off the setpoint follows the rotor (turned by hand, say), so
+        // that enabling does not jump back.
+        if (first || !self.power_stage_on()) && self.axis.is_still() {
+            let measured = self.measured();
+            if measured != self.axis.setpoint().whole {
+                self.axis.set_position(measured);
+            }
+        }
+    }
+
+    /// The measured position (closed loop): encoder position + zero offset 0x6087.
+    pub(crate) fn measured(&self) -> i64 {
+        self.servo.encoder.wrapping_add(i64::from(self.param(Obj::ZeroOffset) as i32))
+    }
+
+    /// 0x607F: the measured speed in closed loop, the commanded one in open loop.
+    pub(crate) fn real_speed(&self) -> i32 {
+        let v = match self.servo.feedback {
+            Feedback::Open => libm::round(self.axis.setpoint().velocity) as f32,
+            Feedback::Closed(_) => libm::roundf(self.servo.speed),
+        };
+        v as i32
+    }
+
+    /// The electrical angle and the share of the phase current to drive for the setpoint `sp`,
+    /// with the stall detection of the loop in force.
+    /// `moved` is the whole microsteps the setpoint moved this tick: in open loop the angle
+    /// advances by them, so that declaring a position (0x600E) does not turn the motor.
+    pub(crate) fn commutate(&mut self, now: Instant, sp: &Setpoint, moved: i64, inputs: &Inputs) -> (Setpoint, f32) {
+        let per_step = self.param(Obj::Microsteps).max(1);
+        if per_step != self.servo.last_per_step {
+            // A new resolution: the same electrical angle in the new microsteps.
+            let (new, old) = (i64::from(per_step), i64::from(self.servo.last_per_step.max(1)));
+            self.servo.last_angle = (self.servo.last_angle.saturating_mul(2 * new).div_euclid(old) + 1).div_euclid(2);
+            self.servo.last_per_step = per_step;
+        }
+        let Feedback::Closed(encoder) = self.servo.feedback else {
+            self.detect_stall_sensorless(now, sp, inputs, per_step);
+            return (Setpoint { whole: self.servo.last_angle.saturating_add(moved), ..*sp }, 1.0);
+        };
+        let per_rev = encoder.counts_per_rev();
+        let rotor = self.servo.rotor_angle(per_rev, per_step);
+        let following = sp.whole.saturating_sub(self.measured());
+        self.servo.following = following;
+        let to_micro = (STEPS_PER_REV as f32 * per_step as f32) / per_rev as f32;
+        let error = (following as f32 + sp.fraction.to_num::<f32>()) * to_micro;
+        let velocity = sp.velocity * f64::from(to_micro);
+        let at = |m: Micro, velocity: f64| Setpoint {
+            whole: m.whole,
+            fraction: U0F32::from_bits((m.fraction * 4_294_967_296.0) as u32),
+            velocity,
+            acceleration: 0.0,
+        };
+        if !self.power_stage_on() {
+            self.servo.relax();
+            return (at(rotor, 0.0), 0.0);
+        }
+        if libm::fabsf(error) > self.param(Obj::StallLength) as f32 {
+            // A following error beyond 0x605C: the position error alarm (25) and the stall bit.
+            self.status.controller |= STATUS_STALL;
+            self.latch(now, 0, FAULT_POSITION);
+            self.stop_motion();
+            self.servo.relax();
+            return (at(rotor, 0.0), 0.0);
+        }
+        let drive = if self.param(Obj::TorqueLoop) == 1 {
+            let g = Gains::from_objects(
+                self.param(Obj::Kp),
+                self.param(Obj::Ki),
+                self.param(Obj::Kd),
+                self.param(Obj::PreFilter),
+            );
+            self.servo.servo_loop(rotor, error / per_step as f32, per_step, &g)
+        } else {
+            self.servo.position_loop(rotor, error, per_step)
+        };
+        (at(drive.angle, velocity), drive.current)
+    }
+
+    /// Open loop: the sensorless stall detection (0x2107), from the phase currents and voltages.
+    fn detect_stall_sensorless(&mut self, now: Instant, sp: &Setpoint, inputs: &Inputs, per_step: u32) {
+        let (Some(ma), Some(mv)) = (inputs.phase_ma, inputs.phase_mv) else {
+            return self.servo.sensorless.reset();
+        };
+        if self.param(Obj::StallDetect) != 1 || !self.power_stage_on() {
+            return self.servo.sensorless.reset();
+        }
+        let x = SensorlessInput {
+            i: ma.map(|m| m as f32 * 1e-3),
+            v: mv.map(|m| m as f32 * 1e-3),
+            r: self.param(Obj::MotorResistance) as f32 * 1e-3,
+            l: self.param(Obj::MotorInductance) as f32 * 1e-6,
+            speed: (sp.velocity / f64::from(per_step)) as f32,
+            min_speed: self.param(Obj::StallMinSpeed) as f32,
+            limit: stall_limit(self.param(Obj::StallParams)),
+        };
+        if self.servo.sensorless.update(now, &x) && self.status.controller & STATUS_STALL == 0 {
+            self.status.controller |= STATUS_STALL;
+            if self.param(Obj::StallStop) == 1 {
+                self.stop_motion();
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn counts_convert_to_microsteps_exactly() {
+        // 1000 lines ×4 = 4000 counts a turn = 200 full steps: 20 counts a full step.
+        let m = Micro::from_counts(30, 4000, 16);
+        assert_eq!((m.whole, m.fraction), (24, 0.0));
+        let m = Micro::from_counts(-1, 4096, 1);
+        assert_eq!(m.whole, -1);
+        assert!((m.fraction - (1.0 - 200.0 / 4096.0)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn readings_unwrap_across_the_wrap() {
+        let mut s = Servo::new(Feedback::Closed(Encoder::SingleTurn));
+        assert!(s.read(Encoder::SingleTurn, 4090));
+        assert_eq!(s.encoder, 4090);
+        s.read(Encoder::SingleTurn, 5);
+        assert_eq!(s.encoder, 4101);
+        s.read(Encoder::SingleTurn, 4000);
+        assert_eq!(s.encoder, 4000);
+        let inc = Encoder::Incremental { counts: 4000 };
+        let mut s = Servo::new(Feedback::Closed(inc));
+        s.read(inc, u32::MAX - 1);
+        s.read(inc, 3);
+        assert_eq!(s.encoder, 5);
+    }
+
+    #[test]
+    fn the_threshold_moves_the_limit() {
+        assert!((stall_limit(0).to_degrees() - 110.0).abs() < 1e-3);
+        assert!((stall_limit(5).to_degrees() - 90.0).abs() < 1e-3);
+        // -10 as 7-bit two's complement.
+        assert!((stall_limit(0x76).to_degrees() - 150.0).abs() < 1e-3);
+        assert!((stall_limit(0x40).to_degrees() - 175.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn the_position_loop_never_leads_the_rotor_by_more_than_a_full_step() {
+        let s = Servo::new(Feedback::Closed(Encoder::SingleTurn));
+        let rotor = Micro { whole: 100, fraction: 0.5 };
+        assert_eq!(s.position_loop(rotor, 3.0, 16).angle, Micro { whole: 103, fraction: 0.5 });
+        assert_eq!(s.position_loop(rotor, 40.0, 16).angle, Micro { whole: 116, fraction: 0.5 });
+        assert_eq!(s.position_loop(rotor, -40.0, 16).angle, Micro { whole: 84, fraction: 0.5 });
+    }
+
+    #[test]
+    fn the_servo_integral_stops_while_saturated() {
+        let mut s = Servo::new(Feedback::Closed(Encoder::SingleTurn));
+        let g = Gains::from_objects(8, 4, 8, 32);
+        for _ in 0..20_000 {
+            s.servo_loop(Micro { whole: 0, fraction: 0.0 }, 10.0, 16, &g);
+        }
+        // Saturated all along: the integral never grew.
+        assert_eq!(s.integral, 0.0);
+        for _ in 0..2_000 {
+            s.servo_loop(Micro { whole: 0, fraction: 0.0 }, 0.5, 16, &g);
+        }
+        assert!(s.integral > 0.0 && s.integral <= 1.0);
+    }
+}
