@@ -8,6 +8,7 @@
 use std::fmt;
 use std::sync::{Arc, Mutex};
 
+use crate::encoder::EncoderFault;
 use crate::motor::PhaseFault;
 
 /// One injected fault or disturbance.
@@ -28,14 +29,17 @@ pub enum Change {
     Blocked(bool),
     /// Phase A (0) or B (1) gets this fault (`PhaseFault::None` repairs it).
     Phase(usize, PhaseFault),
-    /// The driver (power stage) temperature the drive measures becomes this, °C.
+    /// The driver (power stage) temperature becomes this now, °C: the ambient steps by the
+    /// difference, and the thermal model heats or cools the stage from there.
     DriverTemperature(f64),
+    /// The shaft encoder gets this fault (noise, line break, slipped coupling) or is repaired.
+    Encoder(EncoderFault),
 }
 
 impl Change {
     /// Parses a `--fault` specification: `supply=V`, `supply=V/MS` (ramp to V in MS ms),
     /// `load=NM`, `blocked`, `free`, `open-a`, `open-b`, `short-a`, `short-b`, `heal-a`,
-    /// `heal-b`, `temp=C`.
+    /// `heal-b`, `temp=C`, `encoder-noise=N`, `encoder-lost`, `encoder-frozen`, `encoder-ok`.
     pub fn parse(spec: &str) -> Result<Self, String> {
         let number =
             |t: &str| t.trim().parse::<f64>().ok().filter(|v| v.is_finite()).ok_or(format!("bad number {t:?}"));
@@ -54,6 +58,12 @@ impl Change {
             "blocked" => Change::Blocked(true),
             "free" => Change::Blocked(false),
             "temp" => Change::DriverTemperature(number(value)?),
+            "encoder-noise" => Change::Encoder(EncoderFault::Noise(
+                value.trim().parse().map_err(|_| format!("bad count {value:?} (0 or more counts)"))?,
+            )),
+            "encoder-lost" => Change::Encoder(EncoderFault::Lost),
+            "encoder-frozen" => Change::Encoder(EncoderFault::Frozen),
+            "encoder-ok" => Change::Encoder(EncoderFault::Ok),
             k => match k.split_once('-') {
                 Some(("open", p)) => Change::Phase(phase(p)?, PhaseFault::Open),
                 Some(("short", p)) => Change::Phase(phase(p)?, PhaseFault::Short),
@@ -156,7 +166,11 @@ mod tests {
         assert_eq!(Change::parse("temp=95"), Ok(Change::DriverTemperature(95.0)));
         assert_eq!(Change::parse("load=0.2"), Ok(Change::LoadTorque(0.2)));
         assert_eq!(Change::parse("blocked"), Ok(Change::Blocked(true)));
-        for bad in ["open-c", "supply=x", "load=NaN", "melt"] {
+        assert_eq!(Change::parse("encoder-noise=3"), Ok(Change::Encoder(EncoderFault::Noise(3))));
+        assert_eq!(Change::parse("encoder-lost"), Ok(Change::Encoder(EncoderFault::Lost)));
+        assert_eq!(Change::parse("encoder-frozen"), Ok(Change::Encoder(EncoderFault::Frozen)));
+        assert_eq!(Change::parse("encoder-ok"), Ok(Change::Encoder(EncoderFault::Ok)));
+        for bad in ["open-c", "supply=x", "load=NaN", "melt", "encoder-noise=-1", "encoder-noise", "encoder-gone"] {
             assert!(Change::parse(bad).is_err(), "{bad}");
         }
         assert!("x:blocked".parse::<Scheduled>().is_err());

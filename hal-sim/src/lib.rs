@@ -67,12 +67,14 @@ use crate::flash::{PAGES, SimFlash, block_on};
 use crate::motor::{Motor, MotorCatalog, MotorInputs};
 use crate::plant::Plant;
 
+pub mod encoder;
 pub mod flash;
 pub mod inject;
 pub mod motor;
 pub mod plant;
 pub mod plot;
 pub mod script;
+pub mod thermal;
 pub mod trace;
 
 /// Where masters reach the simulated drive.
@@ -119,6 +121,8 @@ pub struct SimOptions {
     pub axes: Vec<u8>,
     /// Faults and disturbances at set times after power-up (`--fault`), on every axis.
     pub faults: Vec<inject::Scheduled>,
+    /// The encoder on each motor's shaft (`--encoder`).
+    pub encoder: encoder::EncoderKind,
 }
 
 /// The trace or flash file of the drive at `address` when several share the bus: `-axisN`
@@ -397,6 +401,7 @@ fn build<T>(
         let (drive, extra) = power_up(address, drive_config(&SimOptions { address, ..opts.clone() })?)?;
         let mut plant = Plant::new(drive, Motor::new(params.clone(), opts.motor.inputs));
         plant.schedule(opts.faults.clone());
+        plant.set_encoder(opts.encoder);
         if let Some((path, every)) = &opts.motor.trace {
             let path = match address {
                 Some(a) if !opts.axes.is_empty() => axis_trace_path(path, a),

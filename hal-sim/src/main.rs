@@ -66,9 +66,16 @@ struct Args {
     /// `supply=V/RAMP_MS` (a linear ramp from the present voltage), `load=NM` (a load-torque
     /// step), `blocked` / `free` (rotor held / released), `open-a`, `open-b` (coil open),
     /// `short-a`, `short-b` (bridge output shorted: over-current), `heal-a`, `heal-b` (repaired),
-    /// `temp=C` (driver temperature).
+    /// `temp=C` (the driver temperature becomes C: the ambient steps by the difference),
+    /// `encoder-noise=N` (±N counts of jitter), `encoder-lost` (line break), `encoder-frozen`
+    /// (slipped coupling), `encoder-ok` (repaired).
     #[arg(long = "fault", value_name = "MS:SPEC")]
     faults: Vec<hal_sim::inject::Scheduled>,
+    /// The encoder on the motor shaft: `inc:CPR` (incremental, CPR 200, 400, 500, 600, 800,
+    /// 1000, 1200 or 1600 lines, counted x4, 0 at power-up), `abs12` (absolute single-turn,
+    /// 12 bits), `abs12mt` (multi-turn: turns x 4096 + angle) or `none`.
+    #[arg(long, value_name = "KIND", default_value = "inc:1000")]
+    encoder: hal_sim::encoder::EncoderKind,
     /// Record time, commanded and rotor position and velocity, and phase currents as CSV.
     #[arg(long, value_name = "FILE.csv")]
     trace: Option<PathBuf>,
@@ -122,8 +129,14 @@ fn main() -> ExitCode {
         trace: args.trace.map(|path| (path, args.trace_every)),
     };
     if let Some(path) = &args.script {
-        let opts =
-            SimOptions { address: args.address, baud: args.baud, motor, faults: args.faults, ..Default::default() };
+        let opts = SimOptions {
+            address: args.address,
+            baud: args.baud,
+            motor,
+            faults: args.faults,
+            encoder: args.encoder,
+            ..Default::default()
+        };
         return run_script(path, &opts);
     }
     let endpoint = match args.tcp {
@@ -139,6 +152,7 @@ fn main() -> ExitCode {
         fset_low: args.fset_low,
         axes: args.axes.map(|a| a.0).unwrap_or_default(),
         faults: args.faults,
+        encoder: args.encoder,
     };
     let sim = match Simulator::bind(opts) {
         Ok(sim) => sim,

@@ -57,6 +57,15 @@
 //! and the winding, bypassed, makes no torque. [`Motor::set_blocked`]: the rotor is held where it
 //! is (a jammed load), whatever the torque.
 //!
+//! # What the drive measures of the bridge
+//!
+//! [`Motor::take_bridge_means`] gives the bridge voltages and the summed squared bridge currents
+//! averaged since its last call (the drive takes them once a control tick). The voltage is what
+//! the drive knows from its PWM duties and the supply: while the bridge drives, the voltage it
+//! applies (even into an open or shorted output); while it is off, ∓V through the freewheel
+//! diodes while a current flows, and 0 when none does (the terminals then float at the back-EMF,
+//! which no duty tells).
+//!
 //! # Integration
 //!
 //! Sub-steps of T / [`ChopperConfig::substeps`] (12.5 µs, 80 kHz, by default). The bridge voltage is
@@ -322,6 +331,15 @@ impl DriverCommand {
     }
 }
 
+/// Averages over an interval of what the drive knows of its bridges ([`Motor::take_bridge_means`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BridgeMeans {
+    /// Mean voltage applied to phases A and B, V.
+    pub volts: [f64; 2],
+    /// Mean of i_a² + i_b² (bridge currents), A².
+    pub current_sq: f64,
+}
+
 /// What is wrong with one phase's winding or wiring (see the module documentation).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum PhaseFault {
@@ -360,6 +378,13 @@ pub struct Motor {
     v_a: f64,
     v_b: f64,
     bridge_on: bool,
+    /// The voltages the bridges apply over the present PWM period, as the drive commands them.
+    bridge_v: [f64; 2],
+    /// Since the last [`Motor::take_bridge_means`]: ∫ the drive's known bridge voltage dt per
+    /// phase, ∫ (i_a² + i_b²) dt, and the time.
+    v_integral: [f64; 2],
+    current_sq_integral: f64,
+    integral_s: f64,
     torque_e: f64,
     substep: u64,
     carry_s: f64,
@@ -404,6 +429,10 @@ impl Motor {
             v_a: 0.0,
             v_b: 0.0,
             bridge_on: false,
+            bridge_v: [0.0; 2],
+            v_integral: [0.0; 2],
+            current_sq_integral: 0.0,
+            integral_s: 0.0,
             torque_e: 0.0,
             substep: 0,
             carry_s: 0.0,
@@ -525,8 +554,10 @@ impl Motor {
                 };
                 self.v_a = dead_beat(cmd.current * ce, self.i_a, e_a);
                 self.v_b = dead_beat(cmd.current * se, self.i_b, e_b);
+                self.bridge_v = [self.v_a, self.v_b];
             }
         }
+        let (i_a0, i_b0) = (self.i_a, self.i_b);
 
         let [fault_a, fault_b] = self.phase_faults;
         let (short_decay, bridge_on) = (self.short_decay_h, self.bridge_on);
@@ -550,6 +581,22 @@ impl Motor {
         };
         self.i_a = phase(self.i_a, &mut self.v_a, e_a, fault_a);
         self.i_b = phase(self.i_b, &mut self.v_b, e_b, fault_b);
+        let known = |i0: f64, v: f64, commanded: f64| {
+            if self.bridge_on {
+                commanded
+            } else if i0 != 0.0 {
+                v
+            } else {
+                0.0
+            }
+        };
+        let [va, vb] = self.bridge_v;
+        self.v_integral[0] += self.h * known(i_a0, self.v_a, va);
+        self.v_integral[1] += self.h * known(i_b0, self.v_b, vb);
+        // Trapezoid over the sub-step.
+        let sq = |i0: f64, i1: f64| 0.5 * (i0 * i0 + i1 * i1);
+        self.current_sq_integral += self.h * (sq(i_a0, self.i_a) + sq(i_b0, self.i_b));
+        self.integral_s += self.h;
 
         // Mechanics, with the new currents: semi-implicit Euler. A bypassed winding makes no torque.
         let torque_current = |i: f64, fault: PhaseFault| if fault == PhaseFault::Short { 0.0 } else { i };
@@ -646,6 +693,15 @@ impl Motor {
     /// The bridge voltages (v_a, v_b) applied over the last sub-step, V.
     pub fn phase_voltages(&self) -> (f64, f64) {
         (self.v_a, self.v_b)
+    }
+
+    /// The bridge voltages as the drive knows them and i_a² + i_b², averaged since the last call
+    /// (see the module documentation); zeros if no time has passed.
+    pub fn take_bridge_means(&mut self) -> BridgeMeans {
+        let t = core::mem::take(&mut self.integral_s);
+        let [va, vb] = core::mem::take(&mut self.v_integral);
+        let sq = core::mem::take(&mut self.current_sq_integral);
+        if t > 0.0 { BridgeMeans { volts: [va / t, vb / t], current_sq: sq / t } } else { BridgeMeans::default() }
     }
 
     /// Electrical torque K_m(−i_a sin Nθ + i_b cos Nθ) of the last sub-step, N·m.

@@ -1,6 +1,11 @@
 //! The drive and its motor on one simulated clock: every control tick the drive's outputs set the
 //! chopper's command, and the motor model integrates until the next tick.
 //!
+//! What the drive measures ([`Plant::measurements`]) is what a real drive's platform measures:
+//! the supply, the driver temperature (a thermal model, [`crate::thermal`]), the bridge currents,
+//! the bridge voltages averaged over the tick that just ended (PWM duties times the supply), the
+//! open-load flags and the shaft encoder ([`crate::encoder`]); never the model's rotor angle.
+//!
 //! A serial endpoint keeps the clock in pace with wall time ([`Plant::advance_to`] at each wake-up);
 //! scenario tests run it as fast as it goes.
 
@@ -13,8 +18,10 @@ use drive_core::control::{Outputs, TICK_MICROS};
 use drive_core::faults::Inputs;
 use drive_core::{Drive, Instant};
 
+use crate::encoder::{Encoder, EncoderKind};
 use crate::inject::{Change, Injector, Scheduled, Supply};
-use crate::motor::{DriverCommand, Motor, MotorInputs, PhaseFault};
+use crate::motor::{BridgeMeans, DriverCommand, Motor, MotorInputs, PhaseFault};
+use crate::thermal::{Thermal, ThermalParams};
 use crate::trace::{CSV_HEADER, Decimator, TraceRow};
 
 /// A drive driving a simulated motor.
@@ -28,15 +35,19 @@ pub struct Plant {
     trace: Option<(BufWriter<File>, Decimator)>,
     /// The supply, steady or ramping.
     supply: Supply,
-    /// The driver temperature the drive measures, °C.
-    temperature_c: f64,
+    /// The driver's temperature.
+    thermal: Thermal,
+    /// The encoder on the shaft.
+    encoder: Encoder,
+    /// The bridge's averages over the last tick.
+    bridge: BridgeMeans,
     /// Changes still to come, latest first.
     schedule: Vec<Scheduled>,
     /// Changes sent from another thread.
     injector: Injector,
 }
 
-/// Driver temperature at power-up, °C.
+/// Ambient and driver temperature at power-up, °C.
 pub const AMBIENT_C: f64 = 25.0;
 
 /// Microsteps per full step that a resolution object value means (0: full steps).
@@ -62,9 +73,11 @@ pub fn driver_command(out: &Outputs) -> DriverCommand {
 }
 
 impl Plant {
-    /// `drive` and `motor`, at time 0.
+    /// `drive` and `motor`, at time 0, with the default encoder (`inc:1000`) and the driver at
+    /// [`AMBIENT_C`].
     pub fn new(drive: Drive, motor: Motor) -> Self {
         let supply = Supply::steady(motor.inputs().supply_v);
+        let encoder = Encoder::new(EncoderKind::default(), &motor);
         Self {
             drive,
             motor,
@@ -72,7 +85,9 @@ impl Plant {
             last: None,
             trace: None,
             supply,
-            temperature_c: AMBIENT_C,
+            thermal: Thermal::new(ThermalParams::SMALL_DRIVE, AMBIENT_C),
+            encoder,
+            bridge: BridgeMeans::default(),
             schedule: Vec::new(),
             injector: Injector::default(),
         }
@@ -90,8 +105,32 @@ impl Plant {
             Change::LoadTorque(nm) => self.motor.set_inputs(MotorInputs { load_torque_nm: nm, ..inputs }),
             Change::Blocked(b) => self.motor.set_blocked(b),
             Change::Phase(k, fault) => self.motor.set_phase_fault(k, fault),
-            Change::DriverTemperature(c) => self.temperature_c = c,
+            Change::DriverTemperature(c) => self.thermal.force(c),
+            Change::Encoder(fault) => self.encoder.apply(fault, &self.motor),
         }
+    }
+
+    /// Fits an encoder of `kind` now, as at power-up: an incremental one counts from the rotor's
+    /// present position.
+    pub fn set_encoder(&mut self, kind: EncoderKind) {
+        self.encoder = Encoder::new(kind, &self.motor);
+    }
+
+    /// The encoder on the shaft.
+    pub fn encoder(&self) -> &Encoder {
+        &self.encoder
+    }
+
+    /// The driver's thermal model.
+    pub fn thermal(&self) -> &Thermal {
+        &self.thermal
+    }
+
+    /// Replaces the thermal model's constants, keeping the temperature.
+    pub fn set_thermal(&mut self, params: ThermalParams) {
+        let c = self.thermal.temperature_c();
+        self.thermal = Thermal::new(params, self.thermal.ambient_c());
+        self.thermal.force(c);
     }
 
     /// Applies each change at its time after power-up (the simulated time 0).
@@ -105,19 +144,22 @@ impl Plant {
         self.injector.clone()
     }
 
-    /// What the drive measures now: the supply, the driver temperature, the bridge currents and
-    /// the power stage's open-load flags (an open winding while the bridge drives it).
+    /// What the drive measures now: the supply, the driver temperature, the bridge currents, the
+    /// bridge voltages averaged over the last tick, the power stage's open-load flags (an open
+    /// winding while the bridge drives it) and the encoder (its noise drawn for the next tick).
     pub fn measurements(&self) -> Inputs {
         let (a, b) = self.motor.phase_currents();
-        let ma = |i: f64| (i * 1e3).round().clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32;
+        // Amperes to mA, volts to mV.
+        let milli = |x: f64| (x * 1e3).round().clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32;
         let open = |f: PhaseFault| f == PhaseFault::Open && self.motor.bridge_on();
         let [fa, fb] = self.motor.phase_faults();
         Inputs {
             supply_mv: Some((self.motor.inputs().supply_v.max(0.0) * 1e3).round().min(f64::from(u32::MAX)) as u32),
-            temperature_c: Some(self.temperature_c.round().clamp(-40.0, 300.0) as i16),
-            phase_ma: Some([ma(a), ma(b)]),
+            temperature_c: Some(self.thermal.temperature_c().round().clamp(-40.0, 300.0) as i16),
+            phase_ma: Some([milli(a), milli(b)]),
             coil_open: [open(fa), open(fb)],
-            ..Inputs::default()
+            phase_mv: Some(self.bridge.volts.map(milli)),
+            encoder: self.encoder.reading(&self.motor, self.next_tick.as_micros() / TICK_MICROS),
         }
     }
 
@@ -185,7 +227,10 @@ impl Plant {
             self.disturb();
             let out = self.drive.tick_with(self.next_tick, &self.measurements());
             let cmd = driver_command(&out);
-            self.motor.advance(&cmd, TICK_MICROS as f64 * 1e-6);
+            let tick_s = TICK_MICROS as f64 * 1e-6;
+            self.motor.advance(&cmd, tick_s);
+            self.bridge = self.motor.take_bridge_means();
+            self.thermal.advance(self.bridge.current_sq, tick_s);
             if let Some((file, every)) = &mut self.trace
                 && every.take()
             {
