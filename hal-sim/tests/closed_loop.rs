@@ -1,0 +1,153 @@
+//! The closed loop on the physical motor model: the encoder corrects what a load takes away, the
+//! servo loop holds its target, and a following error beyond 0x605C latches alarm 25.
+
+use drive_core::od::Obj;
+use drive_core::{Drive, DriveConfig, Params};
+use hal_sim::DEFAULT_MOTOR;
+use hal_sim::encoder::EncoderFault;
+use hal_sim::inject::Change;
+use hal_sim::motor::{Motor, MotorCatalog, MotorInputs};
+use hal_sim::plant::Plant;
+
+/// Encoder counts a turn: 1000 lines ×4.
+const COUNTS: f64 = 4000.0;
+
+/// The NEMA 17 at 24 V, 1/16 microsteps, 1000 mA, with the given feedback and loop.
+fn plant(feedback: u32, torque_loop: u32) -> Plant {
+    let mut params = Params::factory();
+    for (obj, v) in [
+        (Obj::Feedback, feedback),
+        (Obj::EncoderCpr, 1000),
+        (Obj::TorqueLoop, torque_loop),
+        (Obj::Microsteps, 16),
+        (Obj::PhaseCurrent, 1000),
+        (Obj::StallLength, 255),
+    ] {
+        assert!(params.set(obj, v), "{obj:?}");
+    }
+    let motor = MotorCatalog::builtin().get(DEFAULT_MOTOR).cloned().expect("catalogue motor");
+    Plant::new(Drive::boot(DriveConfig::default(), &params, 0), Motor::new(motor, MotorInputs::default()))
+}
+
+fn set(plant: &mut Plant, obj: Obj, value: u32) {
+    let state = plant.drive_mut().state_mut();
+    assert_eq!(state.check(obj, value), Ok(()), "{obj:?} = {value}");
+    state.apply(obj, value);
+}
+
+fn read(plant: &Plant, obj: Obj) -> i32 {
+    plant.drive().state().read_i32(obj)
+}
+
+fn run(plant: &mut Plant, secs: f64) {
+    let end = plant.next_tick().plus_micros((secs * 1e6) as u64);
+    plant.advance_to(end);
+}
+
+/// The rotor in position units: microsteps (1/16) in open loop, encoder counts in closed loop.
+fn rotor(plant: &Plant, closed: bool) -> f64 {
+    let full = plant.motor().rotor_full_steps();
+    if closed { full * COUNTS / 200.0 } else { full * 16.0 }
+}
+
+/// Moves four turns at two turns a second (in the loop's units) and steps a load of `load_nm`
+/// in while cruising; returns the final |rotor − target| in full steps.
+fn loaded_move(closed: bool, torque_loop: u32, load_nm: f64) -> (Plant, f64) {
+    let mut p = plant(u32::from(closed), torque_loop);
+    let per_turn = if closed { COUNTS } else { 3200.0 };
+    set(&mut p, Obj::MaxSpeed, (2.0 * per_turn) as u32);
+    set(&mut p, Obj::RelativeMove, (4.0 * per_turn) as u32);
+    run(&mut p, 0.8);
+    p.inject(Change::LoadTorque(load_nm));
+    run(&mut p, 0.5);
+    p.inject(Change::LoadTorque(0.0));
+    run(&mut p, 3.0);
+    let target = 4.0 * per_turn;
+    let off = (rotor(&p, closed) - target).abs() / (per_turn / 200.0);
+    (p, off)
+}
+
+#[test]
+fn a_load_step_that_makes_the_open_loop_lose_steps_leaves_the_closed_loop_on_target() {
+    // K_m · 1 A = 0.21 N·m; at 2 turns/s the open loop pulls out below that.
+    let load = 0.19;
+    let (open, lost) = loaded_move(false, 0, load);
+    assert!(lost >= 3.9, "the open loop should lose steps: {lost} full steps off");
+    assert_eq!(open.drive().state().position(), 12_800);
+    for torque_loop in [0, 1] {
+        let (p, off) = loaded_move(true, torque_loop, load);
+        assert_eq!(p.drive().state().position(), 16_000, "loop {torque_loop}");
+        assert!(off < 0.25, "loop {torque_loop}: {off} full steps off target");
+        assert_eq!(read(&p, Obj::DriveFaults), 0);
+        assert_eq!(read(&p, Obj::ControllerStatus), 0);
+    }
+}
+
+#[test]
+fn the_closed_loop_reads_the_encoder_into_its_objects() {
+    let mut p = plant(1, 0);
+    set(&mut p, Obj::MaxSpeed, 4000);
+    set(&mut p, Obj::RelativeMove, 8000);
+    run(&mut p, 1.0);
+    // Cruising at 4000 counts/s: the measured speed says so (a count every five ticks: the
+    // reading ripples, its mean does not).
+    let mut sum = 0;
+    for _ in 0..200 {
+        p.advance_to(p.next_tick());
+        sum += read(&p, Obj::RealSpeed);
+    }
+    assert!((sum / 200 - 4000).abs() < 40, "{}", sum / 200);
+    run(&mut p, 2.0);
+    assert_eq!(read(&p, Obj::Position), 8000);
+    assert!((read(&p, Obj::EncoderPosition) - 8000).abs() <= 4, "{}", read(&p, Obj::EncoderPosition));
+    assert!(read(&p, Obj::FollowingError).abs() <= 4);
+    // Declaring a position sets the zero offset; the motor does not move.
+    set(&mut p, Obj::Position, 100);
+    run(&mut p, 0.2);
+    assert_eq!(read(&p, Obj::ZeroOffset), 100 - read(&p, Obj::EncoderPosition));
+    assert!((rotor(&p, true) - 8000.0).abs() < 4.0);
+    assert_eq!(read(&p, Obj::Position), 100);
+}
+
+#[test]
+fn a_blocked_rotor_latches_the_position_error() {
+    for torque_loop in [0, 1] {
+        let mut p = plant(1, torque_loop);
+        // 1.5 full steps of following error (at 1/16): 24 microsteps.
+        set(&mut p, Obj::StallLength, 24);
+        set(&mut p, Obj::MaxSpeed, 4000);
+        set(&mut p, Obj::RelativeMove, 40_000);
+        run(&mut p, 0.5);
+        let before = rotor(&p, true);
+        p.inject(Change::Blocked(true));
+        run(&mut p, 0.2);
+        assert_eq!(read(&p, Obj::DriveFaults), 1 << 2, "loop {torque_loop}");
+        assert_eq!(read(&p, Obj::AlarmCode), 25);
+        assert_eq!(read(&p, Obj::ControllerStatus) & (1 << 2), 1 << 2);
+        assert!(!p.outputs().expect("ticked").enabled);
+        // Nothing turned while blocked; a move is refused until the bits are cleared.
+        assert!((rotor(&p, true) - before).abs() < 1.0);
+        let state = p.drive().state();
+        assert!(state.check(Obj::RelativeMove, 100).is_err());
+        p.inject(Change::Blocked(false));
+        set(&mut p, Obj::DriveFaults, 0x0F);
+        set(&mut p, Obj::ControllerStatus, 0xFF);
+        run(&mut p, 0.1);
+        set(&mut p, Obj::RelativeMove, 400);
+        run(&mut p, 1.0);
+        assert_eq!(read(&p, Obj::DriveFaults), 0);
+        let target = p.drive().state().position() as f64;
+        assert!((rotor(&p, true) - target).abs() < 4.0, "loop {torque_loop}");
+    }
+}
+
+#[test]
+fn a_lost_encoder_latches_alarm_27() {
+    let mut p = plant(1, 0);
+    run(&mut p, 0.1);
+    p.inject(Change::Encoder(EncoderFault::Lost));
+    run(&mut p, 0.01);
+    assert_eq!(read(&p, Obj::DriveFaults), 1 << 3);
+    assert_eq!(read(&p, Obj::AlarmCode), 27);
+    assert!(!p.outputs().expect("ticked").enabled);
+}
