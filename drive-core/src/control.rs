@@ -287,7 +287,9 @@ impl DriveState {
                     (1, _) => {
                         refuse(self.may_move() || v == 0.0)?;
                         let (depart, _) = self.jumps(libm::fabs(v));
-                        axis.run_at(now, v, depart, &self.scurve_limits(v)).map_err(|_| ObjError::Refused)?;
+                        // Speed 0 stops: the ramp's limits are those of the speed it stops from.
+                        let limit = if v == 0.0 { libm::fabs(axis.setpoint().velocity).max(1.0) } else { v };
+                        axis.run_at(now, v, depart, &self.scurve_limits(limit)).map_err(|_| ObjError::Refused)?;
                     }
                     (0, Some(target)) if busy => {
                         refuse(v != 0.0)?;

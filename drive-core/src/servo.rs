@@ -35,10 +35,12 @@
 //!   drive estimates the back-EMF, e = v − R·i − L·di/dt (R, L: our 0x2108, 0x2109), whose angle
 //!   is the rotor's electrical angle plus 90°. The load angle δ between the current vector and
 //!   the rotor is atan2(e·i, −e×i) in the direction of motion: a hybrid stepper pulls out at 90°.
-//!   A stall is a |δ| beyond 110° − 4° × the signed threshold of 0x6039 bits 0-6 (clamped to
-//!   45°..175°: a positive threshold is more sensitive), or a back-EMF below 0.1 V (a blocked
-//!   rotor), for four ticks in a row, once the commanded speed has been at least our 0x210A full
-//!   steps per second for 10 ms (below that the back-EMF is too small to tell, as §5.5.21 warns).
+//!   Both are averaged over about one full step of travel (a stepper rings inside each step at
+//!   low speed). The first 10 ms at or above our 0x210A full steps a second learn the back-EMF a
+//!   freely running motor gives per speed (below that speed the back-EMF is too small to tell, as
+//!   §5.5.21 warns). Then a stall is, for four ticks in a row, a back-EMF below half the learned
+//!   one (the rotor held or slipping), or a |δ| beyond 110° − 4° × the signed threshold of 0x6039
+//!   bits 0-6 (clamped to 45°..175°: a positive threshold is more sensitive).
 //!   With 0x6043 = 1 the axis then stops at once.
 
 use crate::control::TICK_MICROS;
@@ -51,8 +53,6 @@ use fixed::types::U0F32;
 
 /// Full steps in one turn of the motor (a 1.8° hybrid stepper).
 pub const STEPS_PER_REV: i64 = 200;
-/// Back-EMF below which a commanded motion counts as a blocked rotor, V.
-pub const EMF_FLOOR_V: f32 = 0.1;
 /// Ticks in a row a stall condition must hold.
 pub const STALL_TICKS: u8 = 4;
 /// How long the commanded speed must have been above the minimum before detection starts, µs.
@@ -168,7 +168,9 @@ pub(crate) struct Sensorless {
     dot: f32,
     cross: f32,
     /// Low-passed back-EMF magnitude, V.
-    emf: f32,
+    pub(crate) emf: f32,
+    /// Learned back-EMF of a freely running motor, V per full step a second.
+    per_speed: f32,
     /// Since when the commanded speed has been above the minimum.
     fast_since: Option<Instant>,
     /// Ticks in a row the stall condition has held.
@@ -195,38 +197,52 @@ pub(crate) struct SensorlessInput {
     pub limit: f32,
 }
 
-/// Low-pass weight of the detector's filters: about 0.4 ms at 20 kHz.
-const EMF_ALPHA: f32 = 1.0 / 8.0;
+/// Bounds of the detector's low-pass weight per tick (the weight is the share of a full step
+/// the motor travels in a tick).
+const EMF_ALPHA_MIN: f32 = 1.0 / 256.0;
+const EMF_ALPHA_MAX: f32 = 1.0 / 4.0;
+/// How fast the learned back-EMF per speed follows a healthy motor.
+const PER_SPEED_ALPHA: f32 = 1.0 / 1024.0;
+/// The share of the learned back-EMF below which the rotor counts as held.
+pub const EMF_SHARE: f32 = 0.5;
 
 impl Sensorless {
-    /// One tick; whether the rotor has stalled. `active` false (power stage off, no motion)
-    /// resets the detector.
+    /// One tick; whether the rotor has stalled.
     pub(crate) fn update(&mut self, now: Instant, x: &SensorlessInput) -> bool {
         let last = self.last_i.replace(x.i).unwrap_or(x.i);
-        let mid = [(x.i[0] + last[0]) * 0.5, (x.i[1] + last[1]) * 0.5];
-        let emf = |k: usize| {
-            let (v, i, m) = (x.v.get(k), x.i.get(k), mid.get(k));
-            let (v, i, m) = (v.copied().unwrap_or(0.0), i.copied().unwrap_or(0.0), m.copied().unwrap_or(0.0));
-            let l = last.get(k).copied().unwrap_or(0.0);
-            v - x.r * m - x.l * (i - l) / TICK_S
-        };
-        let (ea, eb) = (emf(0), emf(1));
-        let (dot, cross) = (ea * mid[0] + eb * mid[1], ea * mid[1] - eb * mid[0]);
-        self.dot += (dot - self.dot) * EMF_ALPHA;
-        self.cross += (cross - self.cross) * EMF_ALPHA;
-        self.emf += (libm::sqrtf(ea * ea + eb * eb) - self.emf) * EMF_ALPHA;
+        let [ia, ib] = x.i;
+        let [la, lb] = last;
+        let [va, vb] = x.v;
+        let (ma, mb) = ((ia + la) * 0.5, (ib + lb) * 0.5);
+        let (ea, eb) = (va - x.r * ma - x.l * (ia - la) / TICK_S, vb - x.r * mb - x.l * (ib - lb) / TICK_S);
+        let (dot, cross) = (ea * ma + eb * mb, ea * mb - eb * ma);
+        // Averaged over about half a full step of travel: at low speed a stepper rings inside each
+        // step, and its back-EMF dips with every ring.
+        let speed = libm::fabsf(x.speed);
+        let alpha = (1.5 * speed * TICK_S).clamp(EMF_ALPHA_MIN, EMF_ALPHA_MAX);
+        self.dot += (dot - self.dot) * alpha;
+        self.cross += (cross - self.cross) * alpha;
+        self.emf += (libm::sqrtf(ea * ea + eb * eb) - self.emf) * alpha;
         let s = if x.speed < 0.0 { -1.0 } else { 1.0 };
         self.load_angle = libm::atan2f(s * self.dot, -s * self.cross);
-        if libm::fabsf(x.speed) < x.min_speed || x.min_speed <= 0.0 {
-            self.fast_since = None;
-            self.count = 0;
+        if speed < x.min_speed || x.min_speed <= 0.0 {
+            (self.fast_since, self.count, self.per_speed) = (None, 0, 0.0);
             return false;
         }
         let since = *self.fast_since.get_or_insert(now);
-        if now.since(since) < STALL_SETTLE_MICROS {
+        let per_speed = self.emf / speed;
+        if now.since(since) < STALL_SETTLE_MICROS || self.per_speed == 0.0 {
+            // Running freely: learn the back-EMF a full step a second gives.
+            self.per_speed =
+                if self.per_speed == 0.0 { per_speed } else { self.per_speed + (per_speed - self.per_speed) * 0.05 };
             return false;
         }
-        let stalled = libm::fabsf(self.load_angle) > x.limit || self.emf < EMF_FLOOR_V;
+        // Too little back-EMF for the speed: the rotor is held or slipping; else the load angle.
+        let weak = per_speed < self.per_speed * EMF_SHARE;
+        let stalled = weak || libm::fabsf(self.load_angle) > x.limit;
+        if !stalled {
+            self.per_speed += (per_speed - self.per_speed) * PER_SPEED_ALPHA;
+        }
         self.count = if stalled { self.count.saturating_add(1) } else { 0 };
         self.count >= STALL_TICKS
     }
@@ -320,6 +336,7 @@ impl Servo {
                 dot: 0.0,
                 cross: 0.0,
                 emf: 0.0,
+                per_speed: 0.0,
                 fast_since: None,
                 count: 0,
                 load_angle: 0.0,
@@ -407,6 +424,12 @@ impl DriveState {
                 self.axis.set_position(measured);
             }
         }
+    }
+
+    /// The sensorless detector's present estimates: the load angle (rad, in the direction of
+    /// motion) and the back-EMF magnitude (V), both low-passed. For traces and tuning.
+    pub fn stall_estimate(&self) -> (f32, f32) {
+        (self.servo.sensorless.load_angle, self.servo.sensorless.emf)
     }
 
     /// The measured position (closed loop): encoder position + zero offset 0x6087.

@@ -90,6 +90,19 @@ fn velocity_mode_and_back_to_position_decelerates() {
 }
 
 #[test]
+fn speed_zero_stops_velocity_mode_even_while_accelerating() {
+    let mut bus = Bus::factory();
+    write(&mut bus, 0x6007, 1).expect("velocity mode");
+    bus.request(&[0x01, 0x10, 0x60, 0x03, 0x00, 0x02, 0x04, 0xFF, 0xFF, 0x83, 0x00]).expect("-32000");
+    // Still accelerating at level 8 (5210 pps²) after one second.
+    run(&mut bus, 1_000_000);
+    assert!(busy(&bus));
+    bus.request(&[0x01, 0x10, 0x60, 0x03, 0x00, 0x02, 0x04, 0x00, 0x00, 0x00, 0x00]).expect("speed 0");
+    run(&mut bus, 10_000_000);
+    assert!(!busy(&bus));
+}
+
+#[test]
 fn refused_moves_do_not_move() {
     let mut bus = Bus::factory();
     // Speed 0: nothing to plan.
