@@ -12,6 +12,7 @@ use crate::pdu::{Exception, MAX_READ, Request, Words};
 use crate::pvt::Pvt;
 use crate::rtu::{Framer, MAX_FRAME, RxError};
 use crate::servo::{Feedback, Servo};
+use crate::store::{FaultHistory, HISTORY_OBJECTS};
 use crate::units::{Baud, Instant, SlaveAddr};
 
 /// Controller status bit 2: a stall was detected (write 1 to clear; moves are refused while set).
@@ -61,12 +62,16 @@ pub enum SystemRequest {
     BootLoader,
     /// Power is failing and 0x605E is on: save this position as 0x6055 before it is gone.
     SavePosition(i32),
+    /// An alarm was recorded: save the fault history and the alarm count (0x213C..0x214F,
+    /// 0x2136) as they are now, so that they survive a power cycle.
+    SaveFaults,
 }
 
 /// The values of the saved objects: what a save writes and what power-up loads.
 ///
 /// Only objects a save covers ([`Params::covers`]) can be set; the others stay at their factory
-/// values and are ignored when a drive is built from a set.
+/// values and are ignored when a drive is built from a set, but for those with records of their
+/// own: the power-down position 0x6055 and the fault history with the alarm count.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Params {
     values: [u32; Obj::COUNT],
@@ -117,6 +122,25 @@ impl Params {
     pub fn set_saved_position(&mut self, position: i32) {
         if let Some(v) = self.values.get_mut(Obj::SavedPosition as usize) {
             *v = position as u32;
+        }
+    }
+
+    /// The fault history and alarm count loaded at power-up (their own record).
+    pub fn fault_history(&self) -> FaultHistory {
+        let mut history = FaultHistory { count: self.get(Obj::AlarmCount) as u16, ..FaultHistory::default() };
+        for (e, obj) in history.entries.iter_mut().zip(HISTORY_OBJECTS) {
+            *e = self.get(obj);
+        }
+        history
+    }
+
+    /// Sets the fault history and alarm count, which have their own record.
+    pub fn set_fault_history(&mut self, history: &FaultHistory) {
+        let pairs = history.entries.iter().zip(HISTORY_OBJECTS).map(|(&e, obj)| (obj, e));
+        for (obj, value) in pairs.chain([(Obj::AlarmCount, u32::from(history.count))]) {
+            if let Some(v) = self.values.get_mut(obj as usize) {
+                *v = value;
+            }
         }
     }
 }
@@ -177,6 +201,9 @@ pub struct DriveState {
     pub(crate) faults: FaultLog,
     /// The closed loop and stall detection (changed by the tick only, as `faults`).
     pub(crate) servo: Servo,
+    /// The alarm count when the platform was last asked to save the history (changed only by
+    /// taking requests, so kept out of [`Checkpoint`] too).
+    faults_saved: u16,
 }
 
 /// Everything of a [`DriveState`] but the PVT point table: what a multi-object write restores
@@ -197,16 +224,17 @@ pub struct Checkpoint {
 impl DriveState {
     /// Factory state.
     pub fn new(identity: Identity, can_save: bool) -> Self {
-        Self::booted(identity, can_save, Params::factory().values, 0)
+        Self::booted(identity, can_save, Params::factory().values, 0, FaultLog::default())
     }
 
-    /// The state at power-up with the object values `params` and the storage status `storage`.
+    /// The state at power-up with the object values `params`, the storage status `storage` and
+    /// the fault history `faults` (as saved: not to be saved again).
     ///
     /// One struct expression, out of line: the state (12 KB with the PVT table) is written
     /// straight into the caller's place. Built in a local and then modified, it would be copied
     /// out, and a microcontroller's stack does not hold the second copy.
     #[inline(never)]
-    fn booted(identity: Identity, can_save: bool, params: [u32; Obj::COUNT], storage: u8) -> Self {
+    fn booted(identity: Identity, can_save: bool, params: [u32; Obj::COUNT], storage: u8, faults: FaultLog) -> Self {
         let get = |obj: Obj| params.get(obj as usize).copied().unwrap_or(0);
         let feedback = Feedback::from_objects(get(Obj::Feedback), get(Obj::EncoderCpr));
         Self {
@@ -221,7 +249,8 @@ impl DriveState {
             still_since: None,
             pvt: Pvt::default(),
             table: Table::EMPTY,
-            faults: FaultLog::default(),
+            faults_saved: faults.count,
+            faults,
             servo: Servo::new(feedback),
         }
     }
@@ -243,6 +272,7 @@ impl DriveState {
             table: _,
             faults: _,
             servo: _,
+            faults_saved: _,
         } = self;
         Checkpoint {
             params: *params,
@@ -304,6 +334,24 @@ impl DriveState {
             self.request = Some(SystemRequest::SavePosition(self.position() as i32));
         }
         on
+    }
+
+    /// Whether an alarm was recorded since the history was last handed to a platform that saves.
+    fn fault_save_due(&self) -> bool {
+        self.can_save && self.faults.count != self.faults_saved
+    }
+
+    /// [`SystemRequest::SaveFaults`] if [due](DriveState::fault_save_due); the history counts as
+    /// saved from here on (if the save fails, the next alarm saves the whole history again).
+    fn take_fault_save(&mut self) -> Option<SystemRequest> {
+        let due = self.fault_save_due();
+        self.faults_saved = self.faults.count;
+        due.then_some(SystemRequest::SaveFaults)
+    }
+
+    /// Whether a request for the platform is waiting ([`Drive::take_system_request`]).
+    fn has_request(&self) -> bool {
+        self.request.is_some() || self.fault_save_due()
     }
 
     /// The identification strings.
@@ -577,6 +625,7 @@ impl<M: RegisterMap> Drive<M> {
             set(Obj::BaudRate, b.get());
         }
         let get = |obj: Obj| values.get(obj as usize).copied().unwrap_or(0);
+        let faults = FaultLog::restored(&params.fault_history());
         // The serial settings in force are those of power-up; writes take effect at the next one.
         let address = SlaveAddr::new(get(Obj::NodeId) as u8).unwrap_or(SlaveAddr::BROADCAST);
         let baud = Baud::new(get(Obj::BaudRate)).unwrap_or(Baud::FACTORY);
@@ -589,7 +638,7 @@ impl<M: RegisterMap> Drive<M> {
             tx: [0; MAX_FRAME],
             tx_len: 0,
             map,
-            state: DriveState::booted(config.identity, config.can_save, values, storage & !STORAGE_SAVING),
+            state: DriveState::booted(config.identity, config.can_save, values, storage & !STORAGE_SAVING, faults),
         }
     }
 
@@ -661,12 +710,21 @@ impl<M: RegisterMap> Drive<M> {
         if n == 0 { None } else { self.tx.get(..n) }
     }
 
-    /// A request the drive makes of its platform (save, boot loader, power-down position), once.
+    /// A request the drive makes of its platform (save, boot loader, power-down position, fault
+    /// history), once. A fault history save comes after any other request (a power-down position
+    /// first, while the charge lasts).
     ///
     /// On [`SystemRequest::Save`] the platform takes [`DriveState::params`] at once, writes them
-    /// outside the control tick, and reports with [`Drive::save_done`].
+    /// outside the control tick, and reports with [`Drive::save_done`]; on
+    /// [`SystemRequest::SaveFaults`] it takes [`FaultHistory::of`] the state at once.
     pub fn take_system_request(&mut self) -> Option<SystemRequest> {
-        self.state.request.take()
+        self.state.request.take().or_else(|| self.state.take_fault_save())
+    }
+
+    /// Whether [`Drive::take_system_request`] has something: a platform that must prepare for a
+    /// flash operation (finish sending a reply) asks this first.
+    pub fn has_system_request(&self) -> bool {
+        self.state.has_request()
     }
 
     /// The save the drive asked for has ended; `ok` if the flash holds the new set (else the

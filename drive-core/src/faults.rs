@@ -142,6 +142,20 @@ impl FaultLog {
         self.count = self.count.wrapping_add(1);
     }
 
+    /// The log of a history loaded at power-up: its entries (up to the first empty one) and count.
+    pub(crate) fn restored(history: &crate::store::FaultHistory) -> Self {
+        let len = history.entries.iter().take_while(|&&e| e != 0).count();
+        let mut log = Self { count: history.count, ..Self::default() };
+        // The ring holds the oldest first.
+        let newest_first = history.entries.get(..len).unwrap_or_default();
+        for (slot, &e) in log.entries.iter_mut().zip(newest_first.iter().rev()) {
+            *slot = e;
+        }
+        log.len = len as u8;
+        log.head = (len % HISTORY_LEN) as u8;
+        log
+    }
+
     /// History entry `k`, 0 the newest; 0 where there is none.
     pub(crate) fn entry(&self, k: usize) -> u32 {
         if k >= usize::from(self.len) {

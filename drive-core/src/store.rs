@@ -1,6 +1,6 @@
 //! The saved parameters in flash, through `sequential-storage`'s map over a [`NorFlash`].
 //!
-//! Two records, each one map item (a CRC-checked write that a power cut leaves either whole or
+//! Three records, each one map item (a CRC-checked write that a power cut leaves either whole or
 //! ignored, with the crate's repair of torn pages on the next access):
 //!
 //! - [`PARAMS_KEY`]: every object a save covers ([`Params::covers`]), as one record, so that a
@@ -11,6 +11,10 @@
 //!   by an update) keep their factory values. A record of another [`FORMAT`] is not read at all.
 //! - [`POSITION_KEY`]: the position saved at power loss (0x6055), an `i32`, small and quick so it
 //!   fits in the power supply's hold-up time.
+//! - [`FAULTS_KEY`]: the fault history 0x213C..0x214F and the alarm count 0x2136
+//!   ([`FaultHistory`]), saved whenever an alarm is recorded ([`SystemRequest::SaveFaults`]):
+//!   `[format, 0, count (u16), 10 entries (u32), newest first]`, little endian, 44 bytes. A record
+//!   of another [`FAULTS_FORMAT`] or length is not read (the history starts empty).
 //!
 //! The functions are async as the flash traits are; the drive state machine is not: the platform
 //! [`Store::load`]s before it builds the [`Drive`](crate::Drive) and performs the saves that
@@ -25,15 +29,87 @@ use embedded_storage_async::nor_flash::NorFlash;
 use sequential_storage::cache::{Cache, Uncached};
 use sequential_storage::map::{MapConfig, MapConfigError, MapStorage};
 
-use crate::drive::{Drive, Params, STORAGE_CORRUPT, STORAGE_EMPTY, STORAGE_FSET, STORAGE_SAVE_FAILED, SystemRequest};
-use crate::od::{Access, OBJECTS, RegisterMap, Storage};
+use crate::drive::{
+    Drive, DriveState, Params, STORAGE_CORRUPT, STORAGE_EMPTY, STORAGE_FSET, STORAGE_SAVE_FAILED, SystemRequest,
+};
+use crate::faults::HISTORY_LEN;
+use crate::od::{Access, OBJECTS, Obj, RegisterMap, Storage};
 
 /// Map key of the parameter record.
 pub const PARAMS_KEY: u8 = 0;
 /// Map key of the power-down position record.
 pub const POSITION_KEY: u8 = 1;
+/// Map key of the fault history record.
+pub const FAULTS_KEY: u8 = 2;
 /// Format of the parameter record; bumped only if the entry layout changes (new objects do not).
 pub const FORMAT: u8 = 1;
+/// Format of the fault history record.
+pub const FAULTS_FORMAT: u8 = 1;
+/// Bytes of the fault history record.
+pub const FAULTS_RECORD: usize = HEADER + 4 * HISTORY_LEN;
+
+/// The fault history objects, newest entry first.
+pub(crate) const HISTORY_OBJECTS: [Obj; HISTORY_LEN] = [
+    Obj::FaultHistory0,
+    Obj::FaultHistory1,
+    Obj::FaultHistory2,
+    Obj::FaultHistory3,
+    Obj::FaultHistory4,
+    Obj::FaultHistory5,
+    Obj::FaultHistory6,
+    Obj::FaultHistory7,
+    Obj::FaultHistory8,
+    Obj::FaultHistory9,
+];
+
+/// The fault history as the flash keeps it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FaultHistory {
+    /// 0x213C..0x214F: code << 24 | time stamp, newest first; 0 where there is no entry.
+    pub entries: [u32; HISTORY_LEN],
+    /// 0x2136: alarms raised, wrapping.
+    pub count: u16,
+}
+
+impl FaultHistory {
+    /// The history `state` shows now.
+    pub fn of(state: &DriveState) -> Self {
+        let mut history = Self { count: state.read(Obj::AlarmCount) as u16, ..Self::default() };
+        for (e, obj) in history.entries.iter_mut().zip(HISTORY_OBJECTS) {
+            *e = state.read(obj);
+        }
+        history
+    }
+
+    /// The record (see the module documentation).
+    pub fn encode(&self) -> [u8; FAULTS_RECORD] {
+        let mut out = [0u8; FAULTS_RECORD];
+        let [lo, hi] = self.count.to_le_bytes();
+        if let Some((head, entries)) = out.split_first_chunk_mut::<HEADER>() {
+            *head = [FAULTS_FORMAT, 0, lo, hi];
+            for (chunk, e) in entries.as_chunks_mut::<4>().0.iter_mut().zip(self.entries) {
+                *chunk = e.to_le_bytes();
+            }
+        }
+        out
+    }
+
+    /// Reads a record.
+    pub fn decode(record: &[u8]) -> Result<Self, DecodeError> {
+        let (&[format, _, lo, hi], entries) = record.split_first_chunk::<HEADER>().ok_or(DecodeError::Length)?;
+        if format != FAULTS_FORMAT {
+            return Err(DecodeError::Format(format));
+        }
+        if record.len() != FAULTS_RECORD {
+            return Err(DecodeError::Length);
+        }
+        let mut history = Self { count: u16::from_le_bytes([lo, hi]), ..Self::default() };
+        for (e, chunk) in history.entries.iter_mut().zip(entries.as_chunks::<4>().0) {
+            *e = u32::from_le_bytes(*chunk);
+        }
+        Ok(history)
+    }
+}
 
 /// How many objects the parameter record holds (as [`Params::covers`], at compile time).
 pub const SAVED: usize = {
@@ -135,8 +211,8 @@ impl<S: NorFlash> Store<S> {
         Ok(Self { map: MapStorage::new(flash, config, Cache::new_uncached()), buf: [0; BUFFER] })
     }
 
-    /// Reads the saved parameters and the power-down position. A missing record gives factory
-    /// values; a store the map cannot read gives factory values and is erased, so that the next
+    /// Reads the saved parameters, the power-down position and the fault history. A missing
+    /// record gives factory values (an empty history); a store the map cannot read gives factory values and is erased, so that the next
     /// save works. Never fails: what went wrong is in the status bits.
     pub async fn load(&mut self) -> Loaded {
         let mut params = Params::factory();
@@ -160,9 +236,22 @@ impl<S: NorFlash> Store<S> {
             Ok(None) => {}
             Err(_) => unreadable = true,
         }
-        // Neither record, yet the pages are not erased: not a store of ours (or one torn beyond
+        let mut faults_found = false;
+        match self.map.fetch_item::<&[u8]>(&mut self.buf, &FAULTS_KEY).await {
+            Ok(Some(record)) => {
+                faults_found = true;
+                // A record this firmware cannot read is a history lost, not a reason to drop the
+                // parameters.
+                if let Ok(history) = FaultHistory::decode(record) {
+                    params.set_fault_history(&history);
+                }
+            }
+            Ok(None) => {}
+            Err(_) => unreadable = true,
+        }
+        // No record, yet the pages are not erased: not a store of ours (or one torn beyond
         // repair). Saving into it would fail on programmed words.
-        if status & STORAGE_EMPTY != 0 && !position_found && !self.is_erased().await {
+        if status & STORAGE_EMPTY != 0 && !position_found && !faults_found && !self.is_erased().await {
             unreadable = true;
         }
         if unreadable {
@@ -211,6 +300,7 @@ impl<S: NorFlash> Store<S> {
         match job {
             Job::Save(params) => self.save(params).await,
             Job::SavePosition(position) => self.save_position(*position).await,
+            Job::SaveFaults(history) => self.save_faults(history).await,
             Job::BootLoader => Ok(()),
         }
     }
@@ -243,6 +333,12 @@ impl<S: NorFlash> Store<S> {
         self.map.store_item(&mut self.buf, &POSITION_KEY, &position).await
     }
 
+    /// Saves the fault history and alarm count: one small record.
+    pub async fn save_faults(&mut self, history: &FaultHistory) -> Result<(), Error<S>> {
+        let record = history.encode();
+        self.map.store_item(&mut self.buf, &FAULTS_KEY, &record.as_slice()).await
+    }
+
     /// Erases every page of the store.
     pub async fn erase(&mut self) -> Result<(), Error<S>> {
         self.map.erase_all().await
@@ -268,6 +364,8 @@ pub enum Job {
     Save(Params),
     /// Save this power-down position (0x6055).
     SavePosition(i32),
+    /// Save this fault history: the drive's when the request was taken.
+    SaveFaults(FaultHistory),
     /// Jump to the boot loader: the platform's to act on, nothing for the store.
     BootLoader,
 }
@@ -279,6 +377,7 @@ impl Job {
         Some(match drive.take_system_request()? {
             SystemRequest::Save => Job::Save(drive.state().params()),
             SystemRequest::SavePosition(position) => Job::SavePosition(position),
+            SystemRequest::SaveFaults => Job::SaveFaults(FaultHistory::of(drive.state())),
             SystemRequest::BootLoader => Job::BootLoader,
         })
     }
@@ -288,6 +387,7 @@ impl Job {
         match self {
             Job::Save(_) => SystemRequest::Save,
             Job::SavePosition(position) => SystemRequest::SavePosition(*position),
+            Job::SaveFaults(_) => SystemRequest::SaveFaults,
             Job::BootLoader => SystemRequest::BootLoader,
         }
     }
@@ -382,6 +482,58 @@ mod tests {
         // A position job leaves the parameter save status alone.
         Job::SavePosition(7).finish(&mut drive, true);
         assert_eq!(drive.state().read(Obj::StorageStatus) as u8 & STORAGE_SAVE_FAILED, STORAGE_SAVE_FAILED);
+    }
+
+    #[test]
+    fn a_fault_history_record_round_trips_and_bad_ones_are_refused() {
+        let entries = [11 << 24 | 30, 13 << 24 | 20, 10 << 24 | 0x00FF_FFFF, 0, 0, 0, 0, 0, 0, 0];
+        let h = FaultHistory { entries, count: 300 };
+        let record = h.encode();
+        assert_eq!(FaultHistory::decode(&record), Ok(h));
+        let other: heapless::Vec<u8, FAULTS_RECORD> = [9].iter().chain(record.iter().skip(1)).copied().collect();
+        assert_eq!(FaultHistory::decode(&other), Err(DecodeError::Format(9)));
+        let short = record.split_last().map_or(&[][..], |(_, r)| r);
+        assert_eq!(FaultHistory::decode(short), Err(DecodeError::Length));
+        assert_eq!(FaultHistory::decode(&[FAULTS_FORMAT, 0]), Err(DecodeError::Length));
+    }
+
+    #[test]
+    fn a_booted_history_shows_and_only_a_new_alarm_asks_for_a_save() {
+        use crate::faults::Inputs;
+        use crate::{DriveConfig, Instant};
+        let hot = Inputs { temperature_c: Some(100), ..Inputs::default() };
+        // A full history: the new alarm pushes the oldest out.
+        let mut h = FaultHistory { count: 12, ..FaultHistory::default() };
+        for (k, e) in h.entries.iter_mut().enumerate() {
+            *e = (10 + k as u32) << 24 | (100 - k as u32);
+        }
+        let mut p = Params::factory();
+        p.set_fault_history(&h);
+        assert_eq!(p.fault_history(), h);
+        let mut drive = Drive::boot(DriveConfig { can_save: true, ..DriveConfig::default() }, &p, 0);
+        assert_eq!(FaultHistory::of(drive.state()), h);
+        assert!(!drive.has_system_request());
+        assert_eq!(Job::take(&mut drive), None, "what was loaded is saved already");
+        drive.tick_with(Instant::from_micros(1_000_000), &hot);
+        assert!(drive.has_system_request());
+        let job = Job::take(&mut drive);
+        let mut want = FaultHistory { count: 13, ..FaultHistory::default() };
+        for (w, e) in want.entries.iter_mut().zip([15 << 24 | 10].iter().chain(&h.entries)) {
+            *w = *e;
+        }
+        assert_eq!(job, Some(Job::SaveFaults(want)));
+        assert_eq!(job.map(|j| j.request()), Some(SystemRequest::SaveFaults));
+        assert_eq!(Job::take(&mut drive), None, "once");
+        // A partial history fills up from where it ended; without storage nothing is asked.
+        let short = FaultHistory { entries: [13 << 24 | 7, 11 << 24 | 3, 0, 0, 0, 0, 0, 0, 0, 0], count: 2 };
+        p.set_fault_history(&short);
+        let mut drive = Drive::boot(DriveConfig::default(), &p, 0);
+        drive.tick_with(Instant::from_micros(500_000), &hot);
+        let shown = FaultHistory::of(drive.state());
+        let entries = [15 << 24 | 5, 13 << 24 | 7, 11 << 24 | 3, 0, 0, 0, 0, 0, 0, 0];
+        assert_eq!(shown, FaultHistory { entries, count: 3 });
+        assert!(!drive.has_system_request());
+        assert_eq!(drive.take_system_request(), None);
     }
 
     #[test]

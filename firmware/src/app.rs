@@ -119,17 +119,18 @@ pub fn serve_store(store: &mut crate::board::ParamStore) {
         match (job, done) {
             (Job::Save(_), Err(_)) => warn!("parameter save failed"),
             (Job::SavePosition(_), Err(_)) => warn!("power-down position not saved"),
+            (Job::SaveFaults(_), Err(_)) => warn!("fault history not saved"),
             // The drive refuses 0x200F = 1: there is no boot loader to jump to yet.
             _ => {}
         }
     }
 }
 
-/// Whether the drive asked for a parameter save that has not been carried out yet (0x2120 bit 3).
+/// Whether the drive asked for a flash operation that has not been carried out yet (a parameter
+/// save, the power-down position, the fault history).
 #[cfg(not(feature = "qemu"))]
 fn save_pending() -> bool {
-    use drive_core::drive::STORAGE_SAVING;
-    with_drive(|d| d.state().read(drive_core::od::Obj::StorageStatus) as u8 & STORAGE_SAVING != 0).unwrap_or(false)
+    with_drive(|d| d.has_system_request()).unwrap_or(false)
 }
 
 /// The RTU slave on a line with baud timing: bytes in with their arrival time, t3.5 from a

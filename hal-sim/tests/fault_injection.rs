@@ -136,3 +136,56 @@ fn an_injector_reaches_the_plant_from_another_thread() {
     assert_eq!(read(&p, Obj::DriveFaults), 1);
     assert_eq!(read(&p, Obj::AlarmCode), 14);
 }
+
+#[test]
+fn the_fault_history_survives_a_power_cycle() {
+    use drive_core::DriveConfig;
+    use drive_core::drive::SystemRequest;
+    use hal_sim::flash::{PAGES, SimFlash};
+
+    let params = MotorCatalog::builtin().get(DEFAULT_MOTOR).cloned().expect("catalogue motor");
+    let config = DriveConfig { can_save: true, ..Default::default() };
+    let mut store = hal_sim::store(SimFlash::erased(PAGES)).expect("store");
+    let drive = hal_sim::boot(&mut store, config, false);
+    let mut p = Plant::new(drive, Motor::new(params.clone(), MotorInputs::default()));
+    run(&mut p, 0.05);
+    p.inject(Change::Phase(0, PhaseFault::Open));
+    run(&mut p, 0.1);
+    hal_sim::serve_request(p.drive_mut(), &mut store);
+    // Still open: cleared, it latches again, a second entry.
+    set(&mut p, Obj::ErrorStatus, 1 << 1);
+    run(&mut p, 0.2);
+    hal_sim::serve_request(p.drive_mut(), &mut store);
+    let history = |p: &Plant| (0x213C..0x2150).step_by(2).map(|k| read_at(p, k)).collect::<Vec<u32>>();
+    let before = history(&p);
+    assert_eq!(read(&p, Obj::AlarmCount), 2);
+    assert_eq!(before[0] >> 24, 11);
+    assert_eq!(before[1] >> 24, 11);
+    assert!(before[0] & 0xFF_FFFF > before[1] & 0xFF_FFFF, "newest first: {before:08X?}");
+    assert!(before[2..].iter().all(|&e| e == 0));
+
+    // Power cycle on the same flash.
+    let bytes = store.into_flash().bytes().to_vec();
+    let mut store = hal_sim::store(SimFlash::from_bytes(bytes)).expect("store");
+    let drive = hal_sim::boot(&mut store, config, false);
+    let mut p = Plant::new(drive, Motor::new(params, MotorInputs::default()));
+    assert_eq!(history(&p), before);
+    assert_eq!(read(&p, Obj::AlarmCount), 2);
+    assert_eq!(p.drive_mut().take_system_request(), None, "nothing new to save");
+    // A new alarm goes on top of the old ones, and is saved.
+    run(&mut p, 0.05);
+    p.inject(Change::DriverTemperature(100.0));
+    run(&mut p, 0.01);
+    assert_eq!(read(&p, Obj::AlarmCount), 3);
+    let after = history(&p);
+    assert_eq!((after[0] >> 24, &after[1..3]), (15, &before[..2]));
+    assert!(p.drive_mut().has_system_request());
+    assert_eq!(p.drive_mut().take_system_request(), Some(SystemRequest::SaveFaults));
+    assert_eq!(p.drive_mut().take_system_request(), None, "once");
+}
+
+/// The 32-bit object at register `addr`.
+fn read_at(plant: &Plant, addr: u16) -> u32 {
+    let obj = drive_core::od::OBJECTS.iter().find(|d| d.addr == addr).expect("an object").obj;
+    read(plant, obj)
+}

@@ -9,7 +9,7 @@ use std::time::{Duration, Instant as WallClock};
 use drive_core::crc::crc16;
 use drive_core::drive::{STORAGE_CORRUPT, STORAGE_EMPTY, STORAGE_SAVE_FAILED};
 use drive_core::od::Obj;
-use drive_core::store::{RECORD, SAVED, Store, item_bytes};
+use drive_core::store::{FAULTS_RECORD, FaultHistory, RECORD, SAVED, Store, item_bytes};
 use drive_core::{Drive, DriveConfig, Instant, Params};
 use hal_sim::flash::{PAGE, PAGES, SimFlash, Tear, block_on};
 
@@ -32,6 +32,16 @@ fn set(g: u32) -> Params {
 
 fn store_on(flash: SimFlash) -> Store<SimFlash> {
     hal_sim::store(flash).expect("store on the flash")
+}
+
+/// Fault history number `g`: `g` alarms, the last ten of them in the history, newest first.
+fn history(g: u32) -> FaultHistory {
+    let mut h = FaultHistory { count: g as u16, ..FaultHistory::default() };
+    for (k, e) in h.entries.iter_mut().enumerate().take(g as usize) {
+        let n = g - k as u32;
+        *e = (10 + n % 20) << 24 | n * 37;
+    }
+    h
 }
 
 /// Powers up on `bytes`: what loads, and the drive answering a read of the phase current.
@@ -64,7 +74,8 @@ struct Cuts {
 
 impl Cuts {
     /// Runs `save` on a flash holding `before`, uncut, then cut at each of its operations with
-    /// each tear; after each cut the restart must find exactly `old` or `new` (0x6055 included),
+    /// each tear; after each cut the restart must find exactly `old` or `new` (0x6055 and the
+    /// fault history included),
     /// with a readable store, a drive that answers, and a store that takes the next save.
     fn every_cut(&mut self, before: &[u8], old: &Params, new: &Params, save: impl Fn(&mut Store<SimFlash>) -> bool) {
         let mut uncut = store_on(SimFlash::from_bytes(before.to_vec()));
@@ -101,8 +112,10 @@ fn a_power_cut_at_every_operation_leaves_the_old_or_the_new_set() {
     block_on(store.save(&set(0))).expect("first save");
     let mut params = Cuts::default();
     let mut positions = Cuts::default();
-    // Enough saves to fill every page and wrap around twice, with a power-down position now and
-    // then (its own record, which a cut parameter save must not lose either).
+    let mut faults = Cuts::default();
+    // Enough saves to fill every page and wrap around twice, with a power-down position and a
+    // fault history now and then (records of their own, which a cut parameter save must not lose
+    // either).
     let saves = 2 * (PAGES * PAGE) as u32 / item_bytes::<SimFlash>(RECORD) as u32 + 8;
     let mut current = set(0);
     for g in 1..=saves {
@@ -114,15 +127,25 @@ fn a_power_cut_at_every_operation_leaves_the_old_or_the_new_set() {
             block_on(store.save_position(g as i32 * -1000)).expect("position save");
             current = next;
         }
+        if g % 5 == 0 {
+            let h = history(g);
+            let mut next = current.clone();
+            next.set_fault_history(&h);
+            let bytes = store.flash().bytes().to_vec();
+            faults.every_cut(&bytes, &current, &next, |s| block_on(s.save_faults(&h)).is_ok());
+            block_on(store.save_faults(&h)).expect("fault history save");
+            current = next;
+        }
         let mut next = set(g);
         next.set_saved_position(current.get(Obj::SavedPosition) as i32);
+        next.set_fault_history(&current.fault_history());
         let bytes = store.flash().bytes().to_vec();
         params.every_cut(&bytes, &current, &next, |s| block_on(s.save(&set(g))).is_ok());
         block_on(store.save(&set(g))).expect("save");
         current = next;
     }
     let erases = store.flash().erase_counts().to_vec();
-    for (what, c) in [("parameter", &params), ("position", &positions)] {
+    for (what, c) in [("parameter", &params), ("position", &positions), ("fault history", &faults)] {
         println!(
             "{what} saves: {} power cuts tested (every operation, up to {} a save, x {} tears): {} restarts found the old set, {} the new",
             c.points,
@@ -135,6 +158,11 @@ fn a_power_cut_at_every_operation_leaves_the_old_or_the_new_set() {
     println!("{saves} parameter saves; erases per page {erases:?}");
     assert!(erases.iter().all(|&e| e >= 1), "every page was erased and reused: {erases:?}");
     assert!(params.new > 0 && params.old > 0, "both outcomes happen");
+    assert!(faults.new > 0 && faults.old > 0, "both outcomes happen");
+    println!(
+        "fault history record: {FAULTS_RECORD} bytes, {} flash bytes a save",
+        item_bytes::<SimFlash>(FAULTS_RECORD)
+    );
 }
 
 #[test]

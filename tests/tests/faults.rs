@@ -260,3 +260,27 @@ async fn the_watchdog_stops_a_moving_axis() {
     assert_eq!(r.write(0x2137, 0).await, Ok(()));
     r.off();
 }
+
+#[tokio::test(flavor = "current_thread")]
+async fn the_fault_history_survives_a_power_cycle() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let flash = dir.path().join("flash.bin");
+    let mut r = rig(Some(&flash)).await;
+    sleep(Duration::from_millis(50)).await;
+    r.injector.inject(Change::DriverTemperature(100.0));
+    r.wait_for(0x6000, 1).await;
+    assert_eq!(r.reg(0x2136).await, 1);
+    let history = r.read(0x213C, 20).await.expect("history");
+    assert_eq!(history[0] >> 8, 15, "{history:04X?}");
+    assert!(history[2..].iter().all(|&w| w == 0), "{history:04X?}");
+    // The simulator saves after its next wake-up (within a millisecond).
+    sleep(Duration::from_millis(50)).await;
+    r.off();
+
+    let mut r = rig(Some(&flash)).await;
+    assert_eq!(r.read(0x213C, 20).await, Ok(history));
+    assert_eq!(r.reg(0x2136).await, 1);
+    // A power-up at 25 °C raises nothing new.
+    assert_eq!(r.reg(0x6000).await, 0);
+    r.off();
+}

@@ -177,8 +177,8 @@ objects! {
     /// 27, ours). Like the bits of 0x6000 they disable the power stage and refuse moves until
     /// cleared.
     DriveFaults @ 0x2135: U8, W1c, Live, Bits(0x0F), default 0, None, "drive faults";
-    /// Alarms raised since power-up (our object), wrapping: a master polls it to see new entries
-    /// in the fault history.
+    /// Alarms raised (our object), wrapping, kept in flash with the fault history across power
+    /// cycles: a master polls it to see new entries in the fault history.
     AlarmCount @ 0x2136: U16, Ro, Live, Any, default 0, None, "alarm count";
     /// Communication timeout (our object, as seed 004's P□602): 0 off, else the longest time
     /// without a valid frame addressed to this drive (or broadcast), in 100 ms. When it runs out a
