@@ -39,7 +39,7 @@ fn history(g: u32) -> FaultHistory {
     let mut h = FaultHistory { count: g as u16, ..FaultHistory::default() };
     for (k, e) in h.entries.iter_mut().enumerate().take(g as usize) {
         let n = g - k as u32;
-        *e = (10 + n % 20) << 24 | n * 37;
+        *e = ((10 + n % 20) << 24) | (n * 37);
     }
     h
 }
