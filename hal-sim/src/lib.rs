@@ -41,6 +41,7 @@
 //! # Ok::<(), std::io::Error>(())
 //! ```
 
+use std::cell::Cell;
 use std::convert::Infallible;
 use std::fs::{self, File};
 use std::io::{self, ErrorKind, Read, Write};
@@ -277,7 +278,7 @@ impl Simulator {
     /// connected, at the next connection attempt while none is over TCP).
     fn run_until(self, off: &AtomicBool) -> io::Result<()> {
         let Simulator { mut plants, mut stores, port, snapshots, .. } = self;
-        let clock = Clock(std::time::Instant::now());
+        let clock = Clock::start();
         let mut sim = Sim { plants: &mut plants, stores: &mut stores, snapshots: &snapshots, off };
         match port {
             Port::Pty { master, slave } => {
@@ -475,22 +476,61 @@ fn make_link(target: &Path, link: &Path) -> io::Result<()> {
     std::os::unix::fs::symlink(target, link)
 }
 
-/// Monotonic time since the loop started.
-struct Clock(std::time::Instant);
+/// Simulated time: wall time since the loop started, less what the host did not let the
+/// serving loop simulate.
+///
+/// A small shared machine may not run a thread for hundreds of milliseconds, and eight traced
+/// axes may take longer to simulate than the time they cover. Caught up in one go, such a gap
+/// would run the drives for that long with their bus deaf, which no real drive does (a PVT FIFO
+/// would run dry with the master's points waiting in the socket). So one step of the serving
+/// loop simulates at most [`MAX_STEP`]: beyond it the simulated world pauses, as a chip halted by
+/// a debugger does, and runs slower than wall time while the host cannot keep pace. Time with no
+/// master connected passes in full.
+struct Clock {
+    origin: std::time::Instant,
+    /// Wall time not simulated.
+    lost: Cell<Duration>,
+    /// The simulated time of the serving loop's last step; `None` after it stopped serving.
+    last: Cell<Option<Instant>>,
+}
+
+/// The most simulated time one step of the serving loop covers (it wakes every [`PACE`]).
+const MAX_STEP: u64 = 100_000;
 
 impl Clock {
+    fn start() -> Self {
+        Self { origin: std::time::Instant::now(), lost: Cell::new(Duration::ZERO), last: Cell::new(None) }
+    }
+
+    /// Wall time since the start, less the time lost.
     fn now(&self) -> Instant {
-        Instant::from_micros(u64::try_from(self.0.elapsed().as_micros()).unwrap_or(u64::MAX))
+        let t = self.origin.elapsed().saturating_sub(self.lost.get());
+        Instant::from_micros(u64::try_from(t.as_micros()).unwrap_or(u64::MAX))
+    }
+
+    /// The time of the serving loop's next step: [`Clock::now`], or [`MAX_STEP`] after the last
+    /// step when the host fell further behind (the rest is lost).
+    fn step(&self) -> Instant {
+        let mut now = self.now();
+        if let Some(last) = self.last.get() {
+            let late = now.since(last).saturating_sub(MAX_STEP);
+            self.lost.set(self.lost.get() + Duration::from_micros(late));
+            now = Instant::from_micros(now.as_micros() - late);
+        }
+        self.last.set(Some(now));
+        now
+    }
+
+    /// The loop stops serving (waits for a master): that time passes in full.
+    fn idle(&self) {
+        self.last.set(None);
     }
 }
 
-/// How long `poll(2)` may wait at `now`: until `deadline` (rounded up to the next millisecond, so
-/// the deadline has passed when it returns), or for ever without one.
-fn poll_timeout(deadline: Option<Instant>, now: Instant) -> PollTimeout {
-    match deadline {
-        None => PollTimeout::NONE,
-        Some(d) => PollTimeout::try_from(d.since(now).div_ceil(1000)).unwrap_or(PollTimeout::MAX),
-    }
+/// How long `poll(2)` waits at `now` for `wake`: rounded up to the next millisecond, so that
+/// `wake` has passed when it returns.
+fn poll_wait(wake: Instant, now: Instant) -> Duration {
+    Duration::from_millis(wake.since(now).div_ceil(1000))
 }
 
 /// What a read from a line found.
@@ -590,6 +630,13 @@ const PACE: Duration = Duration::from_millis(1);
 /// Runs the drive on `line` until the master goes away or the power is switched off (`Ok`), or
 /// `poll(2)` fails.
 fn serve(sim: &mut Sim<'_>, clock: &Clock, line: &mut impl Line) -> io::Result<()> {
+    let served = serve_steps(sim, clock, line);
+    clock.idle();
+    served
+}
+
+/// The loop of [`serve`].
+fn serve_steps(sim: &mut Sim<'_>, clock: &Clock, line: &mut impl Line) -> io::Result<()> {
     let mut buf = [0u8; 512];
     while !sim.off.load(Ordering::Relaxed) {
         let ready = {
@@ -597,16 +644,20 @@ fn serve(sim: &mut Sim<'_>, clock: &Clock, line: &mut impl Line) -> io::Result<(
             let deadline = sim.deadline();
             let pace = clock.now().plus_micros(PACE.as_micros() as u64);
             let wake = deadline.map_or(pace, |d| d.min(pace));
-            match poll(&mut fds, poll_timeout(Some(wake), clock.now())) {
+            match poll(
+                &mut fds,
+                PollTimeout::try_from(poll_wait(wake, clock.now()).as_millis()).unwrap_or(PollTimeout::MAX),
+            ) {
                 Ok(0) | Err(Errno::EINTR) => false,
                 Ok(_) => true,
                 Err(e) => return Err(e.into()),
             }
         };
+        let now = clock.step();
         if ready {
             match line.recv(&mut buf) {
                 Recv::Data(n) => {
-                    if sim.receive(clock.now(), buf.get(..n).unwrap_or_default(), line).is_err() {
+                    if sim.receive(now, buf.get(..n).unwrap_or_default(), line).is_err() {
                         return Ok(());
                     }
                 }
@@ -614,7 +665,7 @@ fn serve(sim: &mut Sim<'_>, clock: &Clock, line: &mut impl Line) -> io::Result<(
                 Recv::Closed => return Ok(()),
             }
         }
-        if sim.timer(clock.now(), Some(&mut *line)).is_err() {
+        if sim.timer(now, Some(&mut *line)).is_err() {
             return Ok(());
         }
         // After the reply: the save runs here, on the I/O side; the motor catches up after it.
@@ -739,11 +790,24 @@ mod tests {
 
     #[test]
     fn poll_waits_until_the_deadline_has_passed() {
-        assert_eq!(poll_timeout(None, at(0)), PollTimeout::NONE);
-        assert_eq!(poll_timeout(Some(at(4010)), at(0)), PollTimeout::try_from(5u64).unwrap());
-        assert_eq!(poll_timeout(Some(at(4010)), at(3010)), PollTimeout::try_from(1u64).unwrap());
-        assert_eq!(poll_timeout(Some(at(4010)), at(4010)), PollTimeout::ZERO);
-        assert_eq!(poll_timeout(Some(at(4010)), at(9000)), PollTimeout::ZERO);
+        let ms = Duration::from_millis;
+        assert_eq!(poll_wait(at(4010), at(0)), ms(5));
+        assert_eq!(poll_wait(at(4010), at(3010)), ms(1));
+        assert_eq!(poll_wait(at(4010), at(4010)), ms(0));
+        assert_eq!(poll_wait(at(4010), at(9000)), ms(0));
+    }
+
+    #[test]
+    fn a_stall_beyond_one_step_is_not_simulated_and_idle_time_passes() {
+        let clock = Clock::start();
+        let first = clock.step();
+        thread::sleep(Duration::from_millis(150));
+        let second = clock.step();
+        assert_eq!(second.since(first), MAX_STEP, "a 150 ms stall simulates one step");
+        clock.idle();
+        thread::sleep(Duration::from_millis(150));
+        let third = clock.step();
+        assert!(third.since(second) >= 150_000, "waiting for a master: {} µs", third.since(second));
     }
 
     #[test]

@@ -365,7 +365,9 @@ impl Drop for Sim {
 }
 
 fn start_sim(args: &[&str]) -> Result<Sim, String> {
-    let bin = root().join("target/release/hal-sim");
+    // The dev build the tests already made (hal-sim is optimised in the dev profile): a release
+    // build of the simulator would cost CI minutes for nothing the masters can tell.
+    let bin = root().join("target/debug/hal-sim");
     let mut child =
         Command::new(&bin).args(args).stdout(Stdio::piped()).spawn().map_err(|e| format!("{}: {e}", bin.display()))?;
     let mut line = String::new();
@@ -377,7 +379,7 @@ fn start_sim(args: &[&str]) -> Result<Sim, String> {
 }
 
 fn masters() -> Result<(), String> {
-    run(cargo().args(["build", "--release", "-p", "hal-sim"]))?;
+    run(cargo().args(["build", "-p", "hal-sim"]))?;
     let venv = root().join("target/venv/bin/python");
     let python = if venv.exists() { venv } else { PathBuf::from("python3") };
     let script = root().join("tests/masters");
