@@ -4,8 +4,8 @@
 //! the settling time at the end of the move and the overshoot.
 //!
 //! The move: four turns at two turns a second on the NEMA 17 at 24 V, 1000 mA, 1/16 microsteps,
-//! with 330 g·cm² of load; from 0.8 s to 1.3 s a load torque of 0.19 N·m (91 % of K_m·I), which
-//! makes the open loop pull out and lose steps.
+//! with 330 g·cm² of load; from 0.8 s to 1.3 s a load torque of 0.17 N·m (81 % of K_m·I), which
+//! makes the open loop pull out and lose steps (the test `closed_loop` runs the same move).
 
 use std::path::PathBuf;
 
@@ -21,6 +21,8 @@ use hal_sim::trace::TraceRow;
 /// Microsteps and encoder counts a full step.
 const MICRO: f64 = 16.0;
 const COUNTS: f64 = 20.0;
+/// The load torque stepped in while cruising, N·m.
+const LOAD_NM: f64 = 0.17;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dir = PathBuf::from(std::env::args().nth(1).unwrap_or_else(|| "docs/img".into()));
@@ -52,7 +54,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         while p.next_tick().as_micros() < 4_000_000 {
             let t = p.next_tick().as_micros();
             if t == 800_000 {
-                p.inject(Change::LoadTorque(0.19));
+                p.inject(Change::LoadTorque(LOAD_NM));
             }
             if t == 1_300_000 {
                 p.inject(Change::LoadTorque(0.0));
@@ -97,7 +99,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             overshoot.max(0.0) / MICRO
         );
         let png = dir.join(format!("closed-loop-{name}.png"));
-        plot_trace(&rows, &png, &format!("{name}: 800 full steps, 0.19 N·m from 0.8 s to 1.3 s"))?;
+        plot_trace(&rows, &png, &format!("{name}: 800 full steps, {LOAD_NM} N·m from 0.8 s to 1.3 s"))?;
     }
     Ok(())
 }

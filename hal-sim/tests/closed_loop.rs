@@ -14,6 +14,11 @@ const COUNTS: f64 = 4000.0;
 
 /// The NEMA 17 at 24 V, 1/16 microsteps, 1000 mA, with the given feedback and loop.
 fn plant(feedback: u32, torque_loop: u32) -> Plant {
+    plant_with(feedback, torque_loop, MotorInputs::default())
+}
+
+/// [`plant`] with the motor's load and supply.
+fn plant_with(feedback: u32, torque_loop: u32, inputs: MotorInputs) -> Plant {
     let mut params = Params::factory();
     for (obj, v) in [
         (Obj::Feedback, feedback),
@@ -26,7 +31,7 @@ fn plant(feedback: u32, torque_loop: u32) -> Plant {
         assert!(params.set(obj, v), "{obj:?}");
     }
     let motor = MotorCatalog::builtin().get(DEFAULT_MOTOR).cloned().expect("catalogue motor");
-    Plant::new(Drive::boot(DriveConfig::default(), &params, 0), Motor::new(motor, MotorInputs::default()))
+    Plant::new(Drive::boot(DriveConfig::default(), &params, 0), Motor::new(motor, inputs))
 }
 
 fn set(plant: &mut Plant, obj: Obj, value: u32) {
@@ -50,14 +55,16 @@ fn rotor(plant: &Plant, closed: bool) -> f64 {
     if closed { full * COUNTS / 200.0 } else { full * 16.0 }
 }
 
-/// Moves four turns at two turns a second (in the loop's units) and steps a load of `load_nm`
-/// in while cruising; returns the final |rotor − target| in full steps.
-fn loaded_move(closed: bool, torque_loop: u32, load_nm: f64) -> (Plant, f64) {
-    let mut p = plant(u32::from(closed), torque_loop);
+/// Moves four turns at two turns a second (in the loop's units), with 330 g·cm² of load inertia,
+/// and steps a load of `load_nm` in while cruising, for half a second from 0.8 s + `phase_us`;
+/// returns the final |rotor − target| in full steps. The example `closed_loop` draws this move.
+fn loaded_move(closed: bool, torque_loop: u32, load_nm: f64, phase_us: f64) -> (Plant, f64) {
+    let inputs = MotorInputs { load_inertia_kgm2: 3.3e-5, ..MotorInputs::default() };
+    let mut p = plant_with(u32::from(closed), torque_loop, inputs);
     let per_turn = if closed { COUNTS } else { 3200.0 };
     set(&mut p, Obj::MaxSpeed, (2.0 * per_turn) as u32);
     set(&mut p, Obj::RelativeMove, (4.0 * per_turn) as u32);
-    run(&mut p, 0.8);
+    run(&mut p, 0.8 + phase_us * 1e-6);
     p.inject(Change::LoadTorque(load_nm));
     run(&mut p, 0.5);
     p.inject(Change::LoadTorque(0.0));
@@ -69,17 +76,23 @@ fn loaded_move(closed: bool, torque_loop: u32, load_nm: f64) -> (Plant, f64) {
 
 #[test]
 fn a_load_step_that_makes_the_open_loop_lose_steps_leaves_the_closed_loop_on_target() {
-    // K_m · 1 A = 0.21 N·m; at 2 turns/s the open loop pulls out below that.
-    let load = 0.19;
-    let (open, lost) = loaded_move(false, 0, load);
-    assert!(lost >= 3.9, "the open loop should lose steps: {lost} full steps off");
-    assert_eq!(open.drive().state().position(), 12_800);
-    for torque_loop in [0, 1] {
-        let (p, off) = loaded_move(true, torque_loop, load);
-        assert_eq!(p.drive().state().position(), 16_000, "loop {torque_loop}");
-        assert!(off < 0.25, "loop {torque_loop}: {off} full steps off target");
-        assert_eq!(read(&p, Obj::DriveFaults), 0);
-        assert_eq!(read(&p, Obj::ControllerStatus), 0);
+    // K_m · 1 A = 0.21 N·m; 0.17 N·m (81 %) pulls the open loop out at 2 turns/s, and the load
+    // then drives the rotor back. The closed loops hold with a margin: at 0.19 N·m (91 %) the
+    // position loop's rotor can come to rest with 0.02 N·m to spare, too little to break away
+    // from the detent torque, and whether it does depends on the phase the load comes in at.
+    // So three phases, a step apart.
+    let load = 0.17;
+    for phase_us in [0.0, 150.0, 300.0] {
+        let (open, lost) = loaded_move(false, 0, load, phase_us);
+        assert!(lost >= 4.0, "the open loop should lose steps: {lost} full steps off");
+        assert_eq!(open.drive().state().position(), 12_800);
+        for torque_loop in [0, 1] {
+            let (p, off) = loaded_move(true, torque_loop, load, phase_us);
+            assert_eq!(p.drive().state().position(), 16_000, "loop {torque_loop}");
+            assert!(off < 0.25, "loop {torque_loop}, phase {phase_us} µs: {off} full steps off target");
+            assert_eq!(read(&p, Obj::DriveFaults), 0);
+            assert_eq!(read(&p, Obj::ControllerStatus), 0);
+        }
     }
 }
 

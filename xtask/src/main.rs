@@ -8,7 +8,8 @@
 //!   fit the chip.
 //! - `qemu --tcp HOST:PORT`: build the QEMU variant and run it with its USART on that port.
 //! - `hil`: build the hardware-in-the-loop suite (`probe-rs` runs it on a board).
-//! - `tick-cost`: the control tick's instruction count under QEMU (`-icount`).
+//! - `tick-cost`: the control tick's instruction count under QEMU (`-icount`): the firmware's, and
+//!   the drive core's alone with the closed loops and the stall detection (CI runs the latter).
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{TcpListener, TcpStream};
@@ -40,7 +41,7 @@ fn main() -> ExitCode {
         "firmware" => firmware(),
         "qemu" => qemu(&std::env::args().skip(2).collect::<Vec<_>>()),
         "hil" => hil(),
-        "tick-cost" => tick_cost(),
+        "tick-cost" => tick_cost().and_then(|()| core_tick_cost()),
         _ => Err(format!(
             "usage: cargo xtask <ci|docs|masters|firmware|qemu --tcp HOST:PORT|hil|tick-cost>, not {task:?}"
         )),
@@ -88,10 +89,12 @@ fn ci() -> Result<(), String> {
     run(cargo().arg("test"))?;
     step("firmware build and size");
     firmware()?;
-    step("QEMU firmware build and clippy");
+    step("QEMU firmware build and clippy (with the tick-cost program)");
     run(cargo()
-        .args(firmware_args("clippy", &["--no-default-features", "--features", "qemu"]))
+        .args(firmware_args("clippy", &["--no-default-features", "--features", "tick-cost", "--bins"]))
         .args(["--", "-D", "warnings"]))?;
+    step("control tick cost on the Cortex-M4 (QEMU)");
+    core_tick_cost()?;
     step("HIL suite build");
     hil()?;
     step("external masters");
@@ -296,6 +299,49 @@ fn tick_cost() -> Result<(), String> {
     println!("  stepping: {:.0} instructions per tick ({moving_n} ticks)", per_tick(moving_n, moving_sum));
     println!("  longest:  {:.0} instructions or fewer", (after.get(4).copied().unwrap_or(0) + 1) as f64 * per_count);
     Ok(())
+}
+
+/// `-icount` shift of the `tick_cost` program: an instruction takes 256 virtual ns, a SysTick
+/// count 250 ns, so a count is 250/256 of an instruction.
+const CORE_ICOUNT_SHIFT: u32 = 8;
+/// Cycles of one 20 kHz control tick on the 170 MHz Cortex-M4 of the G431.
+const TICK_CYCLES: f64 = 170e6 / 20e3;
+
+/// The drive core's tick alone on the Cortex-M4 instruction set, cruising in open loop, with the
+/// closed loops and with the sensorless stall detection (`firmware/src/bin/tick_cost.rs`): runs
+/// it under QEMU and prints instructions a tick and the share of a 20 kHz tick they would take
+/// on the G431 at one cycle an instruction. Fails if the program does (a case not cruising).
+fn core_tick_cost() -> Result<(), String> {
+    run(cargo()
+        .args(firmware_args("build", &["--no-default-features", "--features", "tick-cost", "--bin", "tick_cost"])))?;
+    let out = Command::new("qemu-system-arm")
+        .args(["-M", "b-l475e-iot01a", "-nographic", "-serial", "none", "-monitor", "none"])
+        .args(["-semihosting-config", "enable=on,target=native", "-icount"])
+        .arg(format!("shift={CORE_ICOUNT_SHIFT},align=off"))
+        .arg("-kernel")
+        .arg(elf_dir().join("tick_cost"))
+        .stdin(Stdio::null())
+        .output()
+        .map_err(|e| format!("qemu-system-arm (QEMU 10, .ci/install installs it): {e}"))?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    let per_count = 250.0 / f64::from(1u32 << CORE_ICOUNT_SHIFT);
+    println!("control tick of drive-core on the Cortex-M4 (QEMU -icount), cruising at 32000 pps:");
+    for line in text.lines() {
+        // `tick_cost NAME mean M most N counts`
+        let words: Vec<&str> = line.split_whitespace().collect();
+        match words.as_slice() {
+            ["tick_cost", name, "mean", mean, "most", most, "counts"] => {
+                let count = |w: &str| w.parse::<f64>().map(|c| c * per_count).map_err(|e| format!("{line}: {e}"));
+                let (mean, most) = (count(mean)?, count(most)?);
+                println!(
+                    "  {name:14} {mean:5.0} instructions (most {most:5.0}): {:4.1} % of a 20 kHz tick at 170 MHz, one cycle an instruction",
+                    100.0 * mean / TICK_CYCLES
+                );
+            }
+            _ => println!("  {line}"),
+        }
+    }
+    if out.status.success() { Ok(()) } else { Err(format!("tick_cost under QEMU: {}", out.status)) }
 }
 
 /// How long `probe` tries to reach the drive under QEMU.
