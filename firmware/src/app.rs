@@ -69,10 +69,11 @@ pub fn with_drive<R>(f: impl FnOnce(&mut Drive) -> R) -> Option<R> {
     critical_section::with(|cs| DRIVE.borrow_ref_mut(cs).as_deref_mut().map(f))
 }
 
-/// One control tick at `now`: the drive's motion, then the power stage. Called from the tick
-/// interrupt; it takes no lock the bus could hold for longer than one drive call.
-pub fn control_tick(now: Instant, stage: &mut impl PowerStage) {
-    if let Some(out) = with_drive(|d| d.tick(now)) {
+/// One control tick at `now` with what the board measured: the drive's motion, supervision and
+/// loops, then the power stage. Called from the tick interrupt; it takes no lock the bus could
+/// hold for longer than one drive call.
+pub fn control_tick(now: Instant, inputs: &drive_core::faults::Inputs, stage: &mut impl PowerStage) {
+    if let Some(out) = with_drive(|d| d.tick_with(now, inputs)) {
         stage.apply(&out);
     }
     TICKS.fetch_add(1, Ordering::Relaxed);

@@ -97,14 +97,14 @@ mod run {
 
     #[embassy_executor::main]
     async fn main(spawner: Spawner) {
-        let Board { flash, mut uart, stage, mut inputs, sense, mut watchdog } = board::init();
+        let Board { flash, mut uart, stage, mut inputs, encoder, sense, mut watchdog } = board::init();
         // Power-up, before the drive answers anything: the FSET check and the parameters from
         // flash, then the drive, then the UART at their baud rate and parity.
         let (store, loaded) = power_up(flash, &mut inputs.fset);
         let (baud, parity) = app::start(board::HARDWARE, &loaded.params, loaded.status, true);
         board::set_serial(&mut uart, baud, parity);
         info!("drive up: {} baud, parity {}, storage status {:#x}", baud.get(), parity, loaded.status);
-        board::start_tick(stage);
+        board::start_tick(stage, encoder);
         watchdog.unleash();
         spawner.spawn(unwrap!(app::modbus(uart, store)));
         spawner.spawn(unwrap!(watch_inputs(inputs)));
@@ -139,36 +139,30 @@ mod run {
         matches!(select(fset.wait_for_high(), Timer::after(FSET_HOLD)).await, Either::Second(()))
     }
 
-    /// Every millisecond: the encoder into 0x6089; every 10 ms: the ADC into 0x605F; the
-    /// watchdog is fed only while the control tick runs.
+    /// Every 10 ms: the ADC, its bus voltage and temperature to the control tick (which also
+    /// reads the encoder itself) and its analog input into 0x605F; the watchdog is fed only while
+    /// the control tick runs.
     async fn sense_loop(
         mut sense: Sense,
         mut watchdog: embassy_stm32::wdg::IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
     ) -> ! {
-        let mut ticker = Ticker::every(Duration::from_millis(1));
-        let mut last_count = sense.encoder.count();
+        let mut ticker = Ticker::every(Duration::from_millis(10));
         let mut last_ticks = app::TICKS.load(Ordering::Relaxed);
         let mut n: u32 = 0;
         loop {
             ticker.next().await;
-            // 16-bit counter extended by the signed difference: fine below 32767 counts per ms.
-            let count = sense.encoder.count();
-            let delta = count.wrapping_sub(last_count) as i16;
-            last_count = count;
             n = n.wrapping_add(1);
-            let analog = if n.is_multiple_of(10) { Some(sense.read_adc()) } else { None };
-            app::with_drive(|d| {
-                let s = d.state_mut().status_mut();
-                s.encoder = s.encoder.wrapping_add(i32::from(delta));
-                if let Some((_, _, a)) = analog {
-                    s.analog_in = a;
-                }
-            });
-            if let Some((v, t, _)) = analog
-                && n.is_multiple_of(1000)
-            {
+            let (v, t, a) = sense.read_adc();
+            Sense::publish(v, t);
+            app::with_drive(|d| d.state_mut().status_mut().analog_in = a);
+            if n.is_multiple_of(100) {
                 let cost = board::TICK_CYCLES_MAX.load(Ordering::Relaxed);
-                info!("bus voltage code {}, temperature code {}, longest tick {} cycles", v, t, cost);
+                info!(
+                    "bus {} mV, die {} °C, longest tick {} cycles",
+                    board::supply_mv(v),
+                    board::temperature_c(t),
+                    cost
+                );
             }
             let ticks = app::TICKS.load(Ordering::Relaxed);
             if ticks != last_ticks {

@@ -88,7 +88,7 @@ mod tests {
     #[test]
     #[timeout(5)]
     async fn control_tick_period_and_jitter(board: Board) {
-        board::start_tick(board.stage);
+        board::start_tick(board.stage, board.encoder);
         Timer::after_millis(10).await;
         let (t0, n0) = (Instant::now(), app::TICKS.load(Relaxed));
         Timer::after_millis(200).await;
@@ -129,7 +129,7 @@ mod tests {
         t.cnt().write_value(0);
         t.cr1().modify(|w| w.set_cen(true));
 
-        board::start_tick(board.stage);
+        board::start_tick(board.stage, board.encoder);
         const STEPS: u32 = 40_000;
         app::with_drive(|d| {
             let s = d.state_mut();
@@ -164,7 +164,7 @@ mod tests {
         let before = store.load().await;
         info!("store status before the test {:#x}", before.status);
 
-        board::start_tick(board.stage);
+        board::start_tick(board.stage, board.encoder);
         app::with_drive(|d| {
             let s = d.state_mut();
             s.apply(Obj::GroupId, 5);

@@ -10,9 +10,9 @@
 //! | ENABLE          | PB2         | GPIO out, push-pull         | active low on the usual drivers: high = off|
 //! | current ref     | PB6         | TIM4_CH1 (AF2), 100 kHz PWM | RC-filtered to the driver's VREF           |
 //! | encoder A / B   | PA0 / PA1   | TIM2_CH1 / CH2 (AF1)        | quadrature, ×4                             |
-//! | bus voltage     | PB12        | ADC1_IN11                   | divider to the supply                      |
+//! | bus voltage     | PB12        | ADC1_IN11                   | 100 kΩ / 4.7 kΩ divider from the supply    |
 //! | analog in       | PB14        | ADC1_IN5                    | 0..3.3 V, 0x605F                           |
-//! | temperature     | (internal)  | ADC1 temperature sensor     |                                            |
+//! | temperature     | (internal)  | ADC1 temperature sensor     | the die's, for the power stage's           |
 //! | EXT1 / 2 / 3    | PA4 / 5 / 6 | GPIO in, pull-up, EXTI4/5/6 | 0x6031 bits 7-9                            |
 //! | FSET            | PC13        | GPIO in, pull-up, EXTI13    | factory-settings button to ground          |
 //! | SWDIO / SWCLK   | PA13 / PA14 | debug                       | left alone for the probe (RTT logs)        |
@@ -28,13 +28,14 @@
 //! and the t3.5 timer); TIM6 is the 20 kHz control tick (interrupt priority 0, above all
 //! others); TIM1 emits step pulses; TIM4 the current reference; TIM2 counts the encoder.
 
-use core::cell::RefCell;
+use core::cell::{Cell, RefCell};
 use core::ops::Range;
 
 use cortex_m::singleton;
 use critical_section::Mutex;
 use drive_core::Baud;
 use drive_core::control::TICK_HZ;
+use drive_core::faults::Inputs as Measured;
 use drive_core::store::Store;
 use embassy_embedded_hal::adapter::BlockingAsync;
 use embassy_stm32::adc::{Adc, AdcConfig, SampleTime, Temperature};
@@ -100,7 +101,9 @@ pub struct Board {
     pub stage: StepDir,
     /// The digital inputs.
     pub inputs: Inputs,
-    /// Encoder and analog inputs.
+    /// The encoder's quadrature counter (TIM2), for the control tick.
+    pub encoder: Qei<'static, TIM2>,
+    /// The analog inputs.
     pub sense: Sense,
     /// The independent watchdog, not yet started.
     pub watchdog: IndependentWatchdog<'static, peripherals::IWDG>,
@@ -114,10 +117,8 @@ pub struct Inputs {
     pub fset: ExtiInput<'static, Async>,
 }
 
-/// The encoder counter and the ADC with its channels.
+/// The ADC with its channels.
 pub struct Sense {
-    /// The encoder's quadrature counter (16 bits, extended by whoever polls it).
-    pub encoder: Qei<'static, TIM2>,
     /// ADC1.
     pub adc: Adc<'static, ADC1>,
     /// Bus voltage divider.
@@ -128,6 +129,18 @@ pub struct Sense {
     pub temperature: Temperature,
 }
 
+/// The ADC's reference, VDDA, mV.
+const VDDA_MV: u32 = 3300;
+/// The bus voltage divider on PB12: 100 kΩ from the supply, 4.7 kΩ to ground (73.5 V full scale).
+const DIVIDER_TOP_OHM: u32 = 100_000;
+/// See [`DIVIDER_TOP_OHM`].
+const DIVIDER_BOTTOM_OHM: u32 = 4_700;
+/// The temperature sensor's factory calibration (RM0440 §21.4.32): its readings at 30 °C and
+/// 130 °C with VDDA = 3.0 V, in system memory.
+const TS_CAL1: *const u16 = 0x1FFF_75A8 as *const u16;
+/// See [`TS_CAL1`].
+const TS_CAL2: *const u16 = 0x1FFF_75CA as *const u16;
+
 impl Sense {
     /// Raw 12-bit readings of the bus voltage, the temperature sensor and the analog input.
     pub fn read_adc(&mut self) -> (u16, u16, u16) {
@@ -137,6 +150,76 @@ impl Sense {
         let a = self.adc.blocking_read(&mut self.analog_in, t);
         (v, temp, a)
     }
+
+    /// Hands the bus voltage and temperature readings to the control tick, which checks them
+    /// (under- and over-voltage, power loss, over-temperature).
+    pub fn publish(supply_code: u16, temperature_code: u16) {
+        let supply = supply_mv(supply_code);
+        let temperature = temperature_c(temperature_code);
+        critical_section::with(|cs| {
+            let m = MEASURED.borrow(cs);
+            m.set(Measured { supply_mv: Some(supply), temperature_c: temperature, ..m.get() });
+        });
+    }
+}
+
+/// The supply voltage, mV, of a bus voltage reading.
+pub fn supply_mv(code: u16) -> u32 {
+    let mv = u64::from(code) * u64::from(VDDA_MV) * u64::from(DIVIDER_TOP_OHM + DIVIDER_BOTTOM_OHM)
+        / (4095 * u64::from(DIVIDER_BOTTOM_OHM));
+    mv as u32
+}
+
+/// The die temperature, °C, of a temperature sensor reading, from the factory calibration; `None`
+/// if the calibration is not there (erased words).
+///
+/// The board has no sensor on the bridge: the die sits next to it on the same board and stands
+/// for it, which makes the over-temperature alarm (0x6000 bit 0) react late to a bridge heating
+/// alone. A board with a thermistor on the bridge reads that instead.
+pub fn temperature_c(code: u16) -> Option<i16> {
+    // SAFETY: factory calibration words in system memory, readable at any time.
+    let (cal1, cal2) = unsafe { (core::ptr::read_volatile(TS_CAL1), core::ptr::read_volatile(TS_CAL2)) };
+    let span = i32::from(cal2) - i32::from(cal1);
+    if span <= 0 || cal2 == u16::MAX {
+        return None;
+    }
+    // The calibration was taken at VDDA = 3.0 V.
+    let at_3v0 = i32::from(code) * VDDA_MV as i32 / 3000;
+    i16::try_from(30 + (at_3v0 - i32::from(cal1)) * 100 / span).ok()
+}
+
+/// What the control tick gives the drive: the last supply and temperature of the sense task (none
+/// before its first reading), and the encoder, read by the tick itself.
+static MEASURED: Mutex<Cell<Measured>> = Mutex::new(Cell::new(Measured {
+    supply_mv: None,
+    temperature_c: None,
+    phase_ma: None,
+    coil_open: [false; 2],
+    phase_mv: None,
+    encoder: None,
+}));
+
+/// The encoder's 16-bit quadrature counter, owned by the control tick, with the count extended to
+/// 32 bits and the counter's value it was extended from.
+struct Encoder {
+    qei: Qei<'static, TIM2>,
+    count: u32,
+    last: u16,
+}
+
+/// The encoder, handed over by [`start_tick`].
+static ENCODER: Mutex<RefCell<Option<Encoder>>> = Mutex::new(RefCell::new(None));
+
+/// This tick's measurements: [`MEASURED`] with the encoder's count now. TIM2 counts at most a
+/// few hundred counts in a tick, so the signed 16-bit difference extends it.
+fn measure(cs: critical_section::CriticalSection<'_>) -> Measured {
+    let encoder = ENCODER.borrow_ref_mut(cs).as_mut().map(|e| {
+        let raw = e.qei.count();
+        e.count = e.count.wrapping_add(raw.wrapping_sub(e.last) as i16 as u32);
+        e.last = raw;
+        e.count
+    });
+    Measured { encoder, ..MEASURED.borrow(cs).get() }
 }
 
 /// STEP (TIM1 pulses), DIR and ENABLE to an external step/direction driver, and its current
@@ -222,8 +305,9 @@ impl interrupt::typelevel::Handler<interrupt::typelevel::TIM6_DAC> for TickHandl
             TICK_PERIOD_MAX.fetch_max(period, Relaxed);
         }
         critical_section::with(|cs| {
+            let inputs = measure(cs);
             if let Some(stage) = STAGE.borrow_ref_mut(cs).as_mut() {
-                crate::app::control_tick(crate::app::now(), stage);
+                crate::app::control_tick(crate::app::now(), &inputs, stage);
             }
         });
         let cycles = cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start);
@@ -232,9 +316,13 @@ impl interrupt::typelevel::Handler<interrupt::typelevel::TIM6_DAC> for TickHandl
     }
 }
 
-/// Hands the power stage to the control tick and starts TIM6 at [`TICK_HZ`].
-pub fn start_tick(stage: StepDir) {
-    critical_section::with(|cs| STAGE.borrow_ref_mut(cs).replace(stage));
+/// Hands the power stage and the encoder to the control tick and starts TIM6 at [`TICK_HZ`].
+pub fn start_tick(stage: StepDir, encoder: Qei<'static, TIM2>) {
+    let last = encoder.count();
+    critical_section::with(|cs| {
+        STAGE.borrow_ref_mut(cs).replace(stage);
+        ENCODER.borrow_ref_mut(cs).replace(Encoder { qei: encoder, count: 0, last });
+    });
     pac::RCC.apb1enr1().modify(|w| w.set_tim6en(true));
     let t = pac::TIM6;
     t.psc().write_value(0);
@@ -310,15 +398,10 @@ pub fn init() -> Board {
     };
     let adc = Adc::new(p.ADC1, AdcConfig::default());
     let temperature = adc.enable_temperature();
-    let sense = Sense {
-        encoder: Qei::new(p.TIM2, p.PA0, p.PA1, QeiConfig::default()),
-        adc,
-        bus_voltage: p.PB12,
-        analog_in: p.PB14,
-        temperature,
-    };
+    let encoder = Qei::new(p.TIM2, p.PA0, p.PA1, QeiConfig::default());
+    let sense = Sense { adc, bus_voltage: p.PB12, analog_in: p.PB14, temperature };
     let watchdog = IndependentWatchdog::new(p.IWDG, 500_000);
-    Board { flash: Flash::new_blocking(p.FLASH), uart, stage, inputs, sense, watchdog }
+    Board { flash: Flash::new_blocking(p.FLASH), uart, stage, inputs, encoder, sense, watchdog }
 }
 
 /// The UART settings for `baud` and `parity` (object 0x2100: 0 none, 1 even, 2 odd).

@@ -174,7 +174,8 @@ fn SysTick() {
     let now = micros();
     let mut stage = NoStage { moving: false };
     let before = cortex_m::peripheral::SYST::get_current();
-    crate::app::control_tick(drive_core::Instant::from_micros(now), &mut stage);
+    // The emulated chip measures nothing: no supervision of supply or temperature, open loop.
+    crate::app::control_tick(drive_core::Instant::from_micros(now), &drive_core::faults::Inputs::default(), &mut stage);
     // SysTick counts down and has just reloaded: no wrap within the tick.
     let spent = before.saturating_sub(cortex_m::peripheral::SYST::get_current());
     let at = if stage.moving { 2 } else { 0 };
