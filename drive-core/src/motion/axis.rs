@@ -5,7 +5,7 @@
 //! so the offset stays small and a move ends exactly on its (integer) target however far the
 //! axis has travelled: nothing drifts over 2^31 microsteps.
 
-use super::cubic::Cubic;
+use super::cubic::{Cubic, Rates, Walk};
 use super::scurve::{Limits, PlanError, Profile, State};
 use crate::control::TICK_MICROS;
 use crate::units::Instant;
@@ -32,8 +32,9 @@ enum Segment {
     /// Constant speed `v` from `start`, where the position was `p0` (relative to the anchor).
     Cruise { start: Instant, p0: f64, v: f64 },
     /// A PVT segment from the anchor, started at the control tick `start`. Evaluated exactly in
-    /// integers; held on its end point until the next segment replaces it or the run ends.
-    Cubic { start: Instant, cubic: Cubic },
+    /// integers (walked tick by tick, `walk`); held on its end point until the next segment
+    /// replaces it or the run ends.
+    Cubic { start: Instant, cubic: Cubic, walk: Walk, rates: Rates },
 }
 
 /// The setpoint of one tick.
@@ -115,11 +116,11 @@ impl Axis {
             Segment::Still => State { p: 0.0, v: 0.0, a: 0.0 },
             Segment::Profile { profile, start, .. } => profile.at(seconds(*start, now)),
             Segment::Cruise { start, p0, v } => State { p: p0 + v * seconds(*start, now), v: *v, a: 0.0 },
-            Segment::Cubic { start, cubic } => {
+            Segment::Cubic { start, cubic, rates, .. } => {
                 let k = cubic_tick(*start, now);
                 let o = cubic.at(k);
                 let p = o.whole as f64 + f64::from(o.fraction) * TWO_POW_M32;
-                State { p, v: cubic.velocity(k), a: cubic.acceleration(k) }
+                State { p, v: rates.velocity(k), a: rates.acceleration(k) }
             }
         }
     }
@@ -128,7 +129,7 @@ impl Axis {
     /// is: the caller joins segments end to start).
     pub fn follow(&mut self, start: Instant, cubic: Cubic) {
         self.anchor = cubic.p0;
-        self.segment = Segment::Cubic { start, cubic };
+        self.segment = Segment::Cubic { start, cubic, walk: Walk::new(&cubic, 0), rates: cubic.rates() };
     }
 
     /// Ends a PVT segment that has arrived at rest: the axis stands exactly on its end point.
@@ -142,7 +143,7 @@ impl Axis {
     /// The PVT segment being followed and its start tick.
     pub fn cubic(&self) -> Option<(Instant, Cubic)> {
         match &self.segment {
-            &Segment::Cubic { start, cubic } => Some((start, cubic)),
+            &Segment::Cubic { start, cubic, .. } => Some((start, cubic)),
             _ => None,
         }
     }
@@ -244,6 +245,16 @@ impl Axis {
     /// Evaluates the segment at `now` and returns the setpoint and the whole microsteps moved
     /// since the last tick.
     pub fn tick(&mut self, now: Instant) -> (Setpoint, i64) {
+        if let Segment::Cubic { start, cubic, walk, rates } = &mut self.segment {
+            // Exact: whole microsteps and fraction straight from the integer walk.
+            let k = cubic_tick(*start, now);
+            let o = walk.at(cubic, k);
+            let whole = cubic.p0.saturating_add(o.whole);
+            let moved = whole.saturating_sub(self.last.whole);
+            let fraction = U0F32::from_bits(o.fraction);
+            self.last = Setpoint { whole, fraction, velocity: rates.velocity(k), acceleration: rates.acceleration(k) };
+            return (self.last, moved);
+        }
         let s = match &self.segment {
             Segment::Profile { profile, start, then } if seconds(*start, now) >= profile.duration() => {
                 let (end, duration, start) = (profile.at(profile.duration()), profile.duration(), *start);
@@ -275,17 +286,6 @@ impl Axis {
                 self.anchor = whole;
                 self.segment = Segment::Cruise { start: now, p0: frac, v };
                 State { p: frac, ..s }
-            }
-            Segment::Cubic { start, cubic } => {
-                // Exact: whole microsteps and fraction straight from the integer evaluation.
-                let k = cubic_tick(*start, now);
-                let o = cubic.at(k);
-                let whole = cubic.p0.saturating_add(o.whole);
-                let moved = whole.saturating_sub(self.last.whole);
-                let fraction = U0F32::from_bits(o.fraction);
-                self.last =
-                    Setpoint { whole, fraction, velocity: cubic.velocity(k), acceleration: cubic.acceleration(k) };
-                return (self.last, moved);
             }
             _ => self.state_at(now),
         };

@@ -146,45 +146,59 @@ impl Cubic {
 
     /// The position at tick `k` (clamped to the segment), exactly: floor and fraction.
     pub fn at(&self, k: u64) -> Offset {
-        let n = i128::from(self.n);
-        if n == 0 {
+        if self.n == 0 {
             return Offset { whole: self.delta, fraction: 0 };
         }
-        let k = i128::from(k.min(self.n));
-        let (r, d, v0, v1) = (i128::from(TICK_HZ), i128::from(self.delta), i128::from(self.v0), i128::from(self.v1));
-        let (k2, n2) = (k * k, n * n);
-        let k3 = k2 * k;
-        let num = r * d * (3 * k2 * n - 2 * k3) + n * v0 * (k3 - 2 * k2 * n + k * n2) + n * v1 * (k3 - k2 * n);
-        let den = r * n2 * n;
+        let num = self.num(k.min(self.n));
+        let den = self.den();
         let (whole, rem) = (num.div_euclid(den), num.rem_euclid(den));
         Offset { whole: whole as i64, fraction: ((rem << 32) / den) as u32 }
     }
 
-    /// Seconds of tick `k` and of the whole segment.
-    fn times(&self, k: u64) -> (f64, f64) {
+    /// The numerator of the position at tick `k` over [`Cubic::den`] (module documentation). `k`
+    /// may run a few ticks past the end: the bounds hold up to `N + 3`.
+    fn num(&self, k: u64) -> i128 {
+        let n = i128::from(self.n);
+        let k = i128::from(k);
+        let (r, d, v0, v1) = (i128::from(TICK_HZ), i128::from(self.delta), i128::from(self.v0), i128::from(self.v1));
+        let (k2, n2) = (k * k, n * n);
+        let k3 = k2 * k;
+        r * d * (3 * k2 * n - 2 * k3) + n * v0 * (k3 - 2 * k2 * n + k * n2) + n * v1 * (k3 - k2 * n)
+    }
+
+    /// The numerator's coefficients `[A, B, C]`: `num(k) = A·k³ + B·k² + C·k`.
+    fn coefficients(&self) -> [i128; 3] {
+        let n = i128::from(self.n);
+        let (r, d, v0, v1) = (i128::from(TICK_HZ), i128::from(self.delta), i128::from(self.v0), i128::from(self.v1));
+        [n * (v0 + v1) - 2 * r * d, 3 * r * d * n - n * n * (2 * v0 + v1), n * n * n * v0]
+    }
+
+    /// The denominator of the position, `R·N³` (positive for a segment of some time).
+    fn den(&self) -> i128 {
+        let n = i128::from(self.n);
+        i128::from(TICK_HZ) * n * n * n
+    }
+
+    /// The velocity and acceleration as polynomials in the segment's time.
+    pub fn rates(&self) -> Rates {
         let t = self.n as f64 / f64::from(TICK_HZ);
-        let s = if self.n == 0 { 1.0 } else { k.min(self.n) as f64 / self.n as f64 };
-        (s, t)
+        let (v0, v1) = (self.v0 as f64, self.v1 as f64);
+        if t == 0.0 {
+            return Rates { n: 0.0, v0, v1, b: 0.0, a: 0.0, acc0: 0.0, acc1: 0.0 };
+        }
+        let d = self.delta as f64 / t;
+        let (a, b) = (3.0 * v0 + 3.0 * v1 - 6.0 * d, 6.0 * d - 4.0 * v0 - 2.0 * v1);
+        Rates { n: self.n as f64, v0, v1, b, a, acc0: b / t, acc1: 2.0 * a / t }
     }
 
-    /// Velocity at tick `k`, pps.
+    /// Velocity at tick `k`, pps: [`Rates::velocity`].
     pub fn velocity(&self, k: u64) -> f64 {
-        let (s, t) = self.times(k);
-        if t == 0.0 {
-            return self.v1 as f64;
-        }
-        let (d, v0, v1) = (self.delta as f64, self.v0 as f64, self.v1 as f64);
-        d / t * (6.0 * s - 6.0 * s * s) + v0 * (3.0 * s * s - 4.0 * s + 1.0) + v1 * (3.0 * s * s - 2.0 * s)
+        self.rates().velocity(k)
     }
 
-    /// Acceleration at tick `k`, pps².
+    /// Acceleration at tick `k`, pps²: [`Rates::acceleration`].
     pub fn acceleration(&self, k: u64) -> f64 {
-        let (s, t) = self.times(k);
-        if t == 0.0 {
-            return 0.0;
-        }
-        let (d, v0, v1) = (self.delta as f64, self.v0 as f64, self.v1 as f64);
-        d / (t * t) * (6.0 - 12.0 * s) + v0 / t * (6.0 * s - 4.0) + v1 / t * (6.0 * s - 2.0)
+        self.rates().acceleration(k)
     }
 
     /// The largest speed anywhere on the segment, pps. The velocity is the quadratic
@@ -212,6 +226,178 @@ impl Cubic {
             return self.delta == 0 && self.v0 == self.v1;
         }
         self.peak_speed() <= V_MAX
+    }
+}
+
+/// A segment's velocity `v0 + s·(b + s·a)` and acceleration `acc0 + s·acc1` at `s = k/N`
+/// (the derivatives of the Hermite cubic), their coefficients computed once a segment so that a
+/// tick evaluates two short polynomials. A segment of no time has its end velocity throughout.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Rates {
+    n: f64,
+    v0: f64,
+    v1: f64,
+    b: f64,
+    a: f64,
+    acc0: f64,
+    acc1: f64,
+}
+
+impl Rates {
+    /// The share of the segment at tick `k`, in [0, 1]; `None` for a segment of no time.
+    fn share(&self, k: u64) -> Option<f64> {
+        if self.n == 0.0 { None } else { Some((k as f64).min(self.n) / self.n) }
+    }
+
+    /// Velocity at tick `k`, pps: exactly the points' velocities at both ends.
+    ///
+    /// ```
+    /// use drive_core::motion::cubic::{Cubic, Point};
+    /// // From rest to rest, 1000 microsteps in 10 ms (200 ticks): 150 kpps half-way.
+    /// let c = Cubic::new(0, 0, Point { position: 1000, velocity: 0, time_ms: 10 });
+    /// let r = c.rates();
+    /// assert_eq!((r.velocity(0), r.velocity(100), r.velocity(200)), (0.0, 150_000.0, 0.0));
+    /// ```
+    pub fn velocity(&self, k: u64) -> f64 {
+        match self.share(k) {
+            None => self.v1,
+            Some(s) if s >= 1.0 => self.v1,
+            Some(s) => self.v0 + s * (self.b + s * self.a),
+        }
+    }
+
+    /// Acceleration at tick `k`, pps².
+    pub fn acceleration(&self, k: u64) -> f64 {
+        self.share(k).map_or(0.0, |s| self.acc0 + s * self.acc1)
+    }
+}
+
+/// `q·den + r` with `0 ≤ r < den`: an exact rational over a fixed denominator, added to without
+/// dividing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Mixed {
+    q: i128,
+    r: i128,
+}
+
+impl Mixed {
+    /// `x·2^32 / den` (`den > 0`, below 2^95): `x = a·den + b`, then `b·2^32 = c·den + e`, so no
+    /// product exceeds `den·2^32`.
+    fn scaled(x: i128, den: i128) -> Self {
+        let (a, b) = div_floor(x, den);
+        let (c, e) = div_floor(b << 32, den);
+        Self { q: (a << 32) + c, r: e }
+    }
+
+    /// Adds `o`, both over `den`.
+    fn add(&mut self, o: Mixed, den: i128) {
+        self.q += o.q;
+        self.r += o.r;
+        if self.r >= den {
+            self.r -= den;
+            self.q += 1;
+        }
+    }
+}
+
+/// Floor division with its remainder in `[0, den)`, `den > 0`. A Cortex-M4 divides 128-bit
+/// integers in software at hundreds of instructions; the quotients here are small (whole
+/// microsteps a tick, or below 2^32), so a floating-point estimate corrected by a step or two is
+/// exact at a fraction of that. Quotients beyond the estimate's reach take the division.
+fn div_floor(x: i128, den: i128) -> (i128, i128) {
+    let estimate = libm::floor(x as f64 / den as f64);
+    if libm::fabs(estimate) < 4.0e15 {
+        let mut q = estimate as i128;
+        let mut r = x - q * den;
+        for _ in 0..4 {
+            if r < 0 {
+                q -= 1;
+                r += den;
+            } else if r >= den {
+                q += 1;
+                r -= den;
+            } else {
+                return (q, r);
+            }
+        }
+    }
+    (x.div_euclid(den), x.rem_euclid(den))
+}
+
+/// The most ticks [`Walk::at`] steps through; beyond, it starts again from the exact position.
+const MAX_STRIDE: u64 = 64;
+
+/// A segment walked tick by tick: the same exact position as [`Cubic::at`] (floor and fraction),
+/// by forward differences of the numerator polynomial, kept as [`Mixed`] numbers over its
+/// denominator. Where `Cubic::at` divides 128-bit integers every tick, which a Cortex-M4 does in
+/// software at thousands of instructions, a step of the walk is three exact additions.
+///
+/// ```
+/// use drive_core::motion::cubic::{Cubic, Point, Walk};
+/// let c = Cubic::new(7, 300, Point { position: 1234, velocity: -700, time_ms: 37 });
+/// let mut w = Walk::new(&c, 0);
+/// for k in 0..=c.ticks() + 2 {
+///     assert_eq!(w.at(&c, k), c.at(k));
+/// }
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Walk {
+    /// The tick `pos` is at.
+    k: u64,
+    den: i128,
+    /// The position times 2^32: whole microsteps in `q >> 32`, the fraction in its low bits.
+    pos: Mixed,
+    /// The first, second and third forward differences at `k`.
+    d1: Mixed,
+    d2: Mixed,
+    d3: Mixed,
+}
+
+impl Walk {
+    /// The walk of `c` standing at tick `k` (clamped to the segment).
+    pub fn new(c: &Cubic, k: u64) -> Self {
+        let zero = Mixed { q: 0, r: 0 };
+        if c.n == 0 {
+            return Self { k: 0, den: 1, pos: zero, d1: zero, d2: zero, d3: zero };
+        }
+        let k = k.min(c.n);
+        let den = c.den();
+        let (pos, d1, d2, d3) = if k == 0 {
+            // num(k) = A·k³ + B·k² + C·k: the differences at 0 straight from the coefficients.
+            let [a, b, cc] = c.coefficients();
+            (0, a + b + cc, 6 * a + 2 * b, 6 * a)
+        } else {
+            let [n0, n1, n2, n3] = [k, k + 1, k + 2, k + 3].map(|j| c.num(j));
+            (n0, n1 - n0, n2 - 2 * n1 + n0, n3 - 3 * n2 + 3 * n1 - n0)
+        };
+        Self {
+            k,
+            den,
+            pos: if pos == 0 { zero } else { Mixed::scaled(pos, den) },
+            d1: Mixed::scaled(d1, den),
+            d2: Mixed::scaled(d2, den),
+            d3: Mixed::scaled(d3, den),
+        }
+    }
+
+    /// The position of `c` (the segment this walk was made for) at tick `k`, as [`Cubic::at`]:
+    /// forward from where the walk stands, or from the exact position for a step back or a long
+    /// stride.
+    pub fn at(&mut self, c: &Cubic, k: u64) -> Offset {
+        if c.n == 0 {
+            return Offset { whole: c.delta, fraction: 0 };
+        }
+        let k = k.min(c.n);
+        if k < self.k || k - self.k > MAX_STRIDE {
+            *self = Self::new(c, k);
+        }
+        while self.k < k {
+            self.pos.add(self.d1, self.den);
+            self.d1.add(self.d2, self.den);
+            self.d2.add(self.d3, self.den);
+            self.k += 1;
+        }
+        Offset { whole: (self.pos.q >> 32) as i64, fraction: self.pos.q as u32 }
     }
 }
 
@@ -267,8 +453,67 @@ mod tests {
     fn extreme_values_do_not_overflow() {
         let far = Point { position: i32::MAX, velocity: i32::MIN, time_ms: u16::MAX };
         let c = Cubic::new(i64::MIN, i32::MAX, far);
+        let mut walk = Walk::new(&c, 0);
         for k in [0, 1, c.ticks() / 3, c.ticks() - 1, c.ticks(), u64::MAX] {
-            let _ = c.at(k);
+            assert_eq!(walk.at(&c, k), c.at(k), "tick {k}");
+            let mut from = Walk::new(&c, k.saturating_sub(MAX_STRIDE));
+            assert_eq!(from.at(&c, k), c.at(k), "tick {k}, walked");
+        }
+    }
+
+    #[test]
+    fn rates_end_on_the_points() {
+        let c = Cubic::new(-5, 300, Point { position: 1234, velocity: -700, time_ms: 37 });
+        let r = c.rates();
+        assert_eq!((r.velocity(0), r.velocity(c.ticks()), r.velocity(u64::MAX)), (300.0, -700.0, -700.0));
+        // The acceleration is the velocity's derivative: a central difference over two ticks.
+        let dt = 1.0 / f64::from(TICK_HZ);
+        for k in [1, 100, 739] {
+            let slope = (r.velocity(k + 1) - r.velocity(k - 1)) / (2.0 * dt);
+            assert!((slope - r.acceleration(k)).abs() < 1e-6 * slope.abs().max(1.0), "tick {k}");
+        }
+        let none = Cubic::new(3, 5, Point { position: 3, velocity: 5, time_ms: 0 }).rates();
+        assert_eq!((none.velocity(0), none.acceleration(0)), (5.0, 0.0));
+    }
+
+    #[test]
+    fn division_is_exact_on_either_path() {
+        let den = 20_000 * 1_310_700i128.pow(3);
+        for x in [0, 1, -1, den - 1, den, -den, 3 * den + 5, -7 * den - 1, i128::MAX / 2, i128::MIN / 2] {
+            assert_eq!(div_floor(x, den), (x.div_euclid(den), x.rem_euclid(den)), "{x}");
+        }
+        assert_eq!(div_floor(-1, 3), (-1, 2));
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn division_matches_the_integer_one(x in proptest::prelude::any::<i128>(), den in 1i128..=(1 << 80)) {
+            let x = x >> 10; // the walk's numerators stay below 2^120
+            proptest::prop_assert_eq!(div_floor(x, den), (x.div_euclid(den), x.rem_euclid(den)));
+        }
+
+
+        /// Walking a segment with any strides, forward and back, gives the exact position of
+        /// every tick it lands on.
+        #[test]
+        fn the_walk_is_the_exact_position(
+            p0 in proptest::prelude::any::<i32>(),
+            v0 in -200_000i32..=200_000,
+            to in proptest::prelude::any::<i32>(),
+            v1 in -200_000i32..=200_000,
+            time_ms in 0u16..=300,
+            strides in proptest::collection::vec(-30i64..=90, 1..80),
+        ) {
+            let c = Cubic::new(i64::from(p0), v0, Point { position: to, velocity: v1, time_ms });
+            let mut walk = Walk::new(&c, 0);
+            let mut k = 0u64;
+            for stride in strides {
+                k = k.saturating_add_signed(stride).min(c.ticks() + 5);
+                proptest::prop_assert_eq!(walk.at(&c, k), c.at(k), "tick {}", k);
+            }
+            for k in 0..=c.ticks().min(400) {
+                proptest::prop_assert_eq!(walk.at(&c, k), c.at(k), "tick {}", k);
+            }
         }
     }
 }
