@@ -204,19 +204,13 @@ impl Cubic {
     /// The largest speed anywhere on the segment, pps. The velocity is the quadratic
     /// `a s² + b s + c` in `s`, so it is the larger of the ends and the vertex.
     pub fn peak_speed(&self) -> f64 {
-        let (v0, v1) = (self.v0 as f64, self.v1 as f64);
-        let ends = libm::fabs(v0).max(libm::fabs(v1));
-        let t = self.n as f64 / f64::from(TICK_HZ);
-        if t == 0.0 {
+        let r = self.rates();
+        let ends = libm::fabs(r.v0).max(libm::fabs(r.v1));
+        if r.n == 0.0 || r.a == 0.0 {
             return ends;
         }
-        let d = self.delta as f64 / t;
-        let (a, b) = (-6.0 * d + 3.0 * v0 + 3.0 * v1, 6.0 * d - 4.0 * v0 - 2.0 * v1);
-        if a == 0.0 {
-            return ends;
-        }
-        let s = -b / (2.0 * a);
-        if s > 0.0 && s < 1.0 { ends.max(libm::fabs(a * s * s + b * s + v0)) } else { ends }
+        let s = -r.b / (2.0 * r.a);
+        if s > 0.0 && s < 1.0 { ends.max(libm::fabs(r.a * s * s + r.b * s + r.v0)) } else { ends }
     }
 
     /// Whether the motor can follow the segment: no jump (a segment of no time must stay where it
