@@ -416,7 +416,7 @@ impl Walk {
             add_pt(xd);
         }
         let pts = pts.get_mut(..np).unwrap_or(&mut []);
-        pts.sort_unstable_by(f64::total_cmp);
+        sort_few(pts);
 
         // Merge the intervals into pieces of equal slope: (x0, x1, slope).
         let mut pieces = [(0.0f64, 0.0f64, 0.0f64); WALK_PIECES];
@@ -967,6 +967,21 @@ impl Profile {
 }
 
 /// Evaluates a phase `dt` after its start.
+/// Sorts a few numbers (by `f64::total_cmp`, as `sort_unstable_by` would): an insertion sort,
+/// for the planner sorts a few dozen at most and the library's sort costs 2 KB of flash.
+fn sort_few(xs: &mut [f64]) {
+    for i in 1..xs.len() {
+        let mut j = i;
+        while let Some(pair) = j.checked_sub(1).and_then(|h| xs.get_mut(h..=j)) {
+            match pair {
+                [a, b] if a.total_cmp(b).is_gt() => pair.swap(0, 1),
+                _ => break,
+            }
+            j -= 1;
+        }
+    }
+}
+
 fn eval(ph: &Phase, dt: f64) -> State {
     if ph.a2 == 0.0 && ph.j6 == 0.0 {
         // Constant speed, the long part of most moves: the same numbers as below with the zero
@@ -977,4 +992,26 @@ fn eval(ph: &Phase, dt: f64) -> State {
     let v = ph.v + dt * (2.0 * ph.a2 + 3.0 * ph.j6 * dt);
     let p = ph.p + dt * (ph.v + dt * (ph.a2 + dt * ph.j6));
     State { p, v, a }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use std::vec::Vec;
+
+    use super::sort_few;
+
+    proptest::proptest! {
+        /// The planner's small sort orders as the library's does, signed zeros and all.
+        #[test]
+        fn sort_few_is_the_library_sort(mut xs in proptest::collection::vec(
+            proptest::prop_oneof![proptest::num::f64::ANY, proptest::prelude::Just(0.0), proptest::prelude::Just(-0.0)],
+            0..40,
+        )) {
+            let mut expected = xs.clone();
+            expected.sort_unstable_by(f64::total_cmp);
+            sort_few(&mut xs);
+            proptest::prop_assert_eq!(xs.iter().map(|x| x.to_bits()).collect::<Vec<_>>(), expected.iter().map(|x| x.to_bits()).collect::<Vec<_>>());
+        }
+    }
 }

@@ -240,6 +240,7 @@ const fn interval(ty: Type, range: Range) -> Option<(u32, u32)> {
         Range::Any => Some((0, max as u32)),
         // Within the type; an empty span stays empty.
         Range::Span(lo, hi) => {
+            let (lo, hi) = (lo as i64, hi as i64);
             let lo = if lo < 0 { 0 } else { lo };
             let hi = if hi > max { max } else { hi };
             if lo > hi { Some((1, 0)) } else { Some((lo as u32, hi as u32)) }

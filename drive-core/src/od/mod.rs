@@ -4,6 +4,7 @@
 //! [`native`] is the drive's own map (seed 000, MSME/PMC007). A register map of another vendor is
 //! another table over the same [`Obj`]ects, with its own addresses, units and exception codes.
 
+#[cfg(feature = "docs")]
 pub mod doc;
 pub mod index;
 pub mod map;
@@ -113,8 +114,9 @@ impl Storage {
 pub enum Range {
     /// Anything the type holds.
     Any,
-    /// `min..=max`, compared as signed for S32 objects.
-    Span(i64, i64),
+    /// `min..=max`, compared as signed for S32 objects (an unsigned object's bounds are within
+    /// `i32`: its values above are out of range).
+    Span(i32, i32),
     /// One of these values.
     Set(&'static [u32]),
     /// Only these bits may be set.
@@ -145,7 +147,7 @@ impl Range {
         };
         match self {
             Range::Any => true,
-            Range::Span(min, max) => min <= v && v <= max,
+            Range::Span(min, max) => i64::from(min) <= v && v <= i64::from(max),
             Range::Set(set) => set.contains(&raw),
             Range::Bits(mask) => raw & !mask == 0,
             Range::Magnitude(min, max) => (u64::from(min)..=u64::from(max)).contains(&v.unsigned_abs()),
@@ -215,7 +217,8 @@ pub struct ObjectDef {
     pub obj: Obj,
     /// First register (the high word of a 32-bit object).
     pub addr: u16,
-    /// Short name.
+    /// Short name (feature `docs`).
+    #[cfg(feature = "docs")]
     pub name: &'static str,
     /// Encoding.
     pub ty: Type,
@@ -229,7 +232,9 @@ pub struct ObjectDef {
     pub default: u32,
     /// Unit.
     pub unit: Unit,
-    /// What the object does, from the manual, with our decisions where it is silent.
+    /// What the object does, from the manual, with our decisions where it is silent (feature
+    /// `docs`).
+    #[cfg(feature = "docs")]
     pub doc: &'static str,
 }
 

@@ -21,7 +21,7 @@ const MODES: &[u32] = &[0, 1, 2, 4, 5];
 /// A PVT table index or count.
 const PVT_INDEX: Range = Span(0, 1000);
 /// Full signed 32-bit range.
-const S32_ANY: Range = Span(i32::MIN as i64, i32::MAX as i64);
+const S32_ANY: Range = Span(i32::MIN, i32::MAX);
 
 macro_rules! objects {
     ($(
@@ -40,6 +40,9 @@ macro_rules! objects {
             $( ObjectDef {
                 obj: Obj::$id,
                 addr: $addr,
+                // Names and texts serve the register reference and messages: without `docs` (the
+                // firmware) they stay out of flash, fields and all.
+                #[cfg(feature = "docs")]
                 name: $name,
                 ty: $ty,
                 access: $acc,
@@ -47,8 +50,8 @@ macro_rules! objects {
                 range: $range,
                 default: ($def as i64) as u32,
                 unit: Unit::$unit,
-                // Without the `docs` feature (the firmware) the texts stay out of flash.
-                doc: if cfg!(feature = "docs") { concat!($($doc, "\n"),*) } else { "" },
+                #[cfg(feature = "docs")]
+                doc: concat!($($doc, "\n"),*),
             }, )*
         ];
 
@@ -368,13 +371,13 @@ objects! {
     /// Step notification status: bit 0 point 1 passed, bit 1 point 2 passed; write 1 to clear.
     NotifyStatus @ 0x6061: U8, W1c, Live, Bits(0x03), default 0, None, "step notify status";
     /// Step notification point 1, absolute.
-    NotifyPos1 @ 0x6062: S32, Rw, Ram, Span(-(i32::MAX as i64), i32::MAX as i64), default 0, Steps, "step notify position 1";
+    NotifyPos1 @ 0x6062: S32, Rw, Ram, Span(-i32::MAX, i32::MAX), default 0, Steps, "step notify position 1";
     /// Step notification point 2, absolute.
-    NotifyPos2 @ 0x6064: S32, Rw, Ram, Span(-(i32::MAX as i64), i32::MAX as i64), default 0, Steps, "step notify position 2";
+    NotifyPos2 @ 0x6064: S32, Rw, Ram, Span(-i32::MAX, i32::MAX), default 0, Steps, "step notify position 2";
     /// PP/PV acceleration.
-    PpAccel @ 0x6067: U32, Rw, Rom, Span(151, i32::MAX as i64), default 32000, Pps2, "PP acceleration";
+    PpAccel @ 0x6067: U32, Rw, Rom, Span(151, i32::MAX), default 32000, Pps2, "PP acceleration";
     /// PP/PV deceleration.
-    PpDecel @ 0x6069: U32, Rw, Rom, Span(151, i32::MAX as i64), default 32000, Pps2, "PP deceleration";
+    PpDecel @ 0x6069: U32, Rw, Rom, Span(151, i32::MAX), default 32000, Pps2, "PP deceleration";
     /// PP/PV start speed.
     PpStartSpeed @ 0x606B: U32, Rw, Rom, Span(151, 300_000), default 600, Pps, "PP start speed";
     /// PP/PV stop speed.
