@@ -109,7 +109,8 @@ mod tests {
         // The timer reloads in hardware: only the entry latency varies (< 1 µs).
         let nominal = board::TICK_COUNTS;
         assert!(min >= nominal - 170 && max <= nominal + 170, "jitter under 1 us");
-        // QEMU counts about 2700 instructions for a stepping tick: well inside the period.
+        // QEMU counts under 3 300 instructions for a stepping tick (`cargo xtask tick-cost`):
+        // well inside the period.
         assert!(cost < nominal * 3 / 4, "a tick leaves a quarter of its period to the rest");
     }
 
