@@ -966,7 +966,6 @@ impl Profile {
     }
 }
 
-/// Evaluates a phase `dt` after its start.
 /// Sorts a few numbers (by `f64::total_cmp`, as `sort_unstable_by` would): an insertion sort,
 /// for the planner sorts a few dozen at most and the library's sort costs 2 KB of flash.
 fn sort_few(xs: &mut [f64]) {
@@ -982,6 +981,7 @@ fn sort_few(xs: &mut [f64]) {
     }
 }
 
+/// Evaluates a phase `dt` after its start.
 fn eval(ph: &Phase, dt: f64) -> State {
     if ph.a2 == 0.0 && ph.j6 == 0.0 {
         // Constant speed, the long part of most moves: the same numbers as below with the zero
