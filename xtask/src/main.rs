@@ -325,7 +325,7 @@ fn core_tick_cost() -> Result<(), String> {
         .map_err(|e| format!("qemu-system-arm (QEMU 10, .ci/install installs it): {e}"))?;
     let text = String::from_utf8_lossy(&out.stdout);
     let per_count = 250.0 / f64::from(1u32 << CORE_ICOUNT_SHIFT);
-    println!("control tick of drive-core on the Cortex-M4 (QEMU -icount), cruising at 32000 pps:");
+    println!("control tick of drive-core on the Cortex-M4 (QEMU -icount), the cases of firmware/src/bin/tick_cost.rs:");
     for line in text.lines() {
         // `tick_cost NAME mean M most N counts`
         let words: Vec<&str> = line.split_whitespace().collect();
@@ -334,7 +334,7 @@ fn core_tick_cost() -> Result<(), String> {
                 let count = |w: &str| w.parse::<f64>().map(|c| c * per_count).map_err(|e| format!("{line}: {e}"));
                 let (mean, most) = (count(mean)?, count(most)?);
                 println!(
-                    "  {name:14} {mean:5.0} instructions (most {most:5.0}): {:4.1} % of a 20 kHz tick at 170 MHz, one cycle an instruction",
+                    "  {name:15} {mean:5.0} instructions (most {most:5.0}): {:4.1} % of a 20 kHz tick at 170 MHz, one cycle an instruction",
                     100.0 * mean / TICK_CYCLES
                 );
             }

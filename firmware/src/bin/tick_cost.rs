@@ -17,6 +17,7 @@
 //! - `open_measured`: open loop with the supply, temperature and phase currents (the fault checks);
 //! - `position_loop` / `servo_loop`: closed loop (0x2104 = 1, a 1000-line encoder) with 0x605D =
 //!   0 / 1, the encoder following the setpoint exactly;
+//! - `servo_loop_ramp`: the servo loop in the ramp, as `open_ramp` (the costliest tick of a move);
 //! - `sensorless`: open loop with the stall detection (0x2107 = 1), fed the phase currents and
 //!   bridge voltages of a motor turning 30° electrical behind its current.
 //!
@@ -57,17 +58,19 @@ enum Case {
     OpenMeasured,
     PositionLoop,
     ServoLoop,
+    ServoLoopRamp,
     Sensorless,
 }
 
 impl Case {
-    const ALL: [Case; 7] = [
+    const ALL: [Case; 8] = [
         Case::Open,
         Case::OpenRamp,
         Case::OpenPvt,
         Case::OpenMeasured,
         Case::PositionLoop,
         Case::ServoLoop,
+        Case::ServoLoopRamp,
         Case::Sensorless,
     ];
 
@@ -79,6 +82,7 @@ impl Case {
             Case::OpenMeasured => "open_measured",
             Case::PositionLoop => "position_loop",
             Case::ServoLoop => "servo_loop",
+            Case::ServoLoopRamp => "servo_loop_ramp",
             Case::Sensorless => "sensorless",
         }
     }
@@ -88,7 +92,7 @@ impl Case {
         match self {
             Case::Open | Case::OpenRamp | Case::OpenPvt | Case::OpenMeasured => &[],
             Case::PositionLoop => &[(Obj::Feedback, 1), (Obj::TorqueLoop, 0)],
-            Case::ServoLoop => &[(Obj::Feedback, 1), (Obj::TorqueLoop, 1)],
+            Case::ServoLoop | Case::ServoLoopRamp => &[(Obj::Feedback, 1), (Obj::TorqueLoop, 1)],
             Case::Sensorless => &[(Obj::StallDetect, 1)],
         }
     }
@@ -99,7 +103,7 @@ impl Case {
             // Power-up: the encoder reads 0, nothing turns yet.
             return match self {
                 Case::Open | Case::OpenRamp | Case::OpenPvt => Inputs::default(),
-                Case::PositionLoop | Case::ServoLoop => Inputs { encoder: Some(0), ..MEASURED },
+                Case::PositionLoop | Case::ServoLoop | Case::ServoLoopRamp => Inputs { encoder: Some(0), ..MEASURED },
                 Case::OpenMeasured | Case::Sensorless => MEASURED,
             };
         };
@@ -107,7 +111,9 @@ impl Case {
             Case::Open | Case::OpenRamp | Case::OpenPvt => Inputs::default(),
             Case::OpenMeasured => MEASURED,
             // Closed loop: the setpoint is in encoder counts.
-            Case::PositionLoop | Case::ServoLoop => Inputs { encoder: Some(last.setpoint.whole as u32), ..MEASURED },
+            Case::PositionLoop | Case::ServoLoop | Case::ServoLoopRamp => {
+                Inputs { encoder: Some(last.setpoint.whole as u32), ..MEASURED }
+            }
             Case::Sensorless => {
                 // 1/32 microsteps: a microstep is π/64 electrical.
                 let per = core::f32::consts::FRAC_PI_2 / 32.0;
@@ -237,7 +243,9 @@ fn run(case: Case, slot: &mut MaybeUninit<Drive>) -> (u32, u32, bool) {
     let Some(mut rig) = Rig::new(case, slot) else { return (0, 0, false) };
     let (ok, setup_us) = match case {
         Case::OpenPvt => (rig.start_pvt(), 50_000),
-        Case::OpenRamp => (rig.set(Obj::MaxSpeed, 32_000) && rig.set(Obj::RelativeMove, 10_000_000), 100_000),
+        Case::OpenRamp | Case::ServoLoopRamp => {
+            (rig.set(Obj::MaxSpeed, 32_000) && rig.set(Obj::RelativeMove, 10_000_000), 100_000)
+        }
         _ => (rig.set(Obj::MaxSpeed, 32_000) && rig.set(Obj::RelativeMove, 10_000_000), 1_000_000),
     };
     rig.run(setup_us);
@@ -252,7 +260,7 @@ fn run(case: Case, slot: &mut MaybeUninit<Drive>) -> (u32, u32, bool) {
             && state.read(Obj::ControllerStatus) == 0x08
             && match case {
                 Case::OpenPvt => rig.last.setpoint.velocity > 0.0,
-                Case::OpenRamp => accelerating,
+                Case::OpenRamp | Case::ServoLoopRamp => accelerating,
                 _ => rig.last.setpoint.velocity == 32_000.0 && !accelerating,
             };
     }
