@@ -1,7 +1,8 @@
 //! The control tick's cost on the Cortex-M4 instruction set, with the closed loops and the stall
-//! detection running: `cargo xtask tick-cost` builds this (feature `tick-cost`) for QEMU's STM32L475 (Cortex-M4F, as
-//! the G431) and runs it under `-icount shift=8`, where every instruction takes 256 virtual ns and
-//! SysTick counts every 250 ns (the 4 MHz reset clock): one count is 0.98 instructions.
+//! detection running: `cargo xtask tick-cost` builds this (feature `tick-cost`) for QEMU's
+//! STM32L475 (Cortex-M4F, as the G431) and runs it under `-icount shift=8`, where every
+//! instruction takes 256 virtual ns and SysTick counts every 250 ns (the 4 MHz reset clock): one
+//! count is 0.98 instructions.
 //!
 //! No board, no Embassy: the drive core alone, booted, set moving through its objects, and
 //! ticked every 50 µs of its own time, each tick given what a drive measures. The measured
