@@ -405,6 +405,16 @@ impl DriveState {
         self.stored(index).map(|p| (index, p))
     }
 
+    /// The point [`DriveState::next_point`] would give next, without taking it.
+    fn peek_point(&self, source: &Source) -> Option<Point> {
+        let index = match *source {
+            Source::Fifo if self.pvt.len == 0 => return None,
+            Source::Fifo => self.pvt.head,
+            mut table => table.next_index()?,
+        };
+        self.stored(index)
+    }
+
     /// Starts what is due at the control tick `now`.
     fn start_pending(&mut self, now: Instant) {
         match self.pvt.pending.take() {
@@ -460,6 +470,13 @@ impl DriveState {
                     return;
                 }
             }
+        }
+        // The next segment, if its point is there already, is built a piece a tick before it
+        // starts (its first tick would otherwise build it all: three times a tick's work).
+        if self.axis.preparing()
+            && let Some(p) = self.peek_point(&run.source)
+        {
+            self.axis.prepare(Cubic::new(cubic.p1(), run.to.velocity, p));
         }
         self.pvt.run = Some(run);
     }

@@ -5,7 +5,7 @@
 //! so the offset stays small and a move ends exactly on its (integer) target however far the
 //! axis has travelled: nothing drifts over 2^31 microsteps.
 
-use super::cubic::{Cubic, Rates, Walk};
+use super::cubic::{Ahead, Cubic, Rates, Walk};
 use super::scurve::{Limits, PlanError, Profile, State};
 use crate::control::TICK_MICROS;
 use crate::units::Instant;
@@ -33,8 +33,9 @@ enum Segment {
     Cruise { start: Instant, p0: f64, v: f64 },
     /// A PVT segment from the anchor, started at the control tick `start`. Evaluated exactly in
     /// integers (walked tick by tick, `walk`); held on its end point until the next segment
-    /// replaces it or the run ends.
-    Cubic { start: Instant, cubic: Cubic, walk: Walk, rates: Rates },
+    /// replaces it or the run ends. `ahead` is the next segment, prepared while this one runs
+    /// (it fits in the size of the profile variant).
+    Cubic { start: Instant, cubic: Cubic, walk: Walk, rates: Rates, ahead: Option<Ahead> },
 }
 
 /// The setpoint of one tick.
@@ -126,10 +127,35 @@ impl Axis {
     }
 
     /// Follows the PVT segment `cubic` from the control tick `start` on (from wherever the axis
-    /// is: the caller joins segments end to start).
+    /// is: the caller joins segments end to start), with what [`Axis::prepare`] built of it.
     pub fn follow(&mut self, start: Instant, cubic: Cubic) {
+        let ahead = match self.segment {
+            Segment::Cubic { ahead: Some(a), .. } if a.cubic == cubic => a,
+            _ => Ahead::new(cubic),
+        };
+        let (walk, rates) = ahead.finish();
         self.anchor = cubic.p0;
-        self.segment = Segment::Cubic { start, cubic, walk: Walk::new(&cubic, 0), rates: cubic.rates() };
+        self.segment = Segment::Cubic { start, cubic, walk, rates, ahead: None };
+    }
+
+    /// Whether [`Axis::prepare`] has work to do: the axis follows a PVT segment and the next
+    /// one is not built yet.
+    pub fn preparing(&self) -> bool {
+        matches!(&self.segment, Segment::Cubic { ahead, .. } if !ahead.is_some_and(|a| a.is_built()))
+    }
+
+    /// Builds a piece of `next`, the PVT segment that will follow the one running (one 128-bit
+    /// division or the rates, see [`Ahead`]), so that its first tick does not build it all.
+    /// Nothing happens unless the axis follows a PVT segment.
+    pub fn prepare(&mut self, next: Cubic) {
+        if let Segment::Cubic { ahead, .. } = &mut self.segment {
+            match ahead {
+                Some(a) if a.cubic == next => {
+                    a.advance();
+                }
+                _ => *ahead = Some(Ahead::new(next)),
+            }
+        }
     }
 
     /// Ends a PVT segment that has arrived at rest: the axis stands exactly on its end point.
@@ -245,7 +271,7 @@ impl Axis {
     /// Evaluates the segment at `now` and returns the setpoint and the whole microsteps moved
     /// since the last tick.
     pub fn tick(&mut self, now: Instant) -> (Setpoint, i64) {
-        if let Segment::Cubic { start, cubic, walk, rates } = &mut self.segment {
+        if let Segment::Cubic { start, cubic, walk, rates, .. } = &mut self.segment {
             // Exact: whole microsteps and fraction straight from the integer walk.
             let k = cubic_tick(*start, now);
             let o = walk.at(cubic, k);
