@@ -254,7 +254,7 @@ impl DriveState {
 
     /// The axis after writing `value` to the motion object `obj` at `self.now`, or why not.
     /// `Ok(None)`: accepted, the axis is left as it is.
-    fn plan_motion(&self, obj: Obj, value: u32) -> Result<Option<(Axis, Pp)>, ObjError> {
+    pub(crate) fn plan_motion(&self, obj: Obj, value: u32) -> Result<Option<(Axis, Pp)>, ObjError> {
         let mut axis = self.axis;
         let mut pp = self.pp;
         let now = self.now;
@@ -350,7 +350,12 @@ impl DriveState {
         if crate::pvt::is_pvt_command(obj) {
             return self.apply_pvt(obj, value);
         }
-        let planned = self.plan_motion(obj, value);
+        let planned = self.plan_motion(obj, value).ok().flatten();
+        self.commit_motion(obj, value, planned);
+    }
+
+    /// Writes the motion object `obj` with the axis `planned` for it ([`DriveState::plan_motion`]).
+    pub(crate) fn commit_motion(&mut self, obj: Obj, value: u32, planned: Option<(Axis, Pp)>) {
         match obj {
             // Writing a signed speed sets the direction of relative moves (see the module doc).
             Obj::MaxSpeed if value != 0 => self.set_param(Obj::Direction, u32::from((value as i32) < 0)),
@@ -359,7 +364,7 @@ impl DriveState {
         if obj != Obj::Stop {
             self.set_param(obj, value);
         }
-        if let Ok(Some((axis, pp))) = planned {
+        if let Some((axis, pp)) = planned {
             self.axis = axis;
             self.pp = pp;
             if matches!(obj, Obj::Stop | Obj::Enable) {

@@ -446,15 +446,21 @@ impl DriveState {
             && !matches!(d.obj, Obj::SystemControl)
     }
 
-    /// [`DriveState::check`] for the object `d` declares.
-    #[inline(always)]
-    pub fn check_def(&self, d: &ObjectDef, value: u32) -> Result<(), ObjError> {
+    /// Whether the object `d` declares takes writes, and `value` is within its range.
+    fn check_writable(d: &ObjectDef, value: u32) -> Result<(), ObjError> {
         if d.access == Access::Ro || d.storage == Storage::Const {
             return Err(ObjError::ReadOnly);
         }
         if !d.range.accepts(d.ty, value) {
             return Err(ObjError::OutOfRange);
         }
+        Ok(())
+    }
+
+    /// [`DriveState::check`] for the object `d` declares.
+    #[inline(always)]
+    pub fn check_def(&self, d: &ObjectDef, value: u32) -> Result<(), ObjError> {
+        Self::check_writable(d, value)?;
         match (d.obj, value) {
             // No boot loader to jump to yet (see 0x200F's documentation).
             (Obj::SystemControl, 1) => Err(ObjError::Refused),
@@ -467,6 +473,23 @@ impl DriveState {
             (obj, _) if is_command(obj) => self.check_motion(obj, value),
             _ => Ok(()),
         }
+    }
+
+    /// [`DriveState::check_def`], then [`DriveState::apply_def`] if accepted; nothing changes if
+    /// refused. A motion command is planned once: checking it plans the motion (a plan proves a
+    /// move possible), and so does applying it, and a plan costs a Cortex-M4 hundreds of
+    /// thousands of instructions, during which the control tick waits for the bus task.
+    pub fn write_def(&mut self, d: &ObjectDef, value: u32) -> Result<(), ObjError> {
+        // The objects whose check is `check_motion` and whose write is `apply_motion`.
+        if is_command(d.obj) && has_effect(d.obj) && !crate::pvt::is_pvt_command(d.obj) && d.obj != Obj::Position {
+            Self::check_writable(d, value)?;
+            let planned = self.plan_motion(d.obj, value)?;
+            self.commit_motion(d.obj, value, planned);
+            return Ok(());
+        }
+        self.check_def(d, value)?;
+        self.apply_def(d, value);
+        Ok(())
     }
 
     /// Writes `value` to the object `d` declares, which [`DriveState::check`] accepted.

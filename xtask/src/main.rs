@@ -338,6 +338,15 @@ fn core_tick_cost() -> Result<(), String> {
                     100.0 * mean / TICK_CYCLES
                 );
             }
+            // `request NAME N counts`
+            ["request", name, spent, "counts"] => {
+                let spent = spent.parse::<f64>().map_err(|e| format!("{line}: {e}"))? * per_count;
+                println!(
+                    "  request {name:14} {spent:7.0} instructions to serve: the tick waits up to {:.1} ms ({:.0} ticks) while the bus task holds the drive",
+                    spent / 170e3,
+                    spent / TICK_CYCLES
+                );
+            }
             _ => println!("  {line}"),
         }
     }

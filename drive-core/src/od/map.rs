@@ -141,9 +141,13 @@ impl NativeMap {
                 }
                 Type::Str(_) => return Err(ObjError::ReadOnly),
             };
-            commands |= is_command(d.obj);
+            let command = is_command(d.obj);
+            commands |= command;
+            // A command is checked as it is written (`write_def`): checking a motion command
+            // plans the motion, and so does writing it.
             if let Op::Commit(v) = op
                 && refused.is_none()
+                && !command
             {
                 *refused = drive.check_def(d, v).err();
             }
@@ -162,12 +166,11 @@ impl NativeMap {
     fn commit_in_order(&mut self, drive: &mut DriveState, plan: &Plan) -> Result<(), Exception> {
         let saved = drive.checkpoint();
         for &(d, op) in plan.iter() {
-            if let Op::Commit(v) = op {
-                if let Err(e) = drive.check_def(d, v) {
-                    drive.restore(saved);
-                    return Err(native_exception(e));
-                }
-                drive.apply_def(d, v);
+            if let Op::Commit(v) = op
+                && let Err(e) = drive.write_def(d, v)
+            {
+                drive.restore(saved);
+                return Err(native_exception(e));
             }
         }
         for &(d, op) in plan.iter() {
@@ -187,12 +190,17 @@ impl NativeMap {
         if commands && plan.len() > 1 {
             return self.commit_in_order(drive, &plan);
         }
-        // Values independent of each other, all checked by the plan: apply them.
+        // Values independent of each other, all checked by the plan but a command, which is the
+        // only value if there is one: apply them, the command checked as it is written.
         if let Some(e) = refused {
             return Err(native_exception(e));
         }
         for &(d, op) in plan.iter() {
             match op {
+                Op::Commit(v) if is_command(d.obj) => {
+                    drive.write_def(d, v).map_err(native_exception)?;
+                    self.set_staged(d.obj, None);
+                }
                 Op::Commit(v) => {
                     self.set_staged(d.obj, None);
                     drive.apply_def(d, v);

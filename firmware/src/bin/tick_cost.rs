@@ -196,19 +196,27 @@ impl<'a> Rig<'a> {
     /// Sends the request `body` (its CRC appended) as one burst, ticks until its t3.5 has passed
     /// and fires the timer; whether the reply is a normal one (not an exception).
     fn request(&mut self, body: &[u8]) -> bool {
+        self.timed_request(body).0
+    }
+
+    /// [`Rig::request`], and the SysTick counts the drive took to serve it at t3.5 (the
+    /// `on_timer` call, which the firmware's bus task makes holding the drive).
+    fn timed_request(&mut self, body: &[u8]) -> (bool, u32) {
         let mut frame = [0u8; 32];
         let n = body.len();
-        let Some(dst) = frame.get_mut(..n) else { return false };
+        let Some(dst) = frame.get_mut(..n) else { return (false, 0) };
         dst.copy_from_slice(body);
-        let Some(crc) = frame.get_mut(n..n + 2) else { return false };
+        let Some(crc) = frame.get_mut(n..n + 2) else { return (false, 0) };
         crc.copy_from_slice(&crc16(body).to_le_bytes());
         self.drive.on_rx(Instant::from_micros(self.now), frame.get(..n + 2).unwrap_or_default());
-        let Some(deadline) = self.drive.deadline() else { return false };
+        let Some(deadline) = self.drive.deadline() else { return (false, 0) };
         while self.now + TICK_MICROS <= deadline.as_micros() {
             self.tick();
         }
+        let before = SYST::get_current();
         self.drive.on_timer(deadline);
-        matches!(self.drive.take_reply(), Some(r) if r.get(1) == body.get(1))
+        let spent = before.wrapping_sub(SYST::get_current()) & SYST_MASK;
+        (matches!(self.drive.take_reply(), Some(r) if r.get(1) == body.get(1)), spent)
     }
 
     /// PVT mode 1 with push on time: four points, 100 ms apart, from rest up to 20000 pps and
@@ -268,6 +276,36 @@ fn run(case: Case, slot: &mut MaybeUninit<Drive>) -> (u32, u32, bool) {
     ((sum / u64::from(MEASURED_TICKS)) as u32, most, moving)
 }
 
+/// A write of the 32-bit object at `reg` (function 0x10, two registers) to node 1.
+fn write32(reg: u16, v: i32) -> [u8; 11] {
+    let ([rh, rl], [a, b, c, d]) = (reg.to_be_bytes(), v.to_be_bytes());
+    [SLAVE, 0x10, rh, rl, 0x00, 0x02, 0x04, a, b, c, d]
+}
+
+/// What serving a request costs (the time the bus task holds the drive, so the time a control
+/// tick may wait): a read, a relative move from rest (planned), a re-targeting absolute move
+/// while cruising at 32000 pps (planned from the moving state), one behind the axis (a reversal)
+/// and a stop. Prints a line each;
+/// whether every request was accepted.
+fn requests(slot: &mut MaybeUninit<Drive>) -> bool {
+    let Some(mut rig) = Rig::new(Case::Open, slot) else { return false };
+    let mut ok = rig.set(Obj::MaxSpeed, 32_000);
+    let mut measure = |rig: &mut Rig, name: &str, body: &[u8]| {
+        let (accepted, spent) = rig.timed_request(body);
+        ok &= accepted;
+        hprintln!("request {} {} counts{}", name, spent, if accepted { "" } else { " REFUSED" });
+    };
+    measure(&mut rig, "read", &[SLAVE, 0x03, 0x60, 0x0C, 0x00, 0x02]);
+    measure(&mut rig, "relative_move", &write32(0x6005, 10_000_000));
+    rig.run(1_000_000);
+    measure(&mut rig, "retarget", &write32(0x6044, 20_000_000));
+    rig.run(100_000);
+    measure(&mut rig, "reverse", &write32(0x6044, 0));
+    rig.run(100_000);
+    measure(&mut rig, "stop", &[SLAVE, 0x06, 0x60, 0x53, 0x00, 0x00]);
+    ok
+}
+
 #[entry]
 fn main() -> ! {
     let Some(mut core) = Peripherals::take() else { exit(false) };
@@ -288,6 +326,7 @@ fn main() -> ! {
             if ok { "" } else { " NOT IN ITS SITUATION" }
         );
     }
+    all_ok &= requests(slot);
     exit(all_ok)
 }
 
