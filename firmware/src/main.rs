@@ -14,6 +14,8 @@
 #[cfg(not(target_os = "none"))]
 fn main() {}
 
+#[cfg_attr(not(target_os = "none"), allow(dead_code, reason = "used by the boards and the host tests"))]
+mod coast;
 #[cfg_attr(not(feature = "qemu"), allow(dead_code, reason = "used by the QEMU build and the host tests"))]
 mod frames;
 

@@ -31,6 +31,10 @@ mod frames;
 mod power;
 
 #[cfg(target_os = "none")]
+#[path = "../src/coast.rs"]
+mod coast;
+
+#[cfg(target_os = "none")]
 #[defmt::panic_handler]
 fn defmt_panic() -> ! {
     board::power_off();

@@ -258,7 +258,7 @@ fn tick_cost() -> Result<(), String> {
     let read_stats = || -> Result<Vec<u64>, String> {
         let mut m = TcpStream::connect(("127.0.0.1", mon)).map_err(|e| e.to_string())?;
         m.set_read_timeout(Some(Duration::from_millis(500))).map_err(|e| e.to_string())?;
-        m.write_all(format!("xp /5wx 0x{addr}\n").as_bytes()).map_err(|e| e.to_string())?;
+        m.write_all(format!("xp /6wx 0x{addr}\n").as_bytes()).map_err(|e| e.to_string())?;
         let mut text = String::new();
         let mut buf = [0u8; 512];
         while let Ok(n) = m.read(&mut buf) {
@@ -274,7 +274,7 @@ fn tick_cost() -> Result<(), String> {
             .flat_map(|w| w.split_whitespace().map(|x| u64::from_str_radix(x.trim_start_matches("0x"), 16)))
             .collect::<Result<_, _>>()
             .map_err(|e| format!("{text}: {e}"))?;
-        if words.len() == 5 { Ok(words) } else { Err(format!("unexpected monitor output {text:?}")) }
+        if words.len() == 6 { Ok(words) } else { Err(format!("unexpected monitor output {text:?}")) }
     };
     std::thread::sleep(Duration::from_millis(500));
     let idle = read_stats()?;
@@ -298,6 +298,10 @@ fn tick_cost() -> Result<(), String> {
     println!("  idle:     {:.0} instructions per tick ({idle_n} ticks)", per_tick(idle_n, idle_sum));
     println!("  stepping: {:.0} instructions per tick ({moving_n} ticks)", per_tick(moving_n, moving_sum));
     println!("  longest:  {:.0} instructions or fewer", (after.get(4).copied().unwrap_or(0) + 1) as f64 * per_count);
+    println!(
+        "  coasted:  {} ticks, the bus task holding the drive (five writes, one a move to plan)",
+        after.get(5).copied().unwrap_or(0)
+    );
     Ok(())
 }
 

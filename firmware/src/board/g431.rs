@@ -229,6 +229,8 @@ pub struct StepDir {
     enable: Output<'static>,
     /// Steps asked for and not yet started (signed).
     pending: i64,
+    /// Steps at the last speed while the tick cannot run the drive.
+    coast: crate::coast::Coast,
 }
 
 impl StepDir {
@@ -259,6 +261,10 @@ impl PowerStage for StepDir {
         t.cr1().modify(|w| w.set_cen(true));
         let done = n as i64;
         self.pending -= if self.pending < 0 { -done } else { done };
+    }
+
+    fn coast(&mut self) -> &mut crate::coast::Coast {
+        &mut self.coast
     }
 
     fn set_current(&mut self, milliamps: u16) {
@@ -383,6 +389,7 @@ pub fn init() -> Board {
         dir: Output::new(p.PB1, Level::Low, Speed::Low),
         enable: Output::new(p.PB2, Level::High, Speed::Low), // motor off until told otherwise
         pending: 0,
+        coast: crate::coast::Coast::default(),
     };
     let _ = (p.TIM1, p.TIM4, p.PB0, p.PB6); // owned by the raw timer setup below
     setup_step_timer();

@@ -149,6 +149,7 @@ embassy_time_driver::time_driver_impl!(static DRIVER: SysTickDriver = SysTickDri
 /// notes whether the tick stepped, for the cost figures.
 struct NoStage {
     moving: bool,
+    coast: crate::coast::Coast,
 }
 
 impl PowerStage for NoStage {
@@ -156,13 +157,16 @@ impl PowerStage for NoStage {
         self.moving = steps != 0;
     }
     fn set_current(&mut self, _milliamps: u16) {}
+    fn coast(&mut self) -> &mut crate::coast::Coast {
+        &mut self.coast
+    }
 }
 
 /// The control tick's cost in SysTick counts (a count is 250 virtual ns, 15.6 instructions under
 /// `qemu -icount shift=4`), read by `cargo xtask tick-cost` through QEMU's monitor: [idle ticks, their total counts, ticks that stepped, their total counts, most counts
-/// of one tick].
+/// of one tick, ticks that coasted because the bus task held the drive].
 #[unsafe(no_mangle)]
-static TICK_COST: [AtomicU32; 5] = [const { AtomicU32::new(0) }; 5];
+static TICK_COST: [AtomicU32; 6] = [const { AtomicU32::new(0) }; 6];
 
 /// Every millisecond: time, then the control tick, then the timers due.
 #[cortex_m_rt::exception]
@@ -172,7 +176,7 @@ fn SysTick() {
         m.set(m.get() + 1);
     });
     let now = micros();
-    let mut stage = NoStage { moving: false };
+    let mut stage = NoStage { moving: false, coast: crate::coast::Coast::default() };
     let before = cortex_m::peripheral::SYST::get_current();
     // The emulated chip measures nothing: no supervision of supply or temperature, open loop.
     crate::app::control_tick(drive_core::Instant::from_micros(now), &drive_core::faults::Inputs::default(), &mut stage);
@@ -185,6 +189,9 @@ fn SysTick() {
     }
     if let Some(max) = TICK_COST.get(4) {
         max.fetch_max(spent, Ordering::Relaxed);
+    }
+    if let Some(coasted) = TICK_COST.get(5) {
+        coasted.store(crate::app::COASTED.load(Ordering::Relaxed), Ordering::Relaxed);
     }
     critical_section::with(|cs| {
         let mut q = QUEUE.borrow_ref_mut(cs);
