@@ -553,10 +553,17 @@ const ROOT_ITERS: usize = 200;
 /// not, the endpoint nearer to zero is returned). Illinois (modified regula falsi), bisecting when
 /// three steps have not halved the bracket; stops at `|f| ≤ ftol`, when the bracket cannot shrink, or after
 /// `ROOT_ITERS` evaluations.
-fn solve<F>(mut f: F, mut xa: f64, mut fa: f64, mut xb: f64, mut fb: f64, ftol: f64) -> Result<f64, PlanError>
-where
-    F: FnMut(f64) -> Result<f64, PlanError>,
-{
+///
+/// `f` is a trait object: one copy of the search serves every family (generic, each would inline
+/// its pulses into a copy of its own: 1.4 KB of flash on the Cortex-M4).
+fn solve(
+    f: &mut dyn FnMut(f64) -> Result<f64, PlanError>,
+    mut xa: f64,
+    mut fa: f64,
+    mut xb: f64,
+    mut fb: f64,
+    ftol: f64,
+) -> Result<f64, PlanError> {
     let (mut best, mut fbest) = if fabs(fa) < fabs(fb) { (xa, fabs(fa)) } else { (xb, fabs(fb)) };
     if fbest <= ftol || (fa > 0.0) == (fb > 0.0) {
         return Ok(best);
@@ -715,7 +722,7 @@ impl Profile {
         // Turning velocity above both the natural and the final velocity, or below both.
         let vn = lim.v_nat(v0, a0);
         let (lo, hi) = (vn.min(vf), vn.max(vf));
-        let dist = |vp: f64| turn_td(v0, a0, vp, vf, &lim).map(|e| e.d - d);
+        let mut dist = |vp: f64| turn_td(v0, a0, vp, vf, &lim).map(|e| e.d - d);
         for (xa, ea, xb, eb) in [(hi, None, vmax, Some(ep)), (-vmax, Some(em), lo, None)] {
             if !(xa <= xb && xa >= -vmax && xb <= vmax) {
                 continue;
@@ -730,7 +737,7 @@ impl Profile {
             };
             // The duration grows away from the direct profile: the inner end is the shortest.
             if brackets(ea.d - d, &ea, eb.d - d, &eb) && !beaten(&best, ea.t.min(eb.t)) {
-                let vp = solve(dist, xa, ea.d - d, xb, eb.d - d, ftol)?;
+                let vp = solve(&mut dist, xa, ea.d - d, xb, eb.d - d, ftol)?;
                 let e = turn_td(v0, a0, vp, vf, &lim)?;
                 consider(&mut best, Cand::Turn { vp, cruise: 0.0 }, e, e.d - d);
             }
@@ -753,7 +760,7 @@ impl Profile {
             let eval = |a: f64| dip_td(v0, a0, vf, &lim, Dip { v: apex(a), a });
             let (e0, e1) = (eval(0.0)?, eval(a_top)?);
             if brackets(e0.d - d, &e0, e1.d - d, &e1) && !beaten(&best, e0.t.min(e1.t)) {
-                let a = solve(|a| eval(a).map(|e| e.d - d), 0.0, e0.d - d, a_top, e1.d - d, ftol)?;
+                let a = solve(&mut |a| eval(a).map(|e| e.d - d), 0.0, e0.d - d, a_top, e1.d - d, ftol)?;
                 let e = eval(a)?;
                 consider(&mut best, Cand::Dip { v: apex(a), a }, e, e.d - d);
             }
@@ -771,7 +778,7 @@ impl Profile {
                 let eval = |a: f64| dip_td(v0, a0, vf, &lim, Dip { v: vd, a });
                 let (e0, e1) = (eval(a_lo)?, eval(a_hi)?);
                 if brackets(e0.d - d, &e0, e1.d - d, &e1) && !beaten(&best, e0.t.min(e1.t)) {
-                    let a = solve(|a| eval(a).map(|e| e.d - d), a_lo, e0.d - d, a_hi, e1.d - d, ftol)?;
+                    let a = solve(&mut |a| eval(a).map(|e| e.d - d), a_lo, e0.d - d, a_hi, e1.d - d, ftol)?;
                     let e = eval(a)?;
                     consider(&mut best, Cand::Dip { v: vd, a }, e, e.d - d);
                 }
