@@ -10,15 +10,17 @@
 //! cause (it ran a fraction ahead of a braking axis) is not taken while the axis moves on: the
 //! coming ticks absorb it.
 
-use drive_core::control::TICK_HZ;
 use drive_core::motion::axis::Setpoint;
 
 /// 2^32: the scale of positions and rates in 32.32 fixed point.
 const ONE: f64 = 4_294_967_296.0;
 
 /// What coasting needs of the last tick that ran, and the steps it has coasted since.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug)]
 pub struct Coast {
+    /// Seconds a tick, times 2^32: a velocity in microsteps per second times this is the
+    /// distance of one tick in 2^-32 microstep.
+    per_tick: f64,
     /// Velocity of the last tick that ran, microsteps per second.
     velocity: f64,
     /// Where coasting stands, beyond the last setpoint's whole microstep, in 2^-32 microstep;
@@ -31,6 +33,11 @@ pub struct Coast {
 }
 
 impl Coast {
+    /// Coasting for a stage stepped by a tick of `tick_hz`; nothing to coast yet.
+    pub const fn new(tick_hz: u32) -> Self {
+        Self { per_tick: ONE / tick_hz as f64, velocity: 0.0, position: None, fraction: 0, surplus: 0 }
+    }
+
     /// A tick that ran the drive, which asked for `steps` with the commutation setpoint `sp`:
     /// the steps to emit now, those coasted ahead taken from them.
     pub fn ticked(&mut self, steps: i64, sp: &Setpoint) -> i64 {
@@ -45,7 +52,7 @@ impl Coast {
 
     /// A tick that could not run the drive: the whole microsteps to emit to keep the last speed.
     pub fn coasting(&mut self) -> i64 {
-        let rate = (self.velocity * (ONE / f64::from(TICK_HZ))) as i64;
+        let rate = (self.velocity * self.per_tick) as i64;
         let before = self.position.unwrap_or(i64::from(self.fraction));
         let after = before.saturating_add(rate);
         self.position = Some(after);
@@ -60,6 +67,7 @@ impl Coast {
 #[cfg(all(test, not(target_os = "none")))]
 mod tests {
     use super::*;
+    use drive_core::control::TICK_HZ;
     use fixed::types::U0F32;
 
     /// The setpoint of an axis at `p` microsteps moving at `v` pps.
@@ -76,7 +84,7 @@ mod tests {
         ticks: u32,
         waiting: core::ops::Range<u32>,
     ) -> std::vec::Vec<i64> {
-        let mut coast = Coast::default();
+        let mut coast = Coast::new(TICK_HZ);
         let mut last = pos(0).floor() as i64;
         let mut out = std::vec::Vec::new();
         for k in 1..=ticks {

@@ -95,6 +95,8 @@ fn ci() -> Result<(), String> {
         .args(["--", "-D", "warnings"]))?;
     step("control tick cost on the Cortex-M4 (QEMU)");
     core_tick_cost()?;
+    step("the firmware's tick under QEMU: cost, and coasting while the bus task plans a re-target");
+    tick_cost()?;
     step("HIL suite build");
     hil()?;
     step("external masters");
@@ -258,7 +260,7 @@ fn tick_cost() -> Result<(), String> {
     let read_stats = || -> Result<Vec<u64>, String> {
         let mut m = TcpStream::connect(("127.0.0.1", mon)).map_err(|e| e.to_string())?;
         m.set_read_timeout(Some(Duration::from_millis(500))).map_err(|e| e.to_string())?;
-        m.write_all(format!("xp /6wx 0x{addr}\n").as_bytes()).map_err(|e| e.to_string())?;
+        m.write_all(format!("xp /8wx 0x{addr}\n").as_bytes()).map_err(|e| e.to_string())?;
         let mut text = String::new();
         let mut buf = [0u8; 512];
         while let Ok(n) = m.read(&mut buf) {
@@ -274,20 +276,45 @@ fn tick_cost() -> Result<(), String> {
             .flat_map(|w| w.split_whitespace().map(|x| u64::from_str_radix(x.trim_start_matches("0x"), 16)))
             .collect::<Result<_, _>>()
             .map_err(|e| format!("{text}: {e}"))?;
-        if words.len() == 6 { Ok(words) } else { Err(format!("unexpected monitor output {text:?}")) }
+        if words.len() == 8 { Ok(words) } else { Err(format!("unexpected monitor output {text:?}")) }
     };
     std::thread::sleep(Duration::from_millis(500));
     let idle = read_stats()?;
     let mut s = TcpStream::connect(("127.0.0.1", port)).map_err(|e| e.to_string())?;
     s.set_read_timeout(Some(Duration::from_secs(2))).map_err(|e| e.to_string())?;
-    // 4000 pps forward, then a relative move of 2000 steps (native map, node 1).
-    for (reg, v) in [(0x6003u16, 0u16), (0x6004, 4000), (0x6002, 0), (0x6005, 0), (0x6006, 2000)] {
-        let [rh, rl] = reg.to_be_bytes();
-        let [vh, vl] = v.to_be_bytes();
-        transact(&mut s, &[1, 6, rh, rl, vh, vl], 8)?;
+    let read_word = |s: &mut TcpStream, reg: u16, n: u16| -> Result<Vec<u8>, String> {
+        let ([rh, rl], [_, nl]) = (reg.to_be_bytes(), n.to_be_bytes());
+        transact(s, &[1, 3, rh, rl, 0, nl], 5 + 2 * usize::from(n))
+    };
+    let position = |s: &mut TcpStream| -> Result<i32, String> {
+        let r = read_word(s, 0x600E, 2)?;
+        Ok(i32::from_be_bytes([r[3], r[4], r[5], r[6]]))
+    };
+    // 4000 pps forward, a relative move of 8000 steps (native map, node 1); once it cruises, an
+    // absolute move to 12 000 re-targets it: the drive plans while the axis runs, and the tick
+    // coasts while the bus task holds the drive.
+    let write = |s: &mut TcpStream, reg: u16, v: u16| -> Result<(), String> {
+        let ([rh, rl], [vh, vl]) = (reg.to_be_bytes(), v.to_be_bytes());
+        transact(s, &[1, 6, rh, rl, vh, vl], 8).map(|_| ())
+    };
+    for (reg, v) in [(0x6003u16, 0u16), (0x6004, 4000), (0x6002, 0), (0x6005, 0), (0x6006, 8000)] {
+        write(&mut s, reg, v)?;
     }
-    // Virtual time crawls under -icount (bytes too): sample the ticks of the running move.
-    std::thread::sleep(Duration::from_secs(3));
+    // Virtual time crawls under -icount (bytes too): poll rather than sleep.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while position(&mut s)? < 1000 {
+        if Instant::now() > deadline {
+            return Err("the move did not start".into());
+        }
+    }
+    write(&mut s, 0x6044, 0)?;
+    write(&mut s, 0x6045, 12_000)?;
+    while read_word(&mut s, 0x6001, 1)?[4] & 0x08 != 0 {
+        if Instant::now() > deadline {
+            return Err("the move did not end".into());
+        }
+    }
+    let end = position(&mut s)?;
     let after = read_stats()?;
     drop(qemu);
     let per_count = 250.0 / f64::from(1u32 << ICOUNT_SHIFT);
@@ -298,10 +325,17 @@ fn tick_cost() -> Result<(), String> {
     println!("  idle:     {:.0} instructions per tick ({idle_n} ticks)", per_tick(idle_n, idle_sum));
     println!("  stepping: {:.0} instructions per tick ({moving_n} ticks)", per_tick(moving_n, moving_sum));
     println!("  longest:  {:.0} instructions or fewer", (after.get(4).copied().unwrap_or(0) + 1) as f64 * per_count);
-    println!(
-        "  coasted:  {} ticks, the bus task holding the drive (five writes, one a move to plan)",
-        after.get(5).copied().unwrap_or(0)
-    );
+    let word = |i: usize| after.get(i).copied().unwrap_or(0);
+    // Steps are counted in 32 bits by the firmware.
+    let (emitted, coasting) = (word(6) as u32 as i32, word(7) as u32 as i32);
+    println!("  coasted:  {} ticks while the bus task held the drive, {coasting} steps emitted in them", word(5));
+    println!("  steps:    {emitted} emitted by the stage, the drive ends at {end} (a move re-targeted to 12 000)");
+    if end != 12_000 || emitted != end {
+        return Err(format!("the stage emitted {emitted} steps, the drive stands at {end}: 12 000 both expected"));
+    }
+    if coasting == 0 {
+        return Err("no step was emitted while coasting: the re-target did not exercise it".into());
+    }
     Ok(())
 }
 

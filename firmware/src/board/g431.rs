@@ -389,7 +389,7 @@ pub fn init() -> Board {
         dir: Output::new(p.PB1, Level::Low, Speed::Low),
         enable: Output::new(p.PB2, Level::High, Speed::Low), // motor off until told otherwise
         pending: 0,
-        coast: crate::coast::Coast::default(),
+        coast: crate::coast::Coast::new(drive_core::control::TICK_HZ),
     };
     let _ = (p.TIM1, p.TIM4, p.PB0, p.PB6); // owned by the raw timer setup below
     setup_step_timer();

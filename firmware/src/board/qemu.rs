@@ -29,7 +29,9 @@ pub const HARDWARE: &str = "QEMU L475";
 /// SysTick clock: the core clock at reset (MSI, 4 MHz), which nothing here changes.
 const CORE_HZ: u32 = 4_000_000;
 /// SysTick counts in one millisecond.
-const RELOAD: u32 = CORE_HZ / 1000 - 1;
+const RELOAD: u32 = CORE_HZ / TICK_HZ - 1;
+/// SysTick's rate: the clock of embassy-time and the control tick.
+const TICK_HZ: u32 = 1000;
 
 /// Received bytes, from the RXNE interrupt to the Modbus task.
 static RX: Pipe<CriticalSectionRawMutex, 256> = Pipe::new();
@@ -145,16 +147,20 @@ impl embassy_time_driver::Driver for SysTickDriver {
 
 embassy_time_driver::time_driver_impl!(static DRIVER: SysTickDriver = SysTickDriver);
 
-/// The emulated chip's power stage: none. The drive core counts the steps itself; this only
-/// notes whether the tick stepped, for the cost figures.
+/// The emulated chip's power stage: none. The drive core counts the steps itself; this counts
+/// the steps the stage would emit, for `cargo xtask tick-cost` to check against the drive's
+/// position (coasting must neither lose nor add one), and notes whether the tick stepped.
 struct NoStage {
     moving: bool,
+    /// Steps emitted since power-up (signed).
+    emitted: i64,
     coast: crate::coast::Coast,
 }
 
 impl PowerStage for NoStage {
     fn step(&mut self, steps: i64) {
         self.moving = steps != 0;
+        self.emitted = self.emitted.wrapping_add(steps);
     }
     fn set_current(&mut self, _milliamps: u16) {}
     fn coast(&mut self) -> &mut crate::coast::Coast {
@@ -162,36 +168,50 @@ impl PowerStage for NoStage {
     }
 }
 
-/// The control tick's cost in SysTick counts (a count is 250 virtual ns, 15.6 instructions under
-/// `qemu -icount shift=4`), read by `cargo xtask tick-cost` through QEMU's monitor: [idle ticks, their total counts, ticks that stepped, their total counts, most counts
-/// of one tick, ticks that coasted because the bus task held the drive].
+/// Read by `cargo xtask tick-cost` through QEMU's monitor. The control tick's cost in SysTick
+/// counts (a count is 250 virtual ns, 15.6 instructions under `qemu -icount shift=4`): [0] idle
+/// ticks, [1] their total counts, [2] ticks that stepped, [3] their total counts, [4] most
+/// counts of one tick; [5] ticks that coasted because the bus task held the drive; [6] steps
+/// the stage emitted since power-up (`i32` bits), [7] of them, in ticks that coasted.
 #[unsafe(no_mangle)]
-static TICK_COST: [AtomicU32; 6] = [const { AtomicU32::new(0) }; 6];
+static TICK_COST: [AtomicU32; 8] = [const { AtomicU32::new(0) }; 8];
+
+/// Adds `v` to word `i` of [`TICK_COST`].
+fn add_cost(i: usize, v: u32) {
+    if let Some(w) = TICK_COST.get(i) {
+        w.fetch_add(v, Ordering::Relaxed);
+    }
+}
 
 /// Every millisecond: time, then the control tick, then the timers due.
 #[cortex_m_rt::exception]
 fn SysTick() {
+    // The stage lives from tick to tick: coasting continues from the last tick that ran.
+    static mut STAGE: NoStage = NoStage { moving: false, emitted: 0, coast: crate::coast::Coast::new(TICK_HZ) };
     critical_section::with(|cs| {
         let m = MILLIS.borrow(cs);
         m.set(m.get() + 1);
     });
     let now = micros();
-    let mut stage = NoStage { moving: false, coast: crate::coast::Coast::default() };
+    STAGE.moving = false;
+    let (emitted, coasted) = (STAGE.emitted, crate::app::COASTED.load(Ordering::Relaxed));
     let before = cortex_m::peripheral::SYST::get_current();
     // The emulated chip measures nothing: no supervision of supply or temperature, open loop.
-    crate::app::control_tick(drive_core::Instant::from_micros(now), &drive_core::faults::Inputs::default(), &mut stage);
+    crate::app::control_tick(drive_core::Instant::from_micros(now), &drive_core::faults::Inputs::default(), STAGE);
     // SysTick counts down and has just reloaded: no wrap within the tick.
     let spent = before.saturating_sub(cortex_m::peripheral::SYST::get_current());
-    let at = if stage.moving { 2 } else { 0 };
-    if let (Some(n), Some(sum)) = (TICK_COST.get(at), TICK_COST.get(at + 1)) {
-        n.fetch_add(1, Ordering::Relaxed);
-        sum.fetch_add(spent, Ordering::Relaxed);
-    }
+    let at = if STAGE.moving { 2 } else { 0 };
+    add_cost(at, 1);
+    add_cost(at + 1, spent);
     if let Some(max) = TICK_COST.get(4) {
         max.fetch_max(spent, Ordering::Relaxed);
     }
-    if let Some(coasted) = TICK_COST.get(5) {
-        coasted.store(crate::app::COASTED.load(Ordering::Relaxed), Ordering::Relaxed);
+    // Wrapping to 32 bits: the reader takes the words as `i32`.
+    let steps = STAGE.emitted.wrapping_sub(emitted) as u32;
+    add_cost(6, steps);
+    if crate::app::COASTED.load(Ordering::Relaxed) != coasted {
+        add_cost(5, 1);
+        add_cost(7, steps);
     }
     critical_section::with(|cs| {
         let mut q = QUEUE.borrow_ref_mut(cs);
