@@ -157,6 +157,47 @@ mod tests {
         assert_eq!(position, Some(i64::from(STEPS)));
     }
 
+    /// A re-target while cruising: the drive plans it under its lock for about a millisecond
+    /// (`cargo xtask tick-cost`), the ticks meanwhile coast at the last speed, and still the
+    /// pulses counted on the STEP wire are exactly the drive's final position.
+    #[test]
+    #[timeout(10)]
+    async fn a_retarget_while_cruising_loses_no_step(board: Board) {
+        let t = pac::TIM2;
+        t.cr1().modify(|w| w.set_cen(false));
+        t.smcr().write(|w| {
+            w.set_sms(pac::timer::vals::Sms::EXT_CLOCK_MODE);
+            w.set_ts(pac::timer::vals::Ts::TI1FP1);
+        });
+        t.arr().write_value(u32::MAX);
+        t.cnt().write_value(0);
+        t.cr1().modify(|w| w.set_cen(true));
+
+        board::start_tick(board.stage, board.encoder);
+        // Ramped (factory levels), 40 kpps: two steps a tick while cruising.
+        app::with_drive(|d| {
+            let s = d.state_mut();
+            s.apply(Obj::MaxSpeed, 40_000);
+            s.apply(Obj::RelativeMove, 40_000);
+        });
+        Timer::after_millis(300).await;
+        let coasted = app::COASTED.load(Relaxed);
+        app::with_drive(|d| d.state_mut().apply(Obj::AbsoluteMove, 60_000));
+        let coasted = app::COASTED.load(Relaxed).wrapping_sub(coasted);
+        let start = Instant::now();
+        while app::with_drive(|d| d.state().status().controller & drive_core::drive::STATUS_BUSY != 0) == Some(true) {
+            assert!(start.elapsed() < Duration::from_secs(5), "move ends");
+            Timer::after_millis(5).await;
+        }
+        Timer::after_millis(5).await; // the last pulse train
+        let counted = t.cnt().read();
+        let position = app::with_drive(|d| d.state().position());
+        info!("{} ticks coasted during the re-target; {} pulses counted, position {}", coasted, counted, position);
+        assert!(coasted > 0, "planning the re-target held the drive across ticks");
+        assert_eq!(counted, 60_000);
+        assert_eq!(position, Some(60_000));
+    }
+
     /// A changed set, saved the way the Modbus task saves (the drive's request taken under the
     /// lock, the flash written without it, the control tick running), is what a new store on the
     /// same pages loads. The pages get back what they held before.
