@@ -77,9 +77,11 @@ const CURRENT_PWM_PERIOD: u32 = TIMER_HZ / 100_000;
 /// Phase current at 100 % reference duty (3.3 V on VREF).
 const FULL_SCALE_MA: u32 = 3000;
 
-/// Receive and transmit ring sizes: a whole RTU frame (256 bytes) fits either way.
+/// Receive ring: a whole RTU frame (256 bytes), should the Modbus task fall a frame behind.
 const RX_BUF: usize = 256;
-const TX_BUF: usize = 256;
+/// Transmit ring: half a frame. The task sends from its own copy of the reply and `write_all`
+/// refills the ring as it drains, so a longer ring would only hold a second copy (RAM budget).
+const TX_BUF: usize = 128;
 
 /// The RS-485 port.
 pub type Serial = BufferedUart<'static>;
