@@ -23,6 +23,8 @@ mod frames;
 mod app;
 #[cfg(target_os = "none")]
 mod power;
+#[cfg(target_os = "none")]
+mod stack;
 
 #[cfg(all(target_os = "none", feature = "g431", feature = "qemu"))]
 compile_error!("features `g431` and `qemu` select different chips: build with `--no-default-features --features qemu`");
@@ -99,6 +101,7 @@ mod run {
 
     #[embassy_executor::main]
     async fn main(spawner: Spawner) {
+        crate::stack::paint();
         let Board { flash, mut uart, stage, mut inputs, encoder, sense, mut watchdog } = board::init();
         // Power-up, before the drive answers anything: the FSET check and the parameters from
         // flash, then the drive, then the UART at their baud rate and parity.
@@ -160,10 +163,11 @@ mod run {
             if n.is_multiple_of(100) {
                 let cost = board::TICK_CYCLES_MAX.load(Ordering::Relaxed);
                 info!(
-                    "bus {} mV, die {} °C, longest tick {} cycles",
+                    "bus {} mV, die {} °C, longest tick {} cycles, stack peak {} B",
                     board::supply_mv(v),
                     board::temperature_c(t),
-                    cost
+                    cost,
+                    crate::stack::peak()
                 );
             }
             let ticks = app::TICKS.load(Ordering::Relaxed);
@@ -218,6 +222,7 @@ mod run {
     /// no-op, which would spin the host CPU and starve QEMU's serial I/O.
     #[cortex_m_rt::entry]
     fn main() -> ! {
+        crate::stack::paint();
         // QEMU does not model the flash: factory parameters, and saving is refused (04).
         app::start(board::HARDWARE, &drive_core::Params::factory(), 0, false);
         let serial = board::init();

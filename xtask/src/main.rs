@@ -232,6 +232,9 @@ fn transact(s: &mut TcpStream, body: &[u8], reply_len: usize) -> Result<Vec<u8>,
     Ok(reply)
 }
 
+/// The paint of the firmware's free stack (`firmware/src/stack.rs`).
+const STACK_PAINT: u64 = 0x214B_5453;
+
 /// `-icount` shift of `tick-cost`: an instruction takes 2^4 = 16 virtual ns, so a count of the
 /// 4 MHz SysTick (250 ns) is 15.6 instructions. Shifts 3 and 4 agree (idle 500, stepping ~2700);
 /// with shifts 0-2 QEMU 10.0 reads the same SysTick value before and after most ticks.
@@ -243,10 +246,16 @@ const ICOUNT_SHIFT: u32 = 4;
 fn tick_cost() -> Result<(), String> {
     let elf = build_qemu()?;
     let nm = Command::new("arm-none-eabi-nm").arg(&elf).output().map_err(|e| format!("arm-none-eabi-nm: {e}"))?;
-    let addr = String::from_utf8_lossy(&nm.stdout)
-        .lines()
-        .find_map(|l| l.strip_suffix(" TICK_COST").and_then(|l| l.split_whitespace().next()).map(str::to_string))
-        .ok_or("no TICK_COST symbol")?;
+    let symbols = String::from_utf8_lossy(&nm.stdout).into_owned();
+    let symbol = |name: &str| -> Result<u64, String> {
+        symbols
+            .lines()
+            .find_map(|l| l.strip_suffix(name).filter(|l| l.ends_with(' ')).and_then(|l| l.split_whitespace().next()))
+            .and_then(|a| u64::from_str_radix(a, 16).ok())
+            .ok_or(format!("no {name} symbol"))
+    };
+    let addr = symbol("TICK_COST")?;
+    let (stack_end, stack_start) = (symbol("_stack_end")?, symbol("_stack_start")?);
     let (port, mon) = (free_port()?, free_port()?);
     let monitor = format!("tcp:127.0.0.1:{mon},server=on,wait=off");
     let mut qemu = spawn_qemu(
@@ -257,17 +266,18 @@ fn tick_cost() -> Result<(), String> {
     )?;
     // Generous: under -icount a reply takes a few hundred ms.
     probe("127.0.0.1", port, &mut qemu.0, Duration::from_millis(1000))?;
-    let read_stats = || -> Result<Vec<u64>, String> {
+    // `n` words of the emulated chip's memory at `at`, through QEMU's monitor.
+    let read_memory = |at: u64, n: usize| -> Result<Vec<u64>, String> {
         let mut m = TcpStream::connect(("127.0.0.1", mon)).map_err(|e| e.to_string())?;
         m.set_read_timeout(Some(Duration::from_millis(500))).map_err(|e| e.to_string())?;
-        m.write_all(format!("xp /8wx 0x{addr}\n").as_bytes()).map_err(|e| e.to_string())?;
+        m.write_all(format!("xp /{n}wx 0x{at:x}\n").as_bytes()).map_err(|e| e.to_string())?;
         let mut text = String::new();
-        let mut buf = [0u8; 512];
-        while let Ok(n) = m.read(&mut buf) {
-            if n == 0 {
+        let mut buf = [0u8; 4096];
+        while let Ok(k) = m.read(&mut buf) {
+            if k == 0 {
                 break;
             }
-            text.push_str(&String::from_utf8_lossy(&buf[..n]));
+            text.push_str(&String::from_utf8_lossy(&buf[..k]));
         }
         // QEMU prints four words a line, each line after its address and a colon.
         let words: Vec<u64> = text
@@ -275,11 +285,20 @@ fn tick_cost() -> Result<(), String> {
             .filter_map(|l| l.split_once(": ").filter(|(a, _)| a.trim().len() == 16).map(|(_, w)| w))
             .flat_map(|w| w.split_whitespace().map(|x| u64::from_str_radix(x.trim_start_matches("0x"), 16)))
             .collect::<Result<_, _>>()
-            .map_err(|e| format!("{text}: {e}"))?;
-        if words.len() == 8 { Ok(words) } else { Err(format!("unexpected monitor output {text:?}")) }
+            .map_err(|e| format!("{}: {e}", text.chars().take(500).collect::<String>()))?;
+        if words.len() == n { Ok(words) } else { Err(format!("{} of {n} words from the monitor", words.len())) }
+    };
+    let read_stats = || read_memory(addr, 8);
+    let stack_words = usize::try_from((stack_start - stack_end) / 4).map_err(|e| e.to_string())?;
+    // The firmware painted its free stack at power-up (`firmware/src/stack.rs`): the deepest
+    // word without the paint is as far as the stack has gone.
+    let stack_peak = || -> Result<u64, String> {
+        let untouched = read_memory(stack_end, stack_words)?.iter().take_while(|&&w| w == STACK_PAINT).count();
+        Ok(stack_start - stack_end - 4 * untouched as u64)
     };
     std::thread::sleep(Duration::from_millis(500));
     let idle = read_stats()?;
+    let stack_booted = stack_peak()?;
     let mut s = TcpStream::connect(("127.0.0.1", port)).map_err(|e| e.to_string())?;
     s.set_read_timeout(Some(Duration::from_secs(2))).map_err(|e| e.to_string())?;
     let read_word = |s: &mut TcpStream, reg: u16, n: u16| -> Result<Vec<u8>, String> {
@@ -316,6 +335,7 @@ fn tick_cost() -> Result<(), String> {
     }
     let end = position(&mut s)?;
     let after = read_stats()?;
+    let stack_served = stack_peak()?;
     drop(qemu);
     let per_count = 250.0 / f64::from(1u32 << ICOUNT_SHIFT);
     let per_tick = |n: u64, sum: u64| if n == 0 { 0.0 } else { sum as f64 * per_count / n as f64 };
@@ -330,6 +350,11 @@ fn tick_cost() -> Result<(), String> {
     let (emitted, coasting) = (word(6) as u32 as i32, word(7) as u32 as i32);
     println!("  coasted:  {} ticks while the bus task held the drive, {coasting} steps emitted in them", word(5));
     println!("  steps:    {emitted} emitted by the stage, the drive ends at {end} (a move re-targeted to 12 000)");
+    println!(
+        "  stack:    {stack_booted} B at the most after booting, {stack_served} B after these requests, of the {} B \
+         below the statics",
+        stack_start - stack_end
+    );
     if end != 12_000 || emitted != end {
         return Err(format!("the stage emitted {emitted} steps, the drive stands at {end}: 12 000 both expected"));
     }
