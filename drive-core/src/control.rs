@@ -252,11 +252,22 @@ impl DriveState {
         Ok(())
     }
 
-    /// The axis after writing `value` to the motion object `obj` at `self.now`, or why not.
-    /// `Ok(None)`: accepted, the axis is left as it is.
-    pub(crate) fn plan_motion(&self, obj: Obj, value: u32) -> Result<Option<(Axis, Pp)>, ObjError> {
-        let mut axis = self.axis;
-        let mut pp = self.pp;
+    /// Plans writing `value` to the motion object `obj` at `self.now` into `planned`: the axis
+    /// and set-points after it, `None` if the write leaves them as they are; or why not (and
+    /// `None`). The caller's slot is the one copy of the axis (680 bytes of profile) that
+    /// planning makes: the planner's stack on a microcontroller is short.
+    pub(crate) fn plan_motion(&self, obj: Obj, value: u32, planned: &mut Option<(Axis, Pp)>) -> Result<(), ObjError> {
+        let result = self.plan_motion_into(obj, value, planned);
+        if !matches!(result, Ok(true)) {
+            *planned = None;
+        }
+        result.map(|_| ())
+    }
+
+    /// [`DriveState::plan_motion`] on the copy in `planned`: `Ok(false)` if the write leaves
+    /// the axis as it is.
+    fn plan_motion_into(&self, obj: Obj, value: u32, planned: &mut Option<(Axis, Pp)>) -> Result<bool, ObjError> {
+        let (axis, pp) = planned.insert((self.axis, self.pp));
         let now = self.now;
         let busy = !axis.is_still();
         let mode = self.param(Obj::Mode);
@@ -273,13 +284,13 @@ impl DriveState {
                 let target = if obj == Obj::AbsoluteMove {
                     i64::from(value as i32)
                 } else if busy {
-                    return Ok(None);
+                    return Ok(false);
                 } else if self.param(Obj::Direction) == 0 {
                     position.saturating_add(i64::from(value))
                 } else {
                     position.saturating_sub(i64::from(value))
                 };
-                go_to(&mut axis, target, speed)?;
+                go_to(axis, target, speed)?;
             }
             Obj::MaxSpeed => {
                 let v = f64::from(value as i32);
@@ -293,23 +304,23 @@ impl DriveState {
                     }
                     (0, Some(target)) if busy => {
                         refuse(v != 0.0)?;
-                        go_to(&mut axis, target, v)?;
+                        go_to(axis, target, v)?;
                     }
-                    _ => return Ok(None),
+                    _ => return Ok(false),
                 }
             }
             Obj::Mode => {
                 if value == mode {
-                    return Ok(None);
+                    return Ok(false);
                 }
                 // Leaving a mode while moving: the manual decelerates from velocity to position.
                 refuse(!busy || (mode == 1 && value == 0))?;
                 if busy {
                     axis.run_at(now, 0.0, 0.0, &self.scurve_limits(speed)).map_err(|_| ObjError::Refused)?;
                 }
-                pp = Pp::default();
+                *pp = Pp::default();
             }
-            Obj::ControlWord if matches!(mode, 4 | 5) => self.plan_controlword(&mut axis, &mut pp, value as u16)?,
+            Obj::ControlWord if matches!(mode, 4 | 5) => self.plan_controlword(axis, pp, value as u16)?,
             Obj::PpRunSpeed if mode == 5 && busy && !pp.halted => {
                 let v = f64::from(value as i32);
                 let sp = self.pp_setpoint(0, v);
@@ -317,13 +328,13 @@ impl DriveState {
             }
             Obj::Stop => {
                 axis.halt();
-                pp = Pp::default();
+                *pp = Pp::default();
             }
             Obj::Enable if value == 0 => {
                 axis.halt();
-                pp = Pp::default();
+                *pp = Pp::default();
             }
-            Obj::Enable => return Ok(None),
+            Obj::Enable => return Ok(false),
             Obj::Position | Obj::Microsteps => refuse(!busy)?,
             Obj::ZeroOffset => {
                 refuse(!busy)?;
@@ -332,9 +343,9 @@ impl DriveState {
                     axis.set_position(self.servo.encoder.wrapping_add(i64::from(value as i32)));
                 }
             }
-            _ => return Ok(None),
+            _ => return Ok(false),
         }
-        Ok(Some((axis, pp)))
+        Ok(true)
     }
 
     /// Checks a write to a motion object: refused when the drive cannot act on it now.
@@ -342,7 +353,7 @@ impl DriveState {
         if crate::pvt::is_pvt_command(obj) {
             return self.check_pvt(obj, value);
         }
-        self.plan_motion(obj, value).map(|_| ())
+        self.plan_motion(obj, value, &mut None)
     }
 
     /// Writes a motion object, which [`DriveState::check_motion`] accepted.
@@ -350,12 +361,14 @@ impl DriveState {
         if crate::pvt::is_pvt_command(obj) {
             return self.apply_pvt(obj, value);
         }
-        let planned = self.plan_motion(obj, value).ok().flatten();
-        self.commit_motion(obj, value, planned);
+        let mut planned = None;
+        // Checked already: were it refused now, `planned` is `None` and the axis stays.
+        let _ = self.plan_motion(obj, value, &mut planned);
+        self.commit_motion(obj, value, &mut planned);
     }
 
     /// Writes the motion object `obj` with the axis `planned` for it ([`DriveState::plan_motion`]).
-    pub(crate) fn commit_motion(&mut self, obj: Obj, value: u32, planned: Option<(Axis, Pp)>) {
+    pub(crate) fn commit_motion(&mut self, obj: Obj, value: u32, planned: &mut Option<(Axis, Pp)>) {
         match obj {
             // Writing a signed speed sets the direction of relative moves (see the module doc).
             Obj::MaxSpeed if value != 0 => self.set_param(Obj::Direction, u32::from((value as i32) < 0)),
@@ -365,8 +378,8 @@ impl DriveState {
             self.set_param(obj, value);
         }
         if let Some((axis, pp)) = planned {
-            self.axis = axis;
-            self.pp = pp;
+            self.axis = *axis;
+            self.pp = *pp;
             if matches!(obj, Obj::Stop | Obj::Enable) {
                 self.pvt.cancel();
             }
@@ -389,9 +402,8 @@ impl DriveState {
             return;
         }
         if let Some(sp) = self.pp.buffered.take() {
-            let mut axis = self.axis;
-            if axis.move_to(now, sp.target, sp.depart, sp.arrive, &sp.limits).is_ok() {
-                self.axis = axis;
+            // A plan that fails leaves the axis as it was.
+            if self.axis.move_to(now, sp.target, sp.depart, sp.arrive, &sp.limits).is_ok() {
                 self.pp.active = Some(sp);
             }
             if self.param(Obj::ControlWord) as u16 & CW_NEW_SETPOINT == 0 {

@@ -483,8 +483,9 @@ impl DriveState {
         // The objects whose check is `check_motion` and whose write is `apply_motion`.
         if is_command(d.obj) && has_effect(d.obj) && !crate::pvt::is_pvt_command(d.obj) && d.obj != Obj::Position {
             Self::check_writable(d, value)?;
-            let planned = self.plan_motion(d.obj, value)?;
-            self.commit_motion(d.obj, value, planned);
+            let mut planned = None;
+            self.plan_motion(d.obj, value, &mut planned)?;
+            self.commit_motion(d.obj, value, &mut planned);
             return Ok(());
         }
         self.check_def(d, value)?;

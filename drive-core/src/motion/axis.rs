@@ -174,12 +174,14 @@ impl Axis {
         }
     }
 
-    /// The state at `now` with the anchor moved to its whole part.
-    fn rebase(&mut self, now: Instant) -> State {
+    /// The anchor moved to the whole part of the position at `now`, and the state at `now`
+    /// relative to it. Nothing changes: a plan from it commits both only if it succeeds (and
+    /// the axis is not copied aside for that: it holds a 680-byte profile, and the planner's
+    /// stack on a microcontroller is short).
+    fn rebased(&self, now: Instant) -> (i64, State) {
         let s = self.state_at(now);
         let (whole, frac) = split(self.anchor, s.p);
-        self.anchor = whole;
-        State { p: frac, ..s }
+        (whole, State { p: frac, ..s })
     }
 
     /// Moves to `target`, arriving at `arrive_v` (the stop speed, from which the drive jumps to
@@ -218,17 +220,16 @@ impl Axis {
         then: Then,
         limits: &Limits,
     ) -> Result<(), PlanError> {
-        let mut next = *self;
-        let mut start = next.rebase(now);
-        let goal = target.saturating_sub(next.anchor) as f64;
+        let (anchor, mut start) = self.rebased(now);
+        let goal = target.saturating_sub(anchor) as f64;
         let direction = if goal >= start.p { 1.0 } else { -1.0 };
-        if next.is_still() && start.p != goal {
+        if self.is_still() && start.p != goal {
             start.v = direction * depart_v.min(limits.v_max);
         }
         // The planner takes the arrival speed as a magnitude, in the direction of the move.
         let profile = Profile::to_position(start, goal, arrive_v.min(limits.v_max), limits)?;
-        next.segment = Segment::Profile { profile, start: now, then };
-        *self = next;
+        self.anchor = anchor;
+        self.segment = Segment::Profile { profile, start: now, then };
         Ok(())
     }
 
@@ -240,14 +241,13 @@ impl Axis {
     /// Changes speed to `v` (signed) from whatever the axis is doing at `now`, then keeps it.
     /// From rest it may jump to `depart_v` first. Nothing changes if the plan fails.
     pub fn run_at(&mut self, now: Instant, v: f64, depart_v: f64, limits: &Limits) -> Result<(), PlanError> {
-        let mut next = *self;
-        let mut start = next.rebase(now);
-        if next.is_still() && v != 0.0 {
+        let (anchor, mut start) = self.rebased(now);
+        if self.is_still() && v != 0.0 {
             start.v = libm::copysign(depart_v.min(libm::fabs(v)), v);
         }
         let profile = Profile::to_velocity(start, v, limits)?;
-        next.segment = Segment::Profile { profile, start: now, then: Then::Cruise };
-        *self = next;
+        self.anchor = anchor;
+        self.segment = Segment::Profile { profile, start: now, then: Then::Cruise };
         Ok(())
     }
 
