@@ -21,9 +21,11 @@
 use crate::drive::{DriveState, STATUS_BUSY};
 use crate::faults::Inputs;
 use crate::motion::axis::{Axis, Setpoint};
+use crate::motion::cubic::Table;
 use crate::motion::scurve::Limits;
 use crate::od::{Obj, ObjError};
 use crate::units::Instant;
+use core::borrow::BorrowMut;
 use fixed::types::U0F16;
 
 /// Control ticks per second. At 20 kHz a tick is 50 µs: at the manual's top speed of 200 kpps
@@ -121,7 +123,7 @@ pub struct Outputs {
 /// Fast-decay shares of 0x6010's values 0..=3: 0, 1/2, 3/4, 7/8.
 const DECAY: [U0F16; 4] = [U0F16::ZERO, U0F16::lit("0.5"), U0F16::lit("0.75"), U0F16::lit("0.875")];
 
-impl DriveState {
+impl<P: BorrowMut<Table>> DriveState<P> {
     pub(crate) fn param(&self, obj: Obj) -> u32 {
         self.params.get(obj as usize).copied().unwrap_or(0)
     }

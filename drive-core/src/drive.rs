@@ -14,6 +14,7 @@ use crate::rtu::{Framer, MAX_FRAME, RxError};
 use crate::servo::{Feedback, Servo};
 use crate::store::{FaultHistory, HISTORY_OBJECTS};
 use crate::units::{Baud, Instant, SlaveAddr};
+use core::borrow::BorrowMut;
 
 /// Controller status bit 2: a stall was detected (write 1 to clear; moves are refused while set).
 pub const STATUS_STALL: u8 = 1 << 2;
@@ -177,8 +178,12 @@ pub struct Status {
 }
 
 /// Everything the object dictionary reads and writes.
+///
+/// `P` holds the PVT point table (10 KB): the state owns it by default; a microcontroller keeps
+/// it in a static of its own and lends it (`&'static mut Table`), so that building the state
+/// never passes 10 KB through its stack.
 #[derive(Clone, Debug)]
-pub struct DriveState {
+pub struct DriveState<P = Table> {
     pub(crate) params: [u32; Obj::COUNT],
     pub(crate) status: Status,
     identity: Identity,
@@ -195,7 +200,7 @@ pub struct DriveState {
     /// The PVT run and which slots of `table` hold points.
     pub(crate) pvt: Pvt,
     /// The PVT points (10 KB: kept out of [`Checkpoint`]).
-    pub(crate) table: Table,
+    pub(crate) table: P,
     /// The fault history and the supervision's memory (changed by the tick only, so kept out of
     /// [`Checkpoint`]: a write cannot change it).
     pub(crate) faults: FaultLog,
@@ -224,9 +229,11 @@ pub struct Checkpoint {
 impl DriveState {
     /// Factory state.
     pub fn new(identity: Identity, can_save: bool) -> Self {
-        Self::booted(identity, can_save, Params::factory().values, 0, FaultLog::default())
+        Self::booted(identity, can_save, Params::factory().values, 0, FaultLog::default(), Table::EMPTY)
     }
+}
 
+impl<P: BorrowMut<Table>> DriveState<P> {
     /// The state at power-up with the object values `params`, the storage status `storage` and
     /// the fault history `faults` (as saved: not to be saved again).
     ///
@@ -234,7 +241,14 @@ impl DriveState {
     /// straight into the caller's place. Built in a local and then modified, it would be copied
     /// out, and a microcontroller's stack does not hold the second copy.
     #[inline(never)]
-    fn booted(identity: Identity, can_save: bool, params: [u32; Obj::COUNT], storage: u8, faults: FaultLog) -> Self {
+    fn booted(
+        identity: Identity,
+        can_save: bool,
+        params: [u32; Obj::COUNT],
+        storage: u8,
+        faults: FaultLog,
+        table: P,
+    ) -> Self {
         let get = |obj: Obj| params.get(obj as usize).copied().unwrap_or(0);
         let feedback = Feedback::from_objects(get(Obj::Feedback), get(Obj::EncoderCpr));
         Self {
@@ -248,7 +262,7 @@ impl DriveState {
             pp: Pp::default(),
             still_since: None,
             pvt: Pvt::default(),
-            table: Table::EMPTY,
+            table,
             faults_saved: faults.count,
             faults,
             servo: Servo::new(feedback),
@@ -590,7 +604,7 @@ pub struct Counters {
 
 /// A drive on a serial line: the RTU slave and the drive state behind it.
 #[derive(Clone, Debug)]
-pub struct Drive<M: RegisterMap = NativeMap> {
+pub struct Drive<M: RegisterMap = NativeMap, P = Table> {
     framer: Framer,
     address: SlaveAddr,
     baud: Baud,
@@ -599,7 +613,7 @@ pub struct Drive<M: RegisterMap = NativeMap> {
     tx: [u8; MAX_FRAME],
     tx_len: usize,
     map: M,
-    state: DriveState,
+    state: DriveState<P>,
 }
 
 impl Drive<NativeMap> {
@@ -629,8 +643,26 @@ impl<M: RegisterMap> Drive<M> {
     /// [`Drive::boot`] with the registers laid out by `map`. The node id and baud rate in force
     /// are those of `params` unless `config` overrides them (and the override is what the objects
     /// then show, and what a save stores).
-    #[inline(never)]
     pub fn boot_with_map(config: DriveConfig, map: M, params: &Params, storage: u8) -> Self {
+        Self::boot_with_table(config, map, params, storage, Table::EMPTY)
+    }
+}
+
+impl<M: RegisterMap, P: BorrowMut<Table>> Drive<M, P> {
+    /// [`Drive::boot_with_map`] with the PVT point table `table` (its points are not read: the
+    /// table starts empty). A microcontroller passes a `&'static mut Table` from a static of
+    /// its own, so the drive it builds is 2.8 KB instead of 12.8 KB:
+    ///
+    /// ```
+    /// use drive_core::{Drive, DriveConfig, Params};
+    /// use drive_core::motion::cubic::Table;
+    /// use drive_core::od::map::NativeMap;
+    /// let mut table = Table::EMPTY;
+    /// let d = Drive::boot_with_table(DriveConfig::default(), NativeMap::new(), &Params::factory(), 0, &mut table);
+    /// assert!(core::mem::size_of_val(&d) < 3 * 1024);
+    /// ```
+    #[inline(never)]
+    pub fn boot_with_table(config: DriveConfig, map: M, params: &Params, storage: u8, table: P) -> Self {
         // The values are settled first and the drive is one struct expression (as the state is,
         // `DriveState::booted`), so that nothing of 12 KB is built aside and copied.
         let mut values = Params::factory().values;
@@ -662,7 +694,14 @@ impl<M: RegisterMap> Drive<M> {
             tx: [0; MAX_FRAME],
             tx_len: 0,
             map,
-            state: DriveState::booted(config.identity, config.can_save, values, storage & !STORAGE_SAVING, faults),
+            state: DriveState::booted(
+                config.identity,
+                config.can_save,
+                values,
+                storage & !STORAGE_SAVING,
+                faults,
+                table,
+            ),
         }
     }
 
@@ -677,12 +716,12 @@ impl<M: RegisterMap> Drive<M> {
     }
 
     /// The drive state behind the registers.
-    pub fn state(&self) -> &DriveState {
+    pub fn state(&self) -> &DriveState<P> {
         &self.state
     }
 
     /// The drive state, for the platform (inputs, motion).
-    pub fn state_mut(&mut self) -> &mut DriveState {
+    pub fn state_mut(&mut self) -> &mut DriveState<P> {
         &mut self.state
     }
 
@@ -851,9 +890,9 @@ enum Outcome {
 }
 
 /// The parts of a drive that execute a request.
-struct Server<'a, M> {
+struct Server<'a, M, P> {
     map: &'a mut M,
-    state: &'a mut DriveState,
+    state: &'a mut DriveState<P>,
     counters: &'a mut Counters,
     listen_only: &'a mut bool,
 }
@@ -861,7 +900,7 @@ struct Server<'a, M> {
 /// Conformity level of device identification: regular, stream and individual access.
 const CONFORMITY: u8 = 0x82;
 
-impl<M: RegisterMap> Server<'_, M> {
+impl<M: RegisterMap, P: BorrowMut<Table>> Server<'_, M, P> {
     /// Whether a request executes when it gets no answer (broadcast, listen-only mode).
     fn silent_allowed(&self, req: &Request<'_>) -> bool {
         match *req {

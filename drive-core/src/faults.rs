@@ -17,8 +17,10 @@
 //!   0x6084 it is 0 (applied). With 0x6038 = 0 the duty is always 0: no brake fitted.
 
 use crate::drive::DriveState;
+use crate::motion::cubic::Table;
 use crate::od::Obj;
 use crate::units::Instant;
+use core::borrow::BorrowMut;
 
 /// 0x6000 bit 0: driver over-temperature.
 pub const ERR_OVER_TEMPERATURE: u8 = 1 << 0;
@@ -171,7 +173,7 @@ fn code_of(table: &[(u8, u8)], bits: u8) -> Option<u8> {
     table.iter().find(|(bit, _)| bits & bit != 0).map(|&(_, code)| code)
 }
 
-impl DriveState {
+impl<P: BorrowMut<Table>> DriveState<P> {
     /// Whether a fault is latched (0x6000 or 0x2135): the power stage stays off.
     pub fn faulted(&self) -> bool {
         self.status.error != 0 || self.status.faults != 0

@@ -47,10 +47,11 @@
 use crate::control::TICK_MICROS;
 use crate::drive::DriveState;
 use crate::motion::axis::Axis;
-use crate::motion::cubic::{Cubic, Point, TABLE_SIZE, V_MAX};
+use crate::motion::cubic::{Cubic, Point, TABLE_SIZE, Table, V_MAX};
 use crate::motion::scurve::Limits;
 use crate::od::{Obj, ObjError};
 use crate::units::Instant;
+use core::borrow::BorrowMut;
 
 /// Controller status bit 5: the mode 3 FIFO is empty.
 pub const STATUS_FIFO_EMPTY: u8 = 1 << 5;
@@ -190,7 +191,7 @@ impl Source {
     }
 }
 
-impl DriveState {
+impl<P: BorrowMut<Table>> DriveState<P> {
     fn pvt_mode(&self) -> u32 {
         self.param(Obj::PvtMode)
     }
@@ -203,7 +204,7 @@ impl DriveState {
 
     /// The stored point `i` of the table (modes 1, 2) or the ring's `i`-th slot.
     fn stored(&self, i: u16) -> Option<Point> {
-        self.table.get(usize::from(i))
+        self.table.borrow().get(usize::from(i))
     }
 
     /// The point in the PVT registers 0x6027..0x602C.
@@ -371,7 +372,7 @@ impl DriveState {
         match effect {
             Ok(Effect::Push(p)) => {
                 let slot = (usize::from(pvt.head) + usize::from(pvt.len)) % TABLE_SIZE;
-                self.table.set(slot, p);
+                self.table.borrow_mut().set(slot, p);
                 pvt.len += 1;
                 pvt.last = Some(p);
             }

@@ -47,8 +47,10 @@ use crate::control::TICK_MICROS;
 use crate::drive::{DriveState, STATUS_STALL};
 use crate::faults::{FAULT_POSITION, Inputs};
 use crate::motion::axis::Setpoint;
+use crate::motion::cubic::Table;
 use crate::od::Obj;
 use crate::units::Instant;
+use core::borrow::BorrowMut;
 use fixed::types::U0F32;
 
 /// Full steps in one turn of the motor (a 1.8° hybrid stepper).
@@ -403,7 +405,7 @@ impl Servo {
     }
 }
 
-impl DriveState {
+impl<P: BorrowMut<Table>> DriveState<P> {
     /// The encoder reading of this tick: 0x6089, and in closed loop the measured position. The
     /// first reading of a closed loop places the standing axis on the measured position.
     pub(crate) fn sense(&mut self, inputs: &Inputs) {

@@ -23,6 +23,7 @@
 //! the drive, run on the flash without it, then reported back, if the drive sits behind a lock
 //! that the control tick also takes.
 
+use core::borrow::BorrowMut;
 use core::ops::Range;
 
 use embedded_storage_async::nor_flash::NorFlash;
@@ -33,6 +34,7 @@ use crate::drive::{
     Drive, DriveState, Params, STORAGE_CORRUPT, STORAGE_EMPTY, STORAGE_FSET, STORAGE_SAVE_FAILED, SystemRequest,
 };
 use crate::faults::HISTORY_LEN;
+use crate::motion::cubic::Table;
 use crate::od::{Access, OBJECTS, Obj, RegisterMap, Storage};
 
 /// Map key of the parameter record.
@@ -73,7 +75,7 @@ pub struct FaultHistory {
 
 impl FaultHistory {
     /// The history `state` shows now.
-    pub fn of(state: &DriveState) -> Self {
+    pub fn of<P: BorrowMut<Table>>(state: &DriveState<P>) -> Self {
         let mut history = Self { count: state.read(Obj::AlarmCount) as u16, ..Self::default() };
         for (e, obj) in history.entries.iter_mut().zip(HISTORY_OBJECTS) {
             *e = state.read(obj);
@@ -284,9 +286,9 @@ impl<S: NorFlash> Store<S> {
     /// and [`Job::finish`] in one call, for a platform that can lend the drive for the flash
     /// operation. Returns the request and how it went; [`SystemRequest::BootLoader`] is the
     /// platform's to act on. Call it outside the control tick, after the reply has been sent.
-    pub async fn serve<M: RegisterMap>(
+    pub async fn serve<M: RegisterMap, P: BorrowMut<Table>>(
         &mut self,
-        drive: &mut Drive<M>,
+        drive: &mut Drive<M, P>,
     ) -> Option<(SystemRequest, Result<(), Error<S>>)> {
         let job = Job::take(drive)?;
         let done = self.run(&job).await;
@@ -373,7 +375,7 @@ pub enum Job {
 impl Job {
     /// Takes the drive's pending request, if any, with a copy of its parameters for a save. The
     /// drive shows the save in progress (0x2120 bit 3) and refuses another until [`Job::finish`].
-    pub fn take<M: RegisterMap>(drive: &mut Drive<M>) -> Option<Self> {
+    pub fn take<M: RegisterMap, P: BorrowMut<Table>>(drive: &mut Drive<M, P>) -> Option<Self> {
         Some(match drive.take_system_request()? {
             SystemRequest::Save => Job::Save(drive.state().params()),
             SystemRequest::SavePosition(position) => Job::SavePosition(position),
@@ -394,7 +396,7 @@ impl Job {
 
     /// Tells the drive how the job went (`ok`: the flash holds what it was asked to hold). Only a
     /// parameter save has a status in the drive (0x2120 bits 3 and 4).
-    pub fn finish<M: RegisterMap>(&self, drive: &mut Drive<M>, ok: bool) {
+    pub fn finish<M: RegisterMap, P: BorrowMut<Table>>(&self, drive: &mut Drive<M, P>, ok: bool) {
         if matches!(self, Job::Save(_)) {
             drive.save_done(ok);
         }

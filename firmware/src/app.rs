@@ -15,7 +15,9 @@ use core::sync::atomic::{AtomicU32, Ordering};
 
 use defmt::warn;
 use drive_core::ident::Identity;
-use drive_core::{Baud, Drive, DriveConfig, Instant, Params};
+use drive_core::motion::cubic::Table;
+use drive_core::od::NativeMap;
+use drive_core::{Baud, DriveConfig, Instant, Params};
 use embassy_futures::select::{Either, select};
 use embassy_time::Timer;
 use embedded_io_async::{Read, Write};
@@ -24,8 +26,13 @@ use crate::board::Serial;
 use crate::frames::MAX_FRAME;
 use crate::power::PowerStage;
 
+/// The drive of the firmware: the native map, and the PVT point table (10 KB) in a static of its
+/// own, lent to the drive, so that building the drive (2.8 KB) never passes the table through
+/// the stack.
+pub type Drive = drive_core::Drive<NativeMap, &'static mut Table>;
+
 /// The drive, once `start` has built it. A reference, so the mutex's initial value (`None`) is
-/// zero and lives in .bss: an `Option<Drive>` would copy 2.3 KB of initial image from flash.
+/// zero and lives in .bss: an `Option<Drive>` would copy its initial image from flash.
 static DRIVE: spin::Mutex<Option<&'static mut Drive>> = spin::Mutex::new(None);
 
 /// Control ticks run since power-up (the watchdog is fed only while this advances).
@@ -49,23 +56,32 @@ fn identity(hardware: &'static str) -> Identity {
 /// Returns the serial line settings in force: the baud rate and the parity (0x2100).
 pub fn start(hardware: &'static str, params: &Params, status: u8, can_save: bool) -> (Baud, u32) {
     let config = DriveConfig { identity: identity(hardware), can_save, ..DriveConfig::default() };
-    // singleton! yields its memory once; uninitialised, it is .bss with no flash image.
-    let Some(slot) = cortex_m::singleton!(: MaybeUninit<Drive> = MaybeUninit::uninit()) else {
+    // singleton! yields its memory once; uninitialised (the slot) or all zeros (the empty
+    // table), it is .bss with no flash image.
+    let (Some(slot), Some(table)) = (
+        cortex_m::singleton!(: MaybeUninit<Drive> = MaybeUninit::uninit()),
+        cortex_m::singleton!(: Table = Table::EMPTY),
+    ) else {
         defmt::panic!("app::start called twice");
     };
-    let drive = boot_into(slot, config, params, status);
+    let drive = boot_into(slot, config, params, status, table);
     let line = (drive.baud(), drive.state().read(drive_core::od::Obj::Parity));
     DRIVE.lock().replace(drive);
     line
 }
 
-/// Builds the drive in `slot`. The drive is 12 KB (mostly the PVT table) and the G431's stack
-/// about 16 KB: `Drive::boot` builds it in one place, but the compiler still copies it once
-/// through this frame into the static. Out of line, so that copy is on the stack only for this
-/// call, and with nothing else of size under it (see `board::init`, `run::power_up`).
+/// Builds the drive in `slot`, lending it `table`. The compiler builds the drive (2.8 KB) in
+/// this frame and copies it into the static; out of line, so the copy is on the stack for this
+/// call only.
 #[inline(never)]
-fn boot_into<'a>(slot: &'a mut MaybeUninit<Drive>, config: DriveConfig, params: &Params, status: u8) -> &'a mut Drive {
-    slot.write(Drive::boot(config, params, status))
+fn boot_into(
+    slot: &'static mut MaybeUninit<Drive>,
+    config: DriveConfig,
+    params: &Params,
+    status: u8,
+    table: &'static mut Table,
+) -> &'static mut Drive {
+    slot.write(Drive::boot_with_table(config, NativeMap::new(), params, status, table))
 }
 
 /// Runs `f` on the drive, if it has been started. For the tasks (thread mode), never from an

@@ -4,17 +4,24 @@ use super::index;
 use super::{Access, OBJECTS, Obj, ObjError, ObjectDef, Range, Type};
 use crate::control::has_effect;
 use crate::drive::DriveState;
+use crate::motion::cubic::Table;
 use crate::pdu::{Exception, MAX_WRITE, Words};
+use core::borrow::BorrowMut;
 use heapless::Vec;
 
 /// A vendor's register layout over the drive's objects.
 pub trait RegisterMap {
     /// Reads `out.len() / 2` registers from `addr` into `out`, big-endian.
-    fn read(&self, drive: &DriveState, addr: u16, out: &mut [u8]) -> Result<(), Exception>;
+    fn read<P: BorrowMut<Table>>(&self, drive: &DriveState<P>, addr: u16, out: &mut [u8]) -> Result<(), Exception>;
     /// Whether `qty` registers from `addr` could be read (checked before 0x17 writes anything).
     fn check_read(&self, addr: u16, qty: u16) -> Result<(), Exception>;
     /// Writes `values` from `addr`: all of them, or none and an exception.
-    fn write(&mut self, drive: &mut DriveState, addr: u16, values: Words<'_>) -> Result<(), Exception>;
+    fn write<P: BorrowMut<Table>>(
+        &mut self,
+        drive: &mut DriveState<P>,
+        addr: u16,
+        values: Words<'_>,
+    ) -> Result<(), Exception>;
 }
 
 /// The drive's native map (seed 000): register numbers are object addresses, 32-bit objects are
@@ -85,9 +92,9 @@ impl NativeMap {
     /// the first refusal goes to `refused`: an address error anywhere in the request still comes
     /// first, and a request with commands among several objects is checked again by the caller.
     #[inline]
-    fn plan(
+    fn plan<P: BorrowMut<Table>>(
         &self,
-        drive: &DriveState,
+        drive: &DriveState<P>,
         addr: u16,
         values: Words<'_>,
         plan: &mut Plan,
@@ -163,7 +170,11 @@ impl NativeMap {
     /// clone would copy the 10 KB PVT table).
     // Out of line: the checkpoint would otherwise weigh on every write's stack frame.
     #[inline(never)]
-    fn commit_in_order(&mut self, drive: &mut DriveState, plan: &Plan) -> Result<(), Exception> {
+    fn commit_in_order<P: BorrowMut<Table>>(
+        &mut self,
+        drive: &mut DriveState<P>,
+        plan: &Plan,
+    ) -> Result<(), Exception> {
         let saved = drive.checkpoint();
         for &(d, op) in plan.iter() {
             if let Op::Commit(v) = op
@@ -183,7 +194,12 @@ impl NativeMap {
     /// changes, all or nothing.
     // Out of line, with its plan on the stack: a one-register write does without both.
     #[inline(never)]
-    fn write_planned(&mut self, drive: &mut DriveState, addr: u16, values: Words<'_>) -> Result<(), Exception> {
+    fn write_planned<P: BorrowMut<Table>>(
+        &mut self,
+        drive: &mut DriveState<P>,
+        addr: u16,
+        values: Words<'_>,
+    ) -> Result<(), Exception> {
         let mut plan = Plan::new();
         let mut refused = None;
         let commands = self.plan(drive, addr, values, &mut plan, &mut refused).map_err(native_exception)?;
@@ -222,7 +238,7 @@ static PLAIN: [(u32, u32); Obj::COUNT] = {
     while i < Obj::COUNT {
         #[allow(clippy::indexing_slicing)] // const evaluation: out of bounds is a compile error
         {
-            if DriveState::plain(&OBJECTS[i])
+            if DriveState::<Table>::plain(&OBJECTS[i])
                 && OBJECTS[i].words() == 1
                 && let Some(bounds) = interval(OBJECTS[i].ty, OBJECTS[i].range)
             {
@@ -280,7 +296,7 @@ pub(crate) fn is_command(obj: Obj) -> bool {
 
 /// Register `reg` of the `i`th object, a live value or a text.
 #[inline(never)]
-fn other_word(drive: &DriveState, i: usize, reg: u32) -> u16 {
+fn other_word<P: BorrowMut<Table>>(drive: &DriveState<P>, i: usize, reg: u32) -> u16 {
     let Some(d) = OBJECTS.get(i) else { return 0 };
     let Some(k) = reg.checked_sub(u32::from(d.addr)) else { return 0 };
     match d.ty {
@@ -296,7 +312,7 @@ type Plan = Vec<(&'static ObjectDef, Op), { MAX_WRITE as usize }>;
 
 impl RegisterMap for NativeMap {
     #[inline(always)]
-    fn read(&self, drive: &DriveState, addr: u16, out: &mut [u8]) -> Result<(), Exception> {
+    fn read<P: BorrowMut<Table>>(&self, drive: &DriveState<P>, addr: u16, out: &mut [u8]) -> Result<(), Exception> {
         let regs = index::registers(addr, (out.len() / 2) as u16).ok_or(Exception::IllegalDataAddress)?;
         for ((slot, &e), reg) in out.chunks_exact_mut(2).zip(regs).zip(u32::from(addr)..) {
             // A stored value, or a reserved register (shifted out), as the index entry says;
@@ -317,7 +333,12 @@ impl RegisterMap for NativeMap {
     }
 
     #[inline(always)]
-    fn write(&mut self, drive: &mut DriveState, addr: u16, values: Words<'_>) -> Result<(), Exception> {
+    fn write<P: BorrowMut<Table>>(
+        &mut self,
+        drive: &mut DriveState<P>,
+        addr: u16,
+        values: Words<'_>,
+    ) -> Result<(), Exception> {
         // Registers that are all plain one-register settings (0x06 to a parameter, a block of
         // parameters), the commonest writes: the same checks as the plan of `write_planned`
         // makes, without the plan. Anything else (or an address error) goes there.
