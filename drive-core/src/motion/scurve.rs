@@ -472,9 +472,11 @@ impl Walk {
     }
 }
 
-/// The fastest change from `(vs, a_s)` to `(ve, 0)`, optionally with a dip at `dip.v`.
-fn pulse(vs: f64, a_s: f64, ve: f64, lim: &Lim, dip: Option<Dip>) -> Result<Pulse, PlanError> {
-    let mut out = Pulse::EMPTY;
+/// The fastest change from `(vs, a_s)` to `(ve, 0)`, optionally with a dip at `dip.v`, into
+/// `out` (the caller's: returned by value, every call site would keep a pulse of its own on the
+/// stack).
+fn pulse(vs: f64, a_s: f64, ve: f64, lim: &Lim, dip: Option<Dip>, out: &mut Pulse) -> Result<(), PlanError> {
+    *out = Pulse::EMPTY;
     if !lim.smooth() {
         let s = if ve >= vs { 1.0 } else { -1.0 };
         let (u0, u1) = (s * vs, s * ve);
@@ -488,11 +490,10 @@ fn pulse(vs: f64, a_s: f64, ve: f64, lim: &Lim, dip: Option<Dip>) -> Result<Puls
                 out.push((u1 - u0) / lim.dec, s * lim.dec, 0.0)?;
             }
         }
-        return Ok(out);
+        return Ok(());
     }
-    let walk = walk_for(vs, a_s, ve, lim, dip, &mut out)?;
-    walk.0.segments(walk.1, walk.2, &mut out)?;
-    Ok(out)
+    let walk = walk_for(vs, a_s, ve, lim, dip, out)?;
+    walk.0.segments(walk.1, walk.2, out)
 }
 
 /// Sets up the envelope of a jerk-limited pulse (pushing the counter-ramp, if any, into `out`).
@@ -628,13 +629,178 @@ enum Cand {
 
 /// Duration and distance of "pulse to vp, pulse to vf".
 fn turn_td(v0: f64, a0: f64, vp: f64, vf: f64, lim: &Lim) -> Result<Eval, PlanError> {
-    let e1 = pulse(v0, a0, vp, lim, None)?.time_dist(v0);
-    let e2 = pulse(vp, 0.0, vf, lim, None)?.time_dist(vp);
+    let mut p = Pulse::EMPTY;
+    pulse(v0, a0, vp, lim, None, &mut p)?;
+    let e1 = p.time_dist(v0);
+    pulse(vp, 0.0, vf, lim, None, &mut p)?;
+    let e2 = p.time_dist(vp);
     Ok(Eval { t: e1.t + e2.t, d: e1.d + e2.d, mag: e1.mag + e2.mag })
 }
 
 fn dip_td(v0: f64, a0: f64, vf: f64, lim: &Lim, dip: Dip) -> Result<Eval, PlanError> {
-    Ok(pulse(v0, a0, vf, lim, Some(dip))?.time_dist(v0))
+    let mut p = Pulse::EMPTY;
+    pulse(v0, a0, vf, lim, Some(dip), &mut p)?;
+    Ok(p.time_dist(v0))
+}
+
+/// The fastest candidate for a move of `d` from `(v0, a0)`, arriving at the velocity `vf`, and
+/// its evaluation. Out of line, as [`assemble_position`]: the two run one after the other,
+/// and their frames are not on the stack together (a microcontroller's stack is short).
+#[inline(never)]
+fn fastest_position(v0: f64, a0: f64, vf: f64, d: f64, lim: &Lim) -> Result<(Cand, Eval), PlanError> {
+    let vmax = lim.v;
+    // Root searches stop at this residual; candidates are accepted within their own rounding.
+    let ftol = 1e-14 * fabs(d).max(1.0);
+    let mut best: Option<(f64, Cand, Eval)> = None;
+    let consider = |best: &mut Option<(f64, Cand, Eval)>, c: Cand, e: Eval, residual: f64| {
+        if e.t.is_finite() && fabs(residual) <= e.tol() && best.is_none_or(|(bt, _, _)| e.t < bt) {
+            *best = Some((e.t, c, e));
+        }
+    };
+    // A family whose shortest possible duration is no better than the best so far is skipped.
+    let beaten = |best: &Option<(f64, Cand, Eval)>, t_min: f64| best.is_some_and(|(bt, _, _)| t_min >= bt);
+    // A bracket [fa, fb] around zero, up to the rounding of each end.
+    let brackets = |fa: f64, ea: &Eval, fb: f64, eb: &Eval| {
+        (fa <= ea.tol() && fb >= -eb.tol()) || (fa >= -ea.tol() && fb <= eb.tol())
+    };
+
+    // Cruise at +v_max or -v_max.
+    let ep = turn_td(v0, a0, vmax, vf, lim)?;
+    let em = turn_td(v0, a0, -vmax, vf, lim)?;
+    for (e, v) in [(ep, vmax), (em, -vmax)] {
+        let c = (d - e.d) / v;
+        if c >= -e.tol() / vmax {
+            let c = c.max(0.0);
+            let e = Eval { t: e.t + c, d: e.d + c * v, mag: e.mag + fabs(c * v) };
+            consider(&mut best, Cand::Turn { vp: v, cruise: c }, e, e.d - d);
+        }
+    }
+
+    // Turning velocity above both the natural and the final velocity, or below both.
+    let vn = lim.v_nat(v0, a0);
+    let (lo, hi) = (vn.min(vf), vn.max(vf));
+    let mut dist = |vp: f64| turn_td(v0, a0, vp, vf, lim).map(|e| e.d - d);
+    for (xa, ea, xb, eb) in [(hi, None, vmax, Some(ep)), (-vmax, Some(em), lo, None)] {
+        if !(xa <= xb && xa >= -vmax && xb <= vmax) {
+            continue;
+        }
+        let ea = match ea {
+            Some(e) => e,
+            None => turn_td(v0, a0, xa, vf, lim)?,
+        };
+        let eb = match eb {
+            Some(e) => e,
+            None => turn_td(v0, a0, xb, vf, lim)?,
+        };
+        // The duration grows away from the direct profile: the inner end is the shortest.
+        if brackets(ea.d - d, &ea, eb.d - d, &eb) && !beaten(&best, ea.t.min(eb.t)) {
+            let vp = solve(&mut dist, xa, ea.d - d, xb, eb.d - d, ftol)?;
+            let e = turn_td(v0, a0, vp, vf, lim)?;
+            consider(&mut best, Cand::Turn { vp, cruise: 0.0 }, e, e.d - d);
+        }
+    }
+
+    // Between the direct pulse and "ramp to a = 0, then pulse": one pulse whose acceleration
+    // first dips towards zero at full jerk from the start acceleration (UDUD without a turn).
+    // The dip's apex must be within ±v_max (a start above v_max dips at v_max, below).
+    let s_direct = if vf >= vn { 1.0 } else { -1.0 };
+    if lim.smooth() && s_direct * a0 > 0.0 && fabs(vn) <= vmax {
+        let an = fabs(a0);
+        let apex = |a: f64| v0 + s_direct * (an * an - a * a) / (2.0 * lim.j);
+        // The largest dip acceleration whose apex is within the speed limit.
+        let a_top = if fabs(v0) <= vmax {
+            an
+        } else {
+            let vd = if v0 > 0.0 { vmax } else { -vmax };
+            sqrt((an * an - 2.0 * lim.j * fabs(v0 - vd)).max(0.0))
+        };
+        let eval = |a: f64| dip_td(v0, a0, vf, lim, Dip { v: apex(a), a });
+        let (e0, e1) = (eval(0.0)?, eval(a_top)?);
+        if brackets(e0.d - d, &e0, e1.d - d, &e1) && !beaten(&best, e0.t.min(e1.t)) {
+            let a = solve(&mut |a| eval(a).map(|e| e.d - d), 0.0, e0.d - d, a_top, e1.d - d, ftol)?;
+            let e = eval(a)?;
+            consider(&mut best, Cand::Dip { v: apex(a), a }, e, e.d - d);
+        }
+    }
+
+    // Braking from above v_max: one pulse whose deceleration eases off (dips towards a = 0)
+    // as it passes ±v_max; a dip to zero is "brake to v_max, cruise", found above.
+    if lim.smooth() && (fabs(v0) > vmax || fabs(vn) > vmax) {
+        // The pulse's envelope starts at v_nat whenever the start acceleration must first be
+        // ramped down (it then carries the speed there), so the limit it crosses while braking
+        // is the one on v_nat's side; a start above +v_max can be swept beyond -v_max.
+        let sigma = if fabs(vn) > vmax { vn } else { v0 };
+        let vd = if sigma > 0.0 { vmax } else { -vmax };
+        if let Some((a_lo, a_hi)) = dip_bounds(v0, a0, vf, lim, vd)? {
+            let eval = |a: f64| dip_td(v0, a0, vf, lim, Dip { v: vd, a });
+            let (e0, e1) = (eval(a_lo)?, eval(a_hi)?);
+            if brackets(e0.d - d, &e0, e1.d - d, &e1) && !beaten(&best, e0.t.min(e1.t)) {
+                let a = solve(&mut |a| eval(a).map(|e| e.d - d), a_lo, e0.d - d, a_hi, e1.d - d, ftol)?;
+                let e = eval(a)?;
+                consider(&mut best, Cand::Dip { v: vd, a }, e, e.d - d);
+            }
+        }
+    }
+
+    let (_, cand, eval) = best.ok_or(PlanError::NoSolution)?;
+    Ok((cand, eval))
+}
+
+/// The profile of the candidate `cand` (evaluated as `eval`) from `start`, moving at `v0` with
+/// the acceleration `a0`, to `end`; checked to meet it within rounding.
+#[inline(never)]
+fn assemble_position(
+    start: State,
+    a0: f64,
+    cand: Cand,
+    eval: Eval,
+    lim: &Lim,
+    end: State,
+) -> Result<Profile, PlanError> {
+    let (v0, vf, target_p, vmax) = (start.v, end.v, end.p, lim.v);
+    let mut segs = [Seg::default(); MAX_PHASES];
+    let mut ns = 0usize;
+    let mut add = |p: &Pulse| -> Result<(), PlanError> {
+        for s in p.iter() {
+            *segs.get_mut(ns).ok_or(PlanError::NoSolution)? = *s;
+            ns += 1;
+        }
+        Ok(())
+    };
+    // The cruise phase (index, exact velocity): it starts from v_max exactly, not from the
+    // integrated velocity, so that a long cruise does not accumulate its rounding.
+    let mut cruise_at = None;
+    // One pulse at a time, in one buffer.
+    let mut p = Pulse::EMPTY;
+    match cand {
+        Cand::Turn { vp, cruise } => {
+            pulse(v0, a0, vp, lim, None, &mut p)?;
+            add(&p)?;
+            if cruise > 0.0 {
+                cruise_at = Some((p.n, vp));
+                p = Pulse::EMPTY;
+                p.push(cruise, 0.0, 0.0)?;
+                add(&p)?;
+            }
+            pulse(vp, 0.0, vf, lim, None, &mut p)?;
+            add(&p)?;
+        }
+        Cand::Dip { v, a } => {
+            pulse(v0, a0, vf, lim, Some(Dip { v, a }), &mut p)?;
+            add(&p)?;
+        }
+    }
+    let start = State { a: a0, ..start };
+    let prof = Profile::build(start, segs.get(..ns).unwrap_or(&[]), cruise_at, end)?;
+    // The integrated end must meet the target (the last phase lands on it) to within rounding.
+    let last = prof.eval_end();
+    let tol = eval.tol() + 1e-13 * fabs(start.p);
+    // (The end time of a long profile is rounded: up to a few ulp of the duration at full a.)
+    let tol_v = 1e-9 * vmax + 8.0 * f64::EPSILON * prof.duration * lim.acc.max(lim.dec);
+    if fabs(last.p - target_p) > tol || fabs(last.v - vf) > tol_v {
+        return Err(PlanError::NoSolution);
+    }
+    Ok(prof)
 }
 
 fn finite(s: &State) -> bool {
@@ -691,138 +857,8 @@ impl Profile {
             return Profile::build(start, &[], None, end);
         }
 
-        let vmax = lim.v;
-        // Root searches stop at this residual; candidates are accepted within their own rounding.
-        let ftol = 1e-14 * fabs(d).max(1.0);
-        let mut best: Option<(f64, Cand, Eval)> = None;
-        let consider = |best: &mut Option<(f64, Cand, Eval)>, c: Cand, e: Eval, residual: f64| {
-            if e.t.is_finite() && fabs(residual) <= e.tol() && best.is_none_or(|(bt, _, _)| e.t < bt) {
-                *best = Some((e.t, c, e));
-            }
-        };
-        // A family whose shortest possible duration is no better than the best so far is skipped.
-        let beaten = |best: &Option<(f64, Cand, Eval)>, t_min: f64| best.is_some_and(|(bt, _, _)| t_min >= bt);
-        // A bracket [fa, fb] around zero, up to the rounding of each end.
-        let brackets = |fa: f64, ea: &Eval, fb: f64, eb: &Eval| {
-            (fa <= ea.tol() && fb >= -eb.tol()) || (fa >= -ea.tol() && fb <= eb.tol())
-        };
-
-        // Cruise at +v_max or -v_max.
-        let ep = turn_td(v0, a0, vmax, vf, &lim)?;
-        let em = turn_td(v0, a0, -vmax, vf, &lim)?;
-        for (e, v) in [(ep, vmax), (em, -vmax)] {
-            let c = (d - e.d) / v;
-            if c >= -e.tol() / vmax {
-                let c = c.max(0.0);
-                let e = Eval { t: e.t + c, d: e.d + c * v, mag: e.mag + fabs(c * v) };
-                consider(&mut best, Cand::Turn { vp: v, cruise: c }, e, e.d - d);
-            }
-        }
-
-        // Turning velocity above both the natural and the final velocity, or below both.
-        let vn = lim.v_nat(v0, a0);
-        let (lo, hi) = (vn.min(vf), vn.max(vf));
-        let mut dist = |vp: f64| turn_td(v0, a0, vp, vf, &lim).map(|e| e.d - d);
-        for (xa, ea, xb, eb) in [(hi, None, vmax, Some(ep)), (-vmax, Some(em), lo, None)] {
-            if !(xa <= xb && xa >= -vmax && xb <= vmax) {
-                continue;
-            }
-            let ea = match ea {
-                Some(e) => e,
-                None => turn_td(v0, a0, xa, vf, &lim)?,
-            };
-            let eb = match eb {
-                Some(e) => e,
-                None => turn_td(v0, a0, xb, vf, &lim)?,
-            };
-            // The duration grows away from the direct profile: the inner end is the shortest.
-            if brackets(ea.d - d, &ea, eb.d - d, &eb) && !beaten(&best, ea.t.min(eb.t)) {
-                let vp = solve(&mut dist, xa, ea.d - d, xb, eb.d - d, ftol)?;
-                let e = turn_td(v0, a0, vp, vf, &lim)?;
-                consider(&mut best, Cand::Turn { vp, cruise: 0.0 }, e, e.d - d);
-            }
-        }
-
-        // Between the direct pulse and "ramp to a = 0, then pulse": one pulse whose acceleration
-        // first dips towards zero at full jerk from the start acceleration (UDUD without a turn).
-        // The dip's apex must be within ±v_max (a start above v_max dips at v_max, below).
-        let s_direct = if vf >= vn { 1.0 } else { -1.0 };
-        if lim.smooth() && s_direct * a0 > 0.0 && fabs(vn) <= vmax {
-            let an = fabs(a0);
-            let apex = |a: f64| v0 + s_direct * (an * an - a * a) / (2.0 * lim.j);
-            // The largest dip acceleration whose apex is within the speed limit.
-            let a_top = if fabs(v0) <= vmax {
-                an
-            } else {
-                let vd = if v0 > 0.0 { vmax } else { -vmax };
-                sqrt((an * an - 2.0 * lim.j * fabs(v0 - vd)).max(0.0))
-            };
-            let eval = |a: f64| dip_td(v0, a0, vf, &lim, Dip { v: apex(a), a });
-            let (e0, e1) = (eval(0.0)?, eval(a_top)?);
-            if brackets(e0.d - d, &e0, e1.d - d, &e1) && !beaten(&best, e0.t.min(e1.t)) {
-                let a = solve(&mut |a| eval(a).map(|e| e.d - d), 0.0, e0.d - d, a_top, e1.d - d, ftol)?;
-                let e = eval(a)?;
-                consider(&mut best, Cand::Dip { v: apex(a), a }, e, e.d - d);
-            }
-        }
-
-        // Braking from above v_max: one pulse whose deceleration eases off (dips towards a = 0)
-        // as it passes ±v_max; a dip to zero is "brake to v_max, cruise", found above.
-        if lim.smooth() && (fabs(v0) > vmax || fabs(vn) > vmax) {
-            // The pulse's envelope starts at v_nat whenever the start acceleration must first be
-            // ramped down (it then carries the speed there), so the limit it crosses while braking
-            // is the one on v_nat's side; a start above +v_max can be swept beyond -v_max.
-            let sigma = if fabs(vn) > vmax { vn } else { v0 };
-            let vd = if sigma > 0.0 { vmax } else { -vmax };
-            if let Some((a_lo, a_hi)) = dip_bounds(v0, a0, vf, &lim, vd)? {
-                let eval = |a: f64| dip_td(v0, a0, vf, &lim, Dip { v: vd, a });
-                let (e0, e1) = (eval(a_lo)?, eval(a_hi)?);
-                if brackets(e0.d - d, &e0, e1.d - d, &e1) && !beaten(&best, e0.t.min(e1.t)) {
-                    let a = solve(&mut |a| eval(a).map(|e| e.d - d), a_lo, e0.d - d, a_hi, e1.d - d, ftol)?;
-                    let e = eval(a)?;
-                    consider(&mut best, Cand::Dip { v: vd, a }, e, e.d - d);
-                }
-            }
-        }
-
-        let (_, cand, eval) = best.ok_or(PlanError::NoSolution)?;
-        let mut segs = [Seg::default(); MAX_PHASES];
-        let mut ns = 0usize;
-        let mut add = |p: &Pulse| -> Result<(), PlanError> {
-            for s in p.iter() {
-                *segs.get_mut(ns).ok_or(PlanError::NoSolution)? = *s;
-                ns += 1;
-            }
-            Ok(())
-        };
-        // The cruise phase (index, exact velocity): it starts from v_max exactly, not from the
-        // integrated velocity, so that a long cruise does not accumulate its rounding.
-        let mut cruise_at = None;
-        match cand {
-            Cand::Turn { vp, cruise } => {
-                let p1 = pulse(v0, a0, vp, &lim, None)?;
-                add(&p1)?;
-                if cruise > 0.0 {
-                    cruise_at = Some((p1.n, vp));
-                    let mut c = Pulse::EMPTY;
-                    c.push(cruise, 0.0, 0.0)?;
-                    add(&c)?;
-                }
-                add(&pulse(vp, 0.0, vf, &lim, None)?)?;
-            }
-            Cand::Dip { v, a } => add(&pulse(v0, a0, vf, &lim, Some(Dip { v, a }))?)?,
-        }
-        let start = State { a: a0, ..start };
-        let prof = Profile::build(start, segs.get(..ns).unwrap_or(&[]), cruise_at, end)?;
-        // The integrated end must meet the target (the last phase lands on it) to within rounding.
-        let last = prof.eval_end();
-        let tol = eval.tol() + 1e-13 * fabs(start.p);
-        // (The end time of a long profile is rounded: up to a few ulp of the duration at full a.)
-        let tol_v = 1e-9 * vmax + 8.0 * f64::EPSILON * prof.duration * lim.acc.max(lim.dec);
-        if fabs(last.p - target_p) > tol || fabs(last.v - vf) > tol_v {
-            return Err(PlanError::NoSolution);
-        }
-        Ok(prof)
+        let (cand, eval) = fastest_position(v0, a0, vf, d, &lim)?;
+        assemble_position(start, a0, cand, eval, &lim, end)
     }
 
     /// Plans the fastest change from `start` to the velocity `target_v` (signed, |target_v| ≤
@@ -849,7 +885,8 @@ impl Profile {
             return Err(PlanError::InvalidTarget);
         }
         let a0 = if lim.smooth() { start.a } else { 0.0 };
-        let p = pulse(start.v, a0, target_v, &lim, None)?;
+        let mut p = Pulse::EMPTY;
+        pulse(start.v, a0, target_v, &lim, None, &mut p)?;
         let start = State { a: a0, ..start };
         let mut prof = Profile::build(start, p.segs.get(..p.n).unwrap_or(&[]), None, start)?;
         let e = prof.eval_end();
