@@ -237,9 +237,10 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     /// The state at power-up with the object values `params`, the storage status `storage` and
     /// the fault history `faults` (as saved: not to be saved again).
     ///
-    /// One struct expression, out of line: the state (12 KB with the PVT table) is written
-    /// straight into the caller's place. Built in a local and then modified, it would be copied
-    /// out, and a microcontroller's stack does not hold the second copy.
+    /// One struct expression, out of line: built in a local and then modified, the state would
+    /// be copied once more. (The compiler still builds it in a temporary and copies it to the
+    /// caller's place, which is why a microcontroller lends the 10 KB table: see
+    /// [`Drive::boot_with_table`].)
     #[inline(never)]
     fn booted(
         identity: Identity,
@@ -664,7 +665,7 @@ impl<M: RegisterMap, P: BorrowMut<Table>> Drive<M, P> {
     #[inline(never)]
     pub fn boot_with_table(config: DriveConfig, map: M, params: &Params, storage: u8, table: P) -> Self {
         // The values are settled first and the drive is one struct expression (as the state is,
-        // `DriveState::booted`), so that nothing of 12 KB is built aside and copied.
+        // `DriveState::booted`), so that the drive is not built aside and copied once more.
         let mut values = Params::factory().values;
         params.copy_saved_into(&mut values);
         let mut set = |obj: Obj, value: u32| {

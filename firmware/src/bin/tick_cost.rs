@@ -239,8 +239,9 @@ impl<'a> Rig<'a> {
     }
 }
 
-/// Builds the drive in `slot`, static: the drive is 12 KB and the stack below the statics about
-/// 19 KB, so the one copy `Drive::boot` makes goes through this frame only (as `app::boot_into`).
+/// Builds the drive in `slot`, static: the drive (the table inside, unlike the firmware's, which
+/// lends it) is 12 KB and the stack below the statics about 19 KB, so the one copy `Drive::boot`
+/// makes goes through this frame only.
 #[inline(never)]
 fn boot_into<'a>(slot: &'a mut MaybeUninit<Drive>, params: &Params) -> &'a mut Drive {
     slot.write(Drive::boot(DriveConfig::default(), params, 0))
