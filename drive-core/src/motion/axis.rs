@@ -227,7 +227,8 @@ impl Axis {
             start.v = direction * depart_v.min(limits.v_max);
         }
         // The planner takes the arrival speed as a magnitude, in the direction of the move.
-        let profile = Profile::to_position(start, goal, arrive_v.min(limits.v_max), limits)?;
+        let mut profile = Profile::EMPTY;
+        Profile::to_position_into(&mut profile, start, goal, arrive_v.min(limits.v_max), limits)?;
         self.anchor = anchor;
         self.segment = Segment::Profile { profile, start: now, then };
         Ok(())
@@ -245,7 +246,8 @@ impl Axis {
         if self.is_still() && v != 0.0 {
             start.v = libm::copysign(depart_v.min(libm::fabs(v)), v);
         }
-        let profile = Profile::to_velocity(start, v, limits)?;
+        let mut profile = Profile::EMPTY;
+        Profile::to_velocity_into(&mut profile, start, v, limits)?;
         self.anchor = anchor;
         self.segment = Segment::Profile { profile, start: now, then: Then::Cruise };
         Ok(())

@@ -170,6 +170,16 @@ pub struct Profile {
     end: State,
 }
 
+impl Phase {
+    const ZERO: Phase = Phase { t0: 0.0, p: 0.0, v: 0.0, a2: 0.0, j6: 0.0 };
+}
+
+impl Profile {
+    /// No motion: what a profile is before it is planned into (`to_position_into`).
+    pub const EMPTY: Profile =
+        Profile { phases: [Phase::ZERO; MAX_PHASES], n: 0, duration: 0.0, end: State { p: 0.0, v: 0.0, a: 0.0 } };
+}
+
 // ------------------------------------------------------------------------------------------------
 // Internal representation of the limits and of one velocity pulse.
 
@@ -747,16 +757,17 @@ fn fastest_position(v0: f64, a0: f64, vf: f64, d: f64, lim: &Lim) -> Result<(Can
 }
 
 /// The profile of the candidate `cand` (evaluated as `eval`) from `start`, moving at `v0` with
-/// the acceleration `a0`, to `end`; checked to meet it within rounding.
+/// the acceleration `a0`, to `end`, into `out`; checked to meet it within rounding.
 #[inline(never)]
 fn assemble_position(
+    out: &mut Profile,
     start: State,
     a0: f64,
     cand: Cand,
     eval: Eval,
     lim: &Lim,
     end: State,
-) -> Result<Profile, PlanError> {
+) -> Result<(), PlanError> {
     let (v0, vf, target_p, vmax) = (start.v, end.v, end.p, lim.v);
     let mut segs = [Seg::default(); MAX_PHASES];
     let mut ns = 0usize;
@@ -791,16 +802,16 @@ fn assemble_position(
         }
     }
     let start = State { a: a0, ..start };
-    let prof = Profile::build(start, segs.get(..ns).unwrap_or(&[]), cruise_at, end)?;
+    out.build_into(start, segs.get(..ns).unwrap_or(&[]), cruise_at, end)?;
     // The integrated end must meet the target (the last phase lands on it) to within rounding.
-    let last = prof.eval_end();
+    let last = out.eval_end();
     let tol = eval.tol() + 1e-13 * fabs(start.p);
     // (The end time of a long profile is rounded: up to a few ulp of the duration at full a.)
-    let tol_v = 1e-9 * vmax + 8.0 * f64::EPSILON * prof.duration * lim.acc.max(lim.dec);
+    let tol_v = 1e-9 * vmax + 8.0 * f64::EPSILON * out.duration * lim.acc.max(lim.dec);
     if fabs(last.p - target_p) > tol || fabs(last.v - vf) > tol_v {
         return Err(PlanError::NoSolution);
     }
-    Ok(prof)
+    Ok(())
 }
 
 fn finite(s: &State) -> bool {
@@ -832,6 +843,21 @@ impl Profile {
     /// for invalid inputs (see [`PlanError`]); [`PlanError::NoSolution`] if the numerical search
     /// fails, which is not expected for inputs of sane magnitude.
     pub fn to_position(start: State, target_p: f64, target_v: f64, lim: &Limits) -> Result<Profile, PlanError> {
+        let mut prof = Profile::EMPTY;
+        Profile::to_position_into(&mut prof, start, target_p, target_v, lim)?;
+        Ok(prof)
+    }
+
+    /// [`Profile::to_position`] into `out`, which holds the profile if it succeeds (and is of no
+    /// use if it fails): a profile is 680 bytes, and returned by value it would be on a
+    /// microcontroller's stack once more in every frame it passes through.
+    pub fn to_position_into(
+        out: &mut Profile,
+        start: State,
+        target_p: f64,
+        target_v: f64,
+        lim: &Limits,
+    ) -> Result<(), PlanError> {
         let lim = Lim::new(lim)?;
         if !finite(&start) {
             return Err(PlanError::InvalidState);
@@ -854,11 +880,11 @@ impl Profile {
         };
         let end = State { p: target_p, v: vf, a: 0.0 };
         if d == 0.0 && v0 == 0.0 && a0 == 0.0 {
-            return Profile::build(start, &[], None, end);
+            return out.build_into(start, &[], None, end);
         }
 
         let (cand, eval) = fastest_position(v0, a0, vf, d, &lim)?;
-        assemble_position(start, a0, cand, eval, &lim, end)
+        assemble_position(out, start, a0, cand, eval, &lim, end)
     }
 
     /// Plans the fastest change from `start` to the velocity `target_v` (signed, |target_v| ≤
@@ -877,6 +903,13 @@ impl Profile {
     /// # Errors
     /// As [`Profile::to_position`]; the target is invalid if it is not finite or |target_v| > `v_max`.
     pub fn to_velocity(start: State, target_v: f64, lim: &Limits) -> Result<Profile, PlanError> {
+        let mut prof = Profile::EMPTY;
+        Profile::to_velocity_into(&mut prof, start, target_v, lim)?;
+        Ok(prof)
+    }
+
+    /// [`Profile::to_velocity`] into `out`, as [`Profile::to_position_into`].
+    pub fn to_velocity_into(out: &mut Profile, start: State, target_v: f64, lim: &Limits) -> Result<(), PlanError> {
         let lim = Lim::new(lim)?;
         if !finite(&start) {
             return Err(PlanError::InvalidState);
@@ -888,16 +921,23 @@ impl Profile {
         let mut p = Pulse::EMPTY;
         pulse(start.v, a0, target_v, &lim, None, &mut p)?;
         let start = State { a: a0, ..start };
-        let mut prof = Profile::build(start, p.segs.get(..p.n).unwrap_or(&[]), None, start)?;
-        let e = prof.eval_end();
-        prof.end = State { p: e.p, v: target_v, a: 0.0 };
-        Ok(prof)
+        out.build_into(start, p.segs.get(..p.n).unwrap_or(&[]), None, start)?;
+        let e = out.eval_end();
+        out.end = State { p: e.p, v: target_v, a: 0.0 };
+        Ok(())
     }
 
-    /// Precomputes the phase start states; the phase `cruise.0` (if any) starts at velocity
-    /// `cruise.1` exactly.
-    fn build(start: State, segs: &[Seg], cruise: Option<(usize, f64)>, end: State) -> Result<Profile, PlanError> {
-        let mut phases = [Phase::default(); MAX_PHASES];
+    /// Precomputes the phase start states into `self`; the phase `cruise.0` (if any) starts at
+    /// velocity `cruise.1` exactly.
+    fn build_into(
+        &mut self,
+        start: State,
+        segs: &[Seg],
+        cruise: Option<(usize, f64)>,
+        end: State,
+    ) -> Result<(), PlanError> {
+        // Every phase beyond the profile's stays zero, as in a new one.
+        self.phases = [Phase::ZERO; MAX_PHASES];
         let (mut t, mut p, mut v) = (0.0, start.p, start.v);
         let mut n = 0usize;
         for s in segs {
@@ -906,7 +946,7 @@ impl Profile {
             {
                 v = vc;
             }
-            let ph = phases.get_mut(n).ok_or(PlanError::NoSolution)?;
+            let ph = self.phases.get_mut(n).ok_or(PlanError::NoSolution)?;
             *ph = Phase { t0: t, p, v, a2: 0.5 * s.a, j6: s.j / 6.0 };
             n += 1;
             p += s.t * (v + s.t * (0.5 * s.a + s.t * s.j / 6.0));
@@ -915,15 +955,15 @@ impl Profile {
         }
         if n == 0 {
             // A zero-length profile still answers `at(0)` with the start state.
-            if let Some(ph) = phases.get_mut(0) {
+            if let Some(ph) = self.phases.get_mut(0) {
                 *ph = Phase { t0: 0.0, p: start.p, v: start.v, a2: 0.5 * start.a, j6: 0.0 };
             }
         }
-        let prof = Profile { phases, n, duration: t, end };
+        (self.n, self.duration, self.end) = (n, t, end);
         if !(t.is_finite() && p.is_finite() && v.is_finite()) {
             return Err(PlanError::NoSolution);
         }
-        Ok(prof)
+        Ok(())
     }
 
     /// The state integrated to the end of the last phase (before snapping to the target).
