@@ -90,20 +90,38 @@ pub fn with_drive<R>(f: impl FnOnce(&mut Drive) -> R) -> Option<R> {
     DRIVE.lock().as_deref_mut().map(f)
 }
 
-/// One control tick at `now` with what the board measured: the drive's motion, supervision and
-/// loops, then the power stage. Called from the tick interrupt; if a task holds the drive, the
-/// stage coasts instead, and the tick does not count (the watchdog is fed by drive ticks).
-pub fn control_tick(now: Instant, inputs: &drive_core::faults::Inputs, stage: &mut impl PowerStage) {
-    let Some(mut drive) = DRIVE.try_lock() else {
-        stage.coast_on();
-        COASTED.fetch_add(1, Ordering::Relaxed);
-        return;
-    };
-    if let Some(out) = drive.as_deref_mut().map(|d| d.tick_with(now, inputs)) {
-        drop(drive);
-        stage.apply(&out);
-        TICKS.fetch_add(1, Ordering::Relaxed);
+/// One control tick at `now` with what the board measures (`inputs`, read only if the tick runs
+/// the drive): the drive's motion, supervision and loops, then the power stage. Called from the
+/// tick interrupt; if a task holds the drive, the stage coasts instead, and the tick does not
+/// count (the watchdog is fed by drive ticks).
+pub fn control_tick(now: Instant, inputs: impl FnOnce() -> drive_core::faults::Inputs, stage: &mut impl PowerStage) {
+    match DRIVE.try_lock() {
+        Some(mut drive) => {
+            if let Some(d) = drive.as_deref_mut() {
+                run_tick(d, now, inputs, stage);
+            }
+        }
+        None => {
+            stage.coast_on();
+            COASTED.fetch_add(1, Ordering::Relaxed);
+        }
     }
+}
+
+/// A tick that runs the drive, then its outputs to the stage. Out of line: its frame (about
+/// 1 KB) is on the stack only when the tick runs the drive, which it never does while a task is
+/// deep in a request (the task holds the drive then, and the tick coasts with a small frame).
+/// The inputs are made here, so that what a board never measures is known to the compiler.
+#[inline(never)]
+fn run_tick(
+    drive: &mut Drive,
+    now: Instant,
+    inputs: impl FnOnce() -> drive_core::faults::Inputs,
+    stage: &mut impl PowerStage,
+) {
+    let out = drive.tick_with(now, &inputs());
+    stage.apply(&out);
+    TICKS.fetch_add(1, Ordering::Relaxed);
 }
 
 /// Now, on the drive's clock (embassy-time's, in microseconds).

@@ -313,9 +313,8 @@ impl interrupt::typelevel::Handler<interrupt::typelevel::TIM6_DAC> for TickHandl
             TICK_PERIOD_MAX.fetch_max(period, Relaxed);
         }
         critical_section::with(|cs| {
-            let inputs = measure(cs);
             if let Some(stage) = STAGE.borrow_ref_mut(cs).as_mut() {
-                crate::app::control_tick(crate::app::now(), &inputs, stage);
+                crate::app::control_tick(crate::app::now(), || measure(cs), stage);
             }
         });
         let cycles = cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start);

@@ -197,7 +197,7 @@ fn SysTick() {
     let (emitted, coasted) = (STAGE.emitted, crate::app::COASTED.load(Ordering::Relaxed));
     let before = cortex_m::peripheral::SYST::get_current();
     // The emulated chip measures nothing: no supervision of supply or temperature, open loop.
-    crate::app::control_tick(drive_core::Instant::from_micros(now), &drive_core::faults::Inputs::default(), STAGE);
+    crate::app::control_tick(drive_core::Instant::from_micros(now), drive_core::faults::Inputs::default, STAGE);
     // SysTick counts down and has just reloaded: no wrap within the tick.
     let spent = before.saturating_sub(cortex_m::peripheral::SYST::get_current());
     let at = if STAGE.moving { 2 } else { 0 };
