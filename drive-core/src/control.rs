@@ -192,6 +192,9 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     }
 
     /// The axis and PP state after a controlword write in PP or PV mode.
+    // Out of line: inlined, its set-points would be in `plan_motion`'s frame for every motion
+    // write, not only the PP mode's.
+    #[inline(never)]
     fn plan_controlword(&self, axis: &mut Axis, pp: &mut Pp, new: u16) -> Result<(), ObjError> {
         let old = self.param(Obj::ControlWord) as u16;
         let rise = |bit: u16| new & bit != 0 && old & bit == 0;

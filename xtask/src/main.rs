@@ -328,17 +328,20 @@ fn tick_cost() -> Result<(), String> {
         let r = read_word(s, 0x600E, 2)?;
         Ok(i32::from_be_bytes([r[3], r[4], r[5], r[6]]))
     };
-    // 4000 pps forward, a relative move of 8000 steps (native map, node 1), re-targeted four
-    // times while it cruises by absolute moves, each further: the drive plans while the axis
-    // runs, and the tick coasts while the bus task holds the drive. Four plans let the tick
+    // Forward at 4000 pps, a relative move of 8000 steps (native map, node 1) in one 0x10 write
+    // of 0x6002..0x6006 (three objects, the last a command: the drive commits them in order,
+    // with a checkpoint to roll back to, the deepest write path), then re-targeted four times
+    // while it cruises by absolute moves, each further: the drive plans while the axis runs,
+    // and the tick coasts while the bus task holds the drive. Four plans let the tick
     // interrupt land at more depths of the planner's stack.
     let write = |s: &mut TcpStream, reg: u16, v: u16| -> Result<(), String> {
         let ([rh, rl], [vh, vl]) = (reg.to_be_bytes(), v.to_be_bytes());
         transact(s, &[1, 6, rh, rl, vh, vl], 8).map(|_| ())
     };
-    for (reg, v) in [(0x6003u16, 0u16), (0x6004, 4000), (0x6002, 0), (0x6005, 0), (0x6006, 8000)] {
-        write(&mut s, reg, v)?;
-    }
+    let words: [u16; 5] = [0, 0, 4000, 0, 8000];
+    let mut request = vec![1, 0x10, 0x60, 0x02, 0, 5, 10];
+    request.extend(words.iter().flat_map(|w| w.to_be_bytes()));
+    transact(&mut s, &request, 8)?;
     // Virtual time crawls under -icount (bytes too): poll rather than sleep.
     let deadline = Instant::now() + Duration::from_secs(90);
     for (past, target) in RETARGETS {

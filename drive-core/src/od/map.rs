@@ -120,7 +120,7 @@ impl NativeMap {
                 if refused.is_none() && !(lo..=hi).contains(&v) {
                     *refused = Some(ObjError::OutOfRange);
                 }
-                plan.push((d, Op::Commit(v))).map_err(|_| ObjError::Unknown)?;
+                plan.push(Step::new(d, Op::Commit(v))).map_err(|_| ObjError::Unknown)?;
                 reg += 1;
                 continue;
             }
@@ -158,7 +158,7 @@ impl NativeMap {
             {
                 *refused = drive.check_def(d, v).err();
             }
-            plan.push((d, op)).map_err(|_| ObjError::Unknown)?;
+            plan.push(Step::new(d, op)).map_err(|_| ObjError::Unknown)?;
             reg = d.end();
         }
         if reg < end { Err(ObjError::Unknown) } else { Ok(commands) }
@@ -176,7 +176,7 @@ impl NativeMap {
         plan: &Plan,
     ) -> Result<(), Exception> {
         let saved = drive.checkpoint();
-        for &(d, op) in plan.iter() {
+        for (d, op) in plan.iter().map(|s| s.get()) {
             if let Op::Commit(v) = op
                 && let Err(e) = drive.write_def(d, v)
             {
@@ -184,7 +184,7 @@ impl NativeMap {
                 return Err(native_exception(e));
             }
         }
-        for &(d, op) in plan.iter() {
+        for (d, op) in plan.iter().map(|s| s.get()) {
             self.set_staged(d.obj, if let Op::Stage(hi) = op { Some(hi) } else { None });
         }
         Ok(())
@@ -211,7 +211,7 @@ impl NativeMap {
         if let Some(e) = refused {
             return Err(native_exception(e));
         }
-        for &(d, op) in plan.iter() {
+        for (d, op) in plan.iter().map(|s| s.get()) {
             match op {
                 Op::Commit(v) if is_command(d.obj) => {
                     drive.write_def(d, v).map_err(native_exception)?;
@@ -307,8 +307,48 @@ fn other_word<P: BorrowMut<Table>>(drive: &DriveState<P>, i: usize, reg: u32) ->
     }
 }
 
+/// One object of a plan and what to do with it: 8 bytes (a declaration's reference beside an
+/// [`Op`] took 12, and a plan lives on a microcontroller's short stack).
+#[derive(Clone, Copy, Debug)]
+struct Step {
+    obj: Obj,
+    stage: bool,
+    value: u32,
+}
+
+impl Step {
+    fn new(d: &ObjectDef, op: Op) -> Self {
+        match op {
+            Op::Commit(value) => Self { obj: d.obj, stage: false, value },
+            Op::Stage(hi) => Self { obj: d.obj, stage: true, value: u32::from(hi) },
+        }
+    }
+
+    /// The object's declaration and the operation.
+    fn get(self) -> (&'static ObjectDef, Op) {
+        (self.obj.def(), if self.stage { Op::Stage(self.value as u16) } else { Op::Commit(self.value) })
+    }
+}
+
+/// The most objects a write can touch: the longest run of objects without a register between
+/// them (a write that meets a register without an object is refused), at most [`MAX_WRITE`].
+const PLAN_CAPACITY: usize = {
+    let (mut longest, mut run, mut i) = (1, 1, 1);
+    while i < OBJECTS.len() {
+        #[allow(clippy::indexing_slicing)] // const evaluation: out of bounds is a compile error
+        {
+            run = if OBJECTS[i].addr as u32 == OBJECTS[i - 1].end() { run + 1 } else { 1 };
+        }
+        if run > longest {
+            longest = run;
+        }
+        i += 1;
+    }
+    if longest < MAX_WRITE as usize { longest } else { MAX_WRITE as usize }
+};
+
 /// The objects a write touches and what it does to each, checked before anything changes.
-type Plan = Vec<(&'static ObjectDef, Op), { MAX_WRITE as usize }>;
+type Plan = Vec<Step, PLAN_CAPACITY>;
 
 impl RegisterMap for NativeMap {
     #[inline(always)]
@@ -373,6 +413,37 @@ impl RegisterMap for NativeMap {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A plan holds the longest run of objects with no register between them, and a write of
+    /// all of that run's registers is planned (its values refused or not, never for room).
+    #[test]
+    fn a_plan_holds_the_longest_write() {
+        let runs = OBJECTS.windows(2).fold((1usize, 1usize), |(longest, run), w| match w {
+            [a, b] if u32::from(b.addr) == a.end() => (longest.max(run + 1), run + 1),
+            _ => (longest, 1),
+        });
+        assert_eq!(PLAN_CAPACITY, runs.0.min(usize::from(MAX_WRITE)));
+        let drive = DriveState::new(crate::ident::Identity::SIMULATOR, false);
+        // Every run of writable objects, planned whole with the values they hold.
+        let contiguous = |a: &ObjectDef, b: &ObjectDef| u32::from(b.addr) == a.end();
+        for run in OBJECTS.chunk_by(contiguous) {
+            for w in run.split(|d| d.access == Access::Ro || matches!(d.ty, Type::Str(_))).filter(|w| !w.is_empty()) {
+                let mut words: Vec<u8, 256> = Vec::new();
+                for d in w {
+                    let v = drive.read_def(d);
+                    let bytes = if d.words() == 2 { v.to_be_bytes() } else { [0, 0, (v >> 8) as u8, v as u8] };
+                    let _ = words.extend_from_slice(bytes.get(4 - 2 * usize::from(d.words())..).unwrap_or_default());
+                }
+                let expected: usize = w.iter().map(|d| 2 * usize::from(d.words())).sum();
+                assert_eq!(words.len(), expected);
+                let addr = w.first().map_or(0, |d| d.addr);
+                let (mut plan, mut refused) = (Plan::new(), None);
+                let planned = NativeMap::new().plan(&drive, addr, Words::new(&words), &mut plan, &mut refused);
+                assert!(planned.is_ok(), "{addr:#06x}: {planned:?}");
+                assert_eq!(plan.len(), w.len());
+            }
+        }
+    }
 
     /// The precomputed intervals agree with the declarations, and a plain object is checked for
     /// its range only.
