@@ -407,8 +407,11 @@ impl<P: BorrowMut<Table>> DriveState<P> {
             return;
         }
         if let Some(sp) = self.pp.buffered.take() {
-            // A plan that fails leaves the axis as it was.
-            if self.axis.move_to(now, sp.target, sp.depart, sp.arrive, &sp.limits).is_ok() {
+            // Planned on a copy: a plan that fails leaves the axis as it was (`move_to` would
+            // halt it). In the tick, which runs the drive only while no task is in a request.
+            let mut axis = self.axis;
+            if axis.move_to(now, sp.target, sp.depart, sp.arrive, &sp.limits).is_ok() {
+                self.axis = axis;
                 self.pp.active = Some(sp);
             }
             if self.param(Obj::ControlWord) as u16 & CW_NEW_SETPOINT == 0 {

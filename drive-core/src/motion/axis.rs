@@ -186,7 +186,11 @@ impl Axis {
 
     /// Moves to `target`, arriving at `arrive_v` (the stop speed, from which the drive jumps to
     /// rest), from whatever the axis is doing at `now`. `depart_v` is the speed it may jump to
-    /// from rest (the start speed). Nothing changes if the plan fails.
+    /// from rest (the start speed).
+    ///
+    /// The move is planned in place (a profile is 680 bytes, and a microcontroller's stack is
+    /// short): if the plan fails, the axis [halts](Axis::halt). To keep an axis as it was when a
+    /// plan fails, plan on a copy and take it only if the plan succeeds.
     pub fn move_to(
         &mut self,
         now: Instant,
@@ -199,7 +203,8 @@ impl Axis {
     }
 
     /// Moves through `target` at `pass_v` and keeps that speed beyond it, until the next plan
-    /// (a set-point that follows without a stop). Nothing changes if the plan fails.
+    /// (a set-point that follows without a stop). Planned in place, as [`Axis::move_to`]: the
+    /// axis halts if the plan fails.
     pub fn pass_through(
         &mut self,
         now: Instant,
@@ -227,11 +232,10 @@ impl Axis {
             start.v = direction * depart_v.min(limits.v_max);
         }
         // The planner takes the arrival speed as a magnitude, in the direction of the move.
-        let mut profile = Profile::EMPTY;
-        Profile::to_position_into(&mut profile, start, goal, arrive_v.min(limits.v_max), limits)?;
-        self.anchor = anchor;
-        self.segment = Segment::Profile { profile, start: now, then };
-        Ok(())
+        let arrive_v = arrive_v.min(limits.v_max);
+        self.plan_in_place(anchor, now, then, |profile| {
+            Profile::to_position_into(profile, start, goal, arrive_v, limits)
+        })
     }
 
     /// Whether the last planned profile has run its course (standing, or cruising at its speed).
@@ -240,17 +244,35 @@ impl Axis {
     }
 
     /// Changes speed to `v` (signed) from whatever the axis is doing at `now`, then keeps it.
-    /// From rest it may jump to `depart_v` first. Nothing changes if the plan fails.
+    /// From rest it may jump to `depart_v` first. Planned in place, as [`Axis::move_to`]: the
+    /// axis halts if the plan fails.
     pub fn run_at(&mut self, now: Instant, v: f64, depart_v: f64, limits: &Limits) -> Result<(), PlanError> {
         let (anchor, mut start) = self.rebased(now);
         if self.is_still() && v != 0.0 {
             start.v = libm::copysign(depart_v.min(libm::fabs(v)), v);
         }
-        let mut profile = Profile::EMPTY;
-        Profile::to_velocity_into(&mut profile, start, v, limits)?;
-        self.anchor = anchor;
-        self.segment = Segment::Profile { profile, start: now, then: Then::Cruise };
-        Ok(())
+        self.plan_in_place(anchor, now, Then::Cruise, |profile| Profile::to_velocity_into(profile, start, v, limits))
+    }
+
+    /// Plans a profile into the axis' own segment, to start at `now` with the anchor moved to
+    /// `anchor` (the state the plan starts from is relative to it); halts if the plan fails.
+    fn plan_in_place(
+        &mut self,
+        anchor: i64,
+        now: Instant,
+        then: Then,
+        plan: impl FnOnce(&mut Profile) -> Result<(), PlanError>,
+    ) -> Result<(), PlanError> {
+        self.segment = Segment::Profile { profile: Profile::EMPTY, start: now, then };
+        let planned = match &mut self.segment {
+            Segment::Profile { profile, .. } => plan(profile),
+            _ => Err(PlanError::NoSolution),
+        };
+        match planned {
+            Ok(()) => self.anchor = anchor,
+            Err(_) => self.halt(),
+        }
+        planned
     }
 
     /// Stops at once where the axis is (seed 000 0x6053, disable, faults): no ramp.
