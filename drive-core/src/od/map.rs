@@ -41,14 +41,45 @@ pub trait RegisterMap {
 /// act on now, 04.
 #[derive(Clone, Debug)]
 pub struct NativeMap {
-    staged: [Option<u16>; Obj::COUNT],
+    /// The staged high word of each 32-bit object, by its [`STAGE_SLOT`].
+    staged: [Option<u16>; STAGE_SLOTS],
 }
 
 impl Default for NativeMap {
     fn default() -> Self {
-        Self { staged: [None; Obj::COUNT] }
+        Self { staged: [None; STAGE_SLOTS] }
     }
 }
+
+/// The objects that can be staged: the 32-bit ones.
+const STAGE_SLOTS: usize = {
+    let (mut n, mut i) = (0, 0);
+    while i < OBJECTS.len() {
+        #[allow(clippy::indexing_slicing)] // const evaluation: out of bounds is a compile error
+        if OBJECTS[i].words() == 2 {
+            n += 1;
+        }
+        i += 1;
+    }
+    n
+};
+
+/// Each object's place in [`NativeMap::staged`], in the order of the objects; `u8::MAX` for
+/// an object of one register, which is never staged. (One place an object would take 500 bytes
+/// of RAM for 36 objects that can be staged.)
+const STAGE_SLOT: [u8; Obj::COUNT] = {
+    let mut slot = [u8::MAX; Obj::COUNT];
+    let (mut n, mut i) = (0u8, 0);
+    while i < OBJECTS.len() {
+        #[allow(clippy::indexing_slicing)] // const evaluation: out of bounds is a compile error
+        if OBJECTS[i].words() == 2 {
+            slot[i] = n;
+            n += 1;
+        }
+        i += 1;
+    }
+    slot
+};
 
 /// What writing one object amounts to.
 #[derive(Clone, Copy, Debug)]
@@ -75,11 +106,12 @@ impl NativeMap {
     }
 
     fn staged(&self, obj: Obj) -> Option<u16> {
-        self.staged.get(obj as usize).copied().flatten()
+        let slot = STAGE_SLOT.get(obj as usize)?;
+        self.staged.get(usize::from(*slot)).copied().flatten()
     }
 
     fn set_staged(&mut self, obj: Obj, v: Option<u16>) {
-        if let Some(s) = self.staged.get_mut(obj as usize) {
+        if let Some(s) = STAGE_SLOT.get(obj as usize).and_then(|&slot| self.staged.get_mut(usize::from(slot))) {
             *s = v;
         }
     }
@@ -398,12 +430,11 @@ impl RegisterMap for NativeMap {
             return self.write_planned(drive, addr, values);
         }
         // A plain setting is stored and nothing else (what `apply_def` does for it); its index
-        // entry holds its object index, which is its place in `params` and `staged`.
+        // entry holds its object index, which is its place in `params`. (It has one register:
+        // nothing of it is ever staged.)
         for (&e, &v) in regs.iter().zip(values.pairs()) {
-            let i = usize::from(e >> 8);
-            if let (Some(p), Some(s)) = (drive.params.get_mut(i), self.staged.get_mut(i)) {
+            if let Some(p) = drive.params.get_mut(usize::from(e >> 8)) {
                 *p = u32::from(u16::from_be_bytes(v));
-                *s = None;
             }
         }
         Ok(())
