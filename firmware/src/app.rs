@@ -184,7 +184,8 @@ fn save_pending() -> bool {
 #[cfg(not(feature = "qemu"))]
 #[embassy_executor::task]
 pub async fn modbus(mut serial: Serial, mut store: crate::board::ParamStore) -> ! {
-    let mut buf = [0u8; 64];
+    // Bytes come one or a few at a time: the task reads them as they arrive.
+    let mut buf = [0u8; 16];
     let mut reply = [0u8; MAX_FRAME];
     loop {
         let deadline = with_drive(|d| d.deadline()).flatten();
@@ -239,7 +240,8 @@ const SILENCE_PARTIAL: embassy_time::Duration = embassy_time::Duration::from_mil
 #[cfg(feature = "qemu")]
 #[embassy_executor::task]
 pub async fn modbus(mut serial: Serial) -> ! {
-    let mut buf = [0u8; 64];
+    // Bytes come one or a few at a time: the task reads them as they arrive.
+    let mut buf = [0u8; 16];
     let mut reply = [0u8; MAX_FRAME];
     let mut frame = crate::frames::Assembler::new();
     loop {
