@@ -118,12 +118,8 @@ mod tests {
         assert!(cost < nominal * 3 / 4, "a tick leaves a quarter of its period to the rest");
     }
 
-    /// A relative move at seed 000's top speed: the output timer's pulses, counted by TIM2 from
-    /// the STEP wire, are exactly the move's steps, and the drive's position agrees.
-    #[test]
-    #[timeout(10)]
-    async fn step_count_on_the_output_timer(board: Board) {
-        // TIM2 counts rising edges on TI1 (PA0, wired to STEP): external clock mode 1.
+    /// TIM2 counts the rising edges on TI1 (PA0, wired to STEP) from zero: external clock mode 1.
+    fn count_step_edges() {
         let t = pac::TIM2;
         t.cr1().modify(|w| w.set_cen(false));
         t.smcr().write(|w| {
@@ -133,6 +129,26 @@ mod tests {
         t.arr().write_value(u32::MAX);
         t.cnt().write_value(0);
         t.cr1().modify(|w| w.set_cen(true));
+    }
+
+    /// Once the move has ended (within 5 s) and its last pulse train is out: the pulses TIM2
+    /// counted ([`count_step_edges`]) and the drive's position.
+    async fn steps_when_still() -> (u32, Option<i64>) {
+        let start = Instant::now();
+        while app::with_drive(|d| d.state().status().controller & drive_core::drive::STATUS_BUSY != 0) == Some(true) {
+            assert!(start.elapsed() < Duration::from_secs(5), "move ends");
+            Timer::after_millis(5).await;
+        }
+        Timer::after_millis(5).await; // the last pulse train
+        (pac::TIM2.cnt().read(), app::with_drive(|d| d.state().position()))
+    }
+
+    /// A relative move at seed 000's top speed: the output timer's pulses, counted by TIM2 from
+    /// the STEP wire, are exactly the move's steps, and the drive's position agrees.
+    #[test]
+    #[timeout(10)]
+    async fn step_count_on_the_output_timer(board: Board) {
+        count_step_edges();
 
         board::start_tick(board.stage, board.encoder);
         const STEPS: u32 = 40_000;
@@ -145,13 +161,7 @@ mod tests {
             s.apply(Obj::RelativeMove, STEPS);
         });
         let start = Instant::now();
-        while app::with_drive(|d| d.state().status().controller & drive_core::drive::STATUS_BUSY != 0) == Some(true) {
-            assert!(start.elapsed() < Duration::from_secs(5), "move ends");
-            Timer::after_millis(5).await;
-        }
-        Timer::after_millis(5).await; // the last pulse train
-        let counted = t.cnt().read();
-        let position = app::with_drive(|d| d.state().position());
+        let (counted, position) = steps_when_still().await;
         info!("{} pulses counted, position {}, in {} ms", counted, position, start.elapsed().as_millis());
         assert_eq!(counted, STEPS);
         assert_eq!(position, Some(i64::from(STEPS)));
@@ -163,15 +173,7 @@ mod tests {
     #[test]
     #[timeout(10)]
     async fn a_retarget_while_cruising_loses_no_step(board: Board) {
-        let t = pac::TIM2;
-        t.cr1().modify(|w| w.set_cen(false));
-        t.smcr().write(|w| {
-            w.set_sms(pac::timer::vals::Sms::EXT_CLOCK_MODE);
-            w.set_ts(pac::timer::vals::Ts::TI1FP1);
-        });
-        t.arr().write_value(u32::MAX);
-        t.cnt().write_value(0);
-        t.cr1().modify(|w| w.set_cen(true));
+        count_step_edges();
 
         board::start_tick(board.stage, board.encoder);
         // Ramped (factory levels), 40 kpps: two steps a tick while cruising.
@@ -184,14 +186,7 @@ mod tests {
         let coasted = app::COASTED.load(Relaxed);
         app::with_drive(|d| d.state_mut().apply(Obj::AbsoluteMove, 60_000));
         let coasted = app::COASTED.load(Relaxed).wrapping_sub(coasted);
-        let start = Instant::now();
-        while app::with_drive(|d| d.state().status().controller & drive_core::drive::STATUS_BUSY != 0) == Some(true) {
-            assert!(start.elapsed() < Duration::from_secs(5), "move ends");
-            Timer::after_millis(5).await;
-        }
-        Timer::after_millis(5).await; // the last pulse train
-        let counted = t.cnt().read();
-        let position = app::with_drive(|d| d.state().position());
+        let (counted, position) = steps_when_still().await;
         info!("{} ticks coasted during the re-target; {} pulses counted, position {}", coasted, counted, position);
         assert!(coasted > 0, "planning the re-target held the drive across ticks");
         assert_eq!(counted, 60_000);
