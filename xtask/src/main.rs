@@ -247,34 +247,35 @@ const STACK_PAINT: u64 = 0x214B_5453;
 /// with shifts 0-2 QEMU 10.0 reads the same SysTick value before and after most ticks.
 const ICOUNT_SHIFT: u32 = 4;
 
+/// The symbol table of `elf`, as `arm-none-eabi-nm` prints it.
+fn nm_symbols(elf: &Path) -> Result<String, String> {
+    let nm = Command::new("arm-none-eabi-nm").arg(elf).output().map_err(|e| format!("arm-none-eabi-nm: {e}"))?;
+    Ok(String::from_utf8_lossy(&nm.stdout).into_owned())
+}
+
+/// The address of `name` in a symbol table from [`nm_symbols`].
+fn symbol(symbols: &str, name: &str) -> Result<u64, String> {
+    symbols
+        .lines()
+        .find_map(|l| l.strip_suffix(name).filter(|l| l.ends_with(' ')).and_then(|l| l.split_whitespace().next()))
+        .and_then(|a| u64::from_str_radix(a, 16).ok())
+        .ok_or(format!("no {name} symbol"))
+}
+
 /// The control tick's cost in instructions: the QEMU build under `-icount` (instructions set the
 /// virtual clock) counts SysTick across each tick into `TICK_COST`, read here through QEMU's
 /// monitor while idle and during a move.
 fn tick_cost() -> Result<(), String> {
     let elf = build_qemu()?;
-    let nm = Command::new("arm-none-eabi-nm").arg(&elf).output().map_err(|e| format!("arm-none-eabi-nm: {e}"))?;
-    let symbols = String::from_utf8_lossy(&nm.stdout).into_owned();
-    let symbol = |name: &str| -> Result<u64, String> {
-        symbols
-            .lines()
-            .find_map(|l| l.strip_suffix(name).filter(|l| l.ends_with(' ')).and_then(|l| l.split_whitespace().next()))
-            .and_then(|a| u64::from_str_radix(a, 16).ok())
-            .ok_or(format!("no {name} symbol"))
-    };
-    let addr = symbol("TICK_COST")?;
-    let (stack_end, stack_start) = (symbol("_stack_end")?, symbol("_stack_start")?);
+    let symbols = nm_symbols(&elf)?;
+    let addr = symbol(&symbols, "TICK_COST")?;
+    let (stack_end, stack_start) = (symbol(&symbols, "_stack_end")?, symbol(&symbols, "_stack_start")?);
     // The board's layout, to hold the measured peak against.
     let g431_elf = elf_dir().join("firmware-g431");
     if !g431_elf.exists() {
         firmware()?;
     }
-    let g431 =
-        Command::new("arm-none-eabi-nm").arg(&g431_elf).output().map_err(|e| format!("arm-none-eabi-nm: {e}"))?;
-    let g431_stack_start = String::from_utf8_lossy(&g431.stdout)
-        .lines()
-        .find_map(|l| l.strip_suffix(" _stack_start").and_then(|l| l.split_whitespace().next()))
-        .and_then(|a| u64::from_str_radix(a, 16).ok())
-        .ok_or("no _stack_start in the G431 build")?;
+    let g431_stack_start = symbol(&nm_symbols(&g431_elf)?, "_stack_start")?;
     let (port, mon) = (free_port()?, free_port()?);
     let monitor = format!("tcp:127.0.0.1:{mon},server=on,wait=off");
     let mut qemu = spawn_qemu(
