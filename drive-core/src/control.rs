@@ -149,9 +149,8 @@ impl<P: BorrowMut<Table>> DriveState<P> {
                 4 | 5 => self.pp_setpoint(0, v).limits,
                 _ => self.scurve_limits(v),
             };
-            if self.axis.run_at(self.now, 0.0, 0.0, &limits).is_err() {
-                self.axis.halt();
-            }
+            // A ramp that cannot be planned halts the axis where it stands (`run_at`).
+            let _ = self.axis.run_at(self.now, 0.0, 0.0, &limits);
         }
         self.pp = Pp::default();
         self.pvt.cancel();

@@ -315,10 +315,8 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         // No jerk limit: a PVT segment may end with more acceleration than the ramp's jerk could
         // take back in time; the acceleration steps to the deceleration, velocity stays smooth.
         let limits = Limits { jerk: None, ..self.scurve_limits(v) };
-        if axis.run_at(now, 0.0, 0.0, &limits).is_err() {
-            // Beyond what the ramp can plan from: stop where it stands.
-            axis.halt();
-        }
+        // Beyond what the ramp can plan from, the axis halts where it stands (`run_at`).
+        let _ = axis.run_at(now, 0.0, 0.0, &limits);
         axis
     }
 
