@@ -153,8 +153,94 @@ fn firmware() -> Result<(), String> {
     if flash > FLASH_BUDGET {
         println!("firmware (STM32G431CB): OVER the 64 KiB flash budget (fits the chip)");
     }
+    flash_by_part(&elf, flash)?;
     // The QEMU build shares the output path: keep the board's ELF for `tick-cost`.
     std::fs::copy(&elf, elf_dir().join("firmware-g431")).map_err(|e| e.to_string())?;
+    Ok(())
+}
+
+/// Where the flash goes, by the part of the firmware each symbol belongs to: the first of these
+/// whose path the (demangled) symbol name contains. Code inlined into a function counts where it
+/// is inlined, so the split is approximate.
+const PARTS: &[(&str, &[&str])] = &[
+    ("S-curve planner", &["drive_core::motion::scurve"]),
+    ("PVT segments", &["drive_core::motion::cubic", "drive_core::pvt"]),
+    ("axis", &["drive_core::motion::axis"]),
+    (
+        "software f64 and 64/128-bit arithmetic",
+        &[
+            "compiler_builtins::float",
+            "compiler_builtins::int",
+            "libm::",
+            "__aeabi_d",
+            "__aeabi_f",
+            "__aeabi_l",
+            "__aeabi_ul",
+            "__aeabi_i2d",
+            "__aeabi_ui2d",
+            "__float",
+            "__fix",
+        ],
+    ),
+    ("object dictionary", &["drive_core::od"]),
+    ("parameter store", &["sequential_storage", "drive_core::store", "embassy_embedded_hal"]),
+    ("drive: requests, tick, loops, faults", &["drive_core::"]),
+    ("Embassy executor and tasks", &["embassy_executor"]),
+    ("Embassy HAL and time", &["embassy_", "stm32_metapac"]),
+    (
+        "firmware: board, tasks, interrupts",
+        &[
+            "firmware::",
+            "TIM",
+            "USART",
+            "EXTI",
+            "ADC",
+            "HardFault",
+            "DefaultHandler",
+            "SysTick",
+            "__INTERRUPTS",
+            "__EXCEPTIONS",
+            "Reset",
+        ],
+    ),
+    ("defmt", &["defmt"]),
+    (
+        "core: panics, formatting, memcpy",
+        &["core::", "compiler_builtins::mem", "__aeabi_mem", "<usize as", "<u32 as", "<i32 as", "<str as"],
+    ),
+];
+
+/// Prints the `flash` of the firmware at `elf` by [`PARTS`], then what no part names and what
+/// has no symbol (merged strings, alignment, the initial values of `.data`).
+fn flash_by_part(elf: &Path, flash: u64) -> Result<(), String> {
+    let out = Command::new("arm-none-eabi-nm")
+        .args(["-S", "-C"])
+        .arg(elf)
+        .output()
+        .map_err(|e| format!("arm-none-eabi-nm: {e}"))?;
+    let mut sizes = vec![0u64; PARTS.len() + 1];
+    for line in String::from_utf8_lossy(&out.stdout).lines() {
+        let mut f = line.splitn(4, ' ');
+        let (Some(addr), Some(size), Some(kind), Some(name)) = (f.next(), f.next(), f.next(), f.next()) else {
+            continue;
+        };
+        // Flash holds code and constants from 0x08000000.
+        if !addr.starts_with("08") || !matches!(kind, "t" | "T" | "r" | "R" | "W" | "w") {
+            continue;
+        }
+        let size = u64::from_str_radix(size, 16).unwrap_or(0);
+        let part = PARTS.iter().position(|(_, keys)| keys.iter().any(|k| name.contains(k))).unwrap_or(PARTS.len());
+        sizes[part] += size;
+    }
+    println!("firmware (STM32G431CB): flash by part (symbol sizes; inlined code counts where it is inlined):");
+    for (i, size) in sizes.iter().enumerate() {
+        let name = PARTS.get(i).map_or("other symbols: anonymous constants, strings", |(n, _)| n);
+        println!("  {size:>6} B  {name}");
+    }
+    println!(
+        "  {:>6} B  no symbol: merged strings, alignment, .data's values",
+        flash.saturating_sub(sizes.iter().sum())
+    );
     Ok(())
 }
 
