@@ -153,7 +153,10 @@ async fn send(serial: &mut Serial, reply: &[u8; MAX_FRAME], n: usize) {
 /// (request and parameter copy) is taken under the lock and the flash written without it, so the
 /// control tick keeps its interrupt; a page erase still stalls every flash fetch for ~22 ms,
 /// which is why the drive refuses saves while the axis moves.
-#[cfg(not(feature = "qemu"))]
+///
+/// Out of line: the save's state (about 2 KB) is on the stack while a save runs, not in the
+/// Modbus task's frame for every request.
+#[inline(never)]
 pub fn serve_store(store: &mut crate::board::ParamStore) {
     use drive_core::store::Job;
     while let Some(job) = with_drive(Job::take).flatten() {
@@ -174,7 +177,6 @@ pub fn serve_store(store: &mut crate::board::ParamStore) {
 
 /// Whether the drive asked for a flash operation that has not been carried out yet (a parameter
 /// save, the power-down position, the fault history).
-#[cfg(not(feature = "qemu"))]
 fn save_pending() -> bool {
     with_drive(|d| d.has_system_request()).unwrap_or(false)
 }
@@ -239,7 +241,7 @@ const SILENCE_PARTIAL: embassy_time::Duration = embassy_time::Duration::from_mil
 /// `frames`) or by a long silence, then goes to the drive in one burst t3.5 before now.
 #[cfg(feature = "qemu")]
 #[embassy_executor::task]
-pub async fn modbus(mut serial: Serial) -> ! {
+pub async fn modbus(mut serial: Serial, mut store: crate::board::ParamStore) -> ! {
     // Bytes come one or a few at a time: the task reads them as they arrive.
     let mut buf = [0u8; 16];
     let mut reply = [0u8; MAX_FRAME];
@@ -261,6 +263,10 @@ pub async fn modbus(mut serial: Serial) -> ! {
             Either::Second(()) => None,
         };
         send(&mut serial, &reply, n.unwrap_or(0)).await;
+        if save_pending() && serial.flush().await.is_err() {
+            warn!("uart: flush failed");
+        }
+        serve_store(&mut store);
     }
 }
 

@@ -205,6 +205,7 @@ mod run {
 
     use defmt::unwrap;
     use defmt_rtt as _;
+    use embassy_embedded_hal::adapter::BlockingAsync;
     use embassy_executor::raw::Executor;
 
     use crate::{app, board};
@@ -223,14 +224,11 @@ mod run {
     #[cortex_m_rt::entry]
     fn main() -> ! {
         crate::stack::paint();
-        // QEMU does not model the flash: factory parameters, and saving is refused (04).
-        app::start(board::HARDWARE, &drive_core::Params::factory(), 0, false);
-        let serial = board::init();
         let Some(executor) = cortex_m::singleton!(: Executor = Executor::new(core::ptr::null_mut())) else {
             defmt::panic!("executor created twice");
         };
         let executor: &'static Executor = executor;
-        executor.spawner().spawn(unwrap!(app::modbus(serial)));
+        power_up(executor.spawner());
         loop {
             WORK.store(false, Ordering::Release);
             // SAFETY: polled from this one thread only, never re-entered.
@@ -242,5 +240,24 @@ mod run {
                 }
             });
         }
+    }
+
+    /// The parameters from the store, the drive, the board, and the Modbus task with the store.
+    ///
+    /// Out of line: the store and the state of its loading (about 3 KB) are on the stack for this
+    /// call only, not in `main`'s frame under every task the executor polls.
+    #[inline(never)]
+    fn power_up(spawner: embassy_executor::Spawner) {
+        // QEMU does not model the flash: the store runs on RAM, empty at every boot.
+        let Some(flash) = board::param_flash() else {
+            defmt::panic!("the store's RAM taken twice");
+        };
+        let Ok(mut store) = drive_core::store::Store::new(BlockingAsync::new(flash), board::STORE) else {
+            defmt::panic!("the store's range is not whole pages");
+        };
+        let loaded = embassy_futures::block_on(store.power_up(false));
+        app::start(board::HARDWARE, &loaded.params, loaded.status, true);
+        let serial = board::init();
+        spawner.spawn(unwrap!(app::modbus(serial, store)));
     }
 }

@@ -30,6 +30,9 @@ const RAM_CAPACITY: u64 = 32 * 1024;
 /// Free stack the measured peak must leave on the G431 (`tick-cost` fails otherwise): the QEMU
 /// build's tasks are not the board's, and a measurement samples where interrupts land.
 const STACK_MARGIN: u64 = 1024;
+/// The QEMU build's parameter store: RAM that behaves as flash (`firmware/src/board/qemu.rs`).
+const QEMU_STORE_RAM: u64 = 0x2000_8000;
+const QEMU_STORE_WORDS: usize = 8 * 1024 / 4;
 /// The end of the G431's RAM: flip-link puts the statics below it and the stack below them.
 const RAM_END: u64 = 0x2000_0000 + RAM_CAPACITY;
 
@@ -448,6 +451,28 @@ fn tick_cost() -> Result<(), String> {
     let end = position(&mut s)?;
     let after = read_stats()?;
     let stack_served = stack_peak()?;
+    // Then two parameter saves (the first into the empty store, the second replacing its
+    // record): the store's frames in the bus task, without the drive's lock, with control ticks
+    // landing on top of them. 0x2120 bit 3 is set while a save runs, bit 4 if one failed.
+    for _ in 0..2 {
+        write(&mut s, 0x200F, 2)?;
+        let status = loop {
+            let status = read_word(&mut s, 0x2120, 1)?[4];
+            if status & 0x08 == 0 {
+                break status;
+            }
+            if Instant::now() > deadline {
+                return Err("the parameter save did not end".into());
+            }
+        };
+        if status & 0x10 != 0 {
+            return Err(format!("the parameter save failed: 0x2120 = {status:#04x}"));
+        }
+    }
+    let stack_saved = stack_peak()?;
+    // The store's RAM (`firmware/src/board/qemu.rs`), erased at power-up: what the saves programmed.
+    let programmed =
+        4 * read_memory(QEMU_STORE_RAM, QEMU_STORE_WORDS)?.iter().filter(|&&w| w != u64::from(u32::MAX)).count();
     drop(qemu);
     let per_count = 250.0 / f64::from(1u32 << ICOUNT_SHIFT);
     let per_tick = |n: u64, sum: u64| if n == 0 { 0.0 } else { sum as f64 * per_count / n as f64 };
@@ -464,16 +489,20 @@ fn tick_cost() -> Result<(), String> {
     let goal = RETARGETS.last().map_or(0, |&(_, t)| i32::from(t));
     println!("  steps:    {emitted} emitted by the stage, the drive ends at {end} (a move re-targeted to {goal})");
     println!(
-        "  stack:    {stack_booted} B at the most after booting, {stack_served} B after these requests, of the {} B \
-         below the statics",
+        "  stack:    {stack_booted} B at the most after booting, {stack_served} B after these requests, \
+         {stack_saved} B after two parameter saves, of the {} B below the statics",
         stack_start - stack_end
     );
+    println!("  store:    {programmed} B of the emulated flash programmed by the saves");
+    if programmed == 0 {
+        return Err("the parameter saves programmed nothing".into());
+    }
     if end != goal || emitted != end {
         return Err(format!("the stage emitted {emitted} steps, the drive stands at {end}: {goal} both expected"));
     }
     // The board: its statics (flip-link puts them at the end of RAM) and its stack below them.
     let (g431_statics, g431_stack) = (RAM_END - g431_stack_start, g431_stack_start - 0x2000_0000);
-    let peak = stack_booted.max(stack_served);
+    let peak = stack_booted.max(stack_served).max(stack_saved);
     let ram = g431_statics + peak;
     println!(
         "  G431 RAM: {g431_statics} B of statics + this stack peak {peak} B = {ram} B of the {RAM_BUDGET} B budget \

@@ -107,6 +107,96 @@ pub fn init() -> Serial {
 /// Nothing to cut under QEMU: no power stage.
 pub fn power_off() {}
 
+/// The parameter store's range in [`RamFlash`]: the size of the G431's (four 2 KiB pages).
+pub const STORE: core::ops::Range<u32> = 0..STORE_BYTES;
+/// Bytes of [`RamFlash`].
+const STORE_BYTES: u32 = 8 * 1024;
+/// Where [`RamFlash`] lives: the L475's SRAM1 just above the 32 KiB that `memory.x` (the
+/// G431's) gives the program, so the emulated build keeps the board's statics and stack.
+const STORE_RAM: usize = 0x2000_8000;
+
+/// QEMU does not model this chip's flash controller, so the parameter store runs on RAM that
+/// behaves as NOR flash does (a write only clears bits, an erase sets a page to 0xFF, the
+/// G431's write and page sizes): the same store and save path as the board, lost at power-off.
+pub struct RamFlash(&'static mut [u8]);
+
+/// The parameter store on [`RamFlash`], behind the adapter the board's flash uses.
+pub type ParamStore = drive_core::store::Store<embassy_embedded_hal::adapter::BlockingAsync<RamFlash>>;
+
+/// The store's RAM, erased (the first call only; `None` after).
+pub fn param_flash() -> Option<RamFlash> {
+    static TAKEN: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+    if TAKEN.swap(true, Ordering::AcqRel) {
+        return None;
+    }
+    // SAFETY: STORE_RAM..+STORE_BYTES is SRAM1 of the STM32L475 (96 KiB from 0x20000000),
+    // outside the linker's RAM region (memory.x: 32 KiB), so nothing else uses it; the flag
+    // above hands it out once.
+    let bytes = unsafe { core::slice::from_raw_parts_mut(STORE_RAM as *mut u8, STORE_BYTES as usize) };
+    bytes.fill(0xFF);
+    Some(RamFlash(bytes))
+}
+
+/// A [`RamFlash`] access outside it or not aligned to its write or erase size.
+#[derive(Debug)]
+pub struct RamFlashError(embedded_storage::nor_flash::NorFlashErrorKind);
+
+impl embedded_storage::nor_flash::NorFlashError for RamFlashError {
+    fn kind(&self) -> embedded_storage::nor_flash::NorFlashErrorKind {
+        self.0
+    }
+}
+
+impl RamFlash {
+    /// The bytes at `offset..offset + len`, if within the flash and aligned to `align`.
+    fn range(&mut self, offset: u32, len: usize, align: usize) -> Result<&mut [u8], RamFlashError> {
+        use embedded_storage::nor_flash::NorFlashErrorKind::{NotAligned, OutOfBounds};
+        let start = offset as usize;
+        if !start.is_multiple_of(align) || !len.is_multiple_of(align) {
+            return Err(RamFlashError(NotAligned));
+        }
+        start.checked_add(len).and_then(|end| self.0.get_mut(start..end)).ok_or(RamFlashError(OutOfBounds))
+    }
+}
+
+impl embedded_storage::nor_flash::ErrorType for RamFlash {
+    type Error = RamFlashError;
+}
+
+impl embedded_storage::nor_flash::ReadNorFlash for RamFlash {
+    const READ_SIZE: usize = 1;
+
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), RamFlashError> {
+        bytes.copy_from_slice(self.range(offset, bytes.len(), 1)?);
+        Ok(())
+    }
+
+    fn capacity(&self) -> usize {
+        self.0.len()
+    }
+}
+
+impl embedded_storage::nor_flash::NorFlash for RamFlash {
+    /// The G431's: a double word.
+    const WRITE_SIZE: usize = 8;
+    /// The G431's page.
+    const ERASE_SIZE: usize = 2048;
+
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), RamFlashError> {
+        let len =
+            to.checked_sub(from).ok_or(RamFlashError(embedded_storage::nor_flash::NorFlashErrorKind::OutOfBounds))?;
+        self.range(from, len as usize, Self::ERASE_SIZE)?.fill(0xFF);
+        Ok(())
+    }
+
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), RamFlashError> {
+        for (cell, b) in self.range(offset, bytes.len(), Self::WRITE_SIZE)?.iter_mut().zip(bytes) {
+            *cell &= b;
+        }
+        Ok(())
+    }
+}
+
 /// Milliseconds since boot, counted by the SysTick handler.
 static MILLIS: Mutex<Cell<u64>> = Mutex::new(Cell::new(0));
 /// The timers of embassy-time's queue, and the next time one is due.
