@@ -9,7 +9,8 @@
 //! - SysTick at 1 kHz from the 4 MHz MSI reset clock: the embassy-time driver (microseconds,
 //!   interpolated from the SysTick counter) and the control tick. `drive-core` evaluates the
 //!   motion at the time it is given, so a slower tick only batches more steps per tick;
-//! - no step timer: the drive core counts the steps (the position advances as on the board).
+//! - no step timer: the drive core counts the steps (the position advances as on the board);
+//! - no flash controller: the parameter store runs on RAM that behaves as flash ([`RamFlash`]).
 
 use core::cell::{Cell, RefCell};
 use core::convert::Infallible;
