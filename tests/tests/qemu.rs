@@ -1,6 +1,7 @@
 //! A master we did not write (tokio-modbus) talks to the firmware itself, running on QEMU's
 //! emulated STM32L475 (`cargo xtask qemu`): device identification, registers, a relative move
-//! whose position advances and whose busy bit clears. Skipped, with a message, when QEMU 10's
+//! whose position advances and whose busy bit clears, a parameter save refused while it moves and
+//! carried out at rest. Skipped, with a message, when QEMU 10's
 //! `qemu-system-arm` is not installed (`.ci/install` installs it).
 
 use std::io::{BufRead, BufReader};
@@ -127,6 +128,8 @@ async fn tokio_modbus_drives_the_firmware_under_qemu() {
         write(&mut ctx, reg, v).await.expect("accepted");
     }
     let start = Instant::now();
+    // No save while the axis moves (a page erase would stall the chip's flash): refused, 04.
+    assert_eq!(write(&mut ctx, 0x200F, 2).await, Err(ExceptionCode::ServerDeviceFailure));
     let mut seen = Vec::new();
     loop {
         let busy = read(&mut ctx, 0x6001, 1).await[0] & 0x08 != 0;
@@ -141,4 +144,18 @@ async fn tokio_modbus_drives_the_firmware_under_qemu() {
     assert!(seen.windows(2).all(|w| w[0] <= w[1]), "monotonic: {seen:?}");
     assert_eq!(position(&read(&mut ctx, 0x600E, 2).await), 2000, "ends exactly on target");
     println!("move of 2000 steps at 4000 pps: idle after {:?}, {} position reads", start.elapsed(), seen.len());
+
+    // At rest a save runs: into the store that QEMU's board keeps in RAM (empty at boot, 0x2120
+    // bit 0), bit 3 while it runs, and no failure (bit 4).
+    assert_eq!(read(&mut ctx, 0x2120, 1).await, vec![0x01], "the store is empty at boot");
+    write(&mut ctx, 0x200F, 2).await.expect("a save at rest");
+    let start = Instant::now();
+    let status = loop {
+        let status = read(&mut ctx, 0x2120, 1).await[0];
+        if status & 0x08 == 0 {
+            break status;
+        }
+        assert!(start.elapsed() < Duration::from_secs(10), "the save did not end");
+    };
+    assert_eq!(status & 0x10, 0, "the save failed: 0x2120 = {status:#04x}");
 }
