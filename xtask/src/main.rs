@@ -32,6 +32,7 @@ const RAM_CAPACITY: u64 = 32 * 1024;
 const STACK_MARGIN: u64 = 1024;
 /// The QEMU build's parameter store: RAM that behaves as flash (`firmware/src/board/qemu.rs`).
 const QEMU_STORE_RAM: u64 = 0x2000_8000;
+/// Its size in words (8 KiB, as the G431's).
 const QEMU_STORE_WORDS: usize = 8 * 1024 / 4;
 /// The end of the G431's RAM: flip-link puts the statics below it and the stack below them.
 const RAM_END: u64 = 0x2000_0000 + RAM_CAPACITY;
