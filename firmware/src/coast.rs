@@ -1,6 +1,6 @@
 //! Coasting: the power stage's steps in a control tick that cannot run the drive, because the
 //! bus task holds it. Serving a request that plans a motion holds it for about 1.1-1.3 ms on the
-//! Cortex-M4 (`cargo xtask tick-cost`), 22-27 ticks at 20 kHz; stopping the pulses for that long
+//! Cortex-M4 (`cargo xtask tick-cost`), 21-27 ticks at 20 kHz; stopping the pulses for that long
 //! and then emitting the steps of those ticks at once would jerk a motor running at speed.
 //!
 //! While it waits, the stage keeps stepping at the speed of the last tick that ran, from its
