@@ -217,13 +217,8 @@ const PARTS: &[(&str, &[&str])] = &[
 /// Prints the `flash` of the firmware at `elf` by [`PARTS`], then what no part names and what
 /// has no symbol (merged strings, alignment, the initial values of `.data`).
 fn flash_by_part(elf: &Path, flash: u64) -> Result<(), String> {
-    let out = Command::new("arm-none-eabi-nm")
-        .args(["-S", "-C"])
-        .arg(elf)
-        .output()
-        .map_err(|e| format!("arm-none-eabi-nm: {e}"))?;
     let mut sizes = vec![0u64; PARTS.len() + 1];
-    for line in String::from_utf8_lossy(&out.stdout).lines() {
+    for line in nm_symbols(elf, &["-S", "-C"])?.lines() {
         let mut f = line.splitn(4, ' ');
         let (Some(addr), Some(size), Some(kind), Some(name)) = (f.next(), f.next(), f.next(), f.next()) else {
             continue;
@@ -337,9 +332,13 @@ const STACK_PAINT: u64 = 0x214B_5453;
 /// with shifts 0-2 QEMU 10.0 reads the same SysTick value before and after most ticks.
 const ICOUNT_SHIFT: u32 = 4;
 
-/// The symbol table of `elf`, as `arm-none-eabi-nm` prints it.
-fn nm_symbols(elf: &Path) -> Result<String, String> {
-    let nm = Command::new("arm-none-eabi-nm").arg(elf).output().map_err(|e| format!("arm-none-eabi-nm: {e}"))?;
+/// The symbol table of `elf`, as `arm-none-eabi-nm` with `options` prints it.
+fn nm_symbols(elf: &Path, options: &[&str]) -> Result<String, String> {
+    let nm = Command::new("arm-none-eabi-nm")
+        .args(options)
+        .arg(elf)
+        .output()
+        .map_err(|e| format!("arm-none-eabi-nm: {e}"))?;
     Ok(String::from_utf8_lossy(&nm.stdout).into_owned())
 }
 
@@ -357,7 +356,7 @@ fn symbol(symbols: &str, name: &str) -> Result<u64, String> {
 /// monitor while idle and during a move.
 fn tick_cost() -> Result<(), String> {
     let elf = build_qemu()?;
-    let symbols = nm_symbols(&elf)?;
+    let symbols = nm_symbols(&elf, &[])?;
     let addr = symbol(&symbols, "TICK_COST")?;
     let (stack_end, stack_start) = (symbol(&symbols, "_stack_end")?, symbol(&symbols, "_stack_start")?);
     // The board's layout, to hold the measured peak against.
@@ -365,7 +364,7 @@ fn tick_cost() -> Result<(), String> {
     if !g431_elf.exists() {
         firmware()?;
     }
-    let g431_stack_start = symbol(&nm_symbols(&g431_elf)?, "_stack_start")?;
+    let g431_stack_start = symbol(&nm_symbols(&g431_elf, &[])?, "_stack_start")?;
     let (port, mon) = (free_port()?, free_port()?);
     let monitor = format!("tcp:127.0.0.1:{mon},server=on,wait=off");
     let mut qemu = spawn_qemu(
