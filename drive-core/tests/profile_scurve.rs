@@ -407,6 +407,91 @@ fn regressions() {
     assert!(prof.duration() <= theirs * 1.005, "ours {} Ruckig {theirs}", prof.duration());
 }
 
+/// Short moves planned while accelerating hard (found by `hunt_short_retarget_while_accelerating`).
+#[test]
+fn short_retarget_while_accelerating_hard() {
+    let lim = |v_max, a_max, d_max, j| Limits { v_max, a_max, d_max, jerk: Some(j) };
+    // Retargets from the middle of a move that started accelerating hard, a little (0.2..4
+    // microsteps) from its target: the turn is a hair (~1e-6 pps) beyond the natural velocity,
+    // where one ulp of the turning speed moves the end by more than the rounding accepted.
+    plan_pos(
+        State { p: 4062.8465205467096, v: -6555.83144340775, a: 1.1170575323132874 },
+        753.9447451820558,
+        0.0,
+        &lim(10007.383610071676, 8764.074077484507, 8764.074077484507, 33537.08585595115),
+    );
+    plan_pos(
+        State { p: -532030.0506902903, v: 39897.07899427538, a: -3.6224309221230397 },
+        -523201.25375653955,
+        0.0,
+        &lim(82824.6743451247, 34094.8760907525, 156810.68778766654, 833626.677124571),
+    );
+    plan_pos(
+        State { p: 654.0776813294933, v: -9710.180587853267, a: 28695.264407185343 },
+        -994.1176035737517,
+        0.0,
+        &lim(46014.07261653329, 28695.264407185343, 28695.264407185343, 52703705.76614524),
+    );
+    plan_pos(
+        State { p: -9062350.64954404, v: -24619.8232301892, a: 1.49917425876091 },
+        -9089390.142738529,
+        0.0,
+        &lim(47367.152484956445, 15000.160453878203, 15000.160453878203, 27020.526891660098),
+    );
+    // The same a hair beyond the final velocity (the second pulse is the tiny one).
+    plan_pos(
+        State { p: -3746931.5652342434, v: -5429.987971656961, a: -15296.504819137497 },
+        -3746931.5557835666,
+        166931.103765098,
+        &lim(169087.36870880215, 15819.065178314759, 15819.065178314759, 1168.8092165228863),
+    );
+    // A target a fraction of a microstep ahead, to be passed at a little less than the start
+    // speed: the move reverses twice, 10⁷ microsteps out and back, each reversal within one
+    // phase whose terms cancel (its rounding is of their scale, not of the net distance).
+    plan_pos(
+        State { p: 10634.35067704869, v: -108399.46115918226, a: -57.40601732718458 },
+        10634.271347316624,
+        108344.83646533392,
+        &lim(134966.5048437127, 113.36198615864647, 113.36198615864647, 45421023.30001294),
+    );
+    plan_pos(
+        State { p: 1499.2093486801966, v: 39927.32571994821, a: 177.26186288211707 },
+        1499.79063489027,
+        39919.679826911175,
+        &lim(130711.30904121196, 177.26186288211707, 177.26186288211707, 358788.9139036582),
+    );
+}
+
+/// Easing off a small deceleration at speed, a hair (10⁻⁶..10⁻³ microstep) beyond the direct stop:
+/// a dip of the acceleration whose apex is within an ulp of the start speed (found by
+/// `hunt_short_retarget_while_accelerating` with `HUNT_WIDE=1`).
+#[test]
+fn shallow_dip_near_the_direct_stop() {
+    let lim = |v_max, a_max, d_max, j| Limits { v_max, a_max, d_max, jerk: Some(j) };
+    plan_pos(
+        State { p: -245372.19733461124, v: 40374.87979485995, a: -0.14608436907154818 },
+        -140259.80691968475,
+        0.0,
+        &lim(40374.87979665122, 28439.347887145424, 28439.347887145424, 5956.864477919458),
+    );
+    plan_pos(
+        State { p: 231007.68893225555, v: -87756.44082390609, a: 0.05157008685293099 },
+        -22345.3894876547,
+        0.0,
+        &lim(153082.59446203796, 71595.26765859875, 71595.26765859875, 10528.903815076452),
+    );
+}
+
+/// A trapezoid at a low a_max and a high speed, to a target passed at nearly that speed: a turn
+/// 4 pps beyond the start speed, where one ulp of the speed moves the end by 10⁻⁸ microstep
+/// (found by `trapezoid_position`).
+#[test]
+fn low_acceleration_at_high_speed() {
+    let lim = Limits { v_max: 196929.32662289424, a_max: 439.09057465308996, d_max: 138626.07549068076, jerk: None };
+    let start = State { p: 2.398292301326579, v: 169829.86556285157, a: -91685.81433839421 };
+    plan_pos(start, 1743.0718443186265, 169789.4835080711, &lim);
+}
+
 #[test]
 fn far_positions_do_not_drift() {
     let lim = Limits { v_max: 200_000.0, a_max: 77_440.0, d_max: 77_440.0, jerk: Some(1e7) };
@@ -675,4 +760,89 @@ fn against_ruckig() {
         // edges; those must stay rare.
         assert!(rest.ruckig_suboptimal + retarget.ruckig_suboptimal + asym.ruckig_suboptimal <= 1 + n / 500);
     }
+}
+
+// ------------------------------------------------------------------------------------------------
+// Directed search.
+
+/// One case of `scurve_position`, as its strategy's inputs.
+#[derive(Clone, Copy, Debug)]
+struct HuntCase {
+    lim: Limits,
+    start: State,
+    dist: f64,
+    v_end: f64,
+    frac: f64,
+}
+
+/// A case where `scurve_position` is weakest: a short move (1e-3..10 microsteps) from a start
+/// below v_max that accelerates hard (up to 2× the larger limit) in the direction of its motion.
+/// `wide`: any speed up to 2·v_max, the acceleration either way, 0 or 1e-6..1e3 microsteps.
+/// Without `smooth`, the same for trapezoids.
+fn hunt_case(rng: &mut Rng, wide: bool, smooth: bool) -> HuntCase {
+    let acc = |rng: &mut Rng| {
+        if rng.next() < 0.5 { 5_210.0 + rng.next() * (77_440.0 - 5_210.0) } else { rng.log(100.0, 1e6) }
+    };
+    let a_max = acc(rng);
+    let d_max = if rng.next() < 0.5 { a_max } else { acc(rng) };
+    let lim = Limits { v_max: rng.log(50.0, 2e5), a_max, d_max, jerk: Some(rng.log(1e3, 1e8)).filter(|_| smooth) };
+    let v = rng.sign() * rng.next() * lim.v_max * if wide { 2.0 } else { 1.0 };
+    let a_big = lim.a_max.max(lim.d_max);
+    let k = match (rng.next() * 4.0) as u32 {
+        0 => 2.0 * rng.next(),
+        1 => 0.9 + 0.2 * rng.next(),
+        // Exactly at a_max or at the larger limit.
+        2 if rng.next() < 0.5 => lim.a_max / a_big,
+        2 => 1.0,
+        _ => 0.5 + 1.5 * rng.next(),
+    };
+    let a = if wide { rng.sign() } else { v.signum() } * k * a_big;
+    let p = if rng.next() < 0.2 { 0.0 } else { rng.sign() * rng.log(1.0, 1e7) };
+    let v_end = if rng.next() < 0.75 { 0.0 } else { rng.next() * lim.v_max };
+    let dist = match wide {
+        false => rng.sign() * rng.log(1e-3, 10.0),
+        true if rng.next() < 0.1 => 0.0,
+        true => rng.sign() * rng.log(1e-6, 1e3),
+    };
+    HuntCase { lim, start: State { p, v, a }, dist, v_end, frac: rng.next() }
+}
+
+/// `scurve_position` on one case; without `checked`, only the plans' errors fail (faster).
+fn run_position_case(c: &HuntCase, checked: bool) {
+    if checked {
+        let prof = plan_pos(c.start, c.start.p + c.dist, c.v_end, &c.lim);
+        let mid = prof.at(c.frac * prof.duration());
+        plan_pos(mid, c.start.p - 0.5 * c.dist, 0.0, &c.lim);
+        plan_vel(mid, 0.0, &c.lim);
+    } else {
+        let prof = Profile::to_position(c.start, c.start.p + c.dist, c.v_end, &c.lim).unwrap();
+        let mid = prof.at(c.frac * prof.duration());
+        Profile::to_position(mid, c.start.p - 0.5 * c.dist, 0.0, &c.lim)
+            .unwrap_or_else(|e| panic!("retarget from {mid:?}: {e:?}"));
+        Profile::to_velocity(mid, 0.0, &c.lim).unwrap_or_else(|e| panic!("stop from {mid:?}: {e:?}"));
+    }
+}
+
+/// Runs `HUNT_N` directed cases (seed `HUNT_SEED`; `HUNT_WIDE=1`: the wider region; `HUNT_JERK=0`:
+/// trapezoids; `HUNT_CHECK=0`: only that every plan succeeds, 50× faster) and prints every
+/// failure's inputs.
+#[test]
+#[ignore = "long: run in release with HUNT_N"]
+fn hunt_short_retarget_while_accelerating() {
+    let n = env_count("HUNT_N", 100_000);
+    let mut rng = Rng(env_count("HUNT_SEED", 7) as u64);
+    let checked = env_count("HUNT_CHECK", 1) != 0;
+    let wide = env_count("HUNT_WIDE", 0) != 0;
+    let smooth = env_count("HUNT_JERK", 1) != 0;
+    let mut failures = 0usize;
+    for i in 0..n {
+        let c = hunt_case(&mut rng, wide, smooth);
+        if let Err(e) = std::panic::catch_unwind(|| run_position_case(&c, checked)) {
+            let msg = e.downcast_ref::<String>().map_or("", |s| s.as_str());
+            println!("case {i}: {c:?}\n  {msg}");
+            failures += 1;
+        }
+    }
+    println!("{n} cases, {failures} failures");
+    assert_eq!(failures, 0);
 }

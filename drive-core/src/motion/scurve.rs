@@ -28,7 +28,9 @@
 //!
 //! The turning velocity `vp` is the only unknown: on each side of the direct profile the distance
 //! covered by "pulse 1 + pulse 2" is monotonic in `vp`, so `vp` is found by a bracketed Illinois /
-//! bisection search with a bounded iteration count; the cruise variants at `±v_max` are closed form.
+//! bisection search with a bounded iteration count (in `√|vp − v_direct|`, kept apart from
+//! `v_direct`: a pulse between nearly equal speeds lasts as the square root of their difference);
+//! the cruise variants at `±v_max` are closed form.
 //! Two one-parameter families fill the distances in between, solved the same way on the depth of
 //! a "dip" of the acceleration towards zero:
 //!
@@ -254,14 +256,15 @@ impl Pulse {
         self.segs.iter().take(self.n)
     }
 
-    /// Duration, distance and path length (Σ|Δp| of the segments, the scale of the rounding) of
-    /// the pulse when it starts at velocity `v`.
+    /// Duration, distance and scale of the rounding (the terms' magnitudes summed) of the pulse
+    /// when it starts at velocity `v`.
     fn time_dist(&self, mut v: f64) -> Eval {
         let mut e = Eval { t: 0.0, d: 0.0, mag: 0.0 };
         for s in self.iter() {
             let dp = s.t * (v + s.t * (0.5 * s.a + s.t * s.j / 6.0));
             e.d += dp;
-            e.mag += fabs(dp);
+            // Not |dp|: a segment through zero speed goes far out and back, and its terms cancel.
+            e.mag += s.t * (fabs(v) + s.t * (0.5 * fabs(s.a) + s.t * fabs(s.j) / 6.0));
             v += s.t * (s.a + 0.5 * s.j * s.t);
             e.t += s.t;
         }
@@ -269,7 +272,7 @@ impl Pulse {
     }
 }
 
-/// Duration, distance and path length of a candidate.
+/// Duration, distance and scale of the rounding (at least the path length) of a candidate.
 #[derive(Clone, Copy, Debug)]
 struct Eval {
     t: f64,
@@ -284,11 +287,31 @@ impl Eval {
     }
 }
 
+/// A velocity `base + off`: a turn or a dip close to a known velocity (start, natural or final)
+/// is a small offset from it, which keeps its own precision. Moving a pulse's end by `δ` moves
+/// its end position by about `v·δ/a`, or `2v·√(δ/j)` from `a = 0`: one ulp of a high speed can
+/// move it by 10⁻⁸..10⁻² microstep, beyond the rounding the planner accepts.
+#[derive(Clone, Copy, Debug)]
+struct Vel {
+    base: f64,
+    off: f64,
+}
+
+impl Vel {
+    const fn of(v: f64) -> Vel {
+        Vel { base: v, off: 0.0 }
+    }
+
+    fn val(self) -> f64 {
+        self.base + self.off
+    }
+}
+
 /// An optional "dip" of the acceleration towards `a` as the velocity passes `v` (used when braking
 /// from above `v_max`).
 #[derive(Clone, Copy, Debug)]
 struct Dip {
-    v: f64,
+    v: Vel,
     a: f64,
 }
 
@@ -485,19 +508,22 @@ impl Walk {
 /// The fastest change from `(vs, a_s)` to `(ve, 0)`, optionally with a dip at `dip.v`, into
 /// `out` (the caller's: returned by value, every call site would keep a pulse of its own on the
 /// stack).
-fn pulse(vs: f64, a_s: f64, ve: f64, lim: &Lim, dip: Option<Dip>, out: &mut Pulse) -> Result<(), PlanError> {
+fn pulse(vs: Vel, a_s: f64, ve: Vel, lim: &Lim, dip: Option<Dip>, out: &mut Pulse) -> Result<(), PlanError> {
     *out = Pulse::EMPTY;
     if !lim.smooth() {
-        let s = if ve >= vs { 1.0 } else { -1.0 };
-        let (u0, u1) = (s * vs, s * ve);
-        if u1 > u0 {
+        // The change with the offsets apart (see `Vel`): at a low acceleration, a large speed's
+        // rounding alone would move the end by more than the rounding accepted.
+        let dv = (ve.base - vs.base) + (ve.off - vs.off);
+        let s = if dv >= 0.0 { 1.0 } else { -1.0 };
+        let (u0, u1, du) = (s * vs.val(), s * ve.val(), s * dv);
+        if du > 0.0 {
             if u0 < 0.0 && u1 > 0.0 {
                 out.push(-u0 / lim.dec, s * lim.dec, 0.0)?;
                 out.push(u1 / lim.acc, s * lim.acc, 0.0)?;
             } else if u0 >= 0.0 {
-                out.push((u1 - u0) / lim.acc, s * lim.acc, 0.0)?;
+                out.push(du / lim.acc, s * lim.acc, 0.0)?;
             } else {
-                out.push((u1 - u0) / lim.dec, s * lim.dec, 0.0)?;
+                out.push(du / lim.dec, s * lim.dec, 0.0)?;
             }
         }
         return Ok(());
@@ -509,31 +535,34 @@ fn pulse(vs: f64, a_s: f64, ve: f64, lim: &Lim, dip: Option<Dip>, out: &mut Puls
 /// Sets up the envelope of a jerk-limited pulse (pushing the counter-ramp, if any, into `out`).
 /// Returns the envelope, the start acceleration (normalised, ≥ 0) and the sign.
 fn walk_for(
-    vs: f64,
+    vs: Vel,
     a_s: f64,
-    ve: f64,
+    ve: Vel,
     lim: &Lim,
     dip: Option<Dip>,
     out: &mut Pulse,
 ) -> Result<(Walk, f64, f64), PlanError> {
     let j = lim.j;
-    let s = if ve >= lim.v_nat(vs, a_s) { 1.0 } else { -1.0 };
-    let (u0, an, u1) = (s * vs, s * a_s, s * ve);
-    let (us, a0) = if an < 0.0 {
+    // Bases and offsets are subtracted apart: a small offset stays exact (see `Vel`).
+    let vn = lim.v_nat(vs.base, a_s);
+    let s = if (ve.base - vn) + (ve.off - vs.off) >= 0.0 { 1.0 } else { -1.0 };
+    let (u0, an) = (s * vs.val(), s * a_s);
+    // The envelope starts at v_nat when the start acceleration is first ramped to zero.
+    let (us, a0, v_env) = if an < 0.0 {
         out.push(-an / j, a_s, s * j)?;
-        (u0 - an * an / (2.0 * j), 0.0)
+        (u0 - an * an / (2.0 * j), 0.0, vn)
     } else {
-        (u0, an)
+        (u0, an, vs.base)
     };
     let mut walk = Walk {
         j,
         e0: 0.5 * a0 * a0,
-        w: (u1 - us).max(0.0),
+        w: (s * ((ve.base - v_env) + (ve.off - vs.off))).max(0.0),
         ca: 0.5 * lim.acc * lim.acc,
         cd: 0.5 * lim.dec * lim.dec,
         xz: -us,
         brk: false,
-        dip: dip.map(|d| (s * d.v - us, 0.5 * d.a * d.a)),
+        dip: dip.map(|d| (s * ((d.v.base - v_env) + (d.v.off - vs.off)), 0.5 * d.a * d.a)),
     };
     walk.brk = walk.e0 > walk.g(0.0).0;
     Ok((walk, a0, s))
@@ -544,7 +573,7 @@ fn walk_for(
 /// deepest dip the jerk allows coming from the start. `None` if the pulse does not pass `v`.
 fn dip_bounds(vs: f64, a_s: f64, ve: f64, lim: &Lim, v: f64) -> Result<Option<(f64, f64)>, PlanError> {
     let mut scratch = Pulse::EMPTY;
-    let (walk, _, s) = walk_for(vs, a_s, ve, lim, None, &mut scratch)?;
+    let (walk, _, s) = walk_for(Vel::of(vs), a_s, Vel::of(ve), lim, None, &mut scratch)?;
     // x = s·v − us, and xz = −us.
     let x = s * v + walk.xz;
     if !(x > 0.0 && x < walk.w) {
@@ -632,24 +661,24 @@ fn solve(
 #[derive(Clone, Copy, Debug)]
 enum Cand {
     /// Pulse to `vp`, cruise for `cruise` s, pulse to the target velocity.
-    Turn { vp: f64, cruise: f64 },
+    Turn { vp: Vel, cruise: f64 },
     /// One braking pulse with a dip to `a` at `v`.
-    Dip { v: f64, a: f64 },
+    Dip { v: Vel, a: f64 },
 }
 
 /// Duration and distance of "pulse to vp, pulse to vf".
-fn turn_td(v0: f64, a0: f64, vp: f64, vf: f64, lim: &Lim) -> Result<Eval, PlanError> {
+fn turn_td(v0: f64, a0: f64, vp: Vel, vf: f64, lim: &Lim) -> Result<Eval, PlanError> {
     let mut p = Pulse::EMPTY;
-    pulse(v0, a0, vp, lim, None, &mut p)?;
+    pulse(Vel::of(v0), a0, vp, lim, None, &mut p)?;
     let e1 = p.time_dist(v0);
-    pulse(vp, 0.0, vf, lim, None, &mut p)?;
-    let e2 = p.time_dist(vp);
+    pulse(vp, 0.0, Vel::of(vf), lim, None, &mut p)?;
+    let e2 = p.time_dist(vp.val());
     Ok(Eval { t: e1.t + e2.t, d: e1.d + e2.d, mag: e1.mag + e2.mag })
 }
 
 fn dip_td(v0: f64, a0: f64, vf: f64, lim: &Lim, dip: Dip) -> Result<Eval, PlanError> {
     let mut p = Pulse::EMPTY;
-    pulse(v0, a0, vf, lim, Some(dip), &mut p)?;
+    pulse(Vel::of(v0), a0, Vel::of(vf), lim, Some(dip), &mut p)?;
     Ok(p.time_dist(v0))
 }
 
@@ -675,36 +704,34 @@ fn fastest_position(v0: f64, a0: f64, vf: f64, d: f64, lim: &Lim) -> Result<(Can
     };
 
     // Cruise at +v_max or -v_max.
-    let ep = turn_td(v0, a0, vmax, vf, lim)?;
-    let em = turn_td(v0, a0, -vmax, vf, lim)?;
+    let ep = turn_td(v0, a0, Vel::of(vmax), vf, lim)?;
+    let em = turn_td(v0, a0, Vel::of(-vmax), vf, lim)?;
     for (e, v) in [(ep, vmax), (em, -vmax)] {
         let c = (d - e.d) / v;
         if c >= -e.tol() / vmax {
             let c = c.max(0.0);
             let e = Eval { t: e.t + c, d: e.d + c * v, mag: e.mag + fabs(c * v) };
-            consider(&mut best, Cand::Turn { vp: v, cruise: c }, e, e.d - d);
+            consider(&mut best, Cand::Turn { vp: Vel::of(v), cruise: c }, e, e.d - d);
         }
     }
 
-    // Turning velocity above both the natural and the final velocity, or below both.
+    // Turning velocity above both the natural and the final velocity, or below both: from the
+    // inner end `vi` (the direct profile), `vp = vi ± u²`. A pulse between nearly equal speeds
+    // lasts as √Δv, so in `u` the distance has no infinite slope at `vi`, and its offset from
+    // `vi` keeps its precision (see `Vel`).
     let vn = lim.v_nat(v0, a0);
-    let (lo, hi) = (vn.min(vf), vn.max(vf));
-    let mut dist = |vp: f64| turn_td(v0, a0, vp, vf, lim).map(|e| e.d - d);
-    for (xa, ea, xb, eb) in [(hi, None, vmax, Some(ep)), (-vmax, Some(em), lo, None)] {
-        if !(xa <= xb && xa >= -vmax && xb <= vmax) {
+    for (vi, sg, e_far) in [(vn.max(vf), 1.0, ep), (vn.min(vf), -1.0, em)] {
+        if !(-vmax..=vmax).contains(&vi) {
             continue;
         }
-        let ea = match ea {
-            Some(e) => e,
-            None => turn_td(v0, a0, xa, vf, lim)?,
-        };
-        let eb = match eb {
-            Some(e) => e,
-            None => turn_td(v0, a0, xb, vf, lim)?,
-        };
+        let u_far = sqrt(vmax - sg * vi);
+        let vp_at = |u: f64| if u < u_far { Vel { base: vi, off: sg * u * u } } else { Vel::of(sg * vmax) };
+        let e_in = turn_td(v0, a0, Vel::of(vi), vf, lim)?;
         // The duration grows away from the direct profile: the inner end is the shortest.
-        if brackets(ea.d - d, &ea, eb.d - d, &eb) && !beaten(&best, ea.t.min(eb.t)) {
-            let vp = solve(&mut dist, xa, ea.d - d, xb, eb.d - d, ftol)?;
+        if brackets(e_in.d - d, &e_in, e_far.d - d, &e_far) && !beaten(&best, e_in.t.min(e_far.t)) {
+            let mut dist = |u: f64| turn_td(v0, a0, vp_at(u), vf, lim).map(|e| e.d - d);
+            let u = solve(&mut dist, 0.0, e_in.d - d, u_far, e_far.d - d, ftol)?;
+            let vp = vp_at(u);
             let e = turn_td(v0, a0, vp, vf, lim)?;
             consider(&mut best, Cand::Turn { vp, cruise: 0.0 }, e, e.d - d);
         }
@@ -716,7 +743,8 @@ fn fastest_position(v0: f64, a0: f64, vf: f64, d: f64, lim: &Lim) -> Result<(Can
     let s_direct = if vf >= vn { 1.0 } else { -1.0 };
     if lim.smooth() && s_direct * a0 > 0.0 && fabs(vn) <= vmax {
         let an = fabs(a0);
-        let apex = |a: f64| v0 + s_direct * (an * an - a * a) / (2.0 * lim.j);
+        // An offset from v0: a shallow dip's apex is closer to it than v0's rounding.
+        let apex = |a: f64| Vel { base: v0, off: s_direct * ((an - a) * (an + a)) / (2.0 * lim.j) };
         // The largest dip acceleration whose apex is within the speed limit.
         let a_top = if fabs(v0) <= vmax {
             an
@@ -742,12 +770,12 @@ fn fastest_position(v0: f64, a0: f64, vf: f64, d: f64, lim: &Lim) -> Result<(Can
         let sigma = if fabs(vn) > vmax { vn } else { v0 };
         let vd = if sigma > 0.0 { vmax } else { -vmax };
         if let Some((a_lo, a_hi)) = dip_bounds(v0, a0, vf, lim, vd)? {
-            let eval = |a: f64| dip_td(v0, a0, vf, lim, Dip { v: vd, a });
+            let eval = |a: f64| dip_td(v0, a0, vf, lim, Dip { v: Vel::of(vd), a });
             let (e0, e1) = (eval(a_lo)?, eval(a_hi)?);
             if brackets(e0.d - d, &e0, e1.d - d, &e1) && !beaten(&best, e0.t.min(e1.t)) {
                 let a = solve(&mut |a| eval(a).map(|e| e.d - d), a_lo, e0.d - d, a_hi, e1.d - d, ftol)?;
                 let e = eval(a)?;
-                consider(&mut best, Cand::Dip { v: vd, a }, e, e.d - d);
+                consider(&mut best, Cand::Dip { v: Vel::of(vd), a }, e, e.d - d);
             }
         }
     }
@@ -785,19 +813,19 @@ fn assemble_position(
     let mut p = Pulse::EMPTY;
     match cand {
         Cand::Turn { vp, cruise } => {
-            pulse(v0, a0, vp, lim, None, &mut p)?;
+            pulse(Vel::of(v0), a0, vp, lim, None, &mut p)?;
             add(&p)?;
             if cruise > 0.0 {
-                cruise_at = Some((p.n, vp));
+                cruise_at = Some((p.n, vp.val()));
                 p = Pulse::EMPTY;
                 p.push(cruise, 0.0, 0.0)?;
                 add(&p)?;
             }
-            pulse(vp, 0.0, vf, lim, None, &mut p)?;
+            pulse(vp, 0.0, Vel::of(vf), lim, None, &mut p)?;
             add(&p)?;
         }
         Cand::Dip { v, a } => {
-            pulse(v0, a0, vf, lim, Some(Dip { v, a }), &mut p)?;
+            pulse(Vel::of(v0), a0, Vel::of(vf), lim, Some(Dip { v, a }), &mut p)?;
             add(&p)?;
         }
     }
@@ -919,7 +947,7 @@ impl Profile {
         }
         let a0 = if lim.smooth() { start.a } else { 0.0 };
         let mut p = Pulse::EMPTY;
-        pulse(start.v, a0, target_v, &lim, None, &mut p)?;
+        pulse(Vel::of(start.v), a0, Vel::of(target_v), &lim, None, &mut p)?;
         let start = State { a: a0, ..start };
         out.build_into(start, p.segs.get(..p.n).unwrap_or(&[]), None, start)?;
         let e = out.eval_end();
