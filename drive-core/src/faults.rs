@@ -271,7 +271,9 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     /// The communication watchdog (0x2137): when it runs out, the status bit and a stop.
     fn watchdog(&mut self, now: Instant) {
         let limit = u64::from(self.param(Obj::CommTimeout)) * 100_000;
-        let since = now.since(self.faults.last_frame.unwrap_or(Instant::from_micros(0)));
+        // Before the first frame the watchdog counts from the first tick: the clock need not
+        // start at 0 when the drive powers up.
+        let since = now.since(*self.faults.last_frame.get_or_insert(now));
         if limit != 0 && since >= limit && self.status.comm & COMM_TIMEOUT == 0 {
             self.status.comm |= COMM_TIMEOUT;
             self.decelerate_to_stop();

@@ -348,3 +348,21 @@ fn the_watchdog_counts_from_power_up() {
     assert_eq!(drive.state().read(Obj::ErrorStatus), 0);
     assert!(drive.tick_with(Instant::from_micros(100_050), &NOMINAL).enabled);
 }
+
+/// Found by the soak: a drive powered up while its clock already read 99 s (as a drive restarted
+/// on a running simulated bus) timed out on its first tick.
+#[test]
+fn the_watchdog_counts_from_power_up_when_the_clock_does_not_start_at_zero() {
+    let mut params = Params::factory();
+    assert!(params.set(Obj::CommTimeout, 1));
+    let mut drive = Drive::boot(DriveConfig::default(), &params, 0);
+    let start = 99_000_000;
+    let mut t = start;
+    while t < start + 99_950 {
+        drive.tick_with(Instant::from_micros(t), &NOMINAL);
+        t += 50;
+    }
+    assert_eq!(drive.state().read(Obj::CommStatus), 0);
+    drive.tick_with(Instant::from_micros(start + 100_000), &NOMINAL);
+    assert_eq!(drive.state().read(Obj::CommStatus), 1);
+}
