@@ -69,6 +69,10 @@ impl Framer {
     /// Adds bytes received together at `now` (no silence between them). The caller first takes
     /// an ended frame ([`Framer::ended`]).
     pub fn extend(&mut self, now: Instant, bytes: &[u8]) {
+        // No bytes is no event on the line: neither a gap nor a new end of silence.
+        if bytes.is_empty() {
+            return;
+        }
         if self.len > 0 && now.since(self.last) > self.t15 {
             self.error.get_or_insert(RxError::Gap);
         }

@@ -111,3 +111,20 @@ fn address_comes_from_the_node_id() {
     assert!(bus.request(&[0x07, 0x06, 0x20, 0x28, 0x00, 0x09]).is_some());
     assert_eq!(bus.request(&[0x07, 0x03, 0x20, 0x28, 0x00, 0x01]), reply(&[0x07, 0x03, 0x02, 0x00, 0x09]));
 }
+
+/// Found by the fuzzing of the framer: a receive call with no bytes moved the end of the frame's
+/// silence (and could mark a gap), as if a byte had arrived.
+#[test]
+fn a_receive_of_no_bytes_changes_nothing() {
+    use drive_core::Instant;
+    use drive_core::rtu::Framer;
+    let Some(baud) = Baud::new(9600) else { panic!("9600 baud") };
+    let mut framer = Framer::new(baud);
+    framer.extend(Instant::from_micros(0), &[1, 3]);
+    let deadline = framer.deadline();
+    // Past t1.5 and nearly t3.5: an empty call must neither mark a gap nor restart the silence.
+    framer.extend(Instant::from_micros(3_000), &[]);
+    assert_eq!(framer.deadline(), deadline);
+    assert_eq!(framer.frame(), (&[1u8, 3][..], None));
+    assert!(framer.ended(Instant::from_micros(4_100)));
+}
