@@ -1,0 +1,17 @@
+//! The fuzz targets' logic, shared by the libFuzzer binaries (`fuzz_targets/`) and the stable
+//! corpus replay (`drive-core/tests/fuzz_corpus.rs`): a path include rather than a crate, because
+//! the fuzz crate is a workspace of its own that builds on nightly only.
+//!
+//! Each target is a `run(data)` that panics when the drive disagrees with the oracle.
+
+pub mod oracle;
+pub mod pdu_native;
+pub mod rtu_frame;
+pub mod rtu_stream;
+
+/// A target's entry point.
+pub type Run = fn(&[u8]);
+
+/// The targets and their entry points, for the replay.
+pub const TARGETS: [(&str, Run); 3] =
+    [("rtu_stream", rtu_stream::run), ("rtu_frame", rtu_frame::run), ("pdu_native", pdu_native::run)];
