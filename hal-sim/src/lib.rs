@@ -75,6 +75,7 @@ pub mod motor;
 pub mod plant;
 pub mod plot;
 pub mod script;
+pub mod soak;
 pub mod thermal;
 pub mod trace;
 

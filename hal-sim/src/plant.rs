@@ -246,6 +246,14 @@ impl Plant {
         }
     }
 
+    /// Starts the plant's clock at `t` instead of 0: a drive powered up while others on its bus
+    /// have been running. Only before the first tick.
+    pub fn start_at(&mut self, t: Instant) {
+        if self.last.is_none() {
+            self.next_tick = t;
+        }
+    }
+
     /// The simulated time of the next tick.
     pub fn next_tick(&self) -> Instant {
         self.next_tick

@@ -49,8 +49,12 @@ fn main() -> ExitCode {
         "qemu" => qemu(&std::env::args().skip(2).collect::<Vec<_>>()),
         "hil" => hil(),
         "tick-cost" => tick_cost().and_then(|()| core_tick_cost()),
+        // The soak in release (the simulator runs ~30x faster than in a debug build).
+        "soak" => run(cargo()
+            .args(["run", "--release", "-q", "-p", "hal-sim", "--bin", "soak", "--"])
+            .args(std::env::args().skip(2))),
         _ => Err(format!(
-            "usage: cargo xtask <ci|docs|masters|firmware|qemu --tcp HOST:PORT|hil|tick-cost>, not {task:?}"
+            "usage: cargo xtask <ci|docs|masters|firmware|qemu --tcp HOST:PORT|hil|tick-cost|soak [--seed S --hours H --minutes M --axes N --trace]>, not {task:?}"
         )),
     };
     match result {

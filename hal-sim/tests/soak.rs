@@ -1,0 +1,21 @@
+//! The soak on a fixed seed, a few simulated minutes: several drives on one bus under random legal
+//! traffic with disturbances and faults on the line (module `hal_sim::soak`). The day-long run is
+//! `cargo xtask soak --hours 24`.
+
+use hal_sim::soak::{Config, run};
+
+#[test]
+fn three_drives_for_three_simulated_minutes() {
+    let cfg = Config { seed: 2027, duration_us: 180_000_000, axes: 3, progress_s: 0, trace: false };
+    let report = match run(&cfg) {
+        Ok(report) => report,
+        Err(failure) => panic!("{failure}"),
+    };
+    println!("{report}");
+    // The run did what a soak is for: traffic of every kind, and faults on the line.
+    assert!(report.simulated_us >= cfg.duration_us);
+    assert!(report.frames > 2_000, "{report}");
+    assert!(report.moves > 20 && report.velocity_runs > 2 && report.pvt_streams > 1, "{report}");
+    assert!(report.group_starts > 0 && report.saves > 0 && report.power_cuts > 0, "{report}");
+    assert!(report.lost > 0 && report.corrupted > 0, "{report}");
+}
