@@ -181,9 +181,12 @@ const RESOLUTIONS: [u16; 3] = [16, 8, 32];
 const CURRENT_MA: u16 = 1500;
 /// The fastest the master runs a motor, full steps a second (4 rev/s).
 const FULL_STEPS_PER_S_MAX: f64 = 800.0;
+/// The slowest speed the master sets, as a share of the fastest.
+const SLOWEST: f64 = 0.05;
 /// The farthest from 0 the master sends a motor, full steps.
 const FULL_STEPS_SPAN: i64 = 40_000;
-/// The largest load torque step, N·m (a fifth of what 1.5 A holds at half current... with margin).
+/// The largest load torque, N·m: a sixth of the torque of 1.5 A, a third at half of it (the
+/// lowest standstill current the master sets).
 const LOAD_MAX_NM: f64 = 0.05;
 /// The PVT FIFO's depth and marks of a stream.
 const FIFO: [u16; 3] = [200, 60, 150];
@@ -754,8 +757,20 @@ impl Soak {
                 }
                 return Ok(());
             }
-            if self.now - began > 120_000_000 {
-                return Err(format!("axis {}: still busy after 120 s ({:?})", self.addr(i), self.axes[i].motion));
+            // 120 s, plus the time to the target at the slowest speed the master sets.
+            let far = match self.axes[i].motion {
+                Motion::Move(Some(target)) => (target - position).unsigned_abs() as f64,
+                _ => 0.0,
+            };
+            let slowest = SLOWEST * FULL_STEPS_PER_S_MAX * f64::from(self.axes[i].ustep);
+            let limit = 120_000_000 + (far / slowest * 1e6) as u64;
+            if self.now - began > limit {
+                return Err(format!(
+                    "axis {}: still busy after {} s ({:?})",
+                    self.addr(i),
+                    limit / 1_000_000,
+                    self.axes[i].motion
+                ));
             }
             let poll = self.rng.u64(10_000..100_000);
             self.wait(poll)?;
@@ -1030,7 +1045,7 @@ impl Soak {
     /// A speed for axis `i`, pps, within what the motor follows.
     fn speed(&mut self, i: usize) -> i32 {
         let top = FULL_STEPS_PER_S_MAX * f64::from(self.axes[i].ustep);
-        let lo = 0.05 * top;
+        let lo = SLOWEST * top;
         (lo + (top - lo) * self.rng.f64()) as i32
     }
 
