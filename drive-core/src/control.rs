@@ -23,7 +23,7 @@ use crate::faults::Inputs;
 use crate::motion::axis::{Axis, Setpoint};
 use crate::motion::cubic::Table;
 use crate::motion::scurve::Limits;
-use crate::od::{Obj, ObjError};
+use crate::od::{Obj, ObjError, refuse};
 use crate::units::Instant;
 use core::borrow::BorrowMut;
 use fixed::types::U0F16;
@@ -136,8 +136,11 @@ impl<P: BorrowMut<Table>> DriveState<P> {
 
     /// Whether the drive may start a motion: the power stage on (enabled, no fault, not freed by
     /// power loss), and no stop bit set.
-    pub(crate) fn may_move(&self) -> bool {
-        self.power_stage_on() && self.status.controller & !STATUS_BUSY == 0 && self.status.comm == 0
+    pub(crate) fn may_move(&self) -> Result<(), ObjError> {
+        // A fault also turns the power stage off: it is the reason to give (clear it first).
+        let latched = self.faulted() || self.status.controller & !STATUS_BUSY != 0 || self.status.comm != 0;
+        refuse(!latched, ObjError::Faulted)?;
+        refuse(self.power_stage_on(), ObjError::Disabled)
     }
 
     /// Decelerates a moving axis to rest with the mode's deceleration, and ends any PP set-point
@@ -200,8 +203,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         let fall = |bit: u16| new & bit == 0 && old & bit != 0;
         let now = self.now;
         let run_speed = f64::from(self.param(Obj::PpRunSpeed) as i32);
-        let failed = |_| ObjError::Refused;
-        let refuse = |ok: bool| if ok { Ok(()) } else { Err(ObjError::Refused) };
+        let failed = |_| ObjError::Infeasible;
         let mode = self.param(Obj::Mode);
         if rise(CW_HALT) {
             pp.halted = true;
@@ -211,7 +213,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
             }
         } else if fall(CW_HALT) {
             pp.halted = false;
-            refuse(self.may_move())?;
+            self.may_move()?;
             if mode == 5 {
                 let sp = self.pp_setpoint(0, run_speed);
                 axis.run_at(now, run_speed, sp.depart, &sp.limits).map_err(failed)?;
@@ -222,7 +224,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         }
         if mode == 4 && rise(CW_NEW_SETPOINT) && !pp.ack {
             // With the buffer full (acknowledge still set) a new set-point is ignored (§5.11.3, 4).
-            refuse(self.may_move())?;
+            self.may_move()?;
             let value = i64::from(self.param(Obj::PpTarget) as i32);
             let base = match (pp.buffered, pp.active) {
                 (_, Some(a)) if !axis.is_still() => a.target,
@@ -277,14 +279,14 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         let mode = self.param(Obj::Mode);
         let speed = f64::from(self.param(Obj::MaxSpeed) as i32);
         let position = axis.setpoint().whole;
-        let refuse = |ok: bool| if ok { Ok(()) } else { Err(ObjError::Refused) };
         let go_to = |axis: &mut Axis, target: i64, speed: f64| {
             let (depart, arrive) = self.jumps(libm::fabs(speed));
-            axis.move_to(now, target, depart, arrive, &self.scurve_limits(speed)).map_err(|_| ObjError::Refused)
+            axis.move_to(now, target, depart, arrive, &self.scurve_limits(speed)).map_err(|_| ObjError::Infeasible)
         };
         match obj {
             Obj::RelativeMove | Obj::AbsoluteMove => {
-                refuse(mode == 0 && self.may_move() && speed != 0.0)?;
+                refuse(mode == 0 && speed != 0.0, ObjError::NotNow)?;
+                self.may_move()?;
                 let target = if obj == Obj::AbsoluteMove {
                     i64::from(value as i32)
                 } else if busy {
@@ -300,14 +302,16 @@ impl<P: BorrowMut<Table>> DriveState<P> {
                 let v = f64::from(value as i32);
                 match (mode, axis.target()) {
                     (1, _) => {
-                        refuse(self.may_move() || v == 0.0)?;
+                        if v != 0.0 {
+                            self.may_move()?;
+                        }
                         let (depart, _) = self.jumps(libm::fabs(v));
                         // Speed 0 stops: the ramp's limits are those of the speed it stops from.
                         let limit = if v == 0.0 { libm::fabs(axis.setpoint().velocity).max(1.0) } else { v };
-                        axis.run_at(now, v, depart, &self.scurve_limits(limit)).map_err(|_| ObjError::Refused)?;
+                        axis.run_at(now, v, depart, &self.scurve_limits(limit)).map_err(|_| ObjError::Infeasible)?;
                     }
                     (0, Some(target)) if busy => {
-                        refuse(v != 0.0)?;
+                        refuse(v != 0.0, ObjError::NotNow)?;
                         go_to(axis, target, v)?;
                     }
                     _ => return Ok(false),
@@ -318,9 +322,9 @@ impl<P: BorrowMut<Table>> DriveState<P> {
                     return Ok(false);
                 }
                 // Leaving a mode while moving: the manual decelerates from velocity to position.
-                refuse(!busy || (mode == 1 && value == 0))?;
+                refuse(!busy || (mode == 1 && value == 0), ObjError::Busy)?;
                 if busy {
-                    axis.run_at(now, 0.0, 0.0, &self.scurve_limits(speed)).map_err(|_| ObjError::Refused)?;
+                    axis.run_at(now, 0.0, 0.0, &self.scurve_limits(speed)).map_err(|_| ObjError::Infeasible)?;
                 }
                 *pp = Pp::default();
             }
@@ -328,7 +332,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
             Obj::PpRunSpeed if mode == 5 && busy && !pp.halted => {
                 let v = f64::from(value as i32);
                 let sp = self.pp_setpoint(0, v);
-                axis.run_at(now, v, sp.depart, &sp.limits).map_err(|_| ObjError::Refused)?;
+                axis.run_at(now, v, sp.depart, &sp.limits).map_err(|_| ObjError::Infeasible)?;
             }
             Obj::Stop => {
                 axis.halt();
@@ -339,9 +343,9 @@ impl<P: BorrowMut<Table>> DriveState<P> {
                 *pp = Pp::default();
             }
             Obj::Enable => return Ok(false),
-            Obj::Position | Obj::Microsteps => refuse(!busy)?,
+            Obj::Position | Obj::Microsteps => refuse(!busy, ObjError::Busy)?,
             Obj::ZeroOffset => {
-                refuse(!busy)?;
+                refuse(!busy, ObjError::Busy)?;
                 if self.servo.feedback.encoder().is_some() {
                     // The position moves with the offset, and the axis stands on it.
                     axis.set_position(self.servo.encoder.wrapping_add(i64::from(value as i32)));

@@ -478,12 +478,12 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         Self::check_writable(d, value)?;
         match (d.obj, value) {
             // No boot loader to jump to yet (see 0x200F's documentation).
-            (Obj::SystemControl, 1) => Err(ObjError::Refused),
-            (Obj::SystemControl, 2) if !self.can_save => Err(ObjError::Refused),
+            (Obj::SystemControl, 1) => Err(ObjError::Unsupported),
+            (Obj::SystemControl, 2) if !self.can_save => Err(ObjError::Unsupported),
             // A flash erase stalls the STM32G431's single bank for ~22 ms: never while moving. A
             // second save waits for the first to end.
             (Obj::SystemControl, 2 | 3) if !self.axis.is_still() || self.status.storage & STORAGE_SAVING != 0 => {
-                Err(ObjError::Refused)
+                Err(ObjError::Busy)
             }
             (obj, _) if is_command(obj) => self.check_motion(obj, value),
             _ => Ok(()),

@@ -49,7 +49,7 @@ use crate::drive::DriveState;
 use crate::motion::axis::Axis;
 use crate::motion::cubic::{Cubic, Point, TABLE_SIZE, Table, V_MAX};
 use crate::motion::scurve::Limits;
-use crate::od::{Obj, ObjError};
+use crate::od::{Obj, ObjError, refuse};
 use crate::units::Instant;
 use core::borrow::BorrowMut;
 
@@ -230,23 +230,23 @@ impl<P: BorrowMut<Table>> DriveState<P> {
 
     /// Whether `p` may be pushed now.
     fn check_push(&self, p: Point) -> Result<(), ObjError> {
-        let refuse = |ok: bool| if ok { Ok(()) } else { Err(ObjError::Refused) };
-        refuse(self.pvt.len < self.capacity())?;
-        refuse(f64::from(p.velocity).abs() <= V_MAX)?;
+        refuse(self.pvt.len < self.capacity(), ObjError::NotNow)?;
+        refuse(f64::from(p.velocity).abs() <= V_MAX, ObjError::Infeasible)?;
         match self.pvt.last {
             // Only a first point may take no time (a run's start where the axis stands).
-            Some(prev) => refuse(p.time_ms > 0 && Cubic::between(prev, p).feasible()),
+            Some(prev) => refuse(p.time_ms > 0 && Cubic::between(prev, p).feasible(), ObjError::Infeasible),
             None => Ok(()),
         }
     }
 
     /// The source and first point of the run that a start would begin now, or why not.
     fn plan_run(&self) -> Result<(Source, u16, Point), ObjError> {
-        let refuse = |ok: bool| if ok { Ok(()) } else { Err(ObjError::Refused) };
-        refuse(self.param(Obj::Mode) == 2 && self.may_move() && self.axis.is_still() && self.pvt.run.is_none())?;
+        refuse(self.param(Obj::Mode) == 2, ObjError::NotNow)?;
+        self.may_move()?;
+        refuse(self.axis.is_still() && self.pvt.run.is_none(), ObjError::Busy)?;
         let len = self.pvt.len;
         let (source, first) = if self.pvt_mode() == 2 {
-            refuse(len > 0)?;
+            refuse(len > 0, ObjError::NotNow)?;
             (Source::Fifo, self.pvt.head)
         } else {
             let p = |a, b, n| Phase::new(self.param(a), self.param(b), n);
@@ -260,19 +260,21 @@ impl<P: BorrowMut<Table>> DriveState<P> {
                 ]
             };
             for ph in phases.iter().filter(|ph| ph.times > 0) {
-                refuse(ph.first <= ph.last && ph.last < len)?;
+                refuse(ph.first <= ph.last && ph.last < len, ObjError::NotNow)?;
             }
             // Points within a phase follow each other in the table, checked when pushed; the
             // junctions between phases are checked here.
-            let at = |i: u16| self.stored(i).ok_or(ObjError::Refused);
-            let joins = |a: u16, b: u16| -> Result<(), ObjError> { refuse(Cubic::between(at(a)?, at(b)?).feasible()) };
+            let at = |i: u16| self.stored(i).ok_or(ObjError::NotNow);
+            let joins = |a: u16, b: u16| -> Result<(), ObjError> {
+                refuse(Cubic::between(at(a)?, at(b)?).feasible(), ObjError::Infeasible)
+            };
             let [acc, lp, dec] = phases;
             let last = if self.pvt_mode() == 0 {
                 acc.last
             } else {
                 if lp.times > 0 {
                     // A loop of no time would pass its points endlessly within one tick.
-                    refuse(lp.first < lp.last || at(lp.first)?.time_ms > 0)?;
+                    refuse(lp.first < lp.last || at(lp.first)?.time_ms > 0, ObjError::NotNow)?;
                     joins(acc.last, lp.first)?;
                     joins(lp.last, dec.first)?;
                     if lp.times > 1 {
@@ -283,25 +285,24 @@ impl<P: BorrowMut<Table>> DriveState<P> {
                 }
                 dec.last
             };
-            refuse(at(last)?.velocity == 0)?;
+            refuse(at(last)?.velocity == 0, ObjError::NotNow)?;
             (Source::table(phases), acc.first)
         };
-        let p = self.stored(first).ok_or(ObjError::Refused)?;
-        refuse(Cubic::new(self.axis.setpoint().whole, 0, p).feasible())?;
+        let p = self.stored(first).ok_or(ObjError::NotNow)?;
+        refuse(Cubic::new(self.axis.setpoint().whole, 0, p).feasible(), ObjError::Infeasible)?;
         Ok((source, first, p))
     }
 
     /// The synchronous move that a start would begin now: the axis planned, or why not.
     fn plan_sync(&self, now: Instant) -> Result<Axis, ObjError> {
         let speed = f64::from(self.param(Obj::SyncSpeed) as i32);
-        let ok = self.param(Obj::Mode) == 0 && self.may_move() && self.axis.is_still() && speed != 0.0;
-        if !ok {
-            return Err(ObjError::Refused);
-        }
+        refuse(self.param(Obj::Mode) == 0 && speed != 0.0, ObjError::NotNow)?;
+        self.may_move()?;
+        refuse(self.axis.is_still(), ObjError::Busy)?;
         let target = i64::from(self.param(Obj::SyncPosition) as i32);
         let (depart, arrive) = self.jumps(speed.abs());
         let mut axis = self.axis;
-        axis.move_to(now, target, depart, arrive, &self.scurve_limits(speed)).map_err(|_| ObjError::Refused)?;
+        axis.move_to(now, target, depart, arrive, &self.scurve_limits(speed)).map_err(|_| ObjError::Infeasible)?;
         Ok(axis)
     }
 
@@ -325,7 +326,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         match self.param(Obj::Mode) {
             2 => self.plan_run().map(|_| Effect::Start(Start::Pvt)),
             0 => self.plan_sync(self.now).map(|_| Effect::Start(Start::Sync)),
-            _ => Err(ObjError::Refused),
+            _ => Err(ObjError::NotNow),
         }
     }
 
@@ -339,7 +340,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
             (Obj::PvtControl, OP_PUSH) => {
                 self.check_push(self.point_registers()).map(|()| Effect::Push(self.point_registers()))
             }
-            (Obj::PvtControl, OP_CLEAR) | (Obj::PvtMode, _) if running => Err(ObjError::Refused),
+            (Obj::PvtControl, OP_CLEAR) | (Obj::PvtMode, _) if running => Err(ObjError::Busy),
             (Obj::PvtControl, _) => Ok(Effect::Clear),
             (Obj::PvtMode, v) if v != self.pvt_mode() => Ok(Effect::Clear),
             (Obj::PvtTime, _) if self.param(Obj::PvtAutoPush) == 1 => {

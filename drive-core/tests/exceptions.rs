@@ -119,3 +119,33 @@ fn busy_bus_really_differs_from_factory() {
     assert_ne!(busy_bus().snapshot(), Bus::factory().snapshot());
     assert_eq!(busy_bus().drive.state().read(Obj::Microsteps), 32);
 }
+
+/// Each refusal of a valid value says why (a map turns the reason into its own code; the native
+/// map answers 04 to all of them).
+#[test]
+fn refusals_say_why() {
+    use drive_core::od::ObjError;
+    use drive_core::{Drive, Instant};
+    let mut drive = Drive::factory();
+    drive.tick(Instant::from_micros(50));
+    let st = drive.state_mut();
+    // Speed 0, or another work mode's command: not now.
+    assert_eq!(st.check(Obj::RelativeMove, 100), Err(ObjError::NotNow));
+    st.apply(Obj::MaxSpeed, 4000);
+    assert_eq!(st.check(Obj::RelativeMove, 100), Ok(()));
+    assert!(st.check(Obj::SystemControl, 1) == Err(ObjError::Unsupported));
+    // A latched error bit: faulted.
+    st.status_mut().error = 0x01;
+    assert_eq!(st.check(Obj::RelativeMove, 100), Err(ObjError::Faulted));
+    st.status_mut().error = 0;
+    // The power stage off: disabled.
+    st.apply(Obj::Enable, 0);
+    assert_eq!(st.check(Obj::RelativeMove, 100), Err(ObjError::Disabled));
+    st.apply(Obj::Enable, 1);
+    // Moving: a save and a position set wait for rest.
+    st.apply(Obj::RelativeMove, 100_000);
+    drive.tick(Instant::from_micros(100));
+    let st = drive.state_mut();
+    assert_eq!(st.check(Obj::Position, 0), Err(ObjError::Busy));
+    assert!(ObjError::Busy.is_refusal() && !ObjError::OutOfRange.is_refusal());
+}

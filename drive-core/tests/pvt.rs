@@ -247,7 +247,7 @@ fn mode_3_streams_refilled_fifo_with_status_bits() {
     next += 1;
     // Full: refused, nothing changes.
     let before = r.read(Obj::PvtCount);
-    assert_eq!(r.push(pts[next]), Err(ObjError::Refused));
+    assert_eq!(r.push(pts[next]), Err(ObjError::NotNow));
     assert_eq!(r.read(Obj::PvtCount), before);
     r.set(Obj::PvtControl, 1);
     let mut got = vec![];
@@ -299,42 +299,42 @@ fn underflow_decelerates_without_a_jump_and_sets_the_fault() {
 fn refusals_change_nothing() {
     let mut r = Rig::new();
     // Not in PVT mode: no start.
-    assert_eq!(r.write(Obj::PvtControl, 1), Err(ObjError::Refused));
+    assert_eq!(r.write(Obj::PvtControl, 1), Err(ObjError::NotNow));
     r.set(Obj::Mode, 2);
     // Nothing stored: no start.
-    assert_eq!(r.write(Obj::PvtControl, 1), Err(ObjError::Refused));
+    assert_eq!(r.write(Obj::PvtControl, 1), Err(ObjError::NotNow));
     r.push(pt(0, 0, 0)).unwrap();
     // 1000 microsteps in 5 ms from rest to rest peaks at 300 kpps.
-    assert_eq!(r.push(pt(1000, 0, 5)), Err(ObjError::Refused));
+    assert_eq!(r.push(pt(1000, 0, 5)), Err(ObjError::Infeasible));
     // A jump: no time, another position.
-    assert_eq!(r.push(pt(10, 0, 0)), Err(ObjError::Refused));
-    assert_eq!(r.push(pt(0, 250_000, 100)), Err(ObjError::Refused));
+    assert_eq!(r.push(pt(10, 0, 0)), Err(ObjError::Infeasible));
+    assert_eq!(r.push(pt(0, 250_000, 100)), Err(ObjError::Infeasible));
     assert_eq!(r.read(Obj::PvtCount), 1);
     // Longer than the table's 16-bit time: out of range.
     assert_eq!(r.write(Obj::PvtTime, 65_536), Err(ObjError::OutOfRange));
     r.push(pt(1000, 0, 100)).unwrap();
     // Index beyond the stored points.
     r.set(Obj::PvtM1End, 2);
-    assert_eq!(r.write(Obj::PvtControl, 1), Err(ObjError::Refused));
+    assert_eq!(r.write(Obj::PvtControl, 1), Err(ObjError::NotNow));
     // The last point must be at rest.
     r.push(pt(1100, 500, 100)).unwrap();
-    assert_eq!(r.write(Obj::PvtControl, 1), Err(ObjError::Refused));
+    assert_eq!(r.write(Obj::PvtControl, 1), Err(ObjError::NotNow));
     // The approach to the first point from where the axis stands must be feasible.
     r.set(Obj::PvtM1Start, 1);
     r.set(Obj::PvtM1End, 1);
     r.set(Obj::Position, -100_000);
-    assert_eq!(r.write(Obj::PvtControl, 1), Err(ObjError::Refused));
+    assert_eq!(r.write(Obj::PvtControl, 1), Err(ObjError::Infeasible));
     r.set(Obj::Position, 0);
     // Disabled: refused; enabled: runs, and clear and mode changes are refused while it does.
     r.set(Obj::Enable, 0);
-    assert_eq!(r.write(Obj::PvtControl, 1), Err(ObjError::Refused));
+    assert_eq!(r.write(Obj::PvtControl, 1), Err(ObjError::Disabled));
     r.set(Obj::Enable, 1);
     r.set(Obj::PvtControl, 1);
     r.tick();
     assert!(r.busy());
-    assert_eq!(r.write(Obj::PvtControl, 3), Err(ObjError::Refused));
-    assert_eq!(r.write(Obj::PvtMode, 2), Err(ObjError::Refused));
-    assert_eq!(r.write(Obj::PvtControl, 1), Err(ObjError::Refused));
+    assert_eq!(r.write(Obj::PvtControl, 3), Err(ObjError::Busy));
+    assert_eq!(r.write(Obj::PvtMode, 2), Err(ObjError::Busy));
+    assert_eq!(r.write(Obj::PvtControl, 1), Err(ObjError::Busy));
     assert_eq!(r.read(Obj::PvtCount), 3);
     // 0x6017 = 0 decelerates to rest.
     r.set(Obj::PvtControl, 0);
@@ -466,7 +466,7 @@ fn group_start_runs_synchronous_positioning() {
     assert_eq!(r.drive.state().position(), -3000);
     // Speed 0 cannot start: refused.
     r.set(Obj::SyncSpeed, 0);
-    assert_eq!(r.write(Obj::GroupStart, 9), Err(ObjError::Refused));
+    assert_eq!(r.write(Obj::GroupStart, 9), Err(ObjError::NotNow));
 }
 
 /// Random feasible PVT runs, streamed in mode 3.
@@ -518,7 +518,7 @@ fn only_the_first_point_may_take_no_time() {
     let mut r = Rig::new();
     r.set(Obj::Mode, 2);
     r.push(pt(0, 0, 0)).unwrap();
-    assert_eq!(r.push(pt(0, 0, 0)), Err(ObjError::Refused));
+    assert_eq!(r.push(pt(0, 0, 0)), Err(ObjError::Infeasible));
     r.push(pt(100, 0, 50)).unwrap();
     assert_eq!(r.read(Obj::PvtCount), 2);
 }
@@ -533,7 +533,7 @@ fn points_of_no_time_pass_in_the_tick_they_start() {
     // A loop of point 0 alone (no time) is refused.
     r.set(Obj::PvtM2Loops, 1000);
     r.set(Obj::PvtM2DecEnd, 1);
-    assert_eq!(r.write(Obj::PvtControl, 1), Err(ObjError::Refused));
+    assert_eq!(r.write(Obj::PvtControl, 1), Err(ObjError::NotNow));
     // Acceleration 0..=0, no loop, deceleration 0..=1: the approach and two points of no time,
     // then 50 ms, exactly on the cubic from the first tick.
     r.set(Obj::PvtM2Loops, 0);

@@ -95,7 +95,12 @@ pub const fn native_exception(e: ObjError) -> Exception {
     match e {
         ObjError::Unknown | ObjError::ReadOnly => Exception::IllegalDataAddress,
         ObjError::OutOfRange => Exception::IllegalDataValue,
-        ObjError::Refused => Exception::ServerDeviceFailure,
+        ObjError::Busy
+        | ObjError::Disabled
+        | ObjError::Faulted
+        | ObjError::NotNow
+        | ObjError::Infeasible
+        | ObjError::Unsupported => Exception::ServerDeviceFailure,
     }
 }
 

@@ -258,6 +258,31 @@ pub enum ObjError {
     ReadOnly,
     /// The value is outside the object's range.
     OutOfRange,
-    /// The value is valid but the drive cannot act on it in its present state.
-    Refused,
+    /// The axis is moving, a run is going or a save is under way, and the request needs rest.
+    Busy,
+    /// The power stage is off (0x6006 = 0, or freed by a power loss).
+    Disabled,
+    /// A latched error, stop, stall or communication-timeout bit must be cleared first.
+    Faulted,
+    /// Not in the present work mode or state: another mode's command, a speed of 0, a PVT
+    /// run's points missing or ending in motion, a full FIFO.
+    NotNow,
+    /// No trajectory takes the axis there within its limits (a PVT segment beyond the top
+    /// speed, a junction or an approach the motor cannot follow).
+    Infeasible,
+    /// The drive does not do this: no boot loader to jump to, no flash to save to.
+    Unsupported,
+}
+
+/// `Ok` if `ok`, else the refusal `why`.
+pub(crate) const fn refuse(ok: bool, why: ObjError) -> Result<(), ObjError> {
+    if ok { Ok(()) } else { Err(why) }
+}
+
+impl ObjError {
+    /// Whether the value is valid and only the drive's state refuses it (a map's "device
+    /// failure" exception, where the layout has one code for all of them).
+    pub const fn is_refusal(self) -> bool {
+        !matches!(self, Self::Unknown | Self::ReadOnly | Self::OutOfRange)
+    }
 }
