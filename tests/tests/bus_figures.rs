@@ -144,11 +144,11 @@ async fn points_per_second_on_the_bus() {
             1.0 / c
         );
     }
-    // The README's figures, to 0.1 point/s.
+    // The figures of docs/performance.md (Bus figures), to 0.1 point/s.
     let want = [[166.2, 159.3, 117.0], [20.8, 19.9, 20.7], [5.2, 5.0, 5.4]];
     for (got, want) in table.iter().zip(want) {
         for (g, w) in got.iter().zip(want) {
-            assert!((g - w).abs() < 0.05, "{g:.2} points/s, the README says {w}");
+            assert!((g - w).abs() < 0.05, "{g:.2} points/s, docs/performance.md says {w}");
         }
     }
     // Silences are most of the bus time: 3.5 ms of the 6.0 ms of a written point.

@@ -208,7 +208,7 @@ fn check_run(rows: &[TraceRow], want: &[f64]) -> i64 {
     start
 }
 
-/// Also draws the XY path; the README's plot comes from
+/// Also draws the XY path; the plot in docs/pvt.md comes from
 /// `PVT_CIRCLE_PNG=$PWD/docs/img/pvt-circle.png cargo test -p drive-tests --test pvt circle`.
 #[tokio::test(flavor = "current_thread")]
 async fn circle_on_two_axes_follows_the_cubic_in_step() {

@@ -3,7 +3,7 @@
 //!
 //! QEMU models RCC, GPIO, EXTI and the USARTs of this chip but not its timers, DMA or PWR, and
 //! its USART takes 32-bit accesses only; embassy-stm32's `init` and UART driver do not run there
-//! (see the README). So this layer is small and direct:
+//! (see docs/board-g431.md). So this layer is small and direct:
 //! - USART1 (QEMU's first serial port) with 32-bit register access, the RXNE interrupt filling
 //!   a pipe, and transmission by polling TXE;
 //! - SysTick at 1 kHz from the 4 MHz MSI reset clock: the embassy-time driver (microseconds,
