@@ -20,6 +20,7 @@
 
 use crate::drive::{DriveState, STATUS_BUSY};
 use crate::faults::Inputs;
+use crate::modes::WorkMode;
 use crate::motion::axis::{Axis, Setpoint};
 use crate::motion::cubic::Table;
 use crate::motion::scurve::Limits;
@@ -134,8 +135,13 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         }
     }
 
-    /// Whether the drive may start a motion: the power stage on (enabled, no fault, not freed by
-    /// power loss), and no stop bit set.
+    /// The work mode (0x6007).
+    pub fn mode(&self) -> WorkMode {
+        WorkMode::from_raw(self.param(Obj::Mode)).unwrap_or_default()
+    }
+
+    /// Whether the drive may start a motion, or why not: no fault, stop or timeout bit latched,
+    /// and the power stage on (enabled, not freed by power loss).
     pub(crate) fn may_move(&self) -> Result<(), ObjError> {
         // A fault also turns the power stage off: it is the reason to give (clear it first).
         let latched = self.faulted() || self.status.controller & !STATUS_BUSY != 0 || self.status.comm != 0;
@@ -148,10 +154,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     pub(crate) fn decelerate_to_stop(&mut self) {
         if !self.axis.is_still() {
             let v = libm::fabs(self.axis.setpoint().velocity).max(1.0);
-            let limits = match self.param(Obj::Mode) {
-                4 | 5 => self.pp_setpoint(0, v).limits,
-                _ => self.scurve_limits(v),
-            };
+            let limits = if self.mode().is_profile() { self.pp_setpoint(0, v).limits } else { self.scurve_limits(v) };
             // A ramp that cannot be planned halts the axis where it stands (`run_at`).
             let _ = self.axis.run_at(self.now, 0.0, 0.0, &limits);
         }
@@ -204,7 +207,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         let now = self.now;
         let run_speed = f64::from(self.param(Obj::PpRunSpeed) as i32);
         let failed = |_| ObjError::Infeasible;
-        let mode = self.param(Obj::Mode);
+        let mode = self.mode();
         if rise(CW_HALT) {
             pp.halted = true;
             if !axis.is_still() {
@@ -214,7 +217,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         } else if fall(CW_HALT) {
             pp.halted = false;
             self.may_move()?;
-            if mode == 5 {
+            if mode == WorkMode::ProfileVelocity {
                 let sp = self.pp_setpoint(0, run_speed);
                 axis.run_at(now, run_speed, sp.depart, &sp.limits).map_err(failed)?;
             } else if let Some(sp) = pp.active {
@@ -222,7 +225,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
                 axis.move_to(now, sp.target, sp.depart, sp.arrive, &sp.limits).map_err(failed)?;
             }
         }
-        if mode == 4 && rise(CW_NEW_SETPOINT) && !pp.ack {
+        if mode == WorkMode::ProfilePosition && rise(CW_NEW_SETPOINT) && !pp.ack {
             // With the buffer full (acknowledge still set) a new set-point is ignored (§5.11.3, 4).
             self.may_move()?;
             let value = i64::from(self.param(Obj::PpTarget) as i32);
@@ -276,7 +279,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         let (axis, pp) = planned.insert((self.axis, self.pp));
         let now = self.now;
         let busy = !axis.is_still();
-        let mode = self.param(Obj::Mode);
+        let mode = self.mode();
         let speed = f64::from(self.param(Obj::MaxSpeed) as i32);
         let position = axis.setpoint().whole;
         let go_to = |axis: &mut Axis, target: i64, speed: f64| {
@@ -285,7 +288,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         };
         match obj {
             Obj::RelativeMove | Obj::AbsoluteMove => {
-                refuse(mode == 0 && speed != 0.0, ObjError::NotNow)?;
+                refuse(mode == WorkMode::Position && speed != 0.0, ObjError::NotNow)?;
                 self.may_move()?;
                 let target = if obj == Obj::AbsoluteMove {
                     i64::from(value as i32)
@@ -301,7 +304,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
             Obj::MaxSpeed => {
                 let v = f64::from(value as i32);
                 match (mode, axis.target()) {
-                    (1, _) => {
+                    (WorkMode::Velocity, _) => {
                         if v != 0.0 {
                             self.may_move()?;
                         }
@@ -310,7 +313,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
                         let limit = if v == 0.0 { libm::fabs(axis.setpoint().velocity).max(1.0) } else { v };
                         axis.run_at(now, v, depart, &self.scurve_limits(limit)).map_err(|_| ObjError::Infeasible)?;
                     }
-                    (0, Some(target)) if busy => {
+                    (WorkMode::Position, Some(target)) if busy => {
                         refuse(v != 0.0, ObjError::NotNow)?;
                         go_to(axis, target, v)?;
                     }
@@ -318,18 +321,20 @@ impl<P: BorrowMut<Table>> DriveState<P> {
                 }
             }
             Obj::Mode => {
-                if value == mode {
+                // The declared set admits only modes.
+                let new = WorkMode::from_raw(value).ok_or(ObjError::OutOfRange)?;
+                if new == mode {
                     return Ok(false);
                 }
                 // Leaving a mode while moving: the manual decelerates from velocity to position.
-                refuse(!busy || (mode == 1 && value == 0), ObjError::Busy)?;
+                refuse(!busy || (mode == WorkMode::Velocity && new == WorkMode::Position), ObjError::Busy)?;
                 if busy {
                     axis.run_at(now, 0.0, 0.0, &self.scurve_limits(speed)).map_err(|_| ObjError::Infeasible)?;
                 }
                 *pp = Pp::default();
             }
-            Obj::ControlWord if matches!(mode, 4 | 5) => self.plan_controlword(axis, pp, value as u16)?,
-            Obj::PpRunSpeed if mode == 5 && busy && !pp.halted => {
+            Obj::ControlWord if mode.is_profile() => self.plan_controlword(axis, pp, value as u16)?,
+            Obj::PpRunSpeed if mode == WorkMode::ProfileVelocity && busy && !pp.halted => {
                 let v = f64::from(value as i32);
                 let sp = self.pp_setpoint(0, v);
                 axis.run_at(now, v, sp.depart, &sp.limits).map_err(|_| ObjError::Infeasible)?;
@@ -396,9 +401,9 @@ impl<P: BorrowMut<Table>> DriveState<P> {
 
     /// The PP/PV statusword: target reached and set-point acknowledge.
     pub(crate) fn statusword(&self) -> u16 {
-        let reached = match self.param(Obj::Mode) {
-            4 => self.axis.is_still() && self.pp.buffered.is_none(),
-            5 => self.axis.settled(),
+        let reached = match self.mode() {
+            WorkMode::ProfilePosition => self.axis.is_still() && self.pp.buffered.is_none(),
+            WorkMode::ProfileVelocity => self.axis.settled(),
             _ => false,
         };
         (if reached { SW_TARGET_REACHED } else { 0 }) | if self.pp.ack { SW_SETPOINT_ACK } else { 0 }
@@ -406,7 +411,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
 
     /// PP: when the running move has ended, the buffered set-point starts.
     fn pp_tick(&mut self, now: Instant) {
-        if self.param(Obj::Mode) != 4 || !self.axis.settled() || self.pp.halted {
+        if self.mode() != WorkMode::ProfilePosition || !self.axis.settled() || self.pp.halted {
             return;
         }
         if let Some(sp) = self.pp.buffered.take() {

@@ -25,6 +25,7 @@ pub mod crc;
 pub mod drive;
 pub mod faults;
 pub mod ident;
+pub mod modes;
 pub mod motion;
 pub mod od;
 pub mod pdu;

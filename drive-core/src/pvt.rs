@@ -46,6 +46,7 @@
 
 use crate::control::TICK_MICROS;
 use crate::drive::DriveState;
+use crate::modes::{PvtMode, WorkMode};
 use crate::motion::axis::Axis;
 use crate::motion::cubic::{Cubic, Point, TABLE_SIZE, Table, V_MAX};
 use crate::motion::scurve::Limits;
@@ -192,13 +193,17 @@ impl Source {
 }
 
 impl<P: BorrowMut<Table>> DriveState<P> {
-    fn pvt_mode(&self) -> u32 {
-        self.param(Obj::PvtMode)
+    fn pvt_mode(&self) -> PvtMode {
+        PvtMode::from_raw(self.param(Obj::PvtMode)).unwrap_or_default()
     }
 
     /// How many points may be stored now.
     fn capacity(&self) -> u16 {
-        let limit = if self.pvt_mode() == 2 { self.param(Obj::PvtFifoDepth) } else { self.param(Obj::PvtMaxPoints) };
+        let limit = if self.pvt_mode() == PvtMode::Fifo {
+            self.param(Obj::PvtFifoDepth)
+        } else {
+            self.param(Obj::PvtMaxPoints)
+        };
         if limit == 0 { TABLE_SIZE as u16 } else { limit.min(TABLE_SIZE as u32) as u16 }
     }
 
@@ -218,7 +223,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
 
     /// Controller status bits 5-7 (mode 3 only).
     pub(crate) fn fifo_status(&self) -> u8 {
-        if self.pvt_mode() != 2 {
+        if self.pvt_mode() != PvtMode::Fifo {
             return 0;
         }
         let n = u32::from(self.pvt.len);
@@ -241,16 +246,16 @@ impl<P: BorrowMut<Table>> DriveState<P> {
 
     /// The source and first point of the run that a start would begin now, or why not.
     fn plan_run(&self) -> Result<(Source, u16, Point), ObjError> {
-        refuse(self.param(Obj::Mode) == 2, ObjError::NotNow)?;
+        refuse(self.mode() == WorkMode::Pvt, ObjError::NotNow)?;
         self.may_move()?;
         refuse(self.axis.is_still() && self.pvt.run.is_none(), ObjError::Busy)?;
         let len = self.pvt.len;
-        let (source, first) = if self.pvt_mode() == 2 {
+        let (source, first) = if self.pvt_mode() == PvtMode::Fifo {
             refuse(len > 0, ObjError::NotNow)?;
             (Source::Fifo, self.pvt.head)
         } else {
             let p = |a, b, n| Phase::new(self.param(a), self.param(b), n);
-            let phases = if self.pvt_mode() == 0 {
+            let phases = if self.pvt_mode() == PvtMode::Single {
                 [p(Obj::PvtM1Start, Obj::PvtM1End, 1), Phase::default(), Phase::default()]
             } else {
                 [
@@ -269,7 +274,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
                 refuse(Cubic::between(at(a)?, at(b)?).feasible(), ObjError::Infeasible)
             };
             let [acc, lp, dec] = phases;
-            let last = if self.pvt_mode() == 0 {
+            let last = if self.pvt_mode() == PvtMode::Single {
                 acc.last
             } else {
                 if lp.times > 0 {
@@ -296,7 +301,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     /// The synchronous move that a start would begin now: the axis planned, or why not.
     fn plan_sync(&self, now: Instant) -> Result<Axis, ObjError> {
         let speed = f64::from(self.param(Obj::SyncSpeed) as i32);
-        refuse(self.param(Obj::Mode) == 0 && speed != 0.0, ObjError::NotNow)?;
+        refuse(self.mode() == WorkMode::Position && speed != 0.0, ObjError::NotNow)?;
         self.may_move()?;
         refuse(self.axis.is_still(), ObjError::Busy)?;
         let target = i64::from(self.param(Obj::SyncPosition) as i32);
@@ -323,9 +328,9 @@ impl<P: BorrowMut<Table>> DriveState<P> {
 
     /// What a start (0x6017 = 1, or a group start) does in the present work mode.
     fn plan_start(&self) -> Result<Effect, ObjError> {
-        match self.param(Obj::Mode) {
-            2 => self.plan_run().map(|_| Effect::Start(Start::Pvt)),
-            0 => self.plan_sync(self.now).map(|_| Effect::Start(Start::Sync)),
+        match self.mode() {
+            WorkMode::Pvt => self.plan_run().map(|_| Effect::Start(Start::Pvt)),
+            WorkMode::Position => self.plan_sync(self.now).map(|_| Effect::Start(Start::Sync)),
             _ => Err(ObjError::NotNow),
         }
     }
@@ -342,7 +347,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
             }
             (Obj::PvtControl, OP_CLEAR) | (Obj::PvtMode, _) if running => Err(ObjError::Busy),
             (Obj::PvtControl, _) => Ok(Effect::Clear),
-            (Obj::PvtMode, v) if v != self.pvt_mode() => Ok(Effect::Clear),
+            (Obj::PvtMode, v) if PvtMode::from_raw(v) != Some(self.pvt_mode()) => Ok(Effect::Clear),
             (Obj::PvtTime, _) if self.param(Obj::PvtAutoPush) == 1 => {
                 let p = Point { time_ms: value as u16, ..self.point_registers() };
                 self.check_push(p).map(|()| Effect::Push(p))
@@ -354,7 +359,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     }
 
     fn stop_effect(&self) -> Effect {
-        let moving = self.pvt.run.is_some() || (self.param(Obj::Mode) == 0 && !self.axis.is_still());
+        let moving = self.pvt.run.is_some() || (self.mode() == WorkMode::Position && !self.axis.is_still());
         if moving || self.pvt.pending.is_some() { Effect::Stop } else { Effect::None }
     }
 

@@ -17,7 +17,7 @@ const MICROSTEPS: &[u32] = &[0, 2, 4, 8, 16, 32, 64, 128, 256];
 /// Encoder resolutions of 0x6054: counts per revolution, or 12 (bits) for the absolute encoder.
 const ENCODER_CPR: &[u32] = &[12, 200, 400, 500, 600, 800, 1000, 1200, 1600];
 /// Modes of 0x6007 (3, encoder follower, needs a special firmware and is refused).
-const MODES: &[u32] = &[0, 1, 2, 4, 5];
+const MODES: &[u32] = &crate::modes::WorkMode::RAW;
 /// A PVT table index or count.
 const PVT_INDEX: Range = Span(0, 1000);
 /// Full signed 32-bit range.
