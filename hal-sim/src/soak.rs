@@ -722,6 +722,7 @@ impl Soak {
     /// Waits until axis `i` rests, and checks it rests where it must.
     fn settle(&mut self, i: usize) -> Check {
         let began = self.now;
+        let mut limit = None;
         loop {
             let regs = self.read(i, 0x6000, 16)?;
             let busy = regs[1] & 0x08 != 0;
@@ -757,13 +758,16 @@ impl Soak {
                 }
                 return Ok(());
             }
-            // 120 s, plus the time to the target at the slowest speed the master sets.
-            let far = match self.axes[i].motion {
-                Motion::Move(Some(target)) => (target - position).unsigned_abs() as f64,
-                _ => 0.0,
-            };
-            let slowest = SLOWEST * FULL_STEPS_PER_S_MAX * f64::from(self.axes[i].ustep);
-            let limit = 120_000_000 + (far / slowest * 1e6) as u64;
+            // 120 s, plus the time from where the axis was to the target at the slowest speed
+            // the master sets.
+            let limit = *limit.get_or_insert_with(|| {
+                let far = match self.axes[i].motion {
+                    Motion::Move(Some(target)) => (target - position).unsigned_abs() as f64,
+                    _ => 0.0,
+                };
+                let slowest = SLOWEST * FULL_STEPS_PER_S_MAX * f64::from(self.axes[i].ustep);
+                120_000_000 + (far / slowest * 1e6) as u64
+            });
             if self.now - began > limit {
                 return Err(format!(
                     "axis {}: still busy after {} s ({:?})",
