@@ -29,13 +29,7 @@ use crate::units::Instant;
 use core::borrow::BorrowMut;
 use fixed::types::U0F16;
 
-/// Control ticks per second. At 20 kHz a tick is 50 µs: at the manual's top speed of 200 kpps
-/// that is 10 steps per tick, which the output stage spaces from the setpoint's velocity and
-/// fraction; at low speed the sub-microstep setpoint is smooth. It is also the rate the closed
-/// loop wants, and on a 170 MHz Cortex-M4 it leaves 8500 cycles per tick.
-pub const TICK_HZ: u32 = 20_000;
-/// The control tick period in microseconds.
-pub const TICK_MICROS: u64 = 1_000_000 / TICK_HZ as u64;
+pub use crate::units::{TICK_HZ, TICK_MICROS};
 
 /// Accelerations of the levels 1..=8 of 0x600A/0x600B, in pps² (level 0: no ramp).
 pub const LEVELS: [u32; 8] = [77_440, 48_410, 27_170, 21_510, 14_080, 10_460, 6_915, 5_210];

@@ -7,8 +7,8 @@
 
 use super::cubic::{Ahead, Cubic, Rates, Walk};
 use super::scurve::{Limits, PlanError, Profile, State};
-use crate::control::TICK_MICROS;
 use crate::units::Instant;
+use crate::units::TICK_MICROS;
 use fixed::types::U0F32;
 
 /// What to do when a profile has run its course.

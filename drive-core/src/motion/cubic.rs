@@ -17,7 +17,7 @@
 //! `|v| < 2^31`, `|Δ| ≤ 2^40` (clamped; a feasible segment is far below: at most
 //! 1.5 · 200 kpps · 65.5 s ≈ 2^24.2). The largest term is then below 2^118.
 
-use crate::control::TICK_HZ;
+use crate::units::TICK_HZ;
 
 /// Points the table holds (seed 000 0x6019: up to 1000).
 pub const TABLE_SIZE: usize = 1000;
