@@ -20,7 +20,7 @@
 
 use crate::drive::{DriveState, STATUS_BUSY};
 use crate::faults::Inputs;
-use crate::modes::WorkMode;
+use crate::modes::{PowerState, WorkMode};
 use crate::motion::axis::{Axis, Setpoint};
 use crate::motion::cubic::Table;
 use crate::motion::scurve::Limits;
@@ -137,10 +137,12 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     /// Whether the drive may start a motion, or why not: no fault, stop or timeout bit latched,
     /// and the power stage on (enabled, not freed by power loss).
     pub(crate) fn may_move(&self) -> Result<(), ObjError> {
-        // A fault also turns the power stage off: it is the reason to give (clear it first).
-        let latched = self.faulted() || self.status.controller & !STATUS_BUSY != 0 || self.status.comm != 0;
-        refuse(!latched, ObjError::Faulted)?;
-        refuse(self.power_stage_on(), ObjError::Disabled)
+        refuse(self.status.controller & !STATUS_BUSY == 0 && self.status.comm == 0, ObjError::Faulted)?;
+        match self.power_state() {
+            PowerState::On => Ok(()),
+            PowerState::Faulted => Err(ObjError::Faulted),
+            PowerState::Disabled | PowerState::Freed => Err(ObjError::Disabled),
+        }
     }
 
     /// Decelerates a moving axis to rest with the mode's deceleration, and ends any PP set-point

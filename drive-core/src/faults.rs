@@ -17,6 +17,7 @@
 //!   0x6084 it is 0 (applied). With 0x6038 = 0 the duty is always 0: no brake fitted.
 
 use crate::drive::DriveState;
+use crate::modes::PowerState;
 use crate::motion::cubic::Table;
 use crate::od::Obj;
 use crate::units::Instant;
@@ -298,9 +299,22 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         self.faults.power_failing = failing;
     }
 
-    /// Whether the power stage drives the motor: enabled (0x6011), no fault, not freed by power loss.
+    /// What the power stage does: a fault first, then the master's enable, then power loss.
+    pub fn power_state(&self) -> PowerState {
+        if self.faulted() {
+            PowerState::Faulted
+        } else if self.param(Obj::Enable) != 1 {
+            PowerState::Disabled
+        } else if self.faults.freed {
+            PowerState::Freed
+        } else {
+            PowerState::On
+        }
+    }
+
+    /// Whether the power stage drives the motor.
     pub(crate) fn power_stage_on(&self) -> bool {
-        self.param(Obj::Enable) == 1 && !self.faulted() && !self.faults.freed
+        self.power_state() == PowerState::On
     }
 
     /// The brake's release duty (0x6038) while the power stage is on and power loss does not

@@ -1,4 +1,4 @@
-//! The drive's work modes and PVT modes as enums: the numbers are the native map's values.
+//! The drive's work modes, PVT modes and power states as enums: the numbers are the native map's values.
 
 /// The work mode (0x6007): what the motion objects command.
 ///
@@ -80,6 +80,20 @@ impl PvtMode {
             _ => None,
         }
     }
+}
+
+/// What the power stage does, and why.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PowerState {
+    /// Driving the motor.
+    On,
+    /// Off because the master disabled it (0x6011 = 0).
+    Disabled,
+    /// Off because a fault is latched (0x6000 or 0x2135) until the master clears it.
+    Faulted,
+    /// Off because the supply fell below the free-wheel voltage (0x6083) of the power-loss
+    /// behaviour; on again when it recovers.
+    Freed,
 }
 
 #[cfg(test)]

@@ -124,6 +124,7 @@ fn busy_bus_really_differs_from_factory() {
 /// map answers 04 to all of them).
 #[test]
 fn refusals_say_why() {
+    use drive_core::modes::PowerState;
     use drive_core::od::ObjError;
     use drive_core::{Drive, Instant};
     let mut drive = Drive::factory();
@@ -136,12 +137,15 @@ fn refusals_say_why() {
     assert!(st.check(Obj::SystemControl, 1) == Err(ObjError::Unsupported));
     // A latched error bit: faulted.
     st.status_mut().error = 0x01;
+    assert_eq!(st.power_state(), PowerState::Faulted);
     assert_eq!(st.check(Obj::RelativeMove, 100), Err(ObjError::Faulted));
     st.status_mut().error = 0;
     // The power stage off: disabled.
     st.apply(Obj::Enable, 0);
+    assert_eq!(st.power_state(), PowerState::Disabled);
     assert_eq!(st.check(Obj::RelativeMove, 100), Err(ObjError::Disabled));
     st.apply(Obj::Enable, 1);
+    assert_eq!(st.power_state(), PowerState::On);
     // Moving: a save and a position set wait for rest.
     st.apply(Obj::RelativeMove, 100_000);
     drive.tick(Instant::from_micros(100));
