@@ -1,0 +1,54 @@
+//! The layering of drive-core's modules, read from their sources: the lower layers import
+//! nothing from the layers above them (motion knows nothing of registers or of the control loop).
+
+use std::collections::BTreeSet;
+use std::path::Path;
+
+const SRC: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/src");
+
+/// The top-level modules a module's files name through `crate::`, `use crate::{..}` included
+/// (re-exports at the crate root count as the root, "").
+fn imports(module: &str) -> BTreeSet<String> {
+    let dir = Path::new(SRC).join(module);
+    let mut files: Vec<_> = std::fs::read_dir(&dir)
+        .map(|d| d.filter_map(|e| e.ok()).map(|e| e.path()).collect())
+        .unwrap_or_else(|_| vec![Path::new(SRC).join(format!("{module}.rs"))]);
+    files.retain(|p| p.extension().is_some_and(|e| e == "rs"));
+    assert!(!files.is_empty(), "no sources for {module}");
+    let mut out = BTreeSet::new();
+    for f in files {
+        let Ok(text) = std::fs::read_to_string(&f) else { panic!("cannot read {}", f.display()) };
+        for (i, _) in text.match_indices("crate::") {
+            let rest = &text[i + "crate::".len()..];
+            let name: String = rest.chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '_').collect();
+            let first = name.chars().next();
+            // `crate::Drive` (a root re-export) or `crate::{..}` names the root.
+            out.insert(if first.is_some_and(|c| c.is_ascii_lowercase()) { name } else { String::new() });
+        }
+    }
+    out.remove(module);
+    out
+}
+
+fn assert_only(module: &str, allowed: &[&str]) {
+    let got = imports(module);
+    let extra: Vec<_> = got.iter().filter(|m| !allowed.contains(&m.as_str())).collect();
+    assert!(extra.is_empty(), "{module} imports {extra:?} (it may import {allowed:?})");
+}
+
+#[test]
+fn the_lower_layers_import_nothing_from_above() {
+    // Leaves: units, checksums, the PDU's types, identification, modes.
+    for leaf in ["units", "crc", "pdu", "ident", "modes"] {
+        assert_only(leaf, &[]);
+    }
+    assert_only("rtu", &["crc", "units"]);
+    assert_only("motion", &["units"]);
+}
+
+#[test]
+fn the_reader_sees_imports() {
+    // The check is only as good as its reader: these imports exist.
+    assert!(imports("rtu").contains("crc"));
+    assert!(imports("control").contains("motion"));
+}
