@@ -19,3 +19,15 @@ fn three_drives_for_three_simulated_minutes() {
     assert!(report.group_starts > 0 && report.saves > 0 && report.power_cuts > 0, "{report}");
     assert!(report.lost > 0 && report.corrupted > 0, "{report}");
 }
+
+#[test]
+fn the_same_seed_replays_the_same_run() {
+    let cfg = Config { seed: 5, duration_us: 20_000_000, axes: 2, progress_s: 0, trace: false };
+    let run_once = || match run(&cfg) {
+        Ok(report) => hal_sim::soak::Report { wall: std::time::Duration::ZERO, ..report },
+        Err(failure) => panic!("{failure}"),
+    };
+    let first = run_once();
+    assert!(first.operations > 50, "{first}");
+    assert_eq!(run_once(), first);
+}
