@@ -2,6 +2,7 @@
 
 use crate::control::{Outputs, Pp, has_effect};
 use crate::crc;
+use crate::faults::{FaultHistory, HISTORY_OBJECTS};
 use crate::faults::{FaultLog, Inputs};
 use crate::ident::Identity;
 use crate::motion::axis::Axis;
@@ -12,7 +13,6 @@ use crate::pdu::{Exception, MAX_READ, Request, Words};
 use crate::pvt::Pvt;
 use crate::rtu::{Framer, MAX_FRAME, RxError};
 use crate::servo::{Feedback, Servo};
-use crate::store::{FaultHistory, HISTORY_OBJECTS};
 use crate::units::{Baud, Instant, SlaveAddr};
 use core::borrow::BorrowMut;
 

@@ -146,7 +146,7 @@ impl FaultLog {
     }
 
     /// The log of a history loaded at power-up: its entries (up to the first empty one) and count.
-    pub(crate) fn restored(history: &crate::store::FaultHistory) -> Self {
+    pub(crate) fn restored(history: &FaultHistory) -> Self {
         let len = history.entries.iter().take_while(|&&e| e != 0).count();
         let mut log = Self { count: history.count, ..Self::default() };
         // The ring holds the oldest first.
@@ -166,6 +166,40 @@ impl FaultLog {
         }
         let at = (usize::from(self.head) + HISTORY_LEN - 1 - k) % HISTORY_LEN;
         self.entries.get(at).copied().unwrap_or(0)
+    }
+}
+
+/// The fault history objects, newest entry first.
+pub(crate) const HISTORY_OBJECTS: [Obj; HISTORY_LEN] = [
+    Obj::FaultHistory0,
+    Obj::FaultHistory1,
+    Obj::FaultHistory2,
+    Obj::FaultHistory3,
+    Obj::FaultHistory4,
+    Obj::FaultHistory5,
+    Obj::FaultHistory6,
+    Obj::FaultHistory7,
+    Obj::FaultHistory8,
+    Obj::FaultHistory9,
+];
+
+/// The fault history as the flash keeps it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FaultHistory {
+    /// 0x213C..0x214F: code << 24 | time stamp, newest first; 0 where there is no entry.
+    pub entries: [u32; HISTORY_LEN],
+    /// 0x2136: alarms raised, wrapping.
+    pub count: u16,
+}
+
+impl FaultHistory {
+    /// The history `state` shows now.
+    pub fn of<P: BorrowMut<Table>>(state: &DriveState<P>) -> Self {
+        let mut history = Self { count: state.read(Obj::AlarmCount) as u16, ..Self::default() };
+        for (e, obj) in history.entries.iter_mut().zip(HISTORY_OBJECTS) {
+            *e = state.read(obj);
+        }
+        history
     }
 }
 

@@ -30,12 +30,11 @@ use embedded_storage_async::nor_flash::NorFlash;
 use sequential_storage::cache::{Cache, Uncached};
 use sequential_storage::map::{MapConfig, MapConfigError, MapStorage};
 
-use crate::drive::{
-    Drive, DriveState, Params, STORAGE_CORRUPT, STORAGE_EMPTY, STORAGE_FSET, STORAGE_SAVE_FAILED, SystemRequest,
-};
+use crate::drive::{Drive, Params, STORAGE_CORRUPT, STORAGE_EMPTY, STORAGE_FSET, STORAGE_SAVE_FAILED, SystemRequest};
+pub use crate::faults::FaultHistory;
 use crate::faults::HISTORY_LEN;
 use crate::motion::cubic::Table;
-use crate::od::{Access, OBJECTS, Obj, RegisterMap, Storage};
+use crate::od::{Access, OBJECTS, RegisterMap, Storage};
 
 /// Map key of the parameter record.
 pub const PARAMS_KEY: u8 = 0;
@@ -50,39 +49,7 @@ pub const FAULTS_FORMAT: u8 = 1;
 /// Bytes of the fault history record.
 pub const FAULTS_RECORD: usize = HEADER + 4 * HISTORY_LEN;
 
-/// The fault history objects, newest entry first.
-pub(crate) const HISTORY_OBJECTS: [Obj; HISTORY_LEN] = [
-    Obj::FaultHistory0,
-    Obj::FaultHistory1,
-    Obj::FaultHistory2,
-    Obj::FaultHistory3,
-    Obj::FaultHistory4,
-    Obj::FaultHistory5,
-    Obj::FaultHistory6,
-    Obj::FaultHistory7,
-    Obj::FaultHistory8,
-    Obj::FaultHistory9,
-];
-
-/// The fault history as the flash keeps it.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct FaultHistory {
-    /// 0x213C..0x214F: code << 24 | time stamp, newest first; 0 where there is no entry.
-    pub entries: [u32; HISTORY_LEN],
-    /// 0x2136: alarms raised, wrapping.
-    pub count: u16,
-}
-
 impl FaultHistory {
-    /// The history `state` shows now.
-    pub fn of<P: BorrowMut<Table>>(state: &DriveState<P>) -> Self {
-        let mut history = Self { count: state.read(Obj::AlarmCount) as u16, ..Self::default() };
-        for (e, obj) in history.entries.iter_mut().zip(HISTORY_OBJECTS) {
-            *e = state.read(obj);
-        }
-        history
-    }
-
     /// The record (see the module documentation).
     pub fn encode(&self) -> [u8; FAULTS_RECORD] {
         let mut out = [0u8; FAULTS_RECORD];

@@ -44,6 +44,8 @@ fn the_lower_layers_import_nothing_from_above() {
     }
     assert_only("rtu", &["crc", "units"]);
     assert_only("motion", &["units"]);
+    // The store persists what the faults part keeps, not the other way round.
+    assert!(!imports("faults").contains("store"), "faults imports the store");
 }
 
 #[test]
