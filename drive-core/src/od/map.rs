@@ -90,18 +90,10 @@ enum Op {
     Stage(u16),
 }
 
-/// The native exception for an object error.
+/// The native exception for an object error: the Modbus convention (02 address, 03 value, 04
+/// any refusal).
 pub const fn native_exception(e: ObjError) -> Exception {
-    match e {
-        ObjError::Unknown | ObjError::ReadOnly => Exception::IllegalDataAddress,
-        ObjError::OutOfRange => Exception::IllegalDataValue,
-        ObjError::Busy
-        | ObjError::Disabled
-        | ObjError::Faulted
-        | ObjError::NotNow
-        | ObjError::Infeasible
-        | ObjError::Unsupported => Exception::ServerDeviceFailure,
-    }
+    super::layout::Exceptions::MODBUS.of(e)
 }
 
 impl NativeMap {

@@ -7,6 +7,7 @@
 #[cfg(feature = "docs")]
 pub mod doc;
 pub mod index;
+pub mod layout;
 pub mod map;
 pub mod native;
 
