@@ -215,3 +215,30 @@ fn refusals_answer_the_layouts_codes_and_change_nothing() {
     assert_eq!(r.write(0x0005, &[0, 0]), Err(0x06), "setting the position while moving");
     assert!(r.drive.state().position() >= before_position);
 }
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(300))]
+
+    /// Any write to the layout, and any read: a refused write changes nothing, a read answers
+    /// every register it covers or nothing.
+    #[test]
+    fn refused_writes_change_nothing(
+        writes in proptest::collection::vec((0u16..16, proptest::collection::vec(proptest::num::u16::ANY, 1..6)), 1..12),
+        read in (0u16..16, 1u16..16),
+    ) {
+        let mut r = Rig::new();
+        r.write1(0x0007, 16).unwrap();
+        for (addr, words) in &writes {
+            let before = r.snapshot();
+            let result = if words.len() == 1 { r.write1(*addr, words[0]) } else { r.write(*addr, words) };
+            if result.is_err() {
+                proptest::prop_assert_eq!(r.snapshot(), before, "{:?} at {:#06X}", words, addr);
+            }
+            r.run(1_000);
+        }
+        match r.read(read.0, read.1) {
+            Ok(regs) => proptest::prop_assert_eq!(regs.len(), usize::from(read.1)),
+            Err(code) => proptest::prop_assert_eq!(code, 0x02),
+        }
+    }
+}
