@@ -18,11 +18,17 @@ use std::process::{Child, Command, ExitCode, Stdio};
 use std::time::{Duration, Instant};
 
 const TARGET: &str = "thumbv7em-none-eabihf";
-/// The budget for the G431 build, with every feature: reported, a goal not yet met once
-/// PVT and the parameter store are in.
-const FLASH_BUDGET: u64 = 64 * 1024;
+/// The flash budget of the G431 build with every feature: reported (OVER), not enforced while
+/// the build is above it.
+const FLASH_BUDGET: u64 = 80 * 1024;
 /// RAM budget: the statics plus the stack's peak, as `tick-cost` measures it.
 const RAM_BUDGET: u64 = 24 * 1024;
+/// The control tick's budget, instructions: a mean of a quarter of a 20 kHz tick at 170 MHz in
+/// every case, and twice that in any one tick. Reported (OVER), not enforced while the tick is
+/// above it.
+const TICK_MEAN_BUDGET: f64 = 2125.0;
+/// See [`TICK_MEAN_BUDGET`].
+const TICK_MOST_BUDGET: f64 = 4250.0;
 /// What the chip holds: the flash below the parameter store's last 8 KiB (memory.x), and its
 /// 32 KiB of RAM. Over these the build cannot run, and the task fails.
 const FLASH_CAPACITY: u64 = 120 * 1024;
@@ -159,7 +165,7 @@ fn firmware() -> Result<(), String> {
         return Err("the firmware does not fit the chip".into());
     }
     if flash > FLASH_BUDGET {
-        println!("firmware (STM32G431CB): OVER the 64 KiB flash budget (fits the chip)");
+        println!("firmware (STM32G431CB): OVER the 80 KiB flash budget (fits the chip)");
     }
     flash_by_part(&elf, flash)?;
     // The QEMU build shares the output path: keep the board's ELF for `tick-cost`.
@@ -550,6 +556,7 @@ fn core_tick_cost() -> Result<(), String> {
     let text = String::from_utf8_lossy(&out.stdout);
     let per_count = 250.0 / f64::from(1u32 << CORE_ICOUNT_SHIFT);
     println!("control tick of drive-core on the Cortex-M4 (QEMU -icount), the cases of firmware/src/bin/tick_cost.rs:");
+    let mut over_budget = false;
     for line in text.lines() {
         // `tick_cost NAME mean M most N counts`
         let words: Vec<&str> = line.split_whitespace().collect();
@@ -557,10 +564,14 @@ fn core_tick_cost() -> Result<(), String> {
             ["tick_cost", name, "mean", mean, "most", most, "counts"] => {
                 let count = |w: &str| w.parse::<f64>().map(|c| c * per_count).map_err(|e| format!("{line}: {e}"));
                 let (mean, most) = (count(mean)?, count(most)?);
+                let over = |v: f64, budget: f64| if v > budget { " OVER" } else { "" };
                 println!(
-                    "  {name:15} {mean:5.0} instructions (most {most:5.0}): {:4.1} % of a 20 kHz tick at 170 MHz, one cycle an instruction",
+                    "  {name:15} {mean:5.0} instructions{} (most {most:5.0}{}): {:4.1} % of a 20 kHz tick at 170 MHz, one cycle an instruction",
+                    over(mean, TICK_MEAN_BUDGET),
+                    over(most, TICK_MOST_BUDGET),
                     100.0 * mean / TICK_CYCLES
                 );
+                over_budget |= mean > TICK_MEAN_BUDGET || most > TICK_MOST_BUDGET;
             }
             // `request NAME N counts`
             ["request", name, spent, "counts"] => {
@@ -573,6 +584,11 @@ fn core_tick_cost() -> Result<(), String> {
             }
             _ => println!("  {line}"),
         }
+    }
+    if over_budget {
+        println!(
+            "  OVER the tick's budget: a mean of {TICK_MEAN_BUDGET:.0} instructions (25 % of a tick), at most {TICK_MOST_BUDGET:.0} in one tick"
+        );
     }
     if out.status.success() { Ok(()) } else { Err(format!("tick_cost under QEMU: {}", out.status)) }
 }
