@@ -191,6 +191,11 @@ const LOAD_MAX_NM: f64 = 0.05;
 /// The PVT FIFO's depth and marks of a stream.
 const FIFO: [u16; 3] = [200, 60, 150];
 
+/// The line's time a pushed point takes (request, reply, turnaround, two t3.5), ms, at most.
+const PUSH_MS: f64 = 6.0;
+/// The share of the line the PVT streams together may take.
+const STREAM_LOAD: f64 = 0.5;
+
 /// Points pushed to one stream before the master looks after the other streams: a fill of one
 /// axis must not let another's FIFO run dry.
 const PUSH_BURST: usize = 24;
@@ -1257,9 +1262,25 @@ impl Soak {
     /// Starts a PVT stream on axis `i`: a smooth random path from rest to rest, sampled every
     /// 10-40 ms, pushed a point per 0x10 write (push on time) and refilled on the low mark.
     fn pvt_stream(&mut self, i: usize) -> Check {
+        // The streams share the line: with this one they take at most half of it, the rest
+        // being for the first fills and everything else (a master that planned otherwise would
+        // run its FIFOs dry).
+        let load: f64 = self
+            .axes
+            .iter()
+            .filter_map(|a| match &a.motion {
+                Motion::Stream(s) if !s.stopped => s.points.first().map(|p| PUSH_MS / f64::from(p.2)),
+                _ => None,
+            })
+            .sum();
+        let fastest = PUSH_MS / (STREAM_LOAD - load).max(1e-9);
+        if fastest > 40.0 {
+            let us = self.rng.u64(1_000..300_000);
+            return self.wait(us);
+        }
+        let dt_ms = self.rng.u16(fastest.ceil().max(10.0) as u16..=40);
         let u = f64::from(self.axes[i].ustep);
         let p0 = self.axes[i].plant.drive().state().position() as f64;
-        let dt_ms = self.rng.u16(10..=40);
         let n = self.rng.usize(20..600);
         let t_total = f64::from(dt_ms) * 1e-3 * n as f64;
         // Displacement D with the speed profile D/T (1 - cos): at rest at both ends, peak 2D/T;
