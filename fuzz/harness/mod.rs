@@ -5,6 +5,7 @@
 //! Each target is a `run(data)` that panics when the drive disagrees with the oracle.
 
 pub mod oracle;
+pub mod pdu_layout;
 pub mod pdu_native;
 pub mod rtu_frame;
 pub mod rtu_stream;
@@ -13,5 +14,9 @@ pub mod rtu_stream;
 pub type Run = fn(&[u8]);
 
 /// The targets and their entry points, for the replay.
-pub const TARGETS: [(&str, Run); 3] =
-    [("rtu_stream", rtu_stream::run), ("rtu_frame", rtu_frame::run), ("pdu_native", pdu_native::run)];
+pub const TARGETS: [(&str, Run); 4] = [
+    ("rtu_stream", rtu_stream::run),
+    ("rtu_frame", rtu_frame::run),
+    ("pdu_native", pdu_native::run),
+    ("pdu_layout", pdu_layout::run),
+];

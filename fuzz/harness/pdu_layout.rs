@@ -1,0 +1,152 @@
+//! Request frames to a drive whose map is a layout table (`drive_core::od::layout`): low word
+//! first, scaled units, vendor exception codes. The input is records `[ctl, len, pdu..]`, each
+//! sent as one frame with its CRC after a silence; `ctl` bits 0-1 choose the function (0x03,
+//! 0x06, 0x10, 0x17), bit 2 fixes the quantities and byte counts to the data given, bits 3-5 the
+//! control ticks before the frame (0, 1, 20, 200, 2000).
+//!
+//! The oracle: every frame is answered (a normal reply or an exception of the layout's codes);
+//! an exception changes nothing; a read returns its quantity of registers, each what the
+//! layout's model of that register says (the object's value scaled, in the layout's word order).
+
+use super::oracle::{self, ADDR};
+use drive_core::od::layout::{Entry, Exceptions, FULL_STEPS_PER_REV, Layout, LayoutMap, Scale, WordOrder};
+use drive_core::od::{OBJECTS, Obj, Type};
+use drive_core::pdu::Exception;
+use drive_core::{Drive, DriveConfig, Instant};
+
+static ENTRIES: [Entry; 10] = [
+    Entry { addr: 0x0000, obj: Obj::Mode, scale: Scale::One },
+    Entry { addr: 0x0001, obj: Obj::MaxSpeed, scale: Scale::PerRev(1, 10) },
+    Entry { addr: 0x0003, obj: Obj::AbsoluteMove, scale: Scale::One },
+    Entry { addr: 0x0005, obj: Obj::RelativeMove, scale: Scale::One },
+    Entry { addr: 0x0007, obj: Obj::Position, scale: Scale::One },
+    Entry { addr: 0x0009, obj: Obj::Microsteps, scale: Scale::One },
+    Entry { addr: 0x000A, obj: Obj::Enable, scale: Scale::One },
+    Entry { addr: 0x000B, obj: Obj::PhaseCurrent, scale: Scale::Ratio(100, 1) },
+    Entry { addr: 0x000C, obj: Obj::EncoderPosition, scale: Scale::One },
+    Entry { addr: 0x000E, obj: Obj::ControllerStatus, scale: Scale::One },
+];
+
+static LAYOUT: Layout = Layout {
+    entries: &ENTRIES,
+    order: WordOrder::LowFirst,
+    exceptions: Exceptions {
+        unknown: Exception::IllegalDataAddress,
+        read_only: Exception::Vendor(0x0B),
+        out_of_range: Exception::IllegalDataValue,
+        busy: Exception::Vendor(0x06),
+        disabled: Exception::Vendor(0x0C),
+        faulted: Exception::Vendor(0x0D),
+        not_now: Exception::Vendor(0x0E),
+        infeasible: Exception::Vendor(0x0F),
+        unsupported: Exception::IllegalFunction,
+    },
+};
+
+/// Every code the layout answers, and the request-level ones.
+const CODES: [u8; 10] = [0x01, 0x02, 0x03, 0x04, 0x06, 0x0B, 0x0C, 0x0D, 0x0E, 0x0F];
+
+/// t3.5 at the factory 9600 baud.
+const T35: u64 = 4010;
+
+fn snapshot(drive: &Drive<LayoutMap>) -> (Vec<u32>, i64) {
+    let s = drive.state();
+    (OBJECTS.iter().map(|d| s.read_def(d)).collect(), s.position())
+}
+
+/// What register `reg` reads as by the layout: `None` where the layout has no object.
+fn model(drive: &Drive<LayoutMap>, reg: u32) -> Option<u16> {
+    let e = ENTRIES.iter().find(|e| (u32::from(e.addr)..u32::from(e.addr) + u32::from(e.obj.def().words())).contains(&reg))?;
+    let d = e.obj.def();
+    let raw = drive.state().read_def(d);
+    let v = if d.ty == Type::S32 { i64::from(raw as i32) } else { i64::from(raw) };
+    let per_rev = FULL_STEPS_PER_REV * i64::from(drive.state().read(Obj::Microsteps).max(1));
+    let scaled = match e.scale {
+        Scale::One => v,
+        Scale::Ratio(n, den) => round(v * den, n),
+        Scale::PerRev(n, den) => round(v * den, n * per_rev),
+    } as u32;
+    let k = reg - u32::from(e.addr);
+    Some(if d.words() == 2 && k == 1 { (scaled >> 16) as u16 } else { scaled as u16 })
+}
+
+/// `n / d` to the nearest, halves away from zero.
+fn round(n: i64, d: i64) -> i64 {
+    if n >= 0 { (n + d / 2) / d } else { (n - d / 2) / d }
+}
+
+/// One execution.
+pub fn run(data: &[u8]) {
+    let mut drive = Drive::with_map(DriveConfig::default(), LayoutMap::new(&LAYOUT));
+    let mut now = 0u64;
+    let mut rest = data;
+    while let [ctl, len, tail @ ..] = rest {
+        let (body, next) = tail.split_at(usize::from(*len).min(tail.len()));
+        rest = next;
+        let ticks = [0u64, 1, 20, 200, 2000][usize::from((ctl >> 3) & 7) % 5];
+        for _ in 0..ticks {
+            now += 50;
+            drive.tick(Instant::from_micros(now));
+        }
+        let function = [0x03u8, 0x06, 0x10, 0x17][usize::from(ctl & 3)];
+        let mut pdu = vec![function];
+        pdu.extend_from_slice(body);
+        if ctl & 4 != 0 {
+            fix_lengths(&mut pdu);
+        }
+        let before = snapshot(&drive);
+        let mut frame = vec![ADDR];
+        frame.extend_from_slice(&pdu);
+        let frame = oracle::seal(&frame);
+        now += T35;
+        drive.on_rx(Instant::from_micros(now), &frame);
+        now += T35 + 1;
+        drive.on_timer(Instant::from_micros(now));
+        let reply = drive.take_reply().map(<[u8]>::to_vec);
+        if frame.len() > oracle::MAX_FRAME {
+            continue;
+        }
+        let Some(reply) = reply else { panic!("no reply to {frame:02X?}") };
+        if reply.get(1).is_some_and(|f| f & 0x80 != 0) {
+            // The layout's codes go beyond the Modbus four that `check_reply` knows.
+            assert!(reply.len() == 5 && oracle::crc_ok(&reply), "exception reply {reply:02X?} to {frame:02X?}");
+            assert_eq!(reply[1], function | 0x80, "{reply:02X?} answering {frame:02X?}");
+            assert!(CODES.contains(&reply[2]), "code {:#04X} to {frame:02X?}", reply[2]);
+            assert_eq!(snapshot(&drive), before, "exception {:#04X} to {frame:02X?} changed the drive", reply[2]);
+            continue;
+        }
+        assert!(!oracle::check_reply(&frame, &reply), "{reply:02X?} to {frame:02X?}");
+        match reply.get(1..reply.len() - 2).unwrap_or_default() {
+            [0x03, n, regs @ ..] => {
+                let (addr, qty) = (oracle::be16(&pdu, 1) as u32, oracle::be16(&pdu, 3));
+                assert_eq!(usize::from(*n), 2 * qty, "byte count of {frame:02X?}");
+                for (i, w) in regs.chunks(2).enumerate() {
+                    let got = u16::from_be_bytes([w[0], w[1]]);
+                    assert_eq!(Some(got), model(&drive, addr + i as u32), "register {:#06X}", addr + i as u32);
+                }
+            }
+            _ => {}
+        }
+    }
+}
+
+/// Makes the quantities and byte counts of a request agree with its data.
+fn fix_lengths(pdu: &mut Vec<u8>) {
+    let regs = |bytes: usize| (bytes / 2).clamp(1, 123) as u16;
+    match pdu.first() {
+        Some(0x10) if pdu.len() >= 6 => {
+            let n = regs(pdu.len() - 6);
+            pdu.truncate(6 + 2 * usize::from(n));
+            pdu.resize(6 + 2 * usize::from(n), 0);
+            pdu[3..5].copy_from_slice(&n.to_be_bytes());
+            pdu[5] = (2 * n) as u8;
+        }
+        Some(0x03) if pdu.len() >= 5 => {
+            let q = (pdu[4] % 16).max(1);
+            pdu[3] = 0;
+            pdu[4] = q;
+            pdu.truncate(5);
+        }
+        _ => {}
+    }
+}
