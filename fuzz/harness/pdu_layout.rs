@@ -56,7 +56,9 @@ fn snapshot(drive: &Drive<LayoutMap>) -> (Vec<u32>, i64) {
 
 /// What register `reg` reads as by the layout: `None` where the layout has no object.
 fn model(drive: &Drive<LayoutMap>, reg: u32) -> Option<u16> {
-    let e = ENTRIES.iter().find(|e| (u32::from(e.addr)..u32::from(e.addr) + u32::from(e.obj.def().words())).contains(&reg))?;
+    let e = ENTRIES
+        .iter()
+        .find(|e| (u32::from(e.addr)..u32::from(e.addr) + u32::from(e.obj.def().words())).contains(&reg))?;
     let d = e.obj.def();
     let raw = drive.state().read_def(d);
     let v = if d.ty == Type::S32 { i64::from(raw as i32) } else { i64::from(raw) };
