@@ -118,16 +118,13 @@ pub fn run(data: &[u8]) {
             continue;
         }
         assert!(!oracle::check_reply(&frame, &reply), "{reply:02X?} to {frame:02X?}");
-        match reply.get(1..reply.len() - 2).unwrap_or_default() {
-            [0x03, n, regs @ ..] => {
-                let (addr, qty) = (oracle::be16(&pdu, 1) as u32, oracle::be16(&pdu, 3));
-                assert_eq!(usize::from(*n), 2 * qty, "byte count of {frame:02X?}");
-                for (i, w) in regs.chunks(2).enumerate() {
-                    let got = u16::from_be_bytes([w[0], w[1]]);
-                    assert_eq!(Some(got), model(&drive, addr + i as u32), "register {:#06X}", addr + i as u32);
-                }
+        if let [0x03, n, regs @ ..] = reply.get(1..reply.len() - 2).unwrap_or_default() {
+            let (addr, qty) = (oracle::be16(&pdu, 1) as u32, oracle::be16(&pdu, 3));
+            assert_eq!(usize::from(*n), 2 * qty, "byte count of {frame:02X?}");
+            for (i, w) in regs.chunks(2).enumerate() {
+                let got = u16::from_be_bytes([w[0], w[1]]);
+                assert_eq!(Some(got), model(&drive, addr + i as u32), "register {:#06X}", addr + i as u32);
             }
-            _ => {}
         }
     }
 }
