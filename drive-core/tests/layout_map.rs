@@ -5,39 +5,16 @@
 
 mod common;
 
+// The layout is the one the `pdu_layout` fuzz target drives.
+#[allow(dead_code)]
+#[path = "../../fuzz/harness/mod.rs"]
+mod harness;
+
 use common::frame;
-use drive_core::od::layout::{Entry, Exceptions, Layout, LayoutMap, Scale, WordOrder};
+use drive_core::od::layout::LayoutMap;
 use drive_core::od::{OBJECTS, Obj};
-use drive_core::pdu::Exception;
 use drive_core::{Drive, DriveConfig, Instant};
-
-static ENTRIES: [Entry; 9] = [
-    Entry { addr: 0x0000, obj: Obj::Mode, scale: Scale::One },
-    Entry { addr: 0x0001, obj: Obj::MaxSpeed, scale: Scale::PerRev(1, 10) },
-    Entry { addr: 0x0003, obj: Obj::AbsoluteMove, scale: Scale::One },
-    Entry { addr: 0x0005, obj: Obj::Position, scale: Scale::One },
-    Entry { addr: 0x0007, obj: Obj::Microsteps, scale: Scale::One },
-    Entry { addr: 0x0008, obj: Obj::Enable, scale: Scale::One },
-    Entry { addr: 0x0009, obj: Obj::PhaseCurrent, scale: Scale::Ratio(100, 1) },
-    Entry { addr: 0x000A, obj: Obj::EncoderPosition, scale: Scale::One },
-    Entry { addr: 0x000C, obj: Obj::ControllerStatus, scale: Scale::One },
-];
-
-static LAYOUT: Layout = Layout {
-    entries: &ENTRIES,
-    order: WordOrder::LowFirst,
-    exceptions: Exceptions {
-        unknown: Exception::IllegalDataAddress,
-        read_only: Exception::Vendor(0x0B),
-        out_of_range: Exception::IllegalDataValue,
-        busy: Exception::Vendor(0x06),
-        disabled: Exception::Vendor(0x0C),
-        faulted: Exception::Vendor(0x0D),
-        not_now: Exception::Vendor(0x0E),
-        infeasible: Exception::Vendor(0x0F),
-        unsupported: Exception::IllegalFunction,
-    },
-};
+use harness::pdu_layout::LAYOUT;
 
 struct Rig {
     drive: Drive<LayoutMap>,
@@ -130,7 +107,7 @@ const MINUS_TEN: [u16; 2] = [0xFFF6, 0xFFFF];
 #[test]
 fn values_are_in_the_layouts_units_and_word_order() {
     let mut r = Rig::new();
-    r.write1(0x0007, 16).unwrap();
+    r.write1(0x0009, 16).unwrap();
     // 2.5 rev/s at 16 microsteps of 200 steps: 8000 microsteps a second; low word first.
     r.write(0x0001, &[25, 0]).unwrap();
     assert_eq!(r.get(Obj::MaxSpeed), 8000);
@@ -139,15 +116,15 @@ fn values_are_in_the_layouts_units_and_word_order() {
     assert_eq!(r.get(Obj::MaxSpeed), -3200);
     assert_eq!(r.read(0x0001, 2), Ok(MINUS_TEN.to_vec()));
     // 1.2 A as 12 hundreds of mA.
-    r.write1(0x0009, 12).unwrap();
+    r.write1(0x000B, 12).unwrap();
     assert_eq!(r.get(Obj::PhaseCurrent), 1200);
-    assert_eq!(r.read(0x0009, 1), Ok(vec![12]));
+    assert_eq!(r.read(0x000B, 1), Ok(vec![12]));
 }
 
 #[test]
 fn high_half_stages_low_half_commits() {
     let mut r = Rig::new();
-    r.write1(0x0007, 16).unwrap();
+    r.write1(0x0009, 16).unwrap();
     // Low word first: the high half is the second register; alone it is kept.
     r.write1(0x0002, 0xFFFF).unwrap();
     assert_eq!(r.get(Obj::MaxSpeed), 0);
@@ -170,17 +147,17 @@ fn high_half_stages_low_half_commits() {
 #[test]
 fn a_write_of_several_objects_is_all_or_nothing() {
     let mut r = Rig::new();
-    r.write1(0x0007, 16).unwrap();
+    r.write1(0x0009, 16).unwrap();
     // Mode, speed and an absolute move in one request: the move takes the speed written before
     // it, and runs to its target.
     r.write(0x0000, &[0, 25, 0, 6400, 0]).unwrap();
     assert!(r.get(Obj::ControllerStatus) & 0x08 != 0, "moving");
     r.run(3_000_000);
     assert_eq!(r.drive.state().position(), 6400);
-    assert_eq!(r.read(0x0005, 2), Ok(vec![6400, 0]));
+    assert_eq!(r.read(0x0007, 2), Ok(vec![6400, 0]));
     // A refused value at the end undoes the ones before it: the speed stays.
     let before = r.snapshot();
-    assert_eq!(r.write(0x0007, &[32, 1, 99]), Err(3), "9.9 A is out of range");
+    assert_eq!(r.write(0x0009, &[32, 1, 99]), Err(3), "9.9 A is out of range");
     assert_eq!(r.snapshot(), before);
     // A move refused after its speed was taken: neither happens.
     assert_eq!(r.write(0x0001, &[0, 0, 100, 0]), Err(0x0E), "speed 0: not now");
@@ -190,12 +167,12 @@ fn a_write_of_several_objects_is_all_or_nothing() {
 #[test]
 fn refusals_answer_the_layouts_codes_and_change_nothing() {
     let mut r = Rig::new();
-    r.write1(0x0007, 16).unwrap();
+    r.write1(0x0009, 16).unwrap();
     r.write(0x0001, &[25, 0]).unwrap();
     let before = r.snapshot();
     let cases: [(&str, Write, u8); 4] = [
         ("no object", |r| r.write1(0x0020, 1), 0x02),
-        ("read-only", |r| r.write(0x000A, &[1, 0]), 0x0B),
+        ("read-only", |r| r.write(0x000C, &[1, 0]), 0x0B),
         ("out of range", |r| r.write1(0x0000, 3), 0x03),
         ("beyond the map's scale", |r| r.write(0x0001, &[0, 0x7FFF]), 0x03),
     ];
@@ -203,16 +180,16 @@ fn refusals_answer_the_layouts_codes_and_change_nothing() {
         assert_eq!(write(&mut r), Err(code), "{what}");
         assert_eq!(r.snapshot(), before, "{what} changed something");
     }
-    assert_eq!(r.read(0x000D, 1), Err(0x02), "a read past the layout");
+    assert_eq!(r.read(0x000F, 1), Err(0x02), "a read past the layout");
     // Disabled, then moving: the drive's reasons in this layout's codes.
-    r.write1(0x0008, 0).unwrap();
+    r.write1(0x000A, 0).unwrap();
     let before = r.snapshot();
     assert_eq!(r.write(0x0003, &[100, 0]), Err(0x0C));
     assert_eq!(r.snapshot(), before);
-    r.write1(0x0008, 1).unwrap();
+    r.write1(0x000A, 1).unwrap();
     r.write(0x0003, &[0x0000, 0x0001]).unwrap(); // 65 536 microsteps away
     let before_position = r.drive.state().position();
-    assert_eq!(r.write(0x0005, &[0, 0]), Err(0x06), "setting the position while moving");
+    assert_eq!(r.write(0x0007, &[0, 0]), Err(0x06), "setting the position while moving");
     assert!(r.drive.state().position() >= before_position);
 }
 
@@ -227,7 +204,7 @@ proptest::proptest! {
         read in (0u16..16, 1u16..16),
     ) {
         let mut r = Rig::new();
-        r.write1(0x0007, 16).unwrap();
+        r.write1(0x0009, 16).unwrap();
         for (addr, words) in &writes {
             let before = r.snapshot();
             let result = if words.len() == 1 { r.write1(*addr, words[0]) } else { r.write(*addr, words) };

@@ -14,7 +14,8 @@ use drive_core::od::{OBJECTS, Obj, Type};
 use drive_core::pdu::Exception;
 use drive_core::{Drive, DriveConfig, Instant};
 
-static ENTRIES: [Entry; 10] = [
+/// The layout's objects (shared with `drive-core/tests/layout_map.rs`).
+pub static ENTRIES: [Entry; 10] = [
     Entry { addr: 0x0000, obj: Obj::Mode, scale: Scale::One },
     Entry { addr: 0x0001, obj: Obj::MaxSpeed, scale: Scale::PerRev(1, 10) },
     Entry { addr: 0x0003, obj: Obj::AbsoluteMove, scale: Scale::One },
@@ -27,7 +28,8 @@ static ENTRIES: [Entry; 10] = [
     Entry { addr: 0x000E, obj: Obj::ControllerStatus, scale: Scale::One },
 ];
 
-static LAYOUT: Layout = Layout {
+/// The layout: low word first, vendor codes for the refusals.
+pub static LAYOUT: Layout = Layout {
     entries: &ENTRIES,
     order: WordOrder::LowFirst,
     exceptions: Exceptions {
