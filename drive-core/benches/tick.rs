@@ -151,7 +151,7 @@ fn measure(feed: Feed, last: Option<&Outputs>) -> Inputs {
             // 1/32 microsteps: a microstep is π/64 electrical.
             let per = std::f64::consts::FRAC_PI_2 / 32.0;
             let theta = (out.commutation.whole as f64 + out.commutation.fraction.to_num::<f64>()) * per;
-            let w = out.commutation.velocity * per;
+            let w = f64::from(out.commutation.velocity) * per;
             let (r, l, km, i) = (1.4, 3.0e-3, 0.21, f64::from(out.current_ma) * 1e-3);
             let rotor = theta - 30f64.to_radians();
             let (ia, ib) = (i * theta.cos(), i * theta.sin());
@@ -246,7 +246,8 @@ fn cruising_to_first_target() -> Rig {
     rig.request(&write32(0x6044, FIRST_TARGET));
     rig.run(1_000_000);
     let (a, b) = (rig.tick(), rig.tick());
-    assert!(a.setpoint.velocity == f64::from(SPEED) && b.setpoint.velocity == f64::from(SPEED), "{a:?} {b:?}");
+    let at_speed = |v: f32| (f64::from(v) - f64::from(SPEED)).abs() < 0.5;
+    assert!(at_speed(a.setpoint.velocity) && at_speed(b.setpoint.velocity), "{a:?} {b:?}");
     assert!(b.setpoint.whole < i64::from(FIRST_TARGET) / 2, "{b:?}");
     rig
 }
@@ -320,7 +321,7 @@ fn setup_tick(situation: Situation) -> TickCase {
     // Dry run on a copy: the measured tick is in the situation named, and so is the one after.
     let mut probe = rig.clone();
     let (out, next) = (probe.tick(), probe.tick());
-    let (v, a) = (out.setpoint.velocity, out.setpoint.acceleration);
+    let (v, a) = (f64::from(out.setpoint.velocity), f64::from(out.setpoint.acceleration));
     let v_max = f64::from(SPEED);
     match situation {
         Situation::Idle => {
@@ -329,16 +330,18 @@ fn setup_tick(situation: Situation) -> TickCase {
         }
         Situation::Cruise | Situation::CruiseVelocity => {
             assert!(busy(&rig.drive));
-            assert!(v == v_max && next.setpoint.velocity == v_max && a == 0.0, "{out:?}");
+            // The rates come from the walk's fixed-point differences: within a fraction of a pps.
+            let at_speed = |v: f64| (v - v_max).abs() < 0.5;
+            assert!(at_speed(v) && at_speed(f64::from(next.setpoint.velocity)) && a == 0.0, "{out:?}");
             assert!(out.steps > 0);
         }
         Situation::Ramp => {
             // The constant-acceleration phase of level 1, after the 50 ms of jerk.
-            assert!(a == 77_440.0 && next.setpoint.velocity > v && v < v_max, "{out:?}");
+            assert!((a - 77_440.0).abs() < 1.0 && f64::from(next.setpoint.velocity) > v && v < v_max, "{out:?}");
         }
         Situation::PpRamp => {
             // The trapezoid's acceleration is 0x6067's factory 32000 pps², from the start speed.
-            assert!(a == 32_000.0 && next.setpoint.velocity > v && v < v_max, "{out:?}");
+            assert!((a - 32_000.0).abs() < 1.0 && f64::from(next.setpoint.velocity) > v && v < v_max, "{out:?}");
             assert!((v - (600.0 + 32_000.0 * 0.1)).abs() < 5.0, "{out:?}");
         }
         Situation::Pvt => {
@@ -352,9 +355,9 @@ fn setup_tick(situation: Situation) -> TickCase {
             assert!(busy(&rig.drive));
             if target < FIRST_TARGET {
                 // Reversing: it starts to brake, the acceleration building up.
-                assert!(a < 0.0 && next.setpoint.acceleration < a && v <= v_max, "{out:?}");
+                assert!(a < 0.0 && f64::from(next.setpoint.acceleration) < a && v <= v_max + 0.5, "{out:?}");
             } else {
-                assert!(v == v_max && a == 0.0, "{out:?}");
+                assert!((v - v_max).abs() < 0.5 && a == 0.0, "{out:?}");
             }
         }
     }
@@ -425,7 +428,10 @@ fn setup_loop(which: Loop) -> LoopCase {
     let mut probe = rig.clone();
     let out = probe.tick();
     // Cruising, powered, nothing detected: the loop runs its normal path.
-    assert!(busy(&rig.drive) && out.enabled && out.setpoint.velocity == f64::from(SPEED), "{out:?}");
+    assert!(
+        busy(&rig.drive) && out.enabled && (f64::from(out.setpoint.velocity) - f64::from(SPEED)).abs() < 0.5,
+        "{out:?}"
+    );
     let state = probe.drive.state();
     assert_eq!((state.read(Obj::DriveFaults), state.read(Obj::ControllerStatus)), (0, 0x08), "{which:?}");
     LoopCase { drive: rig.drive, at: at(rig.now + TICK_MICROS), inputs }

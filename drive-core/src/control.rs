@@ -149,7 +149,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     /// or PVT run; stops at once if no ramp can be planned.
     pub(crate) fn decelerate_to_stop(&mut self) {
         if !self.axis.is_still() {
-            let v = libm::fabs(self.axis.setpoint().velocity).max(1.0);
+            let v = f64::from(libm::fabsf(self.axis.setpoint().velocity)).max(1.0);
             let limits = if self.mode().is_profile() { self.pp_setpoint(0, v).limits } else { self.scurve_limits(v) };
             // A ramp that cannot be planned halts the axis where it stands (`run_at`).
             let _ = self.axis.run_at(self.now, 0.0, 0.0, &limits);
@@ -207,7 +207,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         if rise(CW_HALT) {
             pp.halted = true;
             if !axis.is_still() {
-                let sp = self.pp_setpoint(0, libm::fabs(axis.setpoint().velocity).max(1.0));
+                let sp = self.pp_setpoint(0, f64::from(libm::fabsf(axis.setpoint().velocity)).max(1.0));
                 axis.run_at(now, 0.0, 0.0, &sp.limits).map_err(failed)?;
             }
         } else if fall(CW_HALT) {
@@ -306,7 +306,8 @@ impl<P: BorrowMut<Table>> DriveState<P> {
                         }
                         let (depart, _) = self.jumps(libm::fabs(v));
                         // Speed 0 stops: the ramp's limits are those of the speed it stops from.
-                        let limit = if v == 0.0 { libm::fabs(axis.setpoint().velocity).max(1.0) } else { v };
+                        let limit =
+                            if v == 0.0 { f64::from(libm::fabsf(axis.setpoint().velocity)).max(1.0) } else { v };
                         axis.run_at(now, v, depart, &self.scurve_limits(limit)).map_err(|_| ObjError::Infeasible)?;
                     }
                     (WorkMode::Position, Some(target)) if busy => {

@@ -317,7 +317,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         if axis.is_still() {
             return axis;
         }
-        let v = axis.setpoint().velocity.abs().max(1.0);
+        let v = f64::from(axis.setpoint().velocity.abs()).max(1.0);
         // No jerk limit: a PVT segment may end with more acceleration than the ramp's jerk could
         // take back in time; the acceleration steps to the deceleration, velocity stays smooth.
         let limits = Limits { jerk: None, ..self.scurve_limits(v) };

@@ -442,7 +442,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     /// 0x607F: the measured speed in closed loop, the commanded one in open loop.
     pub(crate) fn real_speed(&self) -> i32 {
         let v = match self.servo.feedback {
-            Feedback::Open => libm::round(self.axis.setpoint().velocity) as f32,
+            Feedback::Open => libm::roundf(self.axis.setpoint().velocity),
             Feedback::Closed(_) => libm::roundf(self.servo.speed),
         };
         v as i32
@@ -470,8 +470,8 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         self.servo.following = following;
         let to_micro = (STEPS_PER_REV as f32 * per_step as f32) / per_rev as f32;
         let error = (following as f32 + sp.fraction.to_num::<f32>()) * to_micro;
-        let velocity = sp.velocity * f64::from(to_micro);
-        let at = |m: Micro, velocity: f64| Setpoint {
+        let velocity = sp.velocity * to_micro;
+        let at = |m: Micro, velocity: f32| Setpoint {
             whole: m.whole,
             fraction: U0F32::from_bits((m.fraction * 4_294_967_296.0) as u32),
             velocity,
@@ -516,7 +516,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
             v: mv.map(|m| m as f32 * 1e-3),
             r: self.param(Obj::MotorResistance) as f32 * 1e-3,
             l: self.param(Obj::MotorInductance) as f32 * 1e-6,
-            speed: (sp.velocity / f64::from(per_step)) as f32,
+            speed: sp.velocity / per_step as f32,
             min_speed: self.param(Obj::StallMinSpeed) as f32,
             limit: stall_limit(self.param(Obj::StallParams)),
         };

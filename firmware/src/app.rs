@@ -27,7 +27,7 @@ use crate::frames::MAX_FRAME;
 use crate::power::PowerStage;
 
 /// The drive of the firmware: the native map, and the PVT point table (10 KB) in a static of its
-/// own, lent to the drive, so that building the drive (2.8 KB) never passes the table through
+/// own, lent to the drive, so that building the drive (about 3 KB) never passes the table through
 /// the stack.
 pub type Drive = drive_core::Drive<NativeMap, &'static mut Table>;
 
@@ -70,7 +70,7 @@ pub fn start(hardware: &'static str, params: &Params, status: u8, can_save: bool
     line
 }
 
-/// Builds the drive in `slot`, lending it `table`. The compiler builds the drive (2.8 KB) in
+/// Builds the drive in `slot`, lending it `table`. The compiler builds the drive (about 3 KB) in
 /// this frame and copies it into the static; out of line, so the copy is on the stack for this
 /// call only.
 #[inline(never)]

@@ -46,7 +46,7 @@ impl Coast {
         // Coasting ran ahead of an axis that slowed: hold the step back until it catches up.
         let emit = if backwards && self.surplus != 0 { 0 } else { due };
         self.surplus = self.surplus.saturating_add(emit).saturating_sub(steps);
-        (self.velocity, self.fraction, self.position) = (sp.velocity, sp.fraction.to_bits(), None);
+        (self.velocity, self.fraction, self.position) = (f64::from(sp.velocity), sp.fraction.to_bits(), None);
         emit
     }
 
@@ -73,7 +73,7 @@ mod tests {
     /// The setpoint of an axis at `p` microsteps moving at `v` pps.
     fn at(p: f64, v: f64) -> Setpoint {
         let whole = p.floor();
-        Setpoint { whole: whole as i64, fraction: U0F32::from_num(p - whole), velocity: v, acceleration: 0.0 }
+        Setpoint { whole: whole as i64, fraction: U0F32::from_num(p - whole), velocity: v as f32, acceleration: 0.0 }
     }
 
     /// Runs an axis whose position at tick `k` is `pos(k)` (and velocity `vel(k)`), the ticks

@@ -62,7 +62,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             p.advance_to(p.next_tick());
             let out = p.outputs().ok_or("no tick")?;
             let commanded = (out.setpoint.whole as f64 + out.setpoint.fraction.to_num::<f64>()) * MICRO / unit;
-            let row = TraceRow::from_motor(p.motor(), commanded, out.setpoint.velocity * MICRO / unit, 16);
+            let row = TraceRow::from_motor(p.motor(), commanded, f64::from(out.setpoint.velocity) * MICRO / unit, 16);
             let error = row.commanded_position_usteps - row.rotor_position_usteps;
             if (800_000..1_300_000).contains(&t) {
                 worst_load = worst_load.max(error.abs());

@@ -575,7 +575,7 @@ impl Sim<'_> {
                     time_us: now.as_micros(),
                     rotor_microsteps: plant.rotor_microsteps(),
                     setpoint: out.map_or(0, |o| o.setpoint.whole),
-                    velocity: out.map_or(0.0, |o| o.setpoint.velocity),
+                    velocity: out.map_or(0.0, |o| f64::from(o.setpoint.velocity)),
                     enabled: out.is_some_and(|o| o.enabled),
                     brake_duty: out.map_or(0, |o| o.brake_duty),
                     current_a: a.abs().max(b.abs()),

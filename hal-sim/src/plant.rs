@@ -236,7 +236,7 @@ impl Plant {
             {
                 let per_step = microsteps_per_step(out.microsteps);
                 let commanded = out.setpoint.whole as f64 + out.setpoint.fraction.to_num::<f64>();
-                let row = TraceRow::from_motor(&self.motor, commanded, out.setpoint.velocity, per_step);
+                let row = TraceRow::from_motor(&self.motor, commanded, f64::from(out.setpoint.velocity), per_step);
                 if row.write_csv_line(file).is_err() {
                     self.trace = None;
                 }

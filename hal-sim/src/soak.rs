@@ -1088,7 +1088,7 @@ impl Soak {
         if let Some(to) = running {
             // Ignored only if the move still runs when the frame is served, some ms from now:
             // sent only while the move has more than 50 ms to go at the fastest it may run.
-            let v = self.axes[i].plant.outputs().map_or(0.0, |o| o.setpoint.velocity.abs());
+            let v = self.axes[i].plant.outputs().map_or(0.0, |o| f64::from(o.setpoint.velocity.abs()));
             let fastest = v.max(f64::from(self.axes[i].max_speed.unsigned_abs())).max(f64::from(speed));
             if ((to - here).abs() as f64) < 0.05 * fastest + 10.0 {
                 return self.absolute_move(i);

@@ -1,36 +1,26 @@
-//! The axis: executes one planned segment at a time, evaluated by time at every control tick.
+//! The axis: executes one planned segment at a time, a sample at every control tick.
 //!
-//! Positions are whole microsteps in an `i64` anchor plus an `f64` offset from it that the
-//! planner works in. Every re-plan moves the whole part of the present position into the anchor,
-//! so the offset stays small and a move ends exactly on its (integer) target however far the
-//! axis has travelled: nothing drifts over 2^31 microsteps.
+//! Positions are whole microsteps (`i64`) with a fixed-point fraction. A move or speed change is
+//! planned in `f64` from the state at the tick it starts on, relative to the whole part of that
+//! position, then sampled into a [`Track`] that the tick walks in integers: nothing drifts
+//! however far the axis travels, and a move ends exactly on its integer target.
 
 use super::cubic::{Ahead, Cubic, Rates, Walk};
 use super::scurve::{Limits, PlanError, Profile, State};
+use super::track::{Track, Walker};
 use crate::units::Instant;
 use crate::units::TICK_MICROS;
 use fixed::types::U0F32;
 
-/// What to do when a profile has run its course.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Then {
-    /// A move: stand on the target.
-    Stand,
-    /// A speed change: keep the speed reached.
-    Cruise,
-}
-
 /// The segment being executed.
-// One segment lives in the axis (no heap): the size of the profile variant is what it costs.
+// One segment lives in the axis (no heap): the size of the track variant is what it costs.
 #[allow(clippy::large_enum_variant)]
 #[derive(Clone, Copy, Debug)]
 enum Segment {
     /// Standing on the anchor.
     Still,
-    /// Following a profile that started at `start`, positions relative to the anchor.
-    Profile { profile: Profile, start: Instant, then: Then },
-    /// Constant speed `v` from `start`, where the position was `p0` (relative to the anchor).
-    Cruise { start: Instant, p0: f64, v: f64 },
+    /// Walking the axis' track; `at` is the tick of the walker's sample.
+    Track { walker: Walker, at: Instant },
     /// A PVT segment from the anchor, started at the control tick `start`. Evaluated exactly in
     /// integers (walked tick by tick, `walk`); held on its end point until the next segment
     /// replaces it or the run ends. `ahead` is the next segment, prepared while this one runs
@@ -46,23 +36,25 @@ pub struct Setpoint {
     /// The fraction of a microstep beyond `whole`.
     pub fraction: U0F32,
     /// Velocity in microsteps per second.
-    pub velocity: f64,
+    pub velocity: f32,
     /// Acceleration in microsteps per second squared.
-    pub acceleration: f64,
+    pub acceleration: f32,
 }
 
 /// One axis of motion.
 #[derive(Clone, Copy, Debug)]
 pub struct Axis {
     anchor: i64,
+    /// The fraction beyond `anchor` standing still, in 2^-32 microstep: where a speed change
+    /// to rest stopped.
+    rest: u32,
     segment: Segment,
+    /// The track of [`Segment::Track`] (kept apart, so that a plan samples into it in place).
+    track: Track,
     /// The setpoint of the last tick.
     last: Setpoint,
-}
-
-/// Seconds from `start` to `now`.
-fn seconds(start: Instant, now: Instant) -> f64 {
-    now.since(start) as f64 * 1e-6
+    /// The time of the last tick: plans start on the tick grid it sets.
+    grid: Option<Instant>,
 }
 
 /// 2^-32: the weight of a fraction's lowest bit.
@@ -73,19 +65,16 @@ fn cubic_tick(start: Instant, now: Instant) -> u64 {
     now.since(start) / TICK_MICROS
 }
 
-/// Whole part (floor) and fraction of a position offset; `f64 as i64` saturates, never panics.
-fn split(anchor: i64, p: f64) -> (i64, f64) {
-    let floor = libm::floor(p);
-    (anchor.saturating_add(floor as i64), p - floor)
-}
-
 impl Axis {
     /// An axis standing at `position`.
     pub fn new(position: i64) -> Self {
         Self {
             anchor: position,
+            rest: 0,
             segment: Segment::Still,
+            track: Track::standing(position),
             last: Setpoint { whole: position, fraction: U0F32::ZERO, velocity: 0.0, acceleration: 0.0 },
+            grid: None,
         }
     }
 
@@ -102,26 +91,46 @@ impl Axis {
     /// Where a move now in progress will stop (its target), if it is a move.
     pub fn target(&self) -> Option<i64> {
         match &self.segment {
-            Segment::Profile { profile, then: Then::Stand, .. } => {
-                Some(self.anchor.saturating_add(libm::round(profile.at(profile.duration()).p) as i64))
-            }
+            Segment::Track { .. } => self.track.target(),
             Segment::Still => Some(self.anchor),
             _ => None,
         }
     }
 
-    /// Position, velocity and acceleration at `now`, relative to the anchor.
-    fn state_at(&self, now: Instant) -> State {
-        // By reference: a profile is large, and this runs every tick.
+    /// The tick a plan made at `now` starts on: the first on the grid of the ticks at or after
+    /// `now` (the last tick if `now` is before it).
+    fn activation(&self, now: Instant) -> Instant {
+        match self.grid {
+            Some(t) => {
+                let late = now.since(t);
+                t.plus_micros(late.div_ceil(TICK_MICROS) * TICK_MICROS)
+            }
+            None => now,
+        }
+    }
+
+    /// The whole microsteps of the position at the tick `at` and the state there relative to
+    /// them: what a plan that starts on that tick starts from.
+    fn rebased(&self, at: Instant) -> (i64, State) {
         match &self.segment {
-            Segment::Still => State { p: 0.0, v: 0.0, a: 0.0 },
-            Segment::Profile { profile, start, .. } => profile.at(seconds(*start, now)),
-            Segment::Cruise { start, p0, v } => State { p: p0 + v * seconds(*start, now), v: *v, a: 0.0 },
+            Segment::Still => (self.anchor, State { p: f64::from(self.rest) * TWO_POW_M32, ..State::default() }),
+            Segment::Track { walker, at: now } => {
+                let track = &self.track;
+                let mut w = *walker;
+                let mut t = *now;
+                while t.plus_micros(TICK_MICROS) <= at && !w.ended(track) {
+                    w.step(track);
+                    t = t.plus_micros(TICK_MICROS);
+                }
+                let whole = w.position().0;
+                (whole, w.state(whole))
+            }
             Segment::Cubic { start, cubic, rates, .. } => {
-                let k = cubic_tick(*start, now);
+                let k = cubic_tick(*start, at);
                 let o = cubic.at(k);
-                let p = o.whole as f64 + f64::from(o.fraction) * TWO_POW_M32;
-                State { p, v: rates.velocity(k), a: rates.acceleration(k) }
+                let whole = cubic.p0.saturating_add(o.whole);
+                let p = f64::from(o.fraction) * TWO_POW_M32;
+                (whole, State { p, v: f64::from(rates.velocity(k)), a: f64::from(rates.acceleration(k)) })
             }
         }
     }
@@ -161,7 +170,7 @@ impl Axis {
     /// Ends a PVT segment that has arrived at rest: the axis stands exactly on its end point.
     pub fn stand_on_cubic_end(&mut self) {
         if let Segment::Cubic { cubic, .. } = self.segment {
-            self.anchor = cubic.p1();
+            (self.anchor, self.rest) = (cubic.p1(), 0);
             self.segment = Segment::Still;
         }
     }
@@ -174,21 +183,11 @@ impl Axis {
         }
     }
 
-    /// The anchor moved to the whole part of the position at `now`, and the state at `now`
-    /// relative to it. Nothing changes: a plan from it commits both only if it succeeds (and
-    /// the axis is not copied aside for that: it holds a 680-byte profile, and the planner's
-    /// stack on a microcontroller is short).
-    fn rebased(&self, now: Instant) -> (i64, State) {
-        let s = self.state_at(now);
-        let (whole, frac) = split(self.anchor, s.p);
-        (whole, State { p: frac, ..s })
-    }
-
     /// Moves to `target`, arriving at `arrive_v` (the stop speed, from which the drive jumps to
-    /// rest), from whatever the axis is doing at `now`. `depart_v` is the speed it may jump to
-    /// from rest (the start speed).
+    /// rest), from whatever the axis is doing on the first tick at or after `now`. `depart_v` is
+    /// the speed it may jump to from rest (the start speed).
     ///
-    /// The move is planned in place (a profile is 680 bytes, and a microcontroller's stack is
+    /// The move is planned in place (a track is 700 bytes, and a microcontroller's stack is
     /// short): if the plan fails, the axis [halts](Axis::halt). To keep an axis as it was when a
     /// plan fails, plan on a copy and take it only if the plan succeeds.
     pub fn move_to(
@@ -199,7 +198,7 @@ impl Axis {
         arrive_v: f64,
         limits: &Limits,
     ) -> Result<(), PlanError> {
-        self.plan_to(now, target, depart_v, arrive_v, Then::Stand, limits)
+        self.plan_to(now, target, depart_v, arrive_v, false, limits)
     }
 
     /// Moves through `target` at `pass_v` and keeps that speed beyond it, until the next plan
@@ -213,7 +212,7 @@ impl Axis {
         pass_v: f64,
         limits: &Limits,
     ) -> Result<(), PlanError> {
-        self.plan_to(now, target, depart_v, pass_v, Then::Cruise, limits)
+        self.plan_to(now, target, depart_v, pass_v, true, limits)
     }
 
     fn plan_to(
@@ -222,10 +221,11 @@ impl Axis {
         target: i64,
         depart_v: f64,
         arrive_v: f64,
-        then: Then,
+        cruise: bool,
         limits: &Limits,
     ) -> Result<(), PlanError> {
-        let (anchor, mut start) = self.rebased(now);
+        let at = self.activation(now);
+        let (anchor, mut start) = self.rebased(at);
         let goal = target.saturating_sub(anchor) as f64;
         let direction = if goal >= start.p { 1.0 } else { -1.0 };
         if self.is_still() && start.p != goal {
@@ -233,51 +233,58 @@ impl Axis {
         }
         // The planner takes the arrival speed as a magnitude, in the direction of the move.
         let arrive_v = arrive_v.min(limits.v_max);
-        self.plan_in_place(anchor, now, then, |profile| {
+        self.plan_in_place(anchor, at, cruise, |profile| {
             Profile::to_position_into(profile, start, goal, arrive_v, limits)
         })
     }
 
     /// Whether the last planned profile has run its course (standing, or cruising at its speed).
     pub fn settled(&self) -> bool {
-        !matches!(self.segment, Segment::Profile { .. })
+        match &self.segment {
+            Segment::Track { walker, .. } => walker.cruising(&self.track),
+            _ => true,
+        }
     }
 
-    /// Changes speed to `v` (signed) from whatever the axis is doing at `now`, then keeps it.
-    /// From rest it may jump to `depart_v` first. Planned in place, as [`Axis::move_to`]: the
-    /// axis halts if the plan fails.
+    /// Changes speed to `v` (signed) from whatever the axis is doing on the first tick at or
+    /// after `now`, then keeps it. From rest it may jump to `depart_v` first. Planned in place,
+    /// as [`Axis::move_to`]: the axis halts if the plan fails.
     pub fn run_at(&mut self, now: Instant, v: f64, depart_v: f64, limits: &Limits) -> Result<(), PlanError> {
-        let (anchor, mut start) = self.rebased(now);
+        let at = self.activation(now);
+        let (anchor, mut start) = self.rebased(at);
         if self.is_still() && v != 0.0 {
             start.v = libm::copysign(depart_v.min(libm::fabs(v)), v);
         }
-        self.plan_in_place(anchor, now, Then::Cruise, |profile| Profile::to_velocity_into(profile, start, v, limits))
+        self.plan_in_place(anchor, at, true, |profile| Profile::to_velocity_into(profile, start, v, limits))
     }
 
-    /// Plans a profile into the axis' own segment, to start at `now` with the anchor moved to
-    /// `anchor` (the state the plan starts from is relative to it); halts if the plan fails.
+    /// Plans a profile (positions relative to `anchor`) and samples it into the axis' own
+    /// segment, to start on the tick `at`; halts if the plan fails.
     fn plan_in_place(
         &mut self,
         anchor: i64,
-        now: Instant,
-        then: Then,
+        at: Instant,
+        cruise: bool,
         plan: impl FnOnce(&mut Profile) -> Result<(), PlanError>,
     ) -> Result<(), PlanError> {
-        self.segment = Segment::Profile { profile: Profile::EMPTY, start: now, then };
-        let planned = match &mut self.segment {
-            Segment::Profile { profile, .. } => plan(profile),
-            _ => Err(PlanError::NoSolution),
-        };
-        match planned {
-            Ok(()) => self.anchor = anchor,
-            Err(_) => self.halt(),
+        let mut profile = Profile::EMPTY;
+        let planned = plan(&mut profile).and_then(|()| {
+            if self.track.sample(&profile, anchor, cruise) {
+                self.segment = Segment::Track { walker: Walker::new(&self.track), at };
+                Ok(())
+            } else {
+                Err(PlanError::NoSolution)
+            }
+        });
+        if planned.is_err() {
+            self.halt();
         }
         planned
     }
 
     /// Stops at once where the axis is (seed 000 0x6053, disable, faults): no ramp.
     pub fn halt(&mut self) {
-        self.anchor = self.last.whole;
+        (self.anchor, self.rest) = (self.last.whole, 0);
         self.segment = Segment::Still;
         self.last = Setpoint { fraction: U0F32::ZERO, velocity: 0.0, acceleration: 0.0, ..self.last };
     }
@@ -288,62 +295,41 @@ impl Axis {
         if !self.is_still() {
             return false;
         }
-        *self = Self::new(position);
+        *self = Self { grid: self.grid, ..Self::new(position) };
         true
     }
 
-    /// Evaluates the segment at `now` and returns the setpoint and the whole microsteps moved
-    /// since the last tick.
+    /// The setpoint of the tick at `now` and the whole microsteps moved since the last tick.
+    /// Integers only (and `f32` for the rates): the track's next sample, or the PVT walk.
     pub fn tick(&mut self, now: Instant) -> (Setpoint, i64) {
-        if let Segment::Cubic { start, cubic, walk, rates, .. } = &mut self.segment {
-            // Exact: whole microsteps and fraction straight from the integer walk.
-            let k = cubic_tick(*start, now);
-            let o = walk.at(cubic, k);
-            let whole = cubic.p0.saturating_add(o.whole);
-            let moved = whole.saturating_sub(self.last.whole);
-            let fraction = U0F32::from_bits(o.fraction);
-            self.last = Setpoint { whole, fraction, velocity: rates.velocity(k), acceleration: rates.acceleration(k) };
-            return (self.last, moved);
-        }
-        let s = match &self.segment {
-            Segment::Profile { profile, start, then } if seconds(*start, now) >= profile.duration() => {
-                let (end, duration, start) = (profile.at(profile.duration()), profile.duration(), *start);
-                match *then {
-                    Then::Stand => {
-                        // Exactly on the target: the whole part is the new anchor.
-                        let (whole, _) = split(self.anchor, libm::round(end.p));
-                        self.anchor = whole;
-                        self.segment = Segment::Still;
-                        State { p: 0.0, v: 0.0, a: 0.0 }
-                    }
-                    Then::Cruise if end.v == 0.0 => {
-                        let (whole, frac) = split(self.anchor, end.p);
-                        self.anchor = whole;
-                        self.segment = Segment::Still;
-                        State { p: frac, v: 0.0, a: 0.0 }
-                    }
-                    Then::Cruise => {
-                        // The same line as the profile's end, extrapolated back to its start.
-                        self.segment = Segment::Cruise { start, p0: end.p - end.v * duration, v: end.v };
-                        self.state_at(now)
-                    }
+        self.grid = Some(now);
+        let (whole, fraction, velocity, acceleration) = match &mut self.segment {
+            Segment::Still => (self.anchor, self.rest, 0.0, 0.0),
+            Segment::Track { walker, at } => {
+                let track = &self.track;
+                while at.plus_micros(TICK_MICROS) <= now && !walker.ended(track) {
+                    walker.step(track);
+                    *at = at.plus_micros(TICK_MICROS);
+                }
+                let (whole, fraction) = walker.position();
+                if walker.ended(track) {
+                    // Exactly on the target (or where the speed reached zero): the new anchor.
+                    (self.anchor, self.rest) = (whole, fraction);
+                    self.segment = Segment::Still;
+                    (whole, fraction, 0.0, 0.0)
+                } else {
+                    (whole, fraction, walker.velocity(), walker.acceleration())
                 }
             }
-            &Segment::Cruise { start, p0, v } if libm::fabs(p0 + v * seconds(start, now)) > 65536.0 => {
-                // Keep the offset small: restart the cruise from here, on a whole microsecond.
-                let s = self.state_at(now);
-                let (whole, frac) = split(self.anchor, s.p);
-                self.anchor = whole;
-                self.segment = Segment::Cruise { start: now, p0: frac, v };
-                State { p: frac, ..s }
+            Segment::Cubic { start, cubic, walk, rates, .. } => {
+                // Exact: whole microsteps and fraction straight from the integer walk.
+                let k = cubic_tick(*start, now);
+                let o = walk.at(cubic, k);
+                (cubic.p0.saturating_add(o.whole), o.fraction, rates.velocity(k), rates.acceleration(k))
             }
-            _ => self.state_at(now),
         };
-        let (whole, frac) = split(self.anchor, s.p);
         let moved = whole.saturating_sub(self.last.whole);
-        // `saturating_from_num` panics on NaN; a planner fault must not take the drive down.
-        let fraction = if frac.is_nan() { U0F32::ZERO } else { U0F32::saturating_from_num(frac) };
-        self.last = Setpoint { whole, fraction, velocity: s.v, acceleration: s.a };
+        self.last = Setpoint { whole, fraction: U0F32::from_bits(fraction), velocity, acceleration };
         (self.last, moved)
     }
 }

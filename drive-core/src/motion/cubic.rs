@@ -178,40 +178,55 @@ impl Cubic {
         i128::from(TICK_HZ) * n * n * n
     }
 
-    /// The velocity and acceleration as polynomials in the segment's time.
+    /// The velocity and acceleration as polynomials in the segment's time, computed in `f64`
+    /// and kept in `f32` (the tick evaluates them on the FPU).
     pub fn rates(&self) -> Rates {
         let (v0, v1) = (self.v0 as f64, self.v1 as f64);
         if self.n == 0 {
-            return Rates { n: 0, per_tick: 0.0, v0, v1, b: 0.0, a: 0.0, acc0: 0.0, acc1: 0.0 };
+            let v1 = v1 as f32;
+            return Rates { n: 0, per_tick: 0.0, v0: v1, v1, b: 0.0, a: 0.0, acc0: 0.0, acc1: 0.0 };
         }
-        // One division a segment (software on a Cortex-M4F): 1/N, and 1/T = R/N from it.
         let per_tick = 1.0 / self.n as f64;
         let per_second = f64::from(TICK_HZ) * per_tick;
         let d = self.delta as f64 * per_second;
         let (a, b) = (3.0 * v0 + 3.0 * v1 - 6.0 * d, 6.0 * d - 4.0 * v0 - 2.0 * v1);
-        Rates { n: self.n, per_tick, v0, v1, b, a, acc0: b * per_second, acc1: 2.0 * a * per_second }
+        Rates {
+            n: self.n,
+            per_tick: per_tick as f32,
+            v0: v0 as f32,
+            v1: v1 as f32,
+            b: b as f32,
+            a: a as f32,
+            acc0: (b * per_second) as f32,
+            acc1: (2.0 * a * per_second) as f32,
+        }
     }
 
     /// Velocity at tick `k`, pps: [`Rates::velocity`].
-    pub fn velocity(&self, k: u64) -> f64 {
+    pub fn velocity(&self, k: u64) -> f32 {
         self.rates().velocity(k)
     }
 
     /// Acceleration at tick `k`, pps²: [`Rates::acceleration`].
-    pub fn acceleration(&self, k: u64) -> f64 {
+    pub fn acceleration(&self, k: u64) -> f32 {
         self.rates().acceleration(k)
     }
 
     /// The largest speed anywhere on the segment, pps. The velocity is the quadratic
     /// `a s² + b s + c` in `s`, so it is the larger of the ends and the vertex.
     pub fn peak_speed(&self) -> f64 {
-        let r = self.rates();
-        let ends = libm::fabs(r.v0).max(libm::fabs(r.v1));
-        if r.n == 0 || r.a == 0.0 {
+        let (v0, v1) = (self.v0 as f64, self.v1 as f64);
+        let ends = libm::fabs(v0).max(libm::fabs(v1));
+        if self.n == 0 {
             return ends;
         }
-        let s = -r.b / (2.0 * r.a);
-        if s > 0.0 && s < 1.0 { ends.max(libm::fabs(r.a * s * s + r.b * s + r.v0)) } else { ends }
+        let d = self.delta as f64 * f64::from(TICK_HZ) / self.n as f64;
+        let (a, b) = (3.0 * v0 + 3.0 * v1 - 6.0 * d, 6.0 * d - 4.0 * v0 - 2.0 * v1);
+        if a == 0.0 {
+            return ends;
+        }
+        let s = -b / (2.0 * a);
+        if s > 0.0 && s < 1.0 { ends.max(libm::fabs(a * s * s + b * s + v0)) } else { ends }
     }
 
     /// Whether the motor can follow the segment: no jump (a segment of no time must stay where it
@@ -232,22 +247,23 @@ pub struct Rates {
     /// The segment's ticks, `N`.
     n: u64,
     /// `1/N`: the share of the segment a tick is.
-    per_tick: f64,
-    v0: f64,
-    v1: f64,
-    b: f64,
-    a: f64,
-    acc0: f64,
-    acc1: f64,
+    per_tick: f32,
+    v0: f32,
+    v1: f32,
+    b: f32,
+    a: f32,
+    acc0: f32,
+    acc1: f32,
 }
 
 impl Rates {
     /// The share of the segment at tick `k`, in [0, 1]; `None` for a segment of no time.
-    fn share(&self, k: u64) -> Option<f64> {
+    fn share(&self, k: u64) -> Option<f32> {
         match self.n {
             0 => None,
             n if k >= n => Some(1.0),
-            _ => Some(k as f64 * self.per_tick),
+            // Below `N`, which fits in 32 bits: the FPU converts it.
+            _ => Some(k as u32 as f32 * self.per_tick),
         }
     }
 
@@ -260,7 +276,7 @@ impl Rates {
     /// let r = c.rates();
     /// assert_eq!((r.velocity(0), r.velocity(100), r.velocity(200)), (0.0, 150_000.0, 0.0));
     /// ```
-    pub fn velocity(&self, k: u64) -> f64 {
+    pub fn velocity(&self, k: u64) -> f32 {
         match self.share(k) {
             None => self.v1,
             Some(s) if s >= 1.0 => self.v1,
@@ -269,7 +285,7 @@ impl Rates {
     }
 
     /// Acceleration at tick `k`, pps².
-    pub fn acceleration(&self, k: u64) -> f64 {
+    pub fn acceleration(&self, k: u64) -> f32 {
         self.share(k).map_or(0.0, |s| self.acc0 + s * self.acc1)
     }
 }
@@ -551,8 +567,9 @@ mod tests {
         // The acceleration is the velocity's derivative: a central difference over two ticks.
         let dt = 1.0 / f64::from(TICK_HZ);
         for k in [1, 100, 739] {
-            let slope = (r.velocity(k + 1) - r.velocity(k - 1)) / (2.0 * dt);
-            assert!((slope - r.acceleration(k)).abs() < 1e-6 * slope.abs().max(1.0), "tick {k}");
+            let slope = f64::from(r.velocity(k + 1) - r.velocity(k - 1)) / (2.0 * dt);
+            // The rates are `f32`: a difference of two of them is good to about 1e-4.
+            assert!((slope - f64::from(r.acceleration(k))).abs() < 1e-3 * slope.abs().max(1.0), "tick {k}");
         }
         let none = Cubic::new(3, 5, Point { position: 3, velocity: 5, time_ms: 0 }).rates();
         assert_eq!((none.velocity(0), none.acceleration(0)), (5.0, 0.0));

@@ -3,3 +3,4 @@
 pub mod axis;
 pub mod cubic;
 pub mod scurve;
+pub mod track;

@@ -1007,6 +1007,21 @@ impl Profile {
         self.duration
     }
 
+    /// The phases of constant jerk in order: for each, its start time (s from the profile's
+    /// start) and the state there, with the jerk (microsteps/s³) it keeps until the next one.
+    ///
+    /// ```
+    /// use drive_core::motion::scurve::{Limits, Profile, State};
+    /// let lim = Limits { v_max: 1_000.0, a_max: 1_000.0, d_max: 1_000.0, jerk: None };
+    /// let prof = Profile::to_position(State::default(), 3_000.0, 0.0, &lim).unwrap();
+    /// let starts: Vec<f64> = prof.phases().map(|(t0, _, _)| t0).collect();
+    /// assert_eq!(starts, [0.0, 1.0, 3.0]);
+    /// ```
+    pub fn phases(&self) -> impl Iterator<Item = (f64, State, f64)> + '_ {
+        let phases = self.phases.get(..self.n).unwrap_or(&[]);
+        phases.iter().map(|ph| (ph.t0, State { p: ph.p, v: ph.v, a: 2.0 * ph.a2 }, 6.0 * ph.j6))
+    }
+
     fn phase(&self, t: f64) -> Option<&Phase> {
         let phases = self.phases.get(..self.n.max(1)).unwrap_or(&[]);
         let i = phases.partition_point(|ph| ph.t0 <= t);

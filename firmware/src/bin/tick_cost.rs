@@ -120,7 +120,7 @@ impl Case {
                 let per = core::f32::consts::FRAC_PI_2 / 32.0;
                 let c = &last.commutation;
                 let theta = ((c.whole % 128) as f32 + c.fraction.to_num::<f32>()) * per;
-                let w = c.velocity as f32 * per;
+                let w = c.velocity * per;
                 let (r, l, km, i) = (1.4, 3.0e-3, 0.21, f32::from(last.current_ma) * 1e-3);
                 let rotor = theta - 30f32.to_radians();
                 let (s, co) = (libm::sinf(theta), libm::cosf(theta));
@@ -271,7 +271,7 @@ fn run(case: Case, slot: &mut MaybeUninit<Drive>) -> (u32, u32, bool) {
             && match case {
                 Case::OpenPvt => rig.last.setpoint.velocity > 0.0,
                 Case::OpenRamp | Case::ServoLoopRamp => accelerating,
-                _ => rig.last.setpoint.velocity == 32_000.0 && !accelerating,
+                _ => (rig.last.setpoint.velocity - 32_000.0).abs() < 0.5 && !accelerating,
             };
     }
     ((sum / u64::from(MEASURED_TICKS)) as u32, most, moving)
