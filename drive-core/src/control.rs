@@ -145,17 +145,22 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         }
     }
 
-    /// Decelerates a moving axis to rest with the mode's deceleration, and ends any PP set-point
-    /// or PVT run; stops at once if no ramp can be planned.
+    /// Decelerates a moving axis to rest with the mode's deceleration (a ramp of closed form,
+    /// [`Axis::stop_ramp`]: the control tick runs this), and ends any PP set-point or PVT run.
     pub(crate) fn decelerate_to_stop(&mut self) {
-        if !self.axis.is_still() {
-            let v = f64::from(libm::fabsf(self.axis.setpoint().velocity)).max(1.0);
-            let limits = if self.mode().is_profile() { self.pp_setpoint(0, v).limits } else { self.scurve_limits(v) };
-            // A ramp that cannot be planned halts the axis where it stands (`run_at`).
-            let _ = self.axis.run_at(self.now, 0.0, 0.0, &limits);
-        }
+        self.axis.stop_ramp(self.stop_deceleration());
         self.pp = Pp::default();
         self.pvt.cancel();
+    }
+
+    /// The deceleration of a stop in the present mode, pps²: 0x6068 in the profile modes, else
+    /// the level of 0x600B; 0 (stop at once) for level 0, which has no ramp.
+    pub(crate) fn stop_deceleration(&self) -> u32 {
+        if self.mode().is_profile() {
+            self.param(Obj::PpDecel)
+        } else {
+            LEVELS.get((self.param(Obj::DecelLevel) as usize).wrapping_sub(1)).copied().unwrap_or(0)
+        }
     }
 
     /// Stops the axis where its setpoint is and ends any PP set-point or PVT run.
@@ -217,8 +222,11 @@ impl<P: BorrowMut<Table>> DriveState<P> {
                 let sp = self.pp_setpoint(0, run_speed);
                 axis.run_at(now, run_speed, sp.depart, &sp.limits).map_err(failed)?;
             } else if let Some(sp) = pp.active {
-                // PP: resume the interrupted move.
+                // PP: resume the interrupted move, and the buffered one after it.
                 axis.move_to(now, sp.target, sp.depart, sp.arrive, &sp.limits).map_err(failed)?;
+                if let Some(b) = pp.buffered {
+                    axis.then_move_to(b.target, b.depart, b.arrive, &b.limits).map_err(|_| ObjError::Busy)?;
+                }
             }
         }
         if mode == WorkMode::ProfilePosition && rise(CW_NEW_SETPOINT) && !pp.ack {
@@ -247,7 +255,17 @@ impl<P: BorrowMut<Table>> DriveState<P> {
                         axis.pass_through(now, a.target, a.depart, pass, &a.limits).map_err(failed)?;
                     }
                 }
-                pp.buffered = Some(sp);
+                // Planned now, after the running move: the control tick walks on into it. A
+                // walk already cruising past its target starts it from where it is.
+                if axis.then_move_to(sp.target, sp.depart, sp.arrive, &sp.limits).is_ok() {
+                    pp.buffered = Some(sp);
+                } else if axis.settled() {
+                    axis.move_to(now, sp.target, sp.depart, sp.arrive, &sp.limits).map_err(failed)?;
+                    pp.active = Some(sp);
+                } else {
+                    // The two moves do not fit in one track (more than 17 phases).
+                    return Err(ObjError::Busy);
+                }
             }
             pp.ack = true;
         }
@@ -406,19 +424,14 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         (if reached { SW_TARGET_REACHED } else { 0 }) | if self.pp.ack { SW_SETPOINT_ACK } else { 0 }
     }
 
-    /// PP: when the running move has ended, the buffered set-point starts.
-    fn pp_tick(&mut self, now: Instant) {
-        if self.mode() != WorkMode::ProfilePosition || !self.axis.settled() || self.pp.halted {
+    /// PP: when the walk reaches the buffered set-point (planned after the running one), it is
+    /// the active one.
+    fn pp_tick(&mut self) {
+        if !self.axis.take_joined() || self.mode() != WorkMode::ProfilePosition {
             return;
         }
         if let Some(sp) = self.pp.buffered.take() {
-            // Planned on a copy: a plan that fails leaves the axis as it was (`move_to` would
-            // halt it). In the tick, which runs the drive only while no task is in a request.
-            let mut axis = self.axis;
-            if axis.move_to(now, sp.target, sp.depart, sp.arrive, &sp.limits).is_ok() {
-                self.axis = axis;
-                self.pp.active = Some(sp);
-            }
+            self.pp.active = Some(sp);
             if self.param(Obj::ControlWord) as u16 & CW_NEW_SETPOINT == 0 {
                 self.pp.ack = false;
             }
@@ -437,9 +450,9 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         self.now = now;
         self.sense(inputs);
         self.supervise(now, inputs);
-        self.pp_tick(now);
         self.pvt_tick(now);
         let (setpoint, moved) = self.axis.tick(now);
+        self.pp_tick();
         let (commutation, share) = self.commutate(now, &setpoint, moved, inputs);
         let steps = commutation.whole.saturating_sub(self.servo.last_angle);
         self.servo.last_angle = commutation.whole;

@@ -49,7 +49,6 @@ use crate::drive::DriveState;
 use crate::modes::{PvtMode, WorkMode};
 use crate::motion::axis::Axis;
 use crate::motion::cubic::{Cubic, Point, TABLE_SIZE, Table, V_MAX};
-use crate::motion::scurve::Limits;
 use crate::od::{Obj, ObjError, refuse};
 use crate::units::Instant;
 use core::borrow::BorrowMut;
@@ -73,7 +72,7 @@ const OP_START: u32 = 1;
 const OP_PUSH: u32 = 2;
 const OP_CLEAR: u32 = 3;
 
-/// What starts at the next control tick.
+/// What a start begins, on the next control tick.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Start {
     /// The PVT run of 0x6018.
@@ -108,7 +107,7 @@ struct Run {
     to: Point,
 }
 
-/// The PVT state: which slots of the table hold points, the run, a start due at the next tick.
+/// The PVT state: which slots of the table hold points, and the run.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(crate) struct Pvt {
     /// First stored point (mode 3's ring; 0 in modes 1 and 2).
@@ -118,7 +117,6 @@ pub(crate) struct Pvt {
     /// The last point pushed: the next one's segment starts there.
     last: Option<Point>,
     run: Option<Run>,
-    pending: Option<Start>,
     /// 0x2111.
     pub(crate) fault: u8,
 }
@@ -129,10 +127,9 @@ impl Pvt {
         self.len
     }
 
-    /// Forgets the run and any start due (the axis was stopped).
+    /// Forgets the run (the axis was stopped).
     pub(crate) fn cancel(&mut self) {
         self.run = None;
-        self.pending = None;
     }
 }
 
@@ -311,21 +308,6 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         Ok(axis)
     }
 
-    /// The axis decelerating to rest from what it does at `now` (0x600B's ramp).
-    fn plan_stop(&self, now: Instant) -> Axis {
-        let mut axis = self.axis;
-        if axis.is_still() {
-            return axis;
-        }
-        let v = f64::from(axis.setpoint().velocity.abs()).max(1.0);
-        // No jerk limit: a PVT segment may end with more acceleration than the ramp's jerk could
-        // take back in time; the acceleration steps to the deceleration, velocity stays smooth.
-        let limits = Limits { jerk: None, ..self.scurve_limits(v) };
-        // Beyond what the ramp can plan from, the axis halts where it stands (`run_at`).
-        let _ = axis.run_at(now, 0.0, 0.0, &limits);
-        axis
-    }
-
     /// What a start (0x6017 = 1, or a group start) does in the present work mode.
     fn plan_start(&self) -> Result<Effect, ObjError> {
         match self.mode() {
@@ -337,7 +319,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
 
     /// What writing `value` to the PVT object `obj` does, or why it is refused.
     fn plan_pvt(&self, obj: Obj, value: u32) -> Result<Effect, ObjError> {
-        let running = self.pvt.run.is_some() || self.pvt.pending.is_some();
+        let running = self.pvt.run.is_some();
         let member = self.param(Obj::GroupId) != 0 && self.param(Obj::GroupId) == value;
         match (obj, value) {
             (Obj::PvtControl, OP_STOP) => Ok(self.stop_effect()),
@@ -360,7 +342,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
 
     fn stop_effect(&self) -> Effect {
         let moving = self.pvt.run.is_some() || (self.mode() == WorkMode::Position && !self.axis.is_still());
-        if moving || self.pvt.pending.is_some() { Effect::Stop } else { Effect::None }
+        if moving { Effect::Stop } else { Effect::None }
     }
 
     /// Checks a write to a PVT object.
@@ -372,6 +354,17 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     pub(crate) fn apply_pvt(&mut self, obj: Obj, value: u32) {
         let effect = self.plan_pvt(obj, value);
         self.set_param(obj, value);
+        // A start is planned here, on the bus side: the motion starts on the next control tick.
+        match effect {
+            Ok(Effect::Start(Start::Sync)) => {
+                if let Ok(axis) = self.plan_sync(self.now) {
+                    self.axis = axis;
+                }
+                return;
+            }
+            Ok(Effect::Start(Start::Pvt)) => return self.start_run(),
+            _ => {}
+        }
         let pvt = &mut self.pvt;
         match effect {
             Ok(Effect::Push(p)) => {
@@ -383,10 +376,12 @@ impl<P: BorrowMut<Table>> DriveState<P> {
             Ok(Effect::Clear) => {
                 (pvt.head, pvt.len, pvt.last) = (0, 0, None);
             }
-            Ok(Effect::Start(s)) => pvt.pending = Some(s),
+            Ok(Effect::Start(_)) => {}
             Ok(Effect::Stop) => {
                 pvt.cancel();
-                self.axis = self.plan_stop(self.now);
+                // 0x600B's ramp, without its jerk limit: a PVT segment may end with more
+                // acceleration than the jerk could take back in time.
+                self.axis.stop_ramp(self.stop_deceleration());
             }
             Ok(Effect::None) | Err(_) => {}
         }
@@ -420,30 +415,21 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         self.stored(index)
     }
 
-    /// Starts what is due at the control tick `now`.
-    fn start_pending(&mut self, now: Instant) {
-        match self.pvt.pending.take() {
-            Some(Start::Pvt) => {
-                let Ok((mut source, _, _)) = self.plan_run() else { return };
-                if let Some((i, p)) = self.next_point(&mut source) {
-                    self.axis.follow(now, Cubic::new(self.axis.setpoint().whole, 0, p));
-                    self.pvt.run = Some(Run { source, to: p });
-                    self.status.pvt_pointer = i;
-                }
-            }
-            Some(Start::Sync) => {
-                if let Ok(axis) = self.plan_sync(now) {
-                    self.axis = axis;
-                }
-            }
-            None => {}
+    /// Starts the PVT run on the next control tick: its first segment from where the axis
+    /// stands (built here, not in the tick).
+    fn start_run(&mut self) {
+        let Ok((mut source, _, _)) = self.plan_run() else { return };
+        if let Some((i, p)) = self.next_point(&mut source) {
+            let at = self.axis.next_tick(self.now);
+            self.axis.follow(at, Cubic::new(self.axis.setpoint().whole, 0, p));
+            self.pvt.run = Some(Run { source, to: p });
+            self.status.pvt_pointer = i;
         }
     }
 
-    /// The PVT part of a control tick at `now`: a due start, then the next segment whenever the
-    /// running one has ended (starting exactly at its end, so time does not drift either).
+    /// The PVT part of a control tick at `now`: the next segment whenever the running one has
+    /// ended (starting exactly at its end, so time does not drift either).
     pub(crate) fn pvt_tick(&mut self, now: Instant) {
-        self.start_pending(now);
         let Some(mut run) = self.pvt.run else { return };
         let Some((mut start, mut cubic)) = self.axis.cubic() else {
             // Stopped by something else (0x6053, disable).
@@ -469,7 +455,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
                         self.axis.stand_on_cubic_end();
                     } else {
                         self.pvt.fault |= FAULT_UNDERFLOW;
-                        self.axis = self.plan_stop(now);
+                        self.axis.stop_ramp(self.stop_deceleration());
                     }
                     self.pvt.run = None;
                     return;

@@ -454,7 +454,9 @@ fn group_start_runs_synchronous_positioning() {
     r.tick();
     assert!(!r.busy());
     r.set(Obj::GroupStart, 9);
-    assert!(!r.busy(), "starts at the next tick");
+    // Planned as the start arrives, busy at once, moving from the next tick on.
+    assert!(r.busy());
+    assert_eq!(r.drive.state().position(), 0);
     r.tick();
     assert!(r.busy());
     for _ in 0..100_000 {

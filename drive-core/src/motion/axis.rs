@@ -55,6 +55,11 @@ pub struct Axis {
     last: Setpoint,
     /// The time of the last tick: plans start on the tick grid it sets.
     grid: Option<Instant>,
+    /// The first piece of a move appended to the track ([`Axis::then_move_to`]), until the walk
+    /// reaches it.
+    joint: Option<u8>,
+    /// The walk has reached the appended move (taken by [`Axis::take_joined`]).
+    joined: bool,
 }
 
 /// 2^-32: the weight of a fraction's lowest bit.
@@ -75,6 +80,8 @@ impl Axis {
             track: Track::standing(position),
             last: Setpoint { whole: position, fraction: U0F32::ZERO, velocity: 0.0, acceleration: 0.0 },
             grid: None,
+            joint: None,
+            joined: false,
         }
     }
 
@@ -97,13 +104,13 @@ impl Axis {
         }
     }
 
-    /// The tick a plan made at `now` starts on: the first on the grid of the ticks at or after
-    /// `now` (the last tick if `now` is before it).
-    fn activation(&self, now: Instant) -> Instant {
+    /// The tick a plan made at `now` starts on: the first on the grid of the ticks that is at or
+    /// after `now` and after the last tick (whose setpoint is out already).
+    pub fn next_tick(&self, now: Instant) -> Instant {
         match self.grid {
             Some(t) => {
                 let late = now.since(t);
-                t.plus_micros(late.div_ceil(TICK_MICROS) * TICK_MICROS)
+                t.plus_micros(late.div_ceil(TICK_MICROS).max(1) * TICK_MICROS)
             }
             None => now,
         }
@@ -224,7 +231,7 @@ impl Axis {
         cruise: bool,
         limits: &Limits,
     ) -> Result<(), PlanError> {
-        let at = self.activation(now);
+        let at = self.next_tick(now);
         let (anchor, mut start) = self.rebased(at);
         let goal = target.saturating_sub(anchor) as f64;
         let direction = if goal >= start.p { 1.0 } else { -1.0 };
@@ -250,7 +257,7 @@ impl Axis {
     /// after `now`, then keeps it. From rest it may jump to `depart_v` first. Planned in place,
     /// as [`Axis::move_to`]: the axis halts if the plan fails.
     pub fn run_at(&mut self, now: Instant, v: f64, depart_v: f64, limits: &Limits) -> Result<(), PlanError> {
-        let at = self.activation(now);
+        let at = self.next_tick(now);
         let (anchor, mut start) = self.rebased(at);
         if self.is_still() && v != 0.0 {
             start.v = libm::copysign(depart_v.min(libm::fabs(v)), v);
@@ -268,6 +275,7 @@ impl Axis {
         plan: impl FnOnce(&mut Profile) -> Result<(), PlanError>,
     ) -> Result<(), PlanError> {
         let mut profile = Profile::EMPTY;
+        self.joint = None;
         let planned = plan(&mut profile).and_then(|()| {
             if self.track.sample(&profile, anchor, cruise) {
                 self.segment = Segment::Track { walker: Walker::new(&self.track), at };
@@ -282,10 +290,66 @@ impl Axis {
         planned
     }
 
+    /// Appends a move to `target` to the one under way, to start where it ends (at rest on its
+    /// target, or passing through it at speed): planned now, so that the control tick only
+    /// walks on into it. `depart_v` and `arrive_v` as for [`Axis::move_to`]. Refused (and
+    /// nothing changes) unless the axis follows a move it has not finished, or if the two do
+    /// not fit in one track. [`Axis::take_joined`] tells when the walk reaches it.
+    pub fn then_move_to(
+        &mut self,
+        target: i64,
+        depart_v: f64,
+        arrive_v: f64,
+        limits: &Limits,
+    ) -> Result<(), PlanError> {
+        let Segment::Track { walker, .. } = &self.segment else { return Err(PlanError::NoSolution) };
+        let (anchor, mut start) = self.track.end_state().ok_or(PlanError::NoSolution)?;
+        // A walk already in the final cruise would jump: the caller plans from here instead.
+        if walker.cruising(&self.track) {
+            return Err(PlanError::NoSolution);
+        }
+        let goal = target.saturating_sub(anchor) as f64;
+        if start.v == 0.0 && start.p != goal {
+            start.v = if goal >= start.p { depart_v.min(limits.v_max) } else { -depart_v.min(limits.v_max) };
+        }
+        let mut profile = Profile::EMPTY;
+        Profile::to_position_into(&mut profile, start, goal, arrive_v.min(limits.v_max), limits)?;
+        self.joint = Some(self.track.append(&profile, anchor).ok_or(PlanError::NoSolution)?);
+        Ok(())
+    }
+
+    /// Whether the walk has reached the move appended by [`Axis::then_move_to`] since this was
+    /// last asked.
+    pub fn take_joined(&mut self) -> bool {
+        core::mem::take(&mut self.joined)
+    }
+
+    /// Decelerates to rest at `decel` (pps²) from what the axis does, with no jerk limit: a ramp
+    /// of closed form that a control tick can afford (the watchdog, a PVT FIFO running dry, a
+    /// stop command). Stops at once where the axis is if `decel` is 0.
+    pub fn stop_ramp(&mut self, decel: u32) {
+        if decel == 0 {
+            return self.halt();
+        }
+        self.joint = None;
+        let last = self.last;
+        match &mut self.segment {
+            Segment::Still => {}
+            Segment::Track { walker, .. } => walker.stop_ramp(&mut self.track, decel),
+            Segment::Cubic { start, .. } => {
+                let mut walker = Walker::moving(last.whole, last.fraction.to_bits(), last.velocity);
+                walker.stop_ramp(&mut self.track, decel);
+                let at = self.grid.unwrap_or(*start);
+                self.segment = Segment::Track { walker, at };
+            }
+        }
+    }
+
     /// Stops at once where the axis is (seed 000 0x6053, disable, faults): no ramp.
     pub fn halt(&mut self) {
         (self.anchor, self.rest) = (self.last.whole, 0);
         self.segment = Segment::Still;
+        self.joint = None;
         self.last = Setpoint { fraction: U0F32::ZERO, velocity: 0.0, acceleration: 0.0, ..self.last };
     }
 
@@ -310,6 +374,9 @@ impl Axis {
                 while at.plus_micros(TICK_MICROS) <= now && !walker.ended(track) {
                     walker.step(track);
                     *at = at.plus_micros(TICK_MICROS);
+                }
+                if self.joint.is_some_and(|j| walker.piece() >= j) {
+                    (self.joint, self.joined) = (None, true);
                 }
                 let (whole, fraction) = walker.position();
                 if walker.ended(track) {

@@ -178,28 +178,20 @@ impl Cubic {
         i128::from(TICK_HZ) * n * n * n
     }
 
-    /// The velocity and acceleration as polynomials in the segment's time, computed in `f64`
-    /// and kept in `f32` (the tick evaluates them on the FPU).
+    /// The velocity and acceleration as polynomials in the segment's time, in `f32` (the
+    /// control tick builds and evaluates them on the FPU).
     pub fn rates(&self) -> Rates {
-        let (v0, v1) = (self.v0 as f64, self.v1 as f64);
+        // Velocities are within ±2^31 by construction, Δ of a feasible segment far below.
+        let f = |x: i64| x.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32 as f32;
+        let (v0, v1) = (f(self.v0), f(self.v1));
         if self.n == 0 {
-            let v1 = v1 as f32;
             return Rates { n: 0, per_tick: 0.0, v0: v1, v1, b: 0.0, a: 0.0, acc0: 0.0, acc1: 0.0 };
         }
-        let per_tick = 1.0 / self.n as f64;
-        let per_second = f64::from(TICK_HZ) * per_tick;
-        let d = self.delta as f64 * per_second;
+        let per_tick = 1.0 / self.n.min(u64::from(u32::MAX)) as u32 as f32;
+        let per_second = TICK_HZ as f32 * per_tick;
+        let d = f(self.delta) * per_second;
         let (a, b) = (3.0 * v0 + 3.0 * v1 - 6.0 * d, 6.0 * d - 4.0 * v0 - 2.0 * v1);
-        Rates {
-            n: self.n,
-            per_tick: per_tick as f32,
-            v0: v0 as f32,
-            v1: v1 as f32,
-            b: b as f32,
-            a: a as f32,
-            acc0: (b * per_second) as f32,
-            acc1: (2.0 * a * per_second) as f32,
-        }
+        Rates { n: self.n, per_tick, v0, v1, b, a, acc0: b * per_second, acc1: 2.0 * a * per_second }
     }
 
     /// Velocity at tick `k`, pps: [`Rates::velocity`].
@@ -323,28 +315,10 @@ impl Mixed {
     }
 }
 
-/// Floor division with its remainder in `[0, den)`, `den > 0`, `|x| < 2^126`, `den < 2^96`.
-///
-/// A 128-bit division is a library call on a Cortex-M4 of up to 3000 instructions. When the
-/// quotient is below 2^50, as every per-tick difference of a feasible segment's walk is, an `f64`
-/// division estimates it to within 2 (three roundings of 2^-53 each, then the truncation), and
-/// the remainder `x − q·den` (one 128-bit product, which cannot overflow within these bounds)
-/// corrects it exactly: about a quarter of the cost. Larger quotients divide in 128 bits.
+/// Floor division with its remainder in `[0, den)`, `den > 0`: a 128-bit division, a library
+/// call of integer arithmetic (no floating point: the control tick prepares segments with it,
+/// one division a tick, see [`Ahead`]).
 fn div_floor(x: i128, den: i128) -> (i128, i128) {
-    let estimate = x as f64 / den as f64;
-    if libm::fabs(estimate) < 1.0e15 {
-        let mut q = estimate as i128;
-        let mut r = x - q * den;
-        while r < 0 {
-            q -= 1;
-            r += den;
-        }
-        while r >= den {
-            q += 1;
-            r -= den;
-        }
-        return (q, r);
-    }
     let q = x.div_euclid(den);
     (q, x - q * den)
 }

@@ -67,6 +67,8 @@ enum End {
     Rest(i64, u32),
     /// Nothing: the last piece lasts until the track is replaced.
     Cruise,
+    /// Stand where the last piece left the walk (a stop ramp's end).
+    Here,
 }
 
 /// A trajectory sampled on the control ticks: sample 0 is the tick it is activated on.
@@ -105,18 +107,23 @@ impl Track {
 
     /// [`Track::from_profile`] into `self`; whether it fits.
     pub fn sample(&mut self, profile: &Profile, anchor: i64, cruise: bool) -> bool {
+        self.n = 0;
+        self.sample_after(profile, anchor, cruise)
+    }
+
+    /// Samples `profile` into the pieces after the present ones (its sample 0 is the tick after
+    /// their last); whether it fits (if not, nothing changes).
+    fn sample_after(&mut self, profile: &Profile, anchor: i64, cruise: bool) -> bool {
         let (rate, h) = (f64::from(TICK_HZ), 1.0 / f64::from(TICK_HZ));
         let duration = profile.duration();
         let last = libm::ceil(duration * rate);
-        if last.is_nan() || last > LONGEST as f64 {
+        let cruises = cruise && profile.at(duration).v != 0.0;
+        let needed = Self::phase_ticks(profile).filter(|&(_, k0, k1, _)| k1 > k0).count() + usize::from(cruises);
+        if last.is_nan() || last > LONGEST as f64 || usize::from(self.n) + needed > MAX_PIECES {
             return false;
         }
         let end = profile.at(duration);
-        self.n = 0;
-        let mut phases = profile.phases().peekable();
-        while let Some((t0, s, jerk)) = phases.next() {
-            let t1 = phases.peek().map_or(duration, |&(t, _, _)| t);
-            let (k0, k1) = (libm::ceil(t0 * rate), libm::ceil(t1 * rate).min(last));
+        for ((t0, s, jerk), k0, k1, _) in Self::phase_ticks(profile) {
             if k1 <= k0 {
                 continue;
             }
@@ -126,7 +133,7 @@ impl Track {
             let a = s.a + tau * jerk;
             self.push((k1 - k0) as u32, anchor, p, v, a, jerk);
         }
-        self.end = match (cruise, end.v != 0.0) {
+        self.end = match (cruise, cruises) {
             (true, true) => {
                 let tau = last * h - duration;
                 self.push(FOREVER, anchor, end.p + end.v * tau, end.v, 0.0, 0.0);
@@ -139,6 +146,61 @@ impl Track {
             (false, _) => End::Target(anchor.saturating_add(libm::round(end.p) as i64)),
         };
         true
+    }
+
+    /// The phases of `profile` with their first and end ticks (`k0 ≤ k < k1`, as `f64`), and
+    /// the profile's last tick.
+    fn phase_ticks(profile: &Profile) -> impl Iterator<Item = ((f64, State, f64), f64, f64, f64)> + '_ {
+        let rate = f64::from(TICK_HZ);
+        let duration = profile.duration();
+        let last = libm::ceil(duration * rate);
+        let mut phases = profile.phases().peekable();
+        core::iter::from_fn(move || {
+            let phase = phases.next()?;
+            let t1 = phases.peek().map_or(duration, |&(t, _, _)| t);
+            Some((phase, libm::ceil(phase.0 * rate), libm::ceil(t1 * rate).min(last), last))
+        })
+    }
+
+    /// Where a move appended now would start: the whole microsteps and the state relative to
+    /// them at the tick after the last piece (a move's target at rest, or the start of the
+    /// cruise that ends a pass through a target, which the move replaces). `None` for a
+    /// speed change to rest or a stop ramp.
+    pub fn end_state(&self) -> Option<(i64, State)> {
+        match self.end {
+            End::Target(p) => Some((p, State::default())),
+            End::Cruise => {
+                let last = self.piece(self.n.checked_sub(1)?)?;
+                let v = last.d1 as f64 / Q40 * f64::from(TICK_HZ);
+                Some((last.whole, State { p: f64::from(last.frac) / 4_294_967_296.0, v, a: 0.0 }))
+            }
+            End::Rest(..) | End::Here => None,
+        }
+    }
+
+    /// Appends `profile` (a move from [`Track::end_state`], positions relative to `anchor`),
+    /// replacing a final cruise, or one tick after a move's end at rest; the index of its first
+    /// piece, or `None` if it does not fit (and nothing changes).
+    pub fn append(&mut self, profile: &Profile, anchor: i64) -> Option<u8> {
+        let kept = self.n;
+        match self.end {
+            End::Cruise => self.n = self.n.saturating_sub(1),
+            // A tick on the target at rest first, as a move that ends and one that starts.
+            End::Target(p) => self.push(1, p, 0.0, 0.0, 0.0, 0.0),
+            End::Rest(..) | End::Here => {}
+        }
+        let joint = self.n;
+        if self.sample_after(profile, anchor, false) {
+            Some(joint)
+        } else {
+            self.n = kept;
+            None
+        }
+    }
+
+    /// The number of pieces.
+    pub fn pieces(&self) -> u8 {
+        self.n
     }
 
     /// Appends a piece of `ticks` that starts at `p` (relative to `anchor`) with velocity `v`,
@@ -167,8 +229,18 @@ impl Track {
     pub fn target(&self) -> Option<i64> {
         match self.end {
             End::Target(p) => Some(p),
-            End::Rest(..) | End::Cruise => None,
+            End::Rest(..) | End::Cruise | End::Here => None,
         }
+    }
+
+    /// Makes this a stop ramp of `ticks` (see [`Walker::stop_ramp`]): one piece whose
+    /// differences the walker holds, then standing where it ends. Writes one piece, not the
+    /// whole track: a control tick can afford it.
+    fn make_stop(&mut self, ticks: u32) {
+        if let Some(first) = self.pieces.first_mut() {
+            *first = Piece { ticks, ..Piece::default() };
+        }
+        (self.n, self.end) = (1, End::Here);
     }
 
     fn piece(&self, i: u8) -> Option<&Piece> {
@@ -190,6 +262,9 @@ pub struct Walker {
     d2: i128,
     d3: i128,
 }
+
+/// 1 pps² in Q64.64 microsteps a tick squared: 2^64 / 20 kHz².
+const PER_TICK_SQUARED: i128 = ((1u128 << 64) / (TICK_HZ as u128 * TICK_HZ as u128)) as i128;
 
 /// `2^-n` as `f32`, for `n < 127`.
 const fn two_pow_minus(n: u32) -> f32 {
@@ -229,10 +304,56 @@ impl Walker {
                 match track.end {
                     End::Target(p) => self.p = i128::from(p) << 64,
                     End::Rest(p, frac) => self.p = (i128::from(p) << 64) | (i128::from(frac) << 32),
-                    End::Cruise => {}
+                    End::Cruise | End::Here => {}
                 }
             }
         }
+    }
+
+    /// A walker standing at `whole` and `fraction` (2^-32) moving at `velocity` (pps, below
+    /// 2.5 Mpps), on no track: what a stop ramp starts from when the axis followed no track.
+    pub fn moving(whole: i64, fraction: u32, velocity: f32) -> Self {
+        let step = (velocity / TICK_HZ as f32 * const { 1u32 << 24 } as f32) as i32;
+        let p = (i128::from(whole) << 64) | (i128::from(fraction) << 32);
+        Self { i: 0, j: 0, p, d1: i128::from(step) << 40, d2: 0, d3: 0 }
+    }
+
+    /// Turns `track` into a ramp from this walker's state to rest at `decel` (pps², above 0) with
+    /// no jerk limit, and this walker to its start: the position and the next tick's step are
+    /// kept, the speed falls by `decel / 20 kHz` a tick. Closed form in integers and `f32`: what
+    /// a control tick runs when it must stop on its own (the watchdog, a PVT FIFO running dry).
+    ///
+    /// ```
+    /// use drive_core::motion::scurve::{Limits, Profile, State};
+    /// use drive_core::motion::track::{Track, Walker};
+    /// let lim = Limits { v_max: 4_000.0, a_max: 1e5, d_max: 1e5, jerk: None };
+    /// let prof = Profile::to_velocity(State::default(), 4_000.0, &lim).unwrap();
+    /// let mut track = Track::from_profile(&prof, 0, true).unwrap();
+    /// let mut w = Walker::new(&track);
+    /// for _ in 0..20_000 {
+    ///     w.step(&track);
+    /// }
+    /// // At 4000 pps, stop at 8000 pps²: half a second, 1000 microsteps.
+    /// let (from, _) = w.position();
+    /// w.stop_ramp(&mut track, 8_000);
+    /// while !w.ended(&track) {
+    ///     w.step(&track);
+    /// }
+    /// assert!((w.position().0 - from - 1_000).abs() <= 1);
+    /// ```
+    pub fn stop_ramp(&mut self, track: &mut Track, decel: u32) {
+        let rate = TICK_HZ as f32;
+        let speed = to_f32::<24>(self.d1).abs() * rate;
+        // Ticks to rest: the speed over the deceleration.
+        // Steps `k` of the ramp are `v − (k + ½)·decel` a tick: the last is the last not below 0.
+        let ticks = (speed / decel.max(1) as f32 * rate + 1.5) as u32;
+        let d2 = i128::from(decel) * PER_TICK_SQUARED;
+        track.make_stop(ticks);
+        (self.i, self.j) = (0, 0);
+        self.d2 = if self.d1 < 0 { d2 } else { -d2 };
+        self.d3 = 0;
+        // The first step is the present one, then each smaller by the deceleration.
+        self.d1 += self.d2 / 2;
     }
 
     /// To the next tick of `track`.
@@ -251,6 +372,11 @@ impl Walker {
             self.i += 1;
             self.load(track);
         }
+    }
+
+    /// The index of the piece walked (the number of pieces once the track has ended).
+    pub fn piece(&self) -> u8 {
+        self.i
     }
 
     /// Whether the track has ended (it stands on its target).
