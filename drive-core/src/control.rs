@@ -275,22 +275,12 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         Ok(())
     }
 
-    /// Plans writing `value` to the motion object `obj` at `self.now` into `planned`: the axis
-    /// and set-points after it, `None` if the write leaves them as they are; or why not (and
-    /// `None`). The caller's slot is the one copy of the axis (680 bytes of profile) that
-    /// planning makes: the planner's stack on a microcontroller is short.
-    pub(crate) fn plan_motion(&self, obj: Obj, value: u32, planned: &mut Option<(Axis, Pp)>) -> Result<(), ObjError> {
-        let result = self.plan_motion_into(obj, value, planned);
-        if !matches!(result, Ok(true)) {
-            *planned = None;
-        }
-        result.map(|_| ())
-    }
-
-    /// [`DriveState::plan_motion`] on the copy in `planned`: `Ok(false)` if the write leaves
-    /// the axis as it is.
-    fn plan_motion_into(&self, obj: Obj, value: u32, planned: &mut Option<(Axis, Pp)>) -> Result<bool, ObjError> {
-        let (axis, pp) = planned.insert((self.axis, self.pp));
+    /// Plans writing `value` to the motion object `obj` at `self.now` on `planned`, which holds
+    /// a copy of the axis and set-points (the one copy planning makes: a track is 700 bytes and
+    /// a microcontroller's stack is short): `Ok(true)` if the write changes them, `Ok(false)` if
+    /// it leaves them as they are, or why it is refused (and `planned` is to be dropped).
+    pub(crate) fn plan_motion(&self, obj: Obj, value: u32, planned: &mut (Axis, Pp)) -> Result<bool, ObjError> {
+        let (axis, pp) = (&mut planned.0, &mut planned.1);
         let now = self.now;
         let busy = !axis.is_still();
         let mode = self.mode();
@@ -381,7 +371,8 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         if crate::pvt::is_pvt_command(obj) {
             return self.check_pvt(obj, value);
         }
-        self.plan_motion(obj, value, &mut None)
+        let mut scratch = (self.axis, self.pp);
+        self.plan_motion(obj, value, &mut scratch).map(|_| ())
     }
 
     /// Writes a motion object, which [`DriveState::check_motion`] accepted.
@@ -389,14 +380,15 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         if crate::pvt::is_pvt_command(obj) {
             return self.apply_pvt(obj, value);
         }
-        let mut planned = None;
-        // Checked already: were it refused now, `planned` is `None` and the axis stays.
-        let _ = self.plan_motion(obj, value, &mut planned);
-        self.commit_motion(obj, value, &mut planned);
+        let mut planned = (self.axis, self.pp);
+        // Checked already: were it refused now, the axis stays.
+        let changed = self.plan_motion(obj, value, &mut planned) == Ok(true);
+        self.commit_motion(obj, value, changed.then_some(&planned));
     }
 
-    /// Writes the motion object `obj` with the axis `planned` for it ([`DriveState::plan_motion`]).
-    pub(crate) fn commit_motion(&mut self, obj: Obj, value: u32, planned: &mut Option<(Axis, Pp)>) {
+    /// Writes the motion object `obj` with the axis and set-points `planned` for it, if it
+    /// changes them ([`DriveState::plan_motion`]).
+    pub(crate) fn commit_motion(&mut self, obj: Obj, value: u32, planned: Option<&(Axis, Pp)>) {
         match obj {
             // Writing a signed speed sets the direction of relative moves (see the module doc).
             Obj::MaxSpeed if value != 0 => self.set_param(Obj::Direction, u32::from((value as i32) < 0)),

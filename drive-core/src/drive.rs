@@ -498,9 +498,9 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         // The objects whose check is `check_motion` and whose write is `apply_motion`.
         if is_command(d.obj) && has_effect(d.obj) && !crate::pvt::is_pvt_command(d.obj) && d.obj != Obj::Position {
             Self::check_writable(d, value)?;
-            let mut planned = None;
-            self.plan_motion(d.obj, value, &mut planned)?;
-            self.commit_motion(d.obj, value, &mut planned);
+            let mut planned = (self.axis, self.pp);
+            let changed = self.plan_motion(d.obj, value, &mut planned)?;
+            self.commit_motion(d.obj, value, changed.then_some(&planned));
             return Ok(());
         }
         self.check_def(d, value)?;
