@@ -72,12 +72,21 @@ enum End {
 }
 
 /// A trajectory sampled on the control ticks: sample 0 is the tick it is activated on.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug)]
 pub struct Track {
     pieces: [Piece; MAX_PIECES],
     n: u8,
     end: End,
 }
+
+/// Two tracks are equal if they walk the same: their pieces in use and their ends.
+impl PartialEq for Track {
+    fn eq(&self, other: &Self) -> bool {
+        self.end == other.end && self.used() == other.used()
+    }
+}
+
+impl Eq for Track {}
 
 /// `x` in fixed point: times `scale` (a power of two), truncated, saturating.
 fn fixed(x: f64, scale: f64) -> i64 {
@@ -117,13 +126,15 @@ impl Track {
         let (rate, h) = (f64::from(TICK_HZ), 1.0 / f64::from(TICK_HZ));
         let duration = profile.duration();
         let last = libm::ceil(duration * rate);
-        let cruises = cruise && profile.at(duration).v != 0.0;
-        let needed = Self::phase_ticks(profile).filter(|&(_, k0, k1, _)| k1 > k0).count() + usize::from(cruises);
-        if last.is_nan() || last > LONGEST as f64 || usize::from(self.n) + needed > MAX_PIECES {
+        if last.is_nan() || last > LONGEST as f64 {
             return false;
         }
-        let end = profile.at(duration);
-        for ((t0, s, jerk), k0, k1, _) in Self::phase_ticks(profile) {
+        let (kept, end) = (self.n, profile.at(duration));
+        let mut fits = true;
+        let mut phases = profile.phases().peekable();
+        while let Some((t0, s, jerk)) = phases.next() {
+            let t1 = phases.peek().map_or(duration, |&(t, _, _)| t);
+            let (k0, k1) = (libm::ceil(t0 * rate), libm::ceil(t1 * rate).min(last));
             if k1 <= k0 {
                 continue;
             }
@@ -131,12 +142,12 @@ impl Track {
             let p = s.p + tau * (s.v + tau * (s.a / 2.0 + tau * jerk / 6.0));
             let v = s.v + tau * (s.a + tau * jerk / 2.0);
             let a = s.a + tau * jerk;
-            self.push((k1 - k0) as u32, anchor, p, v, a, jerk);
+            fits &= self.push((k1 - k0) as u32, anchor, p, v, a, jerk);
         }
-        self.end = match (cruise, cruises) {
+        let end = match (cruise, end.v != 0.0) {
             (true, true) => {
                 let tau = last * h - duration;
-                self.push(FOREVER, anchor, end.p + end.v * tau, end.v, 0.0, 0.0);
+                fits &= self.push(FOREVER, anchor, end.p + end.v * tau, end.v, 0.0, 0.0);
                 End::Cruise
             }
             (true, false) => {
@@ -145,21 +156,12 @@ impl Track {
             }
             (false, _) => End::Target(anchor.saturating_add(libm::round(end.p) as i64)),
         };
-        true
-    }
-
-    /// The phases of `profile` with their first and end ticks (`k0 ≤ k < k1`, as `f64`), and
-    /// the profile's last tick.
-    fn phase_ticks(profile: &Profile) -> impl Iterator<Item = ((f64, State, f64), f64, f64, f64)> + '_ {
-        let rate = f64::from(TICK_HZ);
-        let duration = profile.duration();
-        let last = libm::ceil(duration * rate);
-        let mut phases = profile.phases().peekable();
-        core::iter::from_fn(move || {
-            let phase = phases.next()?;
-            let t1 = phases.peek().map_or(duration, |&(t, _, _)| t);
-            Some((phase, libm::ceil(phase.0 * rate), libm::ceil(t1 * rate).min(last), last))
-        })
+        if fits {
+            self.end = end;
+        } else {
+            self.n = kept;
+        }
+        fits
     }
 
     /// Where a move appended now would start: the whole microsteps and the state relative to
@@ -186,7 +188,9 @@ impl Track {
         match self.end {
             End::Cruise => self.n = self.n.saturating_sub(1),
             // A tick on the target at rest first, as a move that ends and one that starts.
-            End::Target(p) => self.push(1, p, 0.0, 0.0, 0.0, 0.0),
+            End::Target(p) => {
+                self.push(1, p, 0.0, 0.0, 0.0, 0.0);
+            }
             End::Rest(..) | End::Here => {}
         }
         let joint = self.n;
@@ -204,8 +208,8 @@ impl Track {
     }
 
     /// Appends a piece of `ticks` that starts at `p` (relative to `anchor`) with velocity `v`,
-    /// acceleration `a` and jerk `j` (per second).
-    fn push(&mut self, ticks: u32, anchor: i64, p: f64, v: f64, a: f64, j: f64) {
+    /// acceleration `a` and jerk `j` (per second); whether there was room for it.
+    fn push(&mut self, ticks: u32, anchor: i64, p: f64, v: f64, a: f64, j: f64) -> bool {
         let h = 1.0 / f64::from(TICK_HZ);
         // The Taylor coefficients in ticks, then the forward differences at the first tick.
         let (c1, c2, c3) = (v * h, a / 2.0 * h * h, j / 6.0 * h * h * h);
@@ -218,9 +222,13 @@ impl Track {
             d2: fixed(2.0 * c2 + 6.0 * c3, Q48),
             d3: fixed(6.0 * c3, Q56),
         };
-        if let Some(slot) = self.pieces.get_mut(usize::from(self.n)) {
-            *slot = piece;
-            self.n += 1;
+        match self.pieces.get_mut(usize::from(self.n)) {
+            Some(slot) => {
+                *slot = piece;
+                self.n += 1;
+                true
+            }
+            None => false,
         }
     }
 
@@ -241,6 +249,11 @@ impl Track {
             *first = Piece { ticks, ..Piece::default() };
         }
         (self.n, self.end) = (1, End::Here);
+    }
+
+    /// The pieces in use.
+    fn used(&self) -> &[Piece] {
+        self.pieces.get(..usize::from(self.n)).unwrap_or(&[])
     }
 
     fn piece(&self, i: u8) -> Option<&Piece> {
@@ -464,5 +477,69 @@ mod tests {
         let expected = prof.at(prof.duration()).p - 20_000.0 * t;
         let (whole, frac) = w.position();
         assert!((whole as f64 + f64::from(frac) / 4_294_967_296.0 - expected).abs() < 1e-3);
+    }
+
+    #[test]
+    fn an_appended_move_starts_a_tick_after_the_first_stands_on_its_target() {
+        let lim = Limits { v_max: 10_000.0, a_max: 100_000.0, d_max: 100_000.0, jerk: None };
+        let first = Profile::to_position(State::default(), 2_000.0, 0.0, &lim).unwrap_or(Profile::EMPTY);
+        let mut track = Track::from_profile(&first, 0, false).unwrap_or(Track::standing(0));
+        let (anchor, start) = track.end_state().unwrap_or_default();
+        assert_eq!((anchor, start), (2_000, State::default()));
+        let second = Profile::to_position(start, -500.0, 0.0, &lim).unwrap_or(Profile::EMPTY);
+        let joint = track.append(&second, anchor);
+        assert_eq!(joint, Some(4), "three pieces of the first move, its tick at rest");
+        let mut w = Walker::new(&track);
+        let mut at_rest_on_target = 0;
+        while !w.ended(&track) {
+            if w.position() == (2_000, 0) && w.velocity() == 0.0 {
+                at_rest_on_target += 1;
+            }
+            w.step(&track);
+        }
+        assert_eq!(at_rest_on_target, 2, "its last sample and the tick at rest");
+        assert_eq!(w.position(), (1_500, 0));
+        // No room for a third: nothing changes.
+        let many = Limits { jerk: Some(1e6), ..lim };
+        for target in [9_000.0, 0.0, 9_000.0] {
+            let before = track;
+            let (anchor, start) = track.end_state().unwrap_or_default();
+            let p = Profile::to_position(start, target - anchor as f64, 0.0, &many).unwrap_or(Profile::EMPTY);
+            if track.append(&p, anchor).is_none() {
+                assert_eq!(track, before);
+                return;
+            }
+        }
+        panic!("three more S-curves fitted in 17 pieces");
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+
+        /// Any move from any state: the walk stays on the planned profile at every tick and
+        /// ends exactly on the (rounded) target.
+        #[test]
+        fn the_walk_follows_any_profile(
+            p0 in 0.0f64..1.0,
+            v0 in -20_000.0f64..20_000.0,
+            a0 in -50_000.0f64..50_000.0,
+            target in -30_000i64..30_000,
+            v_max in 1_000.0f64..40_000.0,
+            a_max in 20_000.0f64..200_000.0,
+            d_max in 20_000.0f64..200_000.0,
+            jerk in proptest::option::of(1e6f64..1e8),
+        ) {
+            let lim = Limits { v_max, a_max, d_max, jerk };
+            let start = State { p: p0, v: v0, a: if jerk.is_some() { a0 } else { 0.0 } };
+            let Ok(prof) = Profile::to_position(start, target as f64, 0.0, &lim) else {
+                return Ok(());
+            };
+            let ticks = (prof.duration() * f64::from(TICK_HZ)) as usize + 2;
+            proptest::prop_assume!(ticks < 400_000);
+            let (track, w, worst) = walk(&prof, false, ticks);
+            proptest::prop_assert!(worst < 1e-3, "{}", worst);
+            proptest::prop_assert!(w.ended(&track));
+            proptest::prop_assert_eq!(w.position(), (target, 0));
+        }
     }
 }
