@@ -12,17 +12,17 @@
 
 use drive_core::motion::axis::Setpoint;
 
-/// 2^32: the scale of positions and rates in 32.32 fixed point.
-const ONE: f64 = 4_294_967_296.0;
+/// 2^16: the scale of the speed a tick in 16.16 fixed point.
+const Q16: f32 = 65_536.0;
 
-/// What coasting needs of the last tick that ran, and the steps it has coasted since.
+/// What coasting needs of the last tick that ran, and the steps it has coasted since. Integers
+/// and `f32` only: it runs in the tick's interrupt.
 #[derive(Clone, Copy, Debug)]
 pub struct Coast {
-    /// Seconds a tick, times 2^32: a velocity in microsteps per second times this is the
-    /// distance of one tick in 2^-32 microstep.
-    per_tick: f64,
-    /// Velocity of the last tick that ran, microsteps per second.
-    velocity: f64,
+    /// Ticks a second, as `f32`.
+    tick_hz: f32,
+    /// The distance of one tick at the last tick's speed, in 2^-32 microstep.
+    rate: i64,
     /// Where coasting stands, beyond the last setpoint's whole microstep, in 2^-32 microstep;
     /// `None` until a coasting tick starts from the setpoint's fraction.
     position: Option<i64>,
@@ -35,26 +35,35 @@ pub struct Coast {
 impl Coast {
     /// Coasting for a stage stepped by a tick of `tick_hz`; nothing to coast yet.
     pub const fn new(tick_hz: u32) -> Self {
-        Self { per_tick: ONE / tick_hz as f64, velocity: 0.0, position: None, fraction: 0, surplus: 0 }
+        Self { tick_hz: tick_hz as f32, rate: 0, position: None, fraction: 0, surplus: 0 }
     }
 
     /// A tick that ran the drive, which asked for `steps` with the commutation setpoint `sp`:
     /// the steps to emit now, those coasted ahead taken from them.
     pub fn ticked(&mut self, steps: i64, sp: &Setpoint) -> i64 {
         let due = steps.saturating_sub(self.surplus);
-        let backwards = (due < 0 && sp.velocity > 0.0) || (due > 0 && sp.velocity < 0.0);
+        let direction = if sp.velocity > 0.0 {
+            1
+        } else if sp.velocity < 0.0 {
+            -1
+        } else {
+            0
+        };
+        let backwards = (due < 0 && direction > 0) || (due > 0 && direction < 0);
         // Coasting ran ahead of an axis that slowed: hold the step back until it catches up.
         let emit = if backwards && self.surplus != 0 { 0 } else { due };
         self.surplus = self.surplus.saturating_add(emit).saturating_sub(steps);
-        (self.velocity, self.fraction, self.position) = (f64::from(sp.velocity), sp.fraction.to_bits(), None);
+        // Microsteps a tick in 16.16 (the FPU converts to `i32`: up to 32 767 a tick), then 32.32.
+        let per_tick = (sp.velocity / self.tick_hz * Q16) as i32;
+        self.rate = i64::from(per_tick) << 16;
+        (self.fraction, self.position) = (sp.fraction.to_bits(), None);
         emit
     }
 
     /// A tick that could not run the drive: the whole microsteps to emit to keep the last speed.
     pub fn coasting(&mut self) -> i64 {
-        let rate = (self.velocity * self.per_tick) as i64;
         let before = self.position.unwrap_or(i64::from(self.fraction));
-        let after = before.saturating_add(rate);
+        let after = before.saturating_add(self.rate);
         self.position = Some(after);
         // Whole microsteps crossed: the difference of the floors.
         let n = (after >> 32) - (before >> 32);
