@@ -142,6 +142,12 @@ pub struct Micro {
     pub fraction: f32,
 }
 
+/// An `i64` that is small in practice (a tick's encoder counts, a following error) as `f32`,
+/// saturated to `i32` first: the FPU converts that, where an `i64` conversion is a library call.
+fn small(x: i64) -> f32 {
+    x.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32 as f32
+}
+
 impl Micro {
     /// `counts` of an encoder with `per_rev` counts a turn, in microsteps of `per_step` a full
     /// step, exactly: whole part by integer division, the remainder as the fraction.
@@ -149,7 +155,8 @@ impl Micro {
         let per_rev = i64::from(per_rev.max(1));
         let num = counts.saturating_mul(STEPS_PER_REV * i64::from(per_step.max(1)));
         let whole = num.div_euclid(per_rev);
-        Self { whole, fraction: num.rem_euclid(per_rev) as f32 / per_rev as f32 }
+        // Below `per_rev`, a `u32`: the FPU converts it (an `i64` conversion is a library call).
+        Self { whole, fraction: num.rem_euclid(per_rev) as u32 as f32 / per_rev as u32 as f32 }
     }
 
     /// This angle moved by `by` microsteps (small: at most a few full steps).
@@ -157,7 +164,11 @@ impl Micro {
         let by = if by.is_finite() { by } else { 0.0 };
         let f = self.fraction + by;
         let floor = libm::floorf(f);
-        Self { whole: self.whole.saturating_add(floor as i64), fraction: (f - floor).clamp(0.0, 0.999_999_9) }
+        // `as i32`: the FPU's saturating conversion (`by` is a few full steps at most).
+        Self {
+            whole: self.whole.saturating_add(i64::from(floor as i32)),
+            fraction: (f - floor).clamp(0.0, 0.999_999_9),
+        }
     }
 }
 
@@ -368,7 +379,7 @@ impl Servo {
         self.encoder = self.encoder.saturating_add(moved);
         // About 13 ms of low-pass: a count a tick is 20 000 counts/s, and at slow speed counts
         // come every few ticks.
-        self.speed += (moved as f32 / TICK_S - self.speed) * (1.0 / 256.0);
+        self.speed += (small(moved) / TICK_S - self.speed) * (1.0 / 256.0);
         false
     }
 
@@ -469,7 +480,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         let following = sp.whole.saturating_sub(self.measured());
         self.servo.following = following;
         let to_micro = (STEPS_PER_REV as f32 * per_step as f32) / per_rev as f32;
-        let error = (following as f32 + sp.fraction.to_num::<f32>()) * to_micro;
+        let error = (small(following) + sp.fraction.to_num::<f32>()) * to_micro;
         let velocity = sp.velocity * to_micro;
         let at = |m: Micro, velocity: f32| Setpoint {
             whole: m.whole,

@@ -167,9 +167,80 @@ fn firmware() -> Result<(), String> {
         println!("firmware (STM32G431CB): OVER the 80 KiB flash budget (fits the chip)");
     }
     flash_by_part(&elf, flash)?;
+    tick_float_check(&elf)?;
     // The QEMU build shares the output path: keep the board's ELF for `tick-cost`.
     std::fs::copy(&elf, elf_dir().join("firmware-g431")).map_err(|e| e.to_string())?;
     Ok(())
+}
+
+/// The G431's control tick interrupt.
+const TICK_HANDLER: &str = "TIM6_DAC";
+
+/// Library routines of software floating point that the tick must not reach: `f64` arithmetic,
+/// comparisons and conversions, and the 64/128-bit integer conversions to and from `f32` (the
+/// FPU converts only 32-bit integers).
+fn is_soft_float(name: &str) -> bool {
+    let Some(rest) = name.strip_prefix("__") else { return false };
+    let aeabi =
+        ["aeabi_d", "aeabi_l2f", "aeabi_ul2f", "aeabi_f2l", "aeabi_f2ul", "aeabi_i2d", "aeabi_ui2d", "aeabi_f2d"];
+    let libgcc =
+        ["adddf3", "subdf3", "muldf3", "divdf3", "floattisf", "floattidf", "floatuntisf", "fixsfti", "fixdfti"];
+    aeabi.iter().any(|p| rest.starts_with(p)) || libgcc.iter().any(|p| rest.starts_with(p))
+}
+
+/// Fails if a software floating-point routine is reachable from the control tick's interrupt
+/// in the firmware's call graph (direct calls, from the disassembly): the tick runs on the
+/// FPU's `f32` and integers only.
+fn tick_float_check(elf: &Path) -> Result<(), String> {
+    let out = Command::new("arm-none-eabi-objdump")
+        .args(["-d", "--no-show-raw-insn", "-C"])
+        .arg(elf)
+        .output()
+        .map_err(|e| format!("arm-none-eabi-objdump (binutils-arm-none-eabi, .ci/install): {e}"))?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    // Functions by start address, and the addresses each one calls or jumps to.
+    let mut names = std::collections::BTreeMap::<u64, String>::new();
+    let mut calls = std::collections::BTreeMap::<u64, Vec<u64>>::new();
+    let mut current = None;
+    for line in text.lines() {
+        if let Some((addr, rest)) = line.split_once(" <")
+            && let Some(name) = rest.strip_suffix(">:")
+            && let Ok(addr) = u64::from_str_radix(addr, 16)
+        {
+            if !name.starts_with('$') {
+                names.insert(addr, name.to_string());
+                current = Some(addr);
+            }
+            continue;
+        }
+        let mut fields = line.split('\t').skip(1);
+        if let (Some(op), Some(arg), Some(from)) = (fields.next(), fields.next(), current)
+            && matches!(op.trim(), "bl" | "b" | "b.w" | "blx")
+            && let Some(target) = arg.split_whitespace().next().and_then(|a| u64::from_str_radix(a, 16).ok())
+        {
+            calls.entry(from).or_default().push(target);
+        }
+    }
+    let owner = |a: u64| names.range(..=a).next_back().map(|(&s, _)| s);
+    let root = names.iter().find(|(_, n)| n.as_str() == TICK_HANDLER).map(|(&a, _)| a);
+    let mut seen = std::collections::BTreeSet::new();
+    let mut todo: Vec<u64> = root.into_iter().collect();
+    while let Some(f) = todo.pop() {
+        if seen.insert(f) {
+            todo.extend(calls.get(&f).into_iter().flatten().filter_map(|&t| owner(t)));
+        }
+    }
+    if seen.len() < 10 {
+        return Err(format!("the call graph from {TICK_HANDLER} has {} functions: not read", seen.len()));
+    }
+    let soft: Vec<&str> =
+        seen.iter().filter_map(|a| names.get(a)).map(String::as_str).filter(|n| is_soft_float(n)).collect();
+    println!(
+        "firmware (STM32G431CB): the control tick ({TICK_HANDLER}) reaches {} functions, {} of software floating point",
+        seen.len(),
+        soft.len()
+    );
+    if soft.is_empty() { Ok(()) } else { Err(format!("the control tick reaches software floating point: {soft:?}")) }
 }
 
 /// Where the flash goes, by the part of the firmware each symbol belongs to: the first of these
