@@ -6,6 +6,7 @@ use crate::faults::{FaultHistory, HISTORY_OBJECTS};
 use crate::faults::{FaultLog, Inputs};
 use crate::ident::Identity;
 use crate::motion::axis::Axis;
+use crate::motion::cubic::Ahead;
 use crate::motion::cubic::Table;
 use crate::od::map::is_command;
 use crate::od::{Access, NativeMap, OBJECTS, Obj, ObjError, ObjectDef, RegisterMap, Storage};
@@ -206,6 +207,9 @@ pub struct DriveState<P = Table> {
     pub(crate) faults: FaultLog,
     /// The closed loop and stall detection (changed by the tick only, as `faults`).
     pub(crate) servo: Servo,
+    /// The next PVT segment's walk, built a piece a tick before it starts (by the tick only, as
+    /// `faults`: a cache of what the run's points give, kept out of [`Checkpoint`]).
+    pub(crate) ahead: Option<Ahead>,
     /// The alarm count when the platform was last asked to save the history (changed only by
     /// taking requests, so kept out of [`Checkpoint`] too).
     faults_saved: u16,
@@ -267,6 +271,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
             faults_saved: faults.count,
             faults,
             servo: Servo::new(feedback),
+            ahead: None,
         }
     }
 
@@ -287,6 +292,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
             table: _,
             faults: _,
             servo: _,
+            ahead: _,
             faults_saved: _,
         } = self;
         Checkpoint {

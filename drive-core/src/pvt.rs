@@ -48,7 +48,7 @@ use crate::control::TICK_MICROS;
 use crate::drive::DriveState;
 use crate::modes::{PvtMode, WorkMode};
 use crate::motion::axis::Axis;
-use crate::motion::cubic::{Cubic, Point, TABLE_SIZE, Table, V_MAX};
+use crate::motion::cubic::{Ahead, Cubic, Point, TABLE_SIZE, Table, V_MAX};
 use crate::od::{Obj, ObjError, refuse};
 use crate::units::Instant;
 use core::borrow::BorrowMut;
@@ -421,7 +421,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         let Ok((mut source, _, _)) = self.plan_run() else { return };
         if let Some((i, p)) = self.next_point(&mut source) {
             let at = self.axis.next_tick(self.now);
-            self.axis.follow(at, Cubic::new(self.axis.setpoint().whole, 0, p));
+            self.axis.follow(at, Cubic::new(self.axis.setpoint().whole, 0, p), None);
             self.pvt.run = Some(Run { source, to: p });
             self.status.pvt_pointer = i;
         }
@@ -446,7 +446,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
                 Some((i, p)) => {
                     cubic = Cubic::new(cubic.p1(), run.to.velocity, p);
                     start = end;
-                    self.axis.follow(start, cubic);
+                    self.axis.follow(start, cubic, self.ahead.take());
                     run.to = p;
                     self.status.pvt_pointer = i;
                 }
@@ -464,10 +464,14 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         }
         // The next segment, if its point is there already, is built a piece a tick before it
         // starts (its first tick would otherwise build it all: three times a tick's work).
-        if self.axis.preparing()
-            && let Some(p) = self.peek_point(&run.source)
-        {
-            self.axis.prepare(Cubic::new(cubic.p1(), run.to.velocity, p));
+        if let Some(p) = self.peek_point(&run.source) {
+            let next = Cubic::new(cubic.p1(), run.to.velocity, p);
+            match &mut self.ahead {
+                Some(a) if a.cubic == next => {
+                    a.advance();
+                }
+                ahead => *ahead = Some(Ahead::new(next)),
+            }
         }
         self.pvt.run = Some(run);
     }

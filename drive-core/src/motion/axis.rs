@@ -23,9 +23,8 @@ enum Segment {
     Track { walker: Walker, at: Instant },
     /// A PVT segment from the anchor, started at the control tick `start`. Evaluated exactly in
     /// integers (walked tick by tick, `walk`); held on its end point until the next segment
-    /// replaces it or the run ends. `ahead` is the next segment, prepared while this one runs
-    /// (it fits in the size of the profile variant).
-    Cubic { start: Instant, cubic: Cubic, walk: Walk, rates: Rates, ahead: Option<Ahead> },
+    /// replaces it or the run ends.
+    Cubic { start: Instant, cubic: Cubic, walk: Walk, rates: Rates },
 }
 
 /// The setpoint of one tick.
@@ -143,35 +142,13 @@ impl Axis {
     }
 
     /// Follows the PVT segment `cubic` from the control tick `start` on (from wherever the axis
-    /// is: the caller joins segments end to start), with what [`Axis::prepare`] built of it.
-    pub fn follow(&mut self, start: Instant, cubic: Cubic) {
-        let ahead = match self.segment {
-            Segment::Cubic { ahead: Some(a), .. } if a.cubic == cubic => a,
-            _ => Ahead::new(cubic),
-        };
+    /// is: the caller joins segments end to start), with what was prepared of it in `ahead`
+    /// (the rest is built now).
+    pub fn follow(&mut self, start: Instant, cubic: Cubic, ahead: Option<Ahead>) {
+        let ahead = ahead.filter(|a| a.cubic == cubic).unwrap_or(Ahead::new(cubic));
         let (walk, rates) = ahead.finish();
         self.anchor = cubic.p0;
-        self.segment = Segment::Cubic { start, cubic, walk, rates, ahead: None };
-    }
-
-    /// Whether [`Axis::prepare`] has work to do: the axis follows a PVT segment and the next
-    /// one is not built yet.
-    pub fn preparing(&self) -> bool {
-        matches!(&self.segment, Segment::Cubic { ahead, .. } if !ahead.is_some_and(|a| a.is_built()))
-    }
-
-    /// Builds a piece of `next`, the PVT segment that will follow the one running (one 128-bit
-    /// division or the rates, see [`Ahead`]), so that its first tick does not build it all.
-    /// Nothing happens unless the axis follows a PVT segment.
-    pub fn prepare(&mut self, next: Cubic) {
-        if let Segment::Cubic { ahead, .. } = &mut self.segment {
-            match ahead {
-                Some(a) if a.cubic == next => {
-                    a.advance();
-                }
-                _ => *ahead = Some(Ahead::new(next)),
-            }
-        }
+        self.segment = Segment::Cubic { start, cubic, walk, rates };
     }
 
     /// Ends a PVT segment that has arrived at rest: the axis stands exactly on its end point.
