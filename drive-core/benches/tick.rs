@@ -354,10 +354,12 @@ fn setup_tick(situation: Situation) -> TickCase {
         Situation::AfterRetarget(target) => {
             assert!(busy(&rig.drive));
             if target < FIRST_TARGET {
-                // Reversing: it starts to brake, the acceleration building up.
-                assert!(a < 0.0 && f64::from(next.setpoint.acceleration) < a && v <= v_max + 0.5, "{out:?}");
+                // Reversing: it starts to brake on this tick (the first of the new plan, from
+                // the cruise's zero), the acceleration building up.
+                assert!(a < 1e-3 && f64::from(next.setpoint.acceleration) < a && v <= v_max + 0.5, "{out:?}");
             } else {
-                assert!((v - v_max).abs() < 0.5 && a == 0.0, "{out:?}");
+                // A re-planned cruise: its acceleration is the rounding of the pieces (1e-6 pps²).
+                assert!((v - v_max).abs() < 0.5 && a.abs() < 1e-3, "{out:?}");
             }
         }
     }

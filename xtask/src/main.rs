@@ -249,7 +249,7 @@ fn tick_float_check(elf: &Path) -> Result<(), String> {
 const PARTS: &[(&str, &[&str])] = &[
     ("S-curve planner", &["drive_core::motion::scurve"]),
     ("PVT segments", &["drive_core::motion::cubic", "drive_core::pvt"]),
-    ("axis", &["drive_core::motion::axis"]),
+    ("axis and tracks", &["drive_core::motion::axis", "drive_core::motion::track"]),
     (
         "software f64 and 64/128-bit arithmetic",
         &[
