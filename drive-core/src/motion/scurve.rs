@@ -687,6 +687,36 @@ fn dip_td(v0: f64, a0: f64, vf: f64, lim: &Lim, dip: Dip) -> Result<Eval, PlanEr
 /// and their frames are not on the stack together (a microcontroller's stack is short).
 #[inline(never)]
 fn fastest_position(v0: f64, a0: f64, vf: f64, d: f64, lim: &Lim) -> Result<(Cand, Eval), PlanError> {
+    match cruise_shortcut(v0, a0, vf, d, lim)? {
+        Some(found) => Ok(found),
+        None => search_position(v0, a0, vf, d, lim),
+    }
+}
+
+/// The fastest profile when it is plainly a cruise at `v_max` towards the target: from no
+/// acceleration, within the speed limit, ending at a speed of the move's direction (or at rest),
+/// with room to cruise. It accelerates towards the target as hard as it may (braking first if
+/// it moves away), holds the top speed and brakes as late as it may: nothing covers the
+/// distance sooner, so the other families need not be searched (a move from rest, a target
+/// further on or behind while cruising). `None` otherwise.
+fn cruise_shortcut(v0: f64, a0: f64, vf: f64, d: f64, lim: &Lim) -> Result<Option<(Cand, Eval)>, PlanError> {
+    let vmax = lim.v;
+    let onward = |v: f64| v * d >= 0.0 && fabs(v) <= vmax;
+    if a0 != 0.0 || d == 0.0 || fabs(v0) > vmax || !onward(vf) {
+        return Ok(None);
+    }
+    let v = if d > 0.0 { vmax } else { -vmax };
+    let e = turn_td(v0, a0, Vel::of(v), vf, lim)?;
+    let cruise = (d - e.d) / v;
+    if cruise.is_nan() || cruise < 0.0 {
+        return Ok(None);
+    }
+    let e = Eval { t: e.t + cruise, d: e.d + cruise * v, mag: e.mag + fabs(cruise * v) };
+    Ok((fabs(e.d - d) <= e.tol()).then_some((Cand::Turn { vp: Vel::of(v), cruise }, e)))
+}
+
+/// [`fastest_position`] by searching every family of profiles.
+fn search_position(v0: f64, a0: f64, vf: f64, d: f64, lim: &Lim) -> Result<(Cand, Eval), PlanError> {
     let vmax = lim.v;
     // Root searches stop at this residual; candidates are accepted within their own rounding.
     let ftol = 1e-14 * fabs(d).max(1.0);
@@ -1126,9 +1156,32 @@ mod tests {
     extern crate std;
     use std::vec::Vec;
 
-    use super::sort_few;
+    use super::{Lim, cruise_shortcut, search_position, sort_few};
+    use crate::motion::scurve::Limits;
 
     proptest::proptest! {
+        /// Where the cruise shortcut answers, the full search finds a profile of the same
+        /// duration: the shortcut never gives a slower move.
+        #[test]
+        fn the_cruise_shortcut_is_the_fastest_profile(
+            d in -1e6f64..1e6,
+            v0 in -1.0f64..1.0,
+            vf in 0.0f64..1.0,
+            v_max in 100.0f64..200_000.0,
+            a_max in 1_000.0f64..200_000.0,
+            d_max in 1_000.0f64..200_000.0,
+            jerk in proptest::option::of(1e5f64..1e9),
+        ) {
+            let Ok(lim) = Lim::new(&Limits { v_max, a_max, d_max, jerk }) else { return Ok(()) };
+            // Any start speed within the limit, an end speed of the move's direction.
+            let (v0, vf) = (v0 * v_max * d.signum(), vf * v_max * d.signum());
+            if let Ok(Some((_, fast))) = cruise_shortcut(v0, 0.0, vf, d, &lim) {
+                let (_, full) = search_position(v0, 0.0, vf, d, &lim).unwrap_or((super::Cand::Turn { vp: super::Vel::of(0.0), cruise: 0.0 }, fast));
+                // The search considers the same cruise: equal, up to rounding.
+                proptest::prop_assert!((fast.t - full.t).abs() <= 1e-12 * full.t + 1e-12, "{} vs {}", fast.t, full.t);
+            }
+        }
+
         /// The planner's small sort orders as the library's does, signed zeros and all.
         #[test]
         fn sort_few_is_the_library_sort(mut xs in proptest::collection::vec(
