@@ -687,10 +687,7 @@ fn dip_td(v0: f64, a0: f64, vf: f64, lim: &Lim, dip: Dip) -> Result<Eval, PlanEr
 /// and their frames are not on the stack together (a microcontroller's stack is short).
 #[inline(never)]
 fn fastest_position(v0: f64, a0: f64, vf: f64, d: f64, lim: &Lim) -> Result<(Cand, Eval), PlanError> {
-    match cruise_shortcut(v0, a0, vf, d, lim)? {
-        Some(found) => Ok(found),
-        None => search_position(v0, a0, vf, d, lim),
-    }
+    search_position(v0, a0, vf, d, lim)
 }
 
 /// The fastest profile when it is plainly a cruise at `v_max` towards the target: from no
@@ -698,21 +695,163 @@ fn fastest_position(v0: f64, a0: f64, vf: f64, d: f64, lim: &Lim) -> Result<(Can
 /// with room to cruise. It accelerates towards the target as hard as it may (braking first if
 /// it moves away), holds the top speed and brakes as late as it may: nothing covers the
 /// distance sooner, so the other families need not be searched (a move from rest, a target
-/// further on or behind while cruising). `None` otherwise.
-fn cruise_shortcut(v0: f64, a0: f64, vf: f64, d: f64, lim: &Lim) -> Result<Option<(Cand, Eval)>, PlanError> {
+/// further on or behind while cruising). The two pulses are left in `p1` and `p2`, the
+/// candidate and its evaluation returned; `None` if the shortcut does not apply.
+fn cruise_pulses(
+    v0: f64,
+    a0: f64,
+    vf: f64,
+    d: f64,
+    lim: &Lim,
+    p1: &mut Pulse,
+    p2: &mut Pulse,
+) -> Result<Option<(Cand, Eval)>, PlanError> {
     let vmax = lim.v;
-    let onward = |v: f64| v * d >= 0.0 && fabs(v) <= vmax;
-    if a0 != 0.0 || d == 0.0 || fabs(v0) > vmax || !onward(vf) {
+    if a0 != 0.0 || d == 0.0 || fabs(v0) > vmax || vf * d < 0.0 || fabs(vf) > vmax {
         return Ok(None);
     }
     let v = if d > 0.0 { vmax } else { -vmax };
-    let e = turn_td(v0, a0, Vel::of(v), vf, lim)?;
-    let cruise = (d - e.d) / v;
-    if cruise.is_nan() || cruise < 0.0 {
+    if v0 * d >= 0.0 && covered(v0, vf, d, lim, vmax) > fabs(d) {
+        // No room to cruise (by the closed form, before building pulses at v_max).
+        return turn_below(v0, vf, d, lim, p1, p2);
+    }
+    pulse(Vel::of(v0), a0, Vel::of(v), lim, None, p1)?;
+    pulse(Vel::of(v), 0.0, Vel::of(vf), lim, None, p2)?;
+    let (e1, e2) = (p1.time_dist(v0), p2.time_dist(v));
+    let cruise = (d - (e1.d + e2.d)) / v;
+    if cruise.is_nan() {
         return Ok(None);
     }
-    let e = Eval { t: e.t + cruise, d: e.d + cruise * v, mag: e.mag + fabs(cruise * v) };
+    if cruise < 0.0 {
+        // No room to cruise: the turn below v_max, if the move goes one way.
+        return turn_below(v0, vf, d, lim, p1, p2);
+    }
+    let e = Eval { t: e1.t + e2.t + cruise, d: e1.d + e2.d + cruise * v, mag: e1.mag + e2.mag + fabs(cruise * v) };
     Ok((fabs(e.d - d) <= e.tol()).then_some((Cand::Turn { vp: Vel::of(v), cruise }, e)))
+}
+
+/// The time of a pulse that changes the speed by `dv ≥ 0` from and to zero acceleration, at the
+/// acceleration limit `l` and the jerk `j` (infinite: a trapezoid's ramp).
+fn pulse_time(dv: f64, l: f64, j: f64) -> f64 {
+    if !j.is_finite() {
+        dv / l
+    } else if dv >= l * l / j {
+        dv / l + l / j
+    } else {
+        2.0 * sqrt(dv / j)
+    }
+}
+
+/// The distance a move of `d`'s direction covers from `(v0, 0)` up to the speed `w` (a
+/// magnitude) and down to `(vf, 0)`, the speeds all of the move's direction: a jerk-limited
+/// pulse between zero accelerations is symmetric in time, so it covers its mean speed times its
+/// duration.
+fn covered(v0: f64, vf: f64, d: f64, lim: &Lim, w: f64) -> f64 {
+    let s = if d > 0.0 { 1.0 } else { -1.0 };
+    let (u0, uf) = (s * v0, s * vf);
+    0.5 * (u0 + w) * pulse_time(w - u0, lim.acc, lim.j) + 0.5 * (w + uf) * pulse_time(w - uf, lim.dec, lim.j)
+}
+
+/// The fastest move of `d` from `(v0, 0)` to `(vf, 0)` that turns at a speed `w` below `v_max`,
+/// the speeds all of the move's direction (or zero): up to `w` at the acceleration limit, down
+/// to `vf` at the deceleration limit. A jerk-limited pulse between zero accelerations is
+/// symmetric in time, so it covers its mean speed times its duration: the distance is closed
+/// form in `w` and increasing, and `w` is found by a bracketed search on it, cheap where the
+/// general search evaluates the pulses themselves. The pulses are then built (`p1`, `p2`) and
+/// checked; `None` if the move is not of this kind (it would overshoot even turning at once) or
+/// the check fails (the general search then decides).
+fn turn_below(
+    v0: f64,
+    vf: f64,
+    d: f64,
+    lim: &Lim,
+    p1: &mut Pulse,
+    p2: &mut Pulse,
+) -> Result<Option<(Cand, Eval)>, PlanError> {
+    let s = if d > 0.0 { 1.0 } else { -1.0 };
+    let (u0, uf, dist) = (s * v0, s * vf, fabs(d));
+    if u0 < 0.0 || uf < 0.0 {
+        return Ok(None);
+    }
+    let covered = |w: f64| covered(v0, vf, d, lim, w);
+    let (mut lo, mut hi) = (u0.max(uf), lim.v);
+    let (mut f_lo, mut f_hi) = (covered(lo) - dist, covered(hi) - dist);
+    if f_lo.is_nan() || f_hi.is_nan() || f_lo > 0.0 || f_hi < 0.0 {
+        return Ok(None);
+    }
+    // Illinois on the closed form: a few dozen evaluations of a few operations each.
+    let mut side = 0i8;
+    for _ in 0..ROOT_ITERS {
+        let w = if f_hi != f_lo { (lo * f_hi - hi * f_lo) / (f_hi - f_lo) } else { 0.5 * (lo + hi) };
+        let w = if w > lo && w < hi { w } else { 0.5 * (lo + hi) };
+        let f = covered(w) - dist;
+        // Well inside the tolerance the built pulses are checked against (`Eval::tol`).
+        if fabs(f) <= 1e-13 * dist + 1e-10 || hi - lo <= 4.0 * f64::EPSILON * hi {
+            lo = w;
+            break;
+        }
+        if f < 0.0 {
+            (lo, f_lo) = (w, f);
+            if side == -1 {
+                f_hi *= 0.5;
+            }
+            side = -1;
+        } else {
+            (hi, f_hi) = (w, f);
+            if side == 1 {
+                f_lo *= 0.5;
+            }
+            side = 1;
+        }
+    }
+    let vp = Vel::of(s * lo);
+    pulse(Vel::of(v0), 0.0, vp, lim, None, p1)?;
+    pulse(vp, 0.0, Vel::of(vf), lim, None, p2)?;
+    let (e1, e2) = (p1.time_dist(v0), p2.time_dist(vp.val()));
+    let e = Eval { t: e1.t + e2.t, d: e1.d + e2.d, mag: e1.mag + e2.mag };
+    Ok((fabs(e.d - d) <= e.tol()).then_some((Cand::Turn { vp, cruise: 0.0 }, e)))
+}
+
+/// [`cruise_pulses`] without keeping the pulses (for the tests).
+#[cfg(test)]
+fn cruise_shortcut(v0: f64, a0: f64, vf: f64, d: f64, lim: &Lim) -> Result<Option<(Cand, Eval)>, PlanError> {
+    let (mut p1, mut p2) = (Pulse::EMPTY, Pulse::EMPTY);
+    cruise_pulses(v0, a0, vf, d, lim, &mut p1, &mut p2)
+}
+
+/// Plans the cruise shortcut ([`cruise_pulses`]) into `out` from the pulses it measured, not
+/// built twice; whether it applies.
+#[inline(never)]
+fn shortcut_position(
+    out: &mut Profile,
+    start: State,
+    a0: f64,
+    d: f64,
+    lim: &Lim,
+    end: State,
+) -> Result<bool, PlanError> {
+    let (mut p1, mut p2) = (Pulse::EMPTY, Pulse::EMPTY);
+    let Some((Cand::Turn { vp, cruise }, eval)) = cruise_pulses(start.v, a0, end.v, d, lim, &mut p1, &mut p2)? else {
+        return Ok(false);
+    };
+    let mut segs = [Seg::default(); MAX_PHASES];
+    let mut ns = 0usize;
+    let mut cruise_at = None;
+    for (i, s) in p1.iter().enumerate() {
+        *segs.get_mut(ns).ok_or(PlanError::NoSolution)? = *s;
+        ns = i + 1;
+    }
+    if cruise > 0.0 {
+        cruise_at = Some((ns, vp.val()));
+        *segs.get_mut(ns).ok_or(PlanError::NoSolution)? = Seg { t: cruise, a: 0.0, j: 0.0 };
+        ns += 1;
+    }
+    for s in p2.iter() {
+        *segs.get_mut(ns).ok_or(PlanError::NoSolution)? = *s;
+        ns += 1;
+    }
+    build_checked(out, State { a: a0, ..start }, segs.get(..ns).unwrap_or(&[]), cruise_at, end, eval, lim)?;
+    Ok(true)
 }
 
 /// [`fastest_position`] by searching every family of profiles.
@@ -826,7 +965,7 @@ fn assemble_position(
     lim: &Lim,
     end: State,
 ) -> Result<(), PlanError> {
-    let (v0, vf, target_p, vmax) = (start.v, end.v, end.p, lim.v);
+    let (v0, vf) = (start.v, end.v);
     let mut segs = [Seg::default(); MAX_PHASES];
     let mut ns = 0usize;
     let mut add = |p: &Pulse| -> Result<(), PlanError> {
@@ -859,14 +998,26 @@ fn assemble_position(
             add(&p)?;
         }
     }
-    let start = State { a: a0, ..start };
-    out.build_into(start, segs.get(..ns).unwrap_or(&[]), cruise_at, end)?;
-    // The integrated end must meet the target (the last phase lands on it) to within rounding.
+    build_checked(out, State { a: a0, ..start }, segs.get(..ns).unwrap_or(&[]), cruise_at, end, eval, lim)
+}
+
+/// Builds `out` from `segs` and checks that the integrated end meets `end` (the last phase lands
+/// on it) to within rounding.
+fn build_checked(
+    out: &mut Profile,
+    start: State,
+    segs: &[Seg],
+    cruise_at: Option<(usize, f64)>,
+    end: State,
+    eval: Eval,
+    lim: &Lim,
+) -> Result<(), PlanError> {
+    out.build_into(start, segs, cruise_at, end)?;
     let last = out.eval_end();
     let tol = eval.tol() + 1e-13 * fabs(start.p);
     // (The end time of a long profile is rounded: up to a few ulp of the duration at full a.)
-    let tol_v = 1e-9 * vmax + 8.0 * f64::EPSILON * out.duration * lim.acc.max(lim.dec);
-    if fabs(last.p - target_p) > tol || fabs(last.v - vf) > tol_v {
+    let tol_v = 1e-9 * lim.v + 8.0 * f64::EPSILON * out.duration * lim.acc.max(lim.dec);
+    if fabs(last.p - end.p) > tol || fabs(last.v - end.v) > tol_v {
         return Err(PlanError::NoSolution);
     }
     Ok(())
@@ -941,6 +1092,9 @@ impl Profile {
             return out.build_into(start, &[], None, end);
         }
 
+        if shortcut_position(out, start, a0, d, &lim, end)? {
+            return Ok(());
+        }
         let (cand, eval) = fastest_position(v0, a0, vf, d, &lim)?;
         assemble_position(out, start, a0, cand, eval, &lim, end)
     }
@@ -1160,11 +1314,11 @@ mod tests {
     use crate::motion::scurve::Limits;
 
     proptest::proptest! {
-        /// Where the cruise shortcut answers, the full search finds a profile of the same
-        /// duration: the shortcut never gives a slower move.
+        /// Where the shortcut answers (a cruise at v_max, or a turn below it), the full search
+        /// finds a profile of the same duration: the shortcut never gives a slower move.
         #[test]
         fn the_cruise_shortcut_is_the_fastest_profile(
-            d in -1e6f64..1e6,
+            d in proptest::prop_oneof![-1e6f64..1e6, -2e3f64..2e3],
             v0 in -1.0f64..1.0,
             vf in 0.0f64..1.0,
             v_max in 100.0f64..200_000.0,

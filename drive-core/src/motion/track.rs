@@ -88,6 +88,9 @@ impl PartialEq for Track {
 
 impl Eq for Track {}
 
+/// 1/6, a multiplication where a division would be a library call on the Cortex-M4.
+const SIXTH: f64 = 1.0 / 6.0;
+
 /// `x` in fixed point: times `scale` (a power of two), truncated, saturating.
 fn fixed(x: f64, scale: f64) -> i64 {
     (x * scale) as i64
@@ -132,17 +135,19 @@ impl Track {
         let (kept, end) = (self.n, profile.at(duration));
         let mut fits = true;
         let mut phases = profile.phases().peekable();
+        // Each phase's first tick is the one after the previous phase's last.
+        let mut k0 = 0.0;
         while let Some((t0, s, jerk)) = phases.next() {
             let t1 = phases.peek().map_or(duration, |&(t, _, _)| t);
-            let (k0, k1) = (libm::ceil(t0 * rate), libm::ceil(t1 * rate).min(last));
-            if k1 <= k0 {
-                continue;
+            let k1 = libm::ceil(t1 * rate).min(last);
+            if k1 > k0 {
+                let tau = k0 * h - t0;
+                let p = s.p + tau * (s.v + tau * (0.5 * s.a + tau * SIXTH * jerk));
+                let v = s.v + tau * (s.a + tau * 0.5 * jerk);
+                let a = s.a + tau * jerk;
+                fits &= self.push((k1 - k0) as u32, anchor, p, v, a, jerk);
+                k0 = k1;
             }
-            let tau = k0 * h - t0;
-            let p = s.p + tau * (s.v + tau * (s.a / 2.0 + tau * jerk / 6.0));
-            let v = s.v + tau * (s.a + tau * jerk / 2.0);
-            let a = s.a + tau * jerk;
-            fits &= self.push((k1 - k0) as u32, anchor, p, v, a, jerk);
         }
         let end = match (cruise, end.v != 0.0) {
             (true, true) => {
@@ -210,9 +215,9 @@ impl Track {
     /// Appends a piece of `ticks` that starts at `p` (relative to `anchor`) with velocity `v`,
     /// acceleration `a` and jerk `j` (per second); whether there was room for it.
     fn push(&mut self, ticks: u32, anchor: i64, p: f64, v: f64, a: f64, j: f64) -> bool {
-        let h = 1.0 / f64::from(TICK_HZ);
+        const H: f64 = 1.0 / TICK_HZ as f64;
         // The Taylor coefficients in ticks, then the forward differences at the first tick.
-        let (c1, c2, c3) = (v * h, a / 2.0 * h * h, j / 6.0 * h * h * h);
+        let (c1, c2, c3) = (v * H, a * (0.5 * H * H), j * (SIXTH * H * H * H));
         let floor = libm::floor(p);
         let piece = Piece {
             ticks,

@@ -285,8 +285,8 @@ fn write32(reg: u16, v: i32) -> [u8; 11] {
 
 /// What serving a request costs (the time the bus task holds the drive, so the time a control
 /// tick may wait): a read, a relative move from rest (planned), a re-targeting absolute move
-/// while cruising at 32000 pps (planned from the moving state), one behind the axis (a reversal)
-/// and a stop. Prints a line each;
+/// while cruising at 32000 pps (planned from the moving state), one behind the axis (a reversal),
+/// a stop, and a relative move too short to reach the speed limit. Prints a line each;
 /// whether every request was accepted.
 fn requests(slot: &mut MaybeUninit<Drive>) -> bool {
     let Some(mut rig) = Rig::new(Case::Open, slot) else { return false };
@@ -304,6 +304,9 @@ fn requests(slot: &mut MaybeUninit<Drive>) -> bool {
     measure(&mut rig, "reverse", &write32(0x6044, 0));
     rig.run(100_000);
     measure(&mut rig, "stop", &[SLAVE, 0x06, 0x60, 0x53, 0x00, 0x00]);
+    rig.run(100_000);
+    // Too short to reach the speed limit: the planner searches the turning speed.
+    measure(&mut rig, "short_move", &write32(0x6005, 2_000));
     ok
 }
 
