@@ -1,4 +1,5 @@
-//! Motion: profiles planned once and evaluated by time at every control tick.
+//! Motion: profiles planned once, outside the tick, and walked in integers a sample at every
+//! control tick.
 
 pub mod axis;
 pub mod cubic;
