@@ -63,7 +63,7 @@
 //! search: from no acceleration towards a target with room to cruise, the cruise at `v_max`
 //! (its two pulses built once); without room, the turn below it, whose speed solves the
 //! closed-form distance of two time-symmetric pulses. A whole move request then costs 90 000-
-//! 140 000 instructions on the M4 (`cargo xtask tick-cost`). Planning belongs outside the 20 kHz
+//! 152 000 instructions on the M4 (`cargo xtask tick-cost`). Planning belongs outside the 20 kHz
 //! tick. A [`Profile`] is 680 bytes.
 //!
 //! ```
@@ -722,10 +722,8 @@ fn cruise_pulses(
         // No room to cruise (by the closed form, before building pulses at v_max).
         return turn_below(v0, vf, d, lim, p1, p2);
     }
-    pulse(Vel::of(v0), a0, Vel::of(v), lim, None, p1)?;
-    pulse(Vel::of(v), 0.0, Vel::of(vf), lim, None, p2)?;
-    let (e1, e2) = (p1.time_dist(v0), p2.time_dist(v));
-    let cruise = (d - (e1.d + e2.d)) / v;
+    let e = two_pulses(v0, Vel::of(v), vf, lim, p1, p2)?;
+    let cruise = (d - e.d) / v;
     if cruise.is_nan() {
         return Ok(None);
     }
@@ -733,8 +731,16 @@ fn cruise_pulses(
         // No room to cruise: the turn below v_max, if the move goes one way.
         return turn_below(v0, vf, d, lim, p1, p2);
     }
-    let e = Eval { t: e1.t + e2.t + cruise, d: e1.d + e2.d + cruise * v, mag: e1.mag + e2.mag + fabs(cruise * v) };
+    let e = Eval { t: e.t + cruise, d: e.d + cruise * v, mag: e.mag + fabs(cruise * v) };
     Ok((fabs(e.d - d) <= e.tol()).then_some((Cand::Turn { vp: Vel::of(v), cruise }, e)))
+}
+
+/// [`turn_td`] from no acceleration, keeping the two pulses in `p1` and `p2` for the profile.
+fn two_pulses(v0: f64, vp: Vel, vf: f64, lim: &Lim, p1: &mut Pulse, p2: &mut Pulse) -> Result<Eval, PlanError> {
+    pulse(Vel::of(v0), 0.0, vp, lim, None, p1)?;
+    pulse(vp, 0.0, Vel::of(vf), lim, None, p2)?;
+    let (e1, e2) = (p1.time_dist(v0), p2.time_dist(vp.val()));
+    Ok(Eval { t: e1.t + e2.t, d: e1.d + e2.d, mag: e1.mag + e2.mag })
 }
 
 /// The time of a pulse that changes the speed by `dv ≥ 0` from and to zero acceleration, at the
@@ -780,42 +786,16 @@ fn turn_below(
     if u0 < 0.0 || uf < 0.0 {
         return Ok(None);
     }
-    let covered = |w: f64| covered(v0, vf, d, lim, w);
-    let (mut lo, mut hi) = (u0.max(uf), lim.v);
-    let (mut f_lo, mut f_hi) = (covered(lo) - dist, covered(hi) - dist);
+    let (lo, hi) = (u0.max(uf), lim.v);
+    let (f_lo, f_hi) = (covered(v0, vf, d, lim, lo) - dist, covered(v0, vf, d, lim, hi) - dist);
     if f_lo.is_nan() || f_hi.is_nan() || f_lo > 0.0 || f_hi < 0.0 {
         return Ok(None);
     }
-    // Illinois on the closed form: a few dozen evaluations of a few operations each.
-    let mut side = 0i8;
-    for _ in 0..ROOT_ITERS {
-        let w = if f_hi != f_lo { (lo * f_hi - hi * f_lo) / (f_hi - f_lo) } else { 0.5 * (lo + hi) };
-        let w = if w > lo && w < hi { w } else { 0.5 * (lo + hi) };
-        let f = covered(w) - dist;
-        // Well inside the tolerance the built pulses are checked against (`Eval::tol`).
-        if fabs(f) <= 1e-13 * dist + 1e-10 || hi - lo <= 4.0 * f64::EPSILON * hi {
-            lo = w;
-            break;
-        }
-        if f < 0.0 {
-            (lo, f_lo) = (w, f);
-            if side == -1 {
-                f_hi *= 0.5;
-            }
-            side = -1;
-        } else {
-            (hi, f_hi) = (w, f);
-            if side == 1 {
-                f_lo *= 0.5;
-            }
-            side = 1;
-        }
-    }
-    let vp = Vel::of(s * lo);
-    pulse(Vel::of(v0), 0.0, vp, lim, None, p1)?;
-    pulse(vp, 0.0, Vel::of(vf), lim, None, p2)?;
-    let (e1, e2) = (p1.time_dist(v0), p2.time_dist(vp.val()));
-    let e = Eval { t: e1.t + e2.t, d: e1.d + e2.d, mag: e1.mag + e2.mag };
+    // The planner's own root search on the closed form: a few dozen evaluations of a few
+    // operations each, well inside the tolerance the built pulses are checked against.
+    let w = solve(&mut |w| Ok(covered(v0, vf, d, lim, w) - dist), lo, f_lo, hi, f_hi, 1e-13 * dist + 1e-10)?;
+    let vp = Vel::of(s * w);
+    let e = two_pulses(v0, vp, vf, lim, p1, p2)?;
     Ok((fabs(e.d - d) <= e.tol()).then_some((Cand::Turn { vp, cruise: 0.0 }, e)))
 }
 
