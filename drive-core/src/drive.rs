@@ -307,6 +307,28 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         }
     }
 
+    /// Writes values in order, all or nothing, as every map's multi-object write does: `value`
+    /// turns each item into its object and value, reading the drive as the writes before it left
+    /// it, or into nothing to write; at the first refusal the drive goes back to how it was
+    /// before the first write, and the refusal is returned. Out of line: the checkpoint
+    /// (everything but the PVT table) is on the stack only here.
+    #[inline(never)]
+    pub fn write_in_order<T>(
+        &mut self,
+        items: impl IntoIterator<Item = T>,
+        mut value: impl FnMut(&Self, T) -> Result<Option<(&'static ObjectDef, u32)>, ObjError>,
+    ) -> Result<(), ObjError> {
+        let saved = self.checkpoint();
+        for item in items {
+            let written = value(self, item).and_then(|w| w.map_or(Ok(()), |(d, v)| self.write_def(d, v)));
+            if let Err(e) = written {
+                self.restore(saved);
+                return Err(e);
+            }
+        }
+        Ok(())
+    }
+
     /// Goes back to `c`.
     pub fn restore(&mut self, c: Checkpoint) {
         let Checkpoint { params, status, request, now, axis, pp, still_since, pvt } = c;

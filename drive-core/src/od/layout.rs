@@ -24,7 +24,7 @@
 //! assert_eq!(drive.state().read(Obj::PhaseCurrent), 1200);
 //! ```
 
-use super::map::RegisterMap;
+use super::map::{Op, RegisterMap};
 use super::{Access, Obj, ObjError, ObjectDef, Type};
 use crate::drive::DriveState;
 use crate::motion::cubic::Table;
@@ -211,15 +211,6 @@ pub struct LayoutMap {
     staged: [Option<u16>; Obj::COUNT],
 }
 
-/// What a write does to one object.
-#[derive(Clone, Copy, Debug)]
-enum Op {
-    /// Its complete value, in the map's unit and bits.
-    Commit(u32),
-    /// Its high half alone.
-    Stage(u16),
-}
-
 /// The most objects one write can reach (123 registers).
 const MAX_OBJECTS: usize = 123;
 
@@ -321,16 +312,14 @@ impl RegisterMap for LayoutMap {
         let ex = self.layout.exceptions;
         let mut plan = heapless::Vec::new();
         self.plan(drive, addr, &values, &mut plan).map_err(|e| ex.of(e))?;
-        let saved = drive.checkpoint();
-        for &(e, op) in &plan {
-            if let Op::Commit(bits) = op {
-                let result = self.drive_value(drive, e, bits).and_then(|v| drive.write_def(e.obj.def(), v));
-                if let Err(err) = result {
-                    drive.restore(saved);
-                    return Err(ex.of(err));
-                }
-            }
-        }
+        // Each value in the drive's unit as the writes before it left the drive (a scale may
+        // depend on an object written earlier in the request).
+        drive
+            .write_in_order(&plan, |drive, &(e, op)| match op {
+                Op::Commit(bits) => self.drive_value(drive, e, bits).map(|v| Some((e.obj.def(), v))),
+                Op::Stage(_) => Ok(None),
+            })
+            .map_err(|e| ex.of(e))?;
         for &(e, op) in &plan {
             if let Some(s) = self.staged.get_mut(e.obj as usize) {
                 *s = if let Op::Stage(hi) = op { Some(hi) } else { None };

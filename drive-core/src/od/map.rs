@@ -81,10 +81,10 @@ const STAGE_SLOT: [u8; Obj::COUNT] = {
     slot
 };
 
-/// What writing one object amounts to.
+/// What writing one object amounts to, in every map.
 #[derive(Clone, Copy, Debug)]
-enum Op {
-    /// The complete value: checked, then applied.
+pub(crate) enum Op {
+    /// The complete value (in the map's unit and bits): checked, then applied.
     Commit(u32),
     /// The high word of a 32-bit object alone: kept until its low word comes.
     Stage(u16),
@@ -195,24 +195,21 @@ impl NativeMap {
 
     /// Commits a write that includes a command: a command may depend on values written before
     /// it in the same request (a speed, then a move), so each value is checked on the drive that
-    /// has taken the ones before, and the drive goes back to its checkpoint if one is refused (a
-    /// clone would copy the 10 KB PVT table).
-    // Out of line: the checkpoint would otherwise weigh on every write's stack frame.
+    /// has taken the ones before, all or nothing ([`DriveState::write_in_order`]).
     #[inline(never)]
     fn commit_in_order<P: BorrowMut<Table>>(
         &mut self,
         drive: &mut DriveState<P>,
         plan: &Plan,
     ) -> Result<(), Exception> {
-        let saved = drive.checkpoint();
-        for (d, op) in plan.iter().map(|s| s.get()) {
-            if let Op::Commit(v) = op
-                && let Err(e) = drive.write_def(d, v)
-            {
-                drive.restore(saved);
-                return Err(native_exception(e));
-            }
-        }
+        drive
+            .write_in_order(plan.iter(), |_, s| {
+                Ok(match s.get() {
+                    (d, Op::Commit(v)) => Some((d, v)),
+                    (_, Op::Stage(_)) => None,
+                })
+            })
+            .map_err(native_exception)?;
         for (d, op) in plan.iter().map(|s| s.get()) {
             self.set_staged(d.obj, if let Op::Stage(hi) = op { Some(hi) } else { None });
         }
