@@ -463,8 +463,11 @@ impl<P: BorrowMut<Table>> DriveState<P> {
             }
         }
         // The next segment, if its point is there already, is built a piece a tick before it
-        // starts (its first tick would otherwise build it all: three times a tick's work).
-        if let Some(p) = self.peek_point(&run.source) {
+        // starts (its first tick would otherwise build it all: three times a tick's work). Once
+        // built from this segment's end, nothing is left to do until it starts (`follow` checks
+        // that it is the segment that starts).
+        let built = self.ahead.is_some_and(|a| a.is_built() && a.cubic.p0 == cubic.p1());
+        if !built && let Some(p) = self.peek_point(&run.source) {
             let next = Cubic::new(cubic.p1(), run.to.velocity, p);
             match &mut self.ahead {
                 Some(a) if a.cubic == next => {
