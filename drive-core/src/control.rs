@@ -18,17 +18,20 @@
 //!
 //! PVT (0x6007 = 2), synchronous positioning and group starts are in [`crate::pvt`].
 
-use crate::drive::{DriveState, STATUS_BUSY};
+use crate::controller::{DECAY, Events, STATUS_BUSY, Settings};
+use crate::drive::DriveState;
 use crate::faults::Inputs;
 use crate::modes::{PowerState, WorkMode};
-use crate::motion::axis::{Axis, Setpoint};
+use crate::motion::axis::Axis;
 use crate::motion::cubic::Table;
 use crate::motion::scurve::Limits;
 use crate::od::{Obj, ObjError, refuse};
+use crate::servo::{Gains, stall_limit};
 use crate::units::Instant;
 use core::borrow::BorrowMut;
 use fixed::types::U0F16;
 
+pub use crate::controller::Outputs;
 pub use crate::units::{TICK_HZ, TICK_MICROS};
 
 /// Accelerations of the levels 1..=8 of 0x600A/0x600B, in pps² (level 0: no ramp).
@@ -89,34 +92,90 @@ pub(crate) struct Pp {
     halted: bool,
 }
 
-/// What the output stage is told at one tick.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Outputs {
-    /// The position setpoint, with its fraction: microsteps in open loop, encoder counts in
-    /// closed loop (see [`crate::servo`]).
-    pub setpoint: Setpoint,
-    /// The electrical angle the power stage drives, in microsteps of `microsteps` a full step
-    /// (four full steps an electrical turn): the setpoint in open loop, the closed loop's
-    /// commutation otherwise.
-    pub commutation: Setpoint,
-    /// Whole microsteps of `commutation` to step this tick (signed): what a STEP/DIR stage emits.
-    pub steps: i64,
-    /// Phase current amplitude in mA; 0 frees the motor.
-    pub current_ma: u16,
-    /// Whether the power stage is on: enabled (0x6011), no fault latched, not freed by power loss.
-    /// Off, the bridges are open and `current_ma` is 0.
-    pub enabled: bool,
-    /// The brake's PWM duty in percent: 0x6038 releases it while the power stage is on, 0 applies
-    /// it (see [`crate::faults`]).
-    pub brake_duty: u8,
-    /// Microsteps per full step that positions count in (0x600C; 0 counts full steps).
-    pub microsteps: u16,
-    /// The share of fast decay in the chopper's off-time (0x6010).
-    pub fast_decay: U0F16,
+/// Whether the controller runs `obj`'s value: a write to it builds the [`Settings`] again.
+pub(crate) const fn runs_on(obj: Obj) -> bool {
+    matches!(
+        obj,
+        Obj::Enable
+            | Obj::Mode
+            | Obj::PpDecel
+            | Obj::DecelLevel
+            | Obj::PhaseCurrent
+            | Obj::IdleCurrent
+            | Obj::IdleDelay
+            | Obj::Microsteps
+            | Obj::CurrentDecay
+            | Obj::Brake
+            | Obj::UnderVoltage
+            | Obj::OverVoltage
+            | Obj::OverTemperature
+            | Obj::OverCurrent
+            | Obj::CommTimeout
+            | Obj::PowerLossControl
+            | Obj::PowerLossFreeVoltage
+            | Obj::PowerLossBrakeVoltage
+            | Obj::AutoSave
+            | Obj::SavedPosition
+            | Obj::EncoderCpr
+            | Obj::ZeroOffset
+            | Obj::StallLength
+            | Obj::TorqueLoop
+            | Obj::Kp
+            | Obj::Ki
+            | Obj::Kd
+            | Obj::PreFilter
+            | Obj::StallDetect
+            | Obj::StallStop
+            | Obj::MotorResistance
+            | Obj::MotorInductance
+            | Obj::StallMinSpeed
+            | Obj::StallParams
+    )
 }
 
-/// Fast-decay shares of 0x6010's values 0..=3: 0, 1/2, 3/4, 7/8.
-const DECAY: [U0F16; 4] = [U0F16::ZERO, U0F16::lit("0.5"), U0F16::lit("0.75"), U0F16::lit("0.875")];
+/// The settings the controller runs, from the objects' values `params` (indexed by object).
+#[inline(never)]
+pub(crate) fn settings_of(params: &[u32; Obj::COUNT]) -> Settings {
+    let get = |obj: Obj| params.get(obj as usize).copied().unwrap_or(0);
+    let mode = WorkMode::from_raw(get(Obj::Mode)).unwrap_or_default();
+    let control = get(Obj::PowerLossControl);
+    Settings {
+        enabled: get(Obj::Enable) == 1,
+        stop_decel: stop_deceleration(mode, get(Obj::PpDecel), get(Obj::DecelLevel)),
+        phase_current_ma: get(Obj::PhaseCurrent),
+        idle_current_pct: get(Obj::IdleCurrent),
+        idle_delay_us: u64::from(get(Obj::IdleDelay)) * 1000,
+        microsteps: get(Obj::Microsteps) as u16,
+        fast_decay: DECAY.get(get(Obj::CurrentDecay) as usize).copied().unwrap_or(U0F16::ZERO),
+        brake_duty: get(Obj::Brake) as u8,
+        under_voltage_mv: get(Obj::UnderVoltage),
+        over_voltage_mv: get(Obj::OverVoltage),
+        over_temperature_c: get(Obj::OverTemperature),
+        over_current_ma: get(Obj::OverCurrent),
+        comm_timeout_us: u64::from(get(Obj::CommTimeout)) * 100_000,
+        free_below_mv: if control & 1 != 0 { get(Obj::PowerLossFreeVoltage) } else { 0 },
+        brake_below_mv: if control & 2 != 0 { get(Obj::PowerLossBrakeVoltage) } else { 0 },
+        auto_save: get(Obj::AutoSave) == 1,
+        saved_position: get(Obj::SavedPosition) as i32,
+        encoder_cpr: get(Obj::EncoderCpr),
+        zero_offset: get(Obj::ZeroOffset) as i32,
+        following_limit: get(Obj::StallLength),
+        servo_loop: get(Obj::TorqueLoop) == 1,
+        gains: Gains::from_objects(get(Obj::Kp), get(Obj::Ki), get(Obj::Kd), get(Obj::PreFilter)),
+        stall_detect: get(Obj::StallDetect) == 1,
+        stall_stop: get(Obj::StallStop) == 1,
+        motor_r: get(Obj::MotorResistance) as f32 * 1e-3,
+        motor_l: get(Obj::MotorInductance) as f32 * 1e-6,
+        stall_min_speed: get(Obj::StallMinSpeed) as f32,
+        stall_limit: stall_limit(get(Obj::StallParams)),
+    }
+}
+
+/// The deceleration of a stop in `mode`, pps²: `pp_decel` (0x6068) in the profile modes, else
+/// the level `level` of 0x600B; 0 (stop at once) for level 0, which has no ramp.
+fn stop_deceleration(mode: WorkMode, pp_decel: u32, level: u32) -> u32 {
+    if mode.is_profile() { pp_decel } else { LEVELS.get((level as usize).wrapping_sub(1)).copied().unwrap_or(0) }
+}
 
 impl<P: BorrowMut<Table>> DriveState<P> {
     pub(crate) fn param(&self, obj: Obj) -> u32 {
@@ -126,6 +185,9 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     pub(crate) fn set_param(&mut self, obj: Obj, value: u32) {
         if let Some(p) = self.params.get_mut(obj as usize) {
             *p = value;
+        }
+        if runs_on(obj) {
+            self.refresh_settings();
         }
     }
 
@@ -137,37 +199,19 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     /// Whether the drive may start a motion, or why not: no fault, stop or timeout bit latched,
     /// and the power stage on (enabled, not freed by power loss).
     pub(crate) fn may_move(&self) -> Result<(), ObjError> {
-        refuse(self.status.controller & !STATUS_BUSY == 0 && self.status.comm == 0, ObjError::Faulted)?;
-        match self.power_state() {
+        let s = &self.ctl.status;
+        refuse(s.controller & !STATUS_BUSY == 0 && s.comm == 0, ObjError::Faulted)?;
+        match self.ctl.power_state() {
             PowerState::On => Ok(()),
             PowerState::Faulted => Err(ObjError::Faulted),
             PowerState::Disabled | PowerState::Freed => Err(ObjError::Disabled),
         }
     }
 
-    /// Decelerates a moving axis to rest with the mode's deceleration (a ramp of closed form,
-    /// [`Axis::stop_ramp`]: the control tick runs this), and ends any PP set-point or PVT run.
-    pub(crate) fn decelerate_to_stop(&mut self) {
-        self.axis.stop_ramp(self.stop_deceleration());
-        self.pp = Pp::default();
-        self.pvt.cancel();
-    }
-
     /// The deceleration of a stop in the present mode, pps²: 0x6068 in the profile modes, else
     /// the level of 0x600B; 0 (stop at once) for level 0, which has no ramp.
     pub(crate) fn stop_deceleration(&self) -> u32 {
-        if self.mode().is_profile() {
-            self.param(Obj::PpDecel)
-        } else {
-            LEVELS.get((self.param(Obj::DecelLevel) as usize).wrapping_sub(1)).copied().unwrap_or(0)
-        }
-    }
-
-    /// Stops the axis where its setpoint is and ends any PP set-point or PVT run.
-    pub(crate) fn stop_motion(&mut self) {
-        self.axis.halt();
-        self.pp = Pp::default();
-        self.pvt.cancel();
+        stop_deceleration(self.mode(), self.param(Obj::PpDecel), self.param(Obj::DecelLevel))
     }
 
     /// The S-curve limits of the native position and velocity modes, for a speed of `speed`.
@@ -356,9 +400,9 @@ impl<P: BorrowMut<Table>> DriveState<P> {
             Obj::Position | Obj::Microsteps => refuse(!busy, ObjError::Busy)?,
             Obj::ZeroOffset => {
                 refuse(!busy, ObjError::Busy)?;
-                if self.servo.feedback.encoder().is_some() {
+                if self.ctl.servo.feedback.encoder().is_some() {
                     // The position moves with the offset, and the axis stands on it.
-                    axis.set_position(self.servo.encoder.wrapping_add(i64::from(value as i32)));
+                    axis.set_position(self.ctl.servo.encoder.wrapping_add(i64::from(value as i32)));
                 }
             }
             _ => return Ok(false),
@@ -371,7 +415,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         if crate::pvt::is_pvt_command(obj) {
             return self.check_pvt(obj, value);
         }
-        let mut scratch = (self.axis, self.pp);
+        let mut scratch = (self.ctl.axis, self.pp);
         self.plan_motion(obj, value, &mut scratch).map(|_| ())
     }
 
@@ -380,7 +424,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         if crate::pvt::is_pvt_command(obj) {
             return self.apply_pvt(obj, value);
         }
-        let mut planned = (self.axis, self.pp);
+        let mut planned = (self.ctl.axis, self.pp);
         // Checked already: were it refused now, the axis stays.
         let changed = self.plan_motion(obj, value, &mut planned) == Ok(true);
         self.commit_motion(obj, value, changed.then_some(&planned));
@@ -398,10 +442,10 @@ impl<P: BorrowMut<Table>> DriveState<P> {
             self.set_param(obj, value);
         }
         if let Some((axis, pp)) = planned {
-            self.axis = *axis;
+            self.ctl.axis = *axis;
             self.pp = *pp;
             if matches!(obj, Obj::Stop | Obj::Enable) {
-                self.pvt.cancel();
+                self.ctl.run = None;
             }
         }
     }
@@ -409,24 +453,35 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     /// The PP/PV statusword: target reached and set-point acknowledge.
     pub(crate) fn statusword(&self) -> u16 {
         let reached = match self.mode() {
-            WorkMode::ProfilePosition => self.axis.is_still() && self.pp.buffered.is_none(),
-            WorkMode::ProfileVelocity => self.axis.settled(),
+            WorkMode::ProfilePosition => self.ctl.axis.is_still() && self.pp.buffered.is_none(),
+            WorkMode::ProfileVelocity => self.ctl.axis.settled(),
             _ => false,
         };
         (if reached { SW_TARGET_REACHED } else { 0 }) | if self.pp.ack { SW_SETPOINT_ACK } else { 0 }
     }
 
-    /// PP: when the walk reaches the buffered set-point (planned after the running one), it is
-    /// the active one.
-    fn pp_tick(&mut self) {
-        if !self.axis.take_joined() || self.mode() != WorkMode::ProfilePosition {
-            return;
+    /// What the controller did on its own: a stop ends the set-points, a joined set-point is
+    /// the active one, failing power asks for the position save, the closed loop's first reading
+    /// sets the zero offset. Out of line: most ticks have nothing to report.
+    #[inline(never)]
+    fn take_events(&mut self, events: Events) {
+        if events.stopped {
+            self.pp = Pp::default();
         }
-        if let Some(sp) = self.pp.buffered.take() {
+        if events.joined
+            && self.mode() == WorkMode::ProfilePosition
+            && let Some(sp) = self.pp.buffered.take()
+        {
             self.pp.active = Some(sp);
             if self.param(Obj::ControlWord) as u16 & CW_NEW_SETPOINT == 0 {
                 self.pp.ack = false;
             }
+        }
+        if events.power_failing {
+            self.power_lost();
+        }
+        if let Some(offset) = events.zero_offset {
+            self.set_param(Obj::ZeroOffset, offset as u32);
         }
     }
 
@@ -436,37 +491,15 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         self.tick_with(now, &Inputs::default())
     }
 
-    /// One control tick at `now`: checks the measurements (see [`crate::faults`]), evaluates the
-    /// motion and updates the live objects.
+    /// One control tick at `now`: the controller's tick (see [`crate::controller`]), then what it
+    /// reports.
     pub fn tick_with(&mut self, now: Instant, inputs: &Inputs) -> Outputs {
         self.now = now;
-        self.sense(inputs);
-        self.supervise(now, inputs);
-        self.pvt_tick(now);
-        let (setpoint, moved) = self.axis.tick(now);
-        self.pp_tick();
-        let (commutation, share) = self.commutate(now, &setpoint, moved, inputs);
-        let steps = commutation.whole.saturating_sub(self.servo.last_angle);
-        self.servo.last_angle = commutation.whole;
-        // Standstill current reduction once the motor has stood for the delay.
-        let still = self.axis.is_still();
-        let since = *self.still_since.get_or_insert(now);
-        if !still {
-            self.still_since = None;
+        let out = self.ctl.tick(now, inputs, &mut self.pvt, self.table.borrow());
+        let events = self.ctl.take_events();
+        if events != Events::default() {
+            self.take_events(events);
         }
-        let idle = still && now.since(since) >= u64::from(self.param(Obj::IdleDelay)) * 1000;
-        let full = self.param(Obj::PhaseCurrent) * if idle { self.param(Obj::IdleCurrent) } else { 100 } / 100;
-        let current = (full as f32 * share.clamp(0.0, 1.0)) as u32;
-        let enabled = self.power_stage_on();
-        Outputs {
-            setpoint,
-            commutation,
-            steps,
-            current_ma: if enabled { current as u16 } else { 0 },
-            enabled,
-            brake_duty: self.brake_duty(),
-            microsteps: self.param(Obj::Microsteps) as u16,
-            fast_decay: DECAY.get(self.param(Obj::CurrentDecay) as usize).copied().unwrap_or(U0F16::ZERO),
-        }
+        out
     }
 }

@@ -1,26 +1,21 @@
 //! The drive: its state behind the object dictionary, and the RTU slave in front of it.
 
-use crate::control::{Outputs, Pp, has_effect};
+use crate::control::{Pp, has_effect, runs_on, settings_of};
+use crate::controller::{Controller, Outputs, Pvt};
 use crate::crc;
 use crate::faults::{FaultHistory, HISTORY_OBJECTS};
 use crate::faults::{FaultLog, Inputs};
 use crate::ident::Identity;
-use crate::motion::axis::Axis;
-use crate::motion::cubic::Ahead;
 use crate::motion::cubic::Table;
 use crate::od::map::is_command;
 use crate::od::{Access, NativeMap, OBJECTS, Obj, ObjError, ObjectDef, RegisterMap, Storage};
 use crate::pdu::{Exception, MAX_READ, Request, Words};
-use crate::pvt::Pvt;
 use crate::rtu::{Framer, MAX_FRAME, RxError};
-use crate::servo::{Feedback, Servo};
+use crate::servo::Feedback;
 use crate::units::{Baud, Instant, SlaveAddr};
 use core::borrow::BorrowMut;
 
-/// Controller status bit 2: a stall was detected (write 1 to clear; moves are refused while set).
-pub const STATUS_STALL: u8 = 1 << 2;
-/// Controller status bit 3: the motor is executing a move.
-pub const STATUS_BUSY: u8 = 1 << 3;
+pub use crate::controller::{STATUS_BUSY, STATUS_STALL, Status};
 
 /// Storage status (0x2120) bit 0: no saved parameters were found at power-up; factory values.
 pub const STORAGE_EMPTY: u8 = 1 << 0;
@@ -153,31 +148,6 @@ impl Default for Params {
     }
 }
 
-/// The drive's running status: what the live objects report.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Status {
-    /// Error status bits (0x6000).
-    pub error: u8,
-    /// Controller status bits (0x6001).
-    pub controller: u8,
-    /// Step-notification bits (0x6061).
-    pub notify: u8,
-    /// GPIO levels (0x6031), inverted as the manual has them.
-    pub gpio: u16,
-    /// Analog input code (0x605F).
-    pub analog_in: u16,
-    /// PVT pointer (0x601A).
-    pub pvt_pointer: u16,
-    /// Encoder position in counts (0x6089).
-    pub encoder: i32,
-    /// Storage status bits (0x2120): `STORAGE_*`.
-    pub storage: u8,
-    /// Drive fault bits beyond 0x6000 (0x2135): `faults::FAULT_*`.
-    pub faults: u8,
-    /// Communication status bits (0x2138): `faults::COMM_TIMEOUT`.
-    pub comm: u8,
-}
-
 /// Everything the object dictionary reads and writes.
 ///
 /// `P` holds the PVT point table (10 KB): the state owns it by default; a microcontroller keeps
@@ -186,30 +156,21 @@ pub struct Status {
 #[derive(Clone, Debug)]
 pub struct DriveState<P = Table> {
     pub(crate) params: [u32; Obj::COUNT],
-    pub(crate) status: Status,
+    /// Storage status bits (0x2120): `STORAGE_*`.
+    storage: u8,
     identity: Identity,
     can_save: bool,
     request: Option<SystemRequest>,
     /// The time of the event being handled (a frame, a tick): when a command takes effect.
     pub(crate) now: Instant,
-    /// The motion being executed.
-    pub(crate) axis: Axis,
     /// The profile position and velocity modes' set-points.
     pub(crate) pp: Pp,
-    /// Since when the axis has stood still (for the standstill current).
-    pub(crate) still_since: Option<Instant>,
-    /// The PVT run and which slots of `table` hold points.
+    /// Which slots of `table` hold PVT points.
     pub(crate) pvt: Pvt,
     /// The PVT points (10 KB: kept out of [`Checkpoint`]).
     pub(crate) table: P,
-    /// The fault history and the supervision's memory (changed by the tick only, so kept out of
-    /// [`Checkpoint`]: a write cannot change it).
-    pub(crate) faults: FaultLog,
-    /// The closed loop and stall detection (changed by the tick only, as `faults`).
-    pub(crate) servo: Servo,
-    /// The next PVT segment's walk, built a piece a tick before it starts (by the tick only, as
-    /// `faults`: a cache of what the run's points give, kept out of [`Checkpoint`]).
-    pub(crate) ahead: Option<Ahead>,
+    /// What the control tick owns: the motion, supervision, the loops and the running status.
+    pub(crate) ctl: Controller,
     /// The alarm count when the platform was last asked to save the history (changed only by
     /// taking requests, so kept out of [`Checkpoint`] too).
     faults_saved: u16,
@@ -221,13 +182,14 @@ pub struct DriveState<P = Table> {
 #[derive(Clone, Debug)]
 pub struct Checkpoint {
     params: [u32; Obj::COUNT],
+    storage: u8,
     status: Status,
     request: Option<SystemRequest>,
     now: Instant,
-    axis: Axis,
+    axis: crate::motion::axis::Axis,
     pp: Pp,
-    still_since: Option<Instant>,
     pvt: Pvt,
+    run: Option<crate::controller::run::Run>,
 }
 
 impl DriveState {
@@ -257,53 +219,35 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         let get = |obj: Obj| params.get(obj as usize).copied().unwrap_or(0);
         let feedback = Feedback::from_objects(get(Obj::Feedback), get(Obj::EncoderCpr));
         Self {
+            faults_saved: faults.count,
+            ctl: Controller::new(settings_of(&params), feedback, faults),
             params,
-            status: Status { storage, ..Status::default() },
+            storage,
             identity,
             can_save,
             request: None,
             now: Instant::from_micros(0),
-            axis: Axis::new(0),
             pp: Pp::default(),
-            still_since: None,
             pvt: Pvt::default(),
             table,
-            faults_saved: faults.count,
-            faults,
-            servo: Servo::new(feedback),
-            ahead: None,
         }
     }
 
     /// Everything but the PVT table, to [`DriveState::restore`] later.
     pub fn checkpoint(&self) -> Checkpoint {
         // Naming every field: a new one must be decided on here.
-        let Self {
-            params,
-            status,
-            identity: _,
-            can_save: _,
-            request,
-            now,
-            axis,
-            pp,
-            still_since,
-            pvt,
-            table: _,
-            faults: _,
-            servo: _,
-            ahead: _,
-            faults_saved: _,
-        } = self;
+        let Self { params, storage, identity: _, can_save: _, request, now, pp, pvt, table: _, ctl, faults_saved: _ } =
+            self;
         Checkpoint {
             params: *params,
-            status: *status,
+            storage: *storage,
+            status: ctl.status,
             request: *request,
             now: *now,
-            axis: *axis,
+            axis: ctl.axis,
             pp: *pp,
-            still_since: *still_since,
             pvt: *pvt,
+            run: ctl.run,
         }
     }
 
@@ -331,29 +275,61 @@ impl<P: BorrowMut<Table>> DriveState<P> {
 
     /// Goes back to `c`.
     pub fn restore(&mut self, c: Checkpoint) {
-        let Checkpoint { params, status, request, now, axis, pp, still_since, pvt } = c;
-        (self.params, self.status, self.request, self.now) = (params, status, request, now);
-        (self.axis, self.pp, self.still_since, self.pvt) = (axis, pp, still_since, pvt);
+        let Checkpoint { params, storage, status, request, now, axis, pp, pvt, run } = c;
+        (self.params, self.storage, self.request, self.now) = (params, storage, request, now);
+        (self.ctl.status, self.ctl.axis, self.ctl.run, self.pp, self.pvt) = (status, axis, run, pp, pvt);
+        self.refresh_settings();
     }
 
     /// The running status.
     pub fn status(&self) -> &Status {
-        &self.status
+        &self.ctl.status
     }
 
-    /// The running status, for the motion and I/O code that owns it.
+    /// The running status, for the platform's inputs (GPIO levels, the analog input).
     pub fn status_mut(&mut self) -> &mut Status {
-        &mut self.status
+        &mut self.ctl.status
+    }
+
+    /// What the power stage does ([`Controller::power_state`]).
+    pub fn power_state(&self) -> crate::modes::PowerState {
+        self.ctl.power_state()
+    }
+
+    /// Whether a fault is latched ([`Controller::faulted`]).
+    pub fn faulted(&self) -> bool {
+        self.ctl.faulted()
+    }
+
+    /// The sensorless stall detector's estimates ([`Controller::stall_estimate`]).
+    pub fn stall_estimate(&self) -> (f32, f32) {
+        self.ctl.stall_estimate()
+    }
+
+    /// What the control tick owns.
+    pub fn controller(&self) -> &Controller {
+        &self.ctl
+    }
+
+    /// Builds the controller's settings again from the objects.
+    #[inline(never)]
+    pub(crate) fn refresh_settings(&mut self) {
+        self.ctl.settings = settings_of(&self.params);
+    }
+
+    /// The storage status bits (0x2120): `STORAGE_*`.
+    pub fn storage(&self) -> u8 {
+        self.storage
     }
 
     /// The position setpoint in whole microsteps (it never wraps; 0x600E..F shows its low 32 bits).
     pub fn position(&self) -> i64 {
-        self.axis.setpoint().whole
+        self.ctl.axis.setpoint().whole
     }
 
     /// Declares the present position, as writing 0x600E..F does; refused while moving.
     pub fn set_position(&mut self, position: i64) -> bool {
-        self.axis.set_position(position)
+        self.ctl.axis.set_position(position)
     }
 
     /// The present values of the objects a save covers: what 0x200F = 2 writes.
@@ -381,20 +357,29 @@ impl<P: BorrowMut<Table>> DriveState<P> {
 
     /// Whether an alarm was recorded since the history was last handed to a platform that saves.
     fn fault_save_due(&self) -> bool {
-        self.can_save && self.faults.count != self.faults_saved
+        self.can_save && self.ctl.faults.count != self.faults_saved
     }
 
     /// [`SystemRequest::SaveFaults`] if [due](DriveState::fault_save_due); the history counts as
     /// saved from here on (if the save fails, the next alarm saves the whole history again).
     fn take_fault_save(&mut self) -> Option<SystemRequest> {
         let due = self.fault_save_due();
-        self.faults_saved = self.faults.count;
+        self.faults_saved = self.ctl.faults.count;
         due.then_some(SystemRequest::SaveFaults)
     }
 
     /// Whether a request for the platform is waiting ([`Drive::take_system_request`]).
     fn has_request(&self) -> bool {
         self.request.is_some() || self.fault_save_due()
+    }
+
+    /// The fault history and alarm count as the objects show them now.
+    pub fn fault_history(&self) -> FaultHistory {
+        let mut history = FaultHistory { count: self.ctl.faults.count, ..FaultHistory::default() };
+        for (k, e) in history.entries.iter_mut().enumerate() {
+            *e = self.ctl.history(k);
+        }
+        history
     }
 
     /// The identification strings.
@@ -418,13 +403,13 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     }
 
     fn live(&self, obj: Obj) -> u32 {
-        let s = &self.status;
+        let s = &self.ctl.status;
         match obj {
             // The axis's own state, not a copy: the register shows the low 32 bits of the setpoint.
-            Obj::Position => self.axis.setpoint().whole as u32,
+            Obj::Position => self.ctl.axis.setpoint().whole as u32,
             Obj::ErrorStatus => u32::from(s.error),
             Obj::ControllerStatus => {
-                u32::from(s.controller | self.fifo_status() | if self.axis.is_still() { 0 } else { STATUS_BUSY })
+                u32::from(s.controller | self.fifo_status() | if self.ctl.axis.is_still() { 0 } else { STATUS_BUSY })
             }
             Obj::PvtCount => u32::from(self.pvt.count()),
             Obj::PvtFault => u32::from(self.pvt.fault),
@@ -433,24 +418,24 @@ impl<P: BorrowMut<Table>> DriveState<P> {
             Obj::AnalogIn => u32::from(s.analog_in),
             Obj::StatusWord => u32::from(self.statusword()),
             Obj::PvtPointer => u32::from(s.pvt_pointer),
-            Obj::RealSpeed => self.real_speed() as u32,
-            Obj::FollowingError => self.servo.following as i32 as u32,
+            Obj::RealSpeed => self.ctl.real_speed() as u32,
+            Obj::FollowingError => self.ctl.servo.following as i32 as u32,
             Obj::EncoderPosition => s.encoder as u32,
-            Obj::StorageStatus => u32::from(s.storage),
-            Obj::AlarmCode => u32::from(self.alarm_code()),
+            Obj::StorageStatus => u32::from(self.storage),
+            Obj::AlarmCode => u32::from(self.ctl.alarm_code()),
             Obj::DriveFaults => u32::from(s.faults),
             Obj::CommStatus => u32::from(s.comm),
-            Obj::AlarmCount => u32::from(self.faults.count),
-            Obj::FaultHistory0 => self.history(0),
-            Obj::FaultHistory1 => self.history(1),
-            Obj::FaultHistory2 => self.history(2),
-            Obj::FaultHistory3 => self.history(3),
-            Obj::FaultHistory4 => self.history(4),
-            Obj::FaultHistory5 => self.history(5),
-            Obj::FaultHistory6 => self.history(6),
-            Obj::FaultHistory7 => self.history(7),
-            Obj::FaultHistory8 => self.history(8),
-            Obj::FaultHistory9 => self.history(9),
+            Obj::AlarmCount => u32::from(self.ctl.faults.count),
+            Obj::FaultHistory0 => self.ctl.history(0),
+            Obj::FaultHistory1 => self.ctl.history(1),
+            Obj::FaultHistory2 => self.ctl.history(2),
+            Obj::FaultHistory3 => self.ctl.history(3),
+            Obj::FaultHistory4 => self.ctl.history(4),
+            Obj::FaultHistory5 => self.ctl.history(5),
+            Obj::FaultHistory6 => self.ctl.history(6),
+            Obj::FaultHistory7 => self.ctl.history(7),
+            Obj::FaultHistory8 => self.ctl.history(8),
+            Obj::FaultHistory9 => self.ctl.history(9),
             _ => self.params.get(obj as usize).copied().unwrap_or(0),
         }
     }
@@ -486,6 +471,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         matches!(d.access, Access::Rw)
             && matches!(d.storage, Storage::Ram | Storage::Rom)
             && !has_effect(d.obj)
+            && !runs_on(d.obj)
             && !matches!(d.obj, Obj::SystemControl)
     }
 
@@ -510,7 +496,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
             (Obj::SystemControl, 2) if !self.can_save => Err(ObjError::Unsupported),
             // A flash erase stalls the STM32G431's single bank for ~22 ms: never while moving. A
             // second save waits for the first to end.
-            (Obj::SystemControl, 2 | 3) if !self.axis.is_still() || self.status.storage & STORAGE_SAVING != 0 => {
+            (Obj::SystemControl, 2 | 3) if !self.ctl.axis.is_still() || self.storage & STORAGE_SAVING != 0 => {
                 Err(ObjError::Busy)
             }
             (obj, _) if is_command(obj) => self.check_motion(obj, value),
@@ -526,7 +512,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         // The objects whose check is `check_motion` and whose write is `apply_motion`.
         if is_command(d.obj) && has_effect(d.obj) && !crate::pvt::is_pvt_command(d.obj) && d.obj != Obj::Position {
             Self::check_writable(d, value)?;
-            let mut planned = (self.axis, self.pp);
+            let mut planned = (self.ctl.axis, self.pp);
             let changed = self.plan_motion(d.obj, value, &mut planned)?;
             self.commit_motion(d.obj, value, changed.then_some(&planned));
             return Ok(());
@@ -540,9 +526,12 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     #[inline(always)]
     pub fn apply_def(&mut self, d: &ObjectDef, value: u32) {
         if d.access == Access::Rw && d.storage != Storage::Live && !is_command(d.obj) {
-            // A plain setting: stored.
+            // A setting: stored, and handed to the controller if it runs it.
             if let Some(p) = self.params.get_mut(d.obj as usize) {
                 *p = value;
+            }
+            if runs_on(d.obj) {
+                self.refresh_settings();
             }
         } else {
             self.apply(d.obj, value);
@@ -551,12 +540,12 @@ impl<P: BorrowMut<Table>> DriveState<P> {
 
     /// Writes `value` to `obj`, which [`DriveState::check`] accepted.
     pub fn apply(&mut self, obj: Obj, value: u32) {
-        let s = &mut self.status;
+        let s = &mut self.ctl.status;
         match obj {
             Obj::ErrorStatus => s.error &= !(value as u8),
             Obj::ControllerStatus => s.controller &= !(value as u8 & !STATUS_BUSY),
             Obj::NotifyStatus => s.notify &= !(value as u8),
-            Obj::StorageStatus => s.storage &= !(value as u8 & !STORAGE_SAVING),
+            Obj::StorageStatus => self.storage &= !(value as u8 & !STORAGE_SAVING),
             Obj::DriveFaults => s.faults &= !(value as u8),
             Obj::CommStatus => s.comm &= !(value as u8),
             Obj::PvtFault => self.pvt.fault &= !(value as u8),
@@ -567,16 +556,14 @@ impl<P: BorrowMut<Table>> DriveState<P> {
             }
             Obj::Position => {
                 let position = i64::from(value as i32);
-                if self.axis.set_position(position) && self.servo.feedback.encoder().is_some() {
+                if self.ctl.axis.set_position(position) && self.ctl.servo.feedback.encoder().is_some() {
                     // Closed loop: the position is the encoder's plus the zero offset.
-                    self.set_param(Obj::ZeroOffset, position.wrapping_sub(self.servo.encoder) as u32);
+                    self.set_param(Obj::ZeroOffset, position.wrapping_sub(self.ctl.servo.encoder) as u32);
                 }
             }
             obj if has_effect(obj) => self.apply_motion(obj, value),
             _ => {
-                if let Some(p) = self.params.get_mut(obj as usize) {
-                    *p = value;
-                }
+                self.set_param(obj, value);
                 if obj == Obj::SystemControl {
                     if value == 3 {
                         self.restore_factory();
@@ -584,7 +571,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
                     // Factory settings are saved too, so that they survive a restart as §3.11's
                     // FSET reset does; without storage they hold until power-off.
                     if (value == 2 || value == 3) && self.can_save {
-                        self.status.storage = (self.status.storage & !STORAGE_SAVE_FAILED) | STORAGE_SAVING;
+                        self.storage = (self.storage & !STORAGE_SAVE_FAILED) | STORAGE_SAVING;
                         self.request = Some(SystemRequest::Save);
                     }
                 }
@@ -596,12 +583,13 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     /// status are untouched).
     pub fn restore_factory(&mut self) {
         Params::factory().copy_saved_into(&mut self.params);
+        self.refresh_settings();
     }
 
     /// The platform finished the save it was asked for ([`SystemRequest::Save`]); `ok` if the
     /// flash holds the new set.
     pub fn save_done(&mut self, ok: bool) {
-        let s = &mut self.status.storage;
+        let s = &mut self.storage;
         *s &= !STORAGE_SAVING;
         if !ok {
             *s |= STORAGE_SAVE_FAILED;
@@ -808,7 +796,7 @@ impl<M: RegisterMap, P: BorrowMut<Table>> Drive<M, P> {
     ///
     /// On [`SystemRequest::Save`] the platform takes [`DriveState::params`] at once, writes them
     /// outside the control tick, and reports with [`Drive::save_done`]; on
-    /// [`SystemRequest::SaveFaults`] it takes [`FaultHistory::of`] the state at once.
+    /// [`SystemRequest::SaveFaults`] it takes [`DriveState::fault_history`] at once.
     pub fn take_system_request(&mut self) -> Option<SystemRequest> {
         self.state.request.take().or_else(|| self.state.take_fault_save())
     }
@@ -850,7 +838,7 @@ impl<M: RegisterMap, P: BorrowMut<Table>> Drive<M, P> {
             return;
         }
         counters.slave_messages = counters.slave_messages.wrapping_add(1);
-        state.heard();
+        state.ctl.heard(state.now);
         let pdu = rest.get(..rest.len().saturating_sub(2)).unwrap_or_default();
         let function = pdu.first().copied().unwrap_or(0);
         if function & 0x80 != 0 {

@@ -44,27 +44,16 @@
 //! 0x6017 = 0 does. Any start, including 0x6017 = 1, takes effect at the next control tick after
 //! the frame, so every drive that receives one frame starts in the same tick.
 
-use crate::control::TICK_MICROS;
+use crate::controller::run::{Phase, Source};
 use crate::drive::DriveState;
 use crate::modes::{PvtMode, WorkMode};
 use crate::motion::axis::Axis;
-use crate::motion::cubic::{Ahead, Cubic, Point, TABLE_SIZE, Table, V_MAX};
+use crate::motion::cubic::{Cubic, Point, TABLE_SIZE, Table, V_MAX};
 use crate::od::{Obj, ObjError, refuse};
 use crate::units::Instant;
 use core::borrow::BorrowMut;
 
-/// Controller status bit 5: the mode 3 FIFO is empty.
-pub const STATUS_FIFO_EMPTY: u8 = 1 << 5;
-/// Controller status bit 6: the mode 3 FIFO holds fewer points than the low mark 0x6025.
-pub const STATUS_FIFO_LOW: u8 = 1 << 6;
-/// Controller status bit 7: the mode 3 FIFO holds more points than the high mark 0x6026.
-pub const STATUS_FIFO_HIGH: u8 = 1 << 7;
-/// 0x2111 bit 0: the FIFO ran dry while the axis was moving.
-pub const FAULT_UNDERFLOW: u8 = 1;
-
-/// Segments started in one tick at most. Only a few of no time can follow each other (see the
-/// module documentation); the bound keeps a tick's work bounded whatever the table holds.
-const SEGMENTS_PER_TICK: usize = 16;
+pub use crate::controller::run::{FAULT_UNDERFLOW, STATUS_FIFO_EMPTY, STATUS_FIFO_HIGH, STATUS_FIFO_LOW};
 
 /// The 0x6017 operations.
 const OP_STOP: u32 = 0;
@@ -81,59 +70,7 @@ pub(crate) enum Start {
     Sync,
 }
 
-/// One phase of a table run: indices `first..=last`, `times` times.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-struct Phase {
-    first: u16,
-    last: u16,
-    times: u16,
-}
-
-/// Where the points of a run come from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Source {
-    /// Modes 1 and 2: phases of the table; `phase` is the current one, `next` its next index,
-    /// `left` how many more times it runs, this one included.
-    Table { phases: [Phase; 3], phase: usize, next: u16, left: u16 },
-    /// Mode 3: the ring.
-    Fifo,
-}
-
-/// A PVT run in progress.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct Run {
-    source: Source,
-    /// The point the running segment heads to.
-    to: Point,
-}
-
-/// The PVT state: which slots of the table hold points, and the run.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub(crate) struct Pvt {
-    /// First stored point (mode 3's ring; 0 in modes 1 and 2).
-    head: u16,
-    /// Points stored (modes 1, 2) or queued (mode 3).
-    len: u16,
-    /// The last point pushed: the next one's segment starts there.
-    last: Option<Point>,
-    run: Option<Run>,
-    /// 0x2111.
-    pub(crate) fault: u8,
-}
-
-impl Pvt {
-    /// Points stored or queued (0x2110).
-    pub(crate) fn count(&self) -> u16 {
-        self.len
-    }
-
-    /// Forgets the run (the axis was stopped).
-    pub(crate) fn cancel(&mut self) {
-        self.run = None;
-    }
-}
-
-/// Whether `obj` is one of the objects this module acts on.
+/// Whether `obj` is one of the PVT and group objects whose write does more than store.
 pub(crate) const fn is_pvt_command(obj: Obj) -> bool {
     matches!(obj, Obj::PvtControl | Obj::PvtMode | Obj::PvtTime | Obj::GroupStart | Obj::GroupStop)
 }
@@ -147,46 +84,6 @@ enum Effect {
     Start(Start),
     /// Decelerate to rest from what the axis does now.
     Stop,
-}
-
-impl Phase {
-    fn new(first: u32, last: u32, times: u32) -> Self {
-        Self { first: first as u16, last: last as u16, times: times as u16 }
-    }
-}
-
-impl Source {
-    fn table(phases: [Phase; 3]) -> Self {
-        let mut s = Source::Table { phases, phase: 0, next: 0, left: 0 };
-        s.enter(0);
-        s
-    }
-
-    /// The next table index of the run, if any is left.
-    fn next_index(&mut self) -> Option<u16> {
-        loop {
-            let Source::Table { phases, phase, next, left } = self else { return None };
-            let ph = phases.get(*phase).copied()?;
-            if *left == 0 {
-                let k = *phase + 1;
-                self.enter(k);
-            } else if *next <= ph.last {
-                *next += 1;
-                return Some(*next - 1);
-            } else {
-                *left -= 1;
-                *next = ph.first;
-            }
-        }
-    }
-
-    fn enter(&mut self, k: usize) {
-        if let Source::Table { phases, phase, next, left } = self {
-            *phase = k;
-            let p = phases.get(k).copied().unwrap_or_default();
-            (*next, *left) = (p.first, p.times);
-        }
-    }
 }
 
 impl<P: BorrowMut<Table>> DriveState<P> {
@@ -245,7 +142,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     fn plan_run(&self) -> Result<(Source, u16, Point), ObjError> {
         refuse(self.mode() == WorkMode::Pvt, ObjError::NotNow)?;
         self.may_move()?;
-        refuse(self.axis.is_still() && self.pvt.run.is_none(), ObjError::Busy)?;
+        refuse(self.ctl.axis.is_still() && self.ctl.run.is_none(), ObjError::Busy)?;
         let len = self.pvt.len;
         let (source, first) = if self.pvt_mode() == PvtMode::Fifo {
             refuse(len > 0, ObjError::NotNow)?;
@@ -291,7 +188,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
             (Source::table(phases), acc.first)
         };
         let p = self.stored(first).ok_or(ObjError::NotNow)?;
-        refuse(Cubic::new(self.axis.setpoint().whole, 0, p).feasible(), ObjError::Infeasible)?;
+        refuse(Cubic::new(self.ctl.axis.setpoint().whole, 0, p).feasible(), ObjError::Infeasible)?;
         Ok((source, first, p))
     }
 
@@ -300,10 +197,10 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         let speed = f64::from(self.param(Obj::SyncSpeed) as i32);
         refuse(self.mode() == WorkMode::Position && speed != 0.0, ObjError::NotNow)?;
         self.may_move()?;
-        refuse(self.axis.is_still(), ObjError::Busy)?;
+        refuse(self.ctl.axis.is_still(), ObjError::Busy)?;
         let target = i64::from(self.param(Obj::SyncPosition) as i32);
         let (depart, arrive) = self.jumps(speed.abs());
-        let mut axis = self.axis;
+        let mut axis = self.ctl.axis;
         axis.move_to(now, target, depart, arrive, &self.scurve_limits(speed)).map_err(|_| ObjError::Infeasible)?;
         Ok(axis)
     }
@@ -319,7 +216,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
 
     /// What writing `value` to the PVT object `obj` does, or why it is refused.
     fn plan_pvt(&self, obj: Obj, value: u32) -> Result<Effect, ObjError> {
-        let running = self.pvt.run.is_some();
+        let running = self.ctl.run.is_some();
         let member = self.param(Obj::GroupId) != 0 && self.param(Obj::GroupId) == value;
         match (obj, value) {
             (Obj::PvtControl, OP_STOP) => Ok(self.stop_effect()),
@@ -341,7 +238,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     }
 
     fn stop_effect(&self) -> Effect {
-        let moving = self.pvt.run.is_some() || (self.mode() == WorkMode::Position && !self.axis.is_still());
+        let moving = self.ctl.run.is_some() || (self.mode() == WorkMode::Position && !self.ctl.axis.is_still());
         if moving { Effect::Stop } else { Effect::None }
     }
 
@@ -358,7 +255,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         match effect {
             Ok(Effect::Start(Start::Sync)) => {
                 if let Ok(axis) = self.plan_sync(self.now) {
-                    self.axis = axis;
+                    self.ctl.axis = axis;
                 }
                 return;
             }
@@ -378,104 +275,22 @@ impl<P: BorrowMut<Table>> DriveState<P> {
             }
             Ok(Effect::Start(_)) => {}
             Ok(Effect::Stop) => {
-                pvt.cancel();
+                self.ctl.run = None;
                 // 0x600B's ramp, without its jerk limit: a PVT segment may end with more
                 // acceleration than the jerk could take back in time.
-                self.axis.stop_ramp(self.stop_deceleration());
+                self.ctl.axis.stop_ramp(self.stop_deceleration());
             }
             Ok(Effect::None) | Err(_) => {}
         }
-    }
-
-    /// The next point of a run, and its index; a FIFO point leaves the queue.
-    fn next_point(&mut self, source: &mut Source) -> Option<(u16, Point)> {
-        let index = match source {
-            Source::Fifo => {
-                let pvt = &mut self.pvt;
-                if pvt.len == 0 {
-                    return None;
-                }
-                let i = pvt.head;
-                pvt.head = ((usize::from(i) + 1) % TABLE_SIZE) as u16;
-                pvt.len -= 1;
-                i
-            }
-            Source::Table { .. } => source.next_index()?,
-        };
-        self.stored(index).map(|p| (index, p))
-    }
-
-    /// The point [`DriveState::next_point`] would give next, without taking it.
-    fn peek_point(&self, source: &Source) -> Option<Point> {
-        let index = match *source {
-            Source::Fifo if self.pvt.len == 0 => return None,
-            Source::Fifo => self.pvt.head,
-            mut table => table.next_index()?,
-        };
-        self.stored(index)
     }
 
     /// Starts the PVT run on the next control tick: its first segment from where the axis
     /// stands (built here, not in the tick).
     fn start_run(&mut self) {
         let Ok((mut source, _, _)) = self.plan_run() else { return };
-        if let Some((i, p)) = self.next_point(&mut source) {
-            let at = self.axis.next_tick(self.now);
-            self.axis.follow(at, Cubic::new(self.axis.setpoint().whole, 0, p), None);
-            self.pvt.run = Some(Run { source, to: p });
-            self.status.pvt_pointer = i;
+        let table = self.table.borrow();
+        if let Some((i, p)) = self.pvt.next_point(&mut source, table) {
+            self.ctl.start_run(self.now, source, i, p);
         }
-    }
-
-    /// The PVT part of a control tick at `now`: the next segment whenever the running one has
-    /// ended (starting exactly at its end, so time does not drift either).
-    pub(crate) fn pvt_tick(&mut self, now: Instant) {
-        let Some(mut run) = self.pvt.run else { return };
-        let Some((mut start, mut cubic)) = self.axis.cubic() else {
-            // Stopped by something else (0x6053, disable).
-            self.pvt.run = None;
-            return;
-        };
-        for _ in 0..SEGMENTS_PER_TICK {
-            let length = cubic.ticks() * TICK_MICROS;
-            if now.since(start) < length || now < start {
-                break;
-            }
-            let end = start.plus_micros(length);
-            match self.next_point(&mut run.source) {
-                Some((i, p)) => {
-                    cubic = Cubic::new(cubic.p1(), run.to.velocity, p);
-                    start = end;
-                    self.axis.follow(start, cubic, self.ahead.take());
-                    run.to = p;
-                    self.status.pvt_pointer = i;
-                }
-                None => {
-                    if run.to.velocity == 0 {
-                        self.axis.stand_on_cubic_end();
-                    } else {
-                        self.pvt.fault |= FAULT_UNDERFLOW;
-                        self.axis.stop_ramp(self.stop_deceleration());
-                    }
-                    self.pvt.run = None;
-                    return;
-                }
-            }
-        }
-        // The next segment, if its point is there already, is built a piece a tick before it
-        // starts (its first tick would otherwise build it all: three times a tick's work). Once
-        // built from this segment's end, nothing is left to do until it starts (`follow` checks
-        // that it is the segment that starts).
-        let built = self.ahead.is_some_and(|a| a.is_built() && a.cubic.p0 == cubic.p1());
-        if !built && let Some(p) = self.peek_point(&run.source) {
-            let next = Cubic::new(cubic.p1(), run.to.velocity, p);
-            match &mut self.ahead {
-                Some(a) if a.cubic == next => {
-                    a.advance();
-                }
-                ahead => *ahead = Some(Ahead::new(next)),
-            }
-        }
-        self.pvt.run = Some(run);
     }
 }

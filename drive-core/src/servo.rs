@@ -1,5 +1,5 @@
 //! The closed loop (seed 000 §5.8) and stall detection (§5.5.20-21, §5.8.7): what the drive does
-//! with the encoder and the phase measurements of [`Inputs`](crate::faults::Inputs) at each tick.
+//! with the encoder and the phase measurements of `faults::Inputs` at each tick.
 //!
 //! **Feedback** is our object 0x2104, read at power-up (as 0x6054: "restart after a change"):
 //! 0 open loop; 1 closed loop with the encoder 0x6054 names (a CPR: incremental, counted ×4;
@@ -10,7 +10,7 @@
 //! speed. With an incremental encoder and 0x605E on, power-up takes 0x6055 as the position.
 //!
 //! **Commutation.** The drive drives the phases at an electrical angle, expressed in microsteps
-//! of 0x600C ([`Outputs::commutation`](crate::control::Outputs)); four full steps are one
+//! of 0x600C (`Outputs::commutation`); four full steps are one
 //! electrical turn (200 full steps a turn: a 1.8° motor). The encoder's electrical zero is the
 //! rotor's position at the first reading after power-up: the drive has not moved it and holds it
 //! at the angle of the setpoint, as an open-loop stepper does (a board whose rotor may sit off
@@ -43,15 +43,7 @@
 //!   bits 0-6 (clamped to 45°..175°: a positive threshold is more sensitive).
 //!   With 0x6043 = 1 the axis then stops at once.
 
-use crate::control::TICK_MICROS;
-use crate::drive::{DriveState, STATUS_STALL};
-use crate::faults::{FAULT_POSITION, Inputs};
-use crate::motion::axis::Setpoint;
-use crate::motion::cubic::Table;
-use crate::od::Obj;
-use crate::units::Instant;
-use core::borrow::BorrowMut;
-use fixed::types::U0F32;
+use crate::units::{Instant, TICK_MICROS};
 
 /// Full steps in one turn of the motor (a 1.8° hybrid stepper).
 pub const STEPS_PER_REV: i64 = 200;
@@ -144,7 +136,7 @@ pub struct Micro {
 
 /// An `i64` that is small in practice (a tick's encoder counts, a following error) as `f32`,
 /// saturated to `i32` first: the FPU converts that, where an `i64` conversion is a library call.
-fn small(x: i64) -> f32 {
+pub(crate) fn small(x: i64) -> f32 {
     x.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32 as f32
 }
 
@@ -299,7 +291,7 @@ pub(crate) struct Servo {
     /// The whole microsteps of the last tick's electrical angle.
     pub(crate) last_angle: i64,
     /// The resolution `last_angle` counts in, microsteps a full step.
-    last_per_step: u32,
+    pub(crate) last_per_step: u32,
 }
 
 /// What the closed loop asks of the power stage at one tick.
@@ -313,7 +305,7 @@ pub(crate) struct Drive {
 
 /// The PID gains and filter of the servo loop, in physical units (see the module doc).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) struct Gains {
+pub struct Gains {
     /// Full current per full step of error.
     pub kp: f32,
     /// Full current per full step·second.
@@ -413,130 +405,6 @@ impl Servo {
         let u = unclamped.clamp(-1.0, 1.0);
         let lead = if u < 0.0 { -(per_step.max(1) as f32) } else { per_step.max(1) as f32 };
         Drive { angle: rotor.plus(lead), current: libm::fabsf(u) }
-    }
-}
-
-impl<P: BorrowMut<Table>> DriveState<P> {
-    /// The encoder reading of this tick: 0x6089, and in closed loop the measured position. The
-    /// first reading of a closed loop places the standing axis on the measured position.
-    pub(crate) fn sense(&mut self, inputs: &Inputs) {
-        let Some(raw) = inputs.encoder else { return };
-        let kind = self.servo.encoder_kind(self.param(Obj::EncoderCpr));
-        let first = self.servo.read(kind, raw);
-        self.status.encoder = self.servo.encoder as i32;
-        let Feedback::Closed(encoder) = self.servo.feedback else { return };
-        if first && matches!(encoder, Encoder::Incremental { .. }) && self.param(Obj::AutoSave) == 1 {
-            // §5.5.15: the incremental closed loop starts from the power-down position.
-            self.set_param(Obj::ZeroOffset, self.param(Obj::SavedPosition));
-        }
-        // While the power stage is off the setpoint follows the rotor (turned by hand, say), so
-        // that enabling does not jump back.
-        if (first || !self.power_stage_on()) && self.axis.is_still() {
-            let measured = self.measured();
-            if measured != self.axis.setpoint().whole {
-                self.axis.set_position(measured);
-            }
-        }
-    }
-
-    /// The sensorless detector's present estimates: the load angle (rad, in the direction of
-    /// motion) and the back-EMF magnitude (V), both low-passed. For traces and tuning.
-    pub fn stall_estimate(&self) -> (f32, f32) {
-        (self.servo.sensorless.load_angle, self.servo.sensorless.emf)
-    }
-
-    /// The measured position (closed loop): encoder position + zero offset 0x6087.
-    pub(crate) fn measured(&self) -> i64 {
-        self.servo.encoder.wrapping_add(i64::from(self.param(Obj::ZeroOffset) as i32))
-    }
-
-    /// 0x607F: the measured speed in closed loop, the commanded one in open loop.
-    pub(crate) fn real_speed(&self) -> i32 {
-        let v = match self.servo.feedback {
-            Feedback::Open => libm::roundf(self.axis.setpoint().velocity),
-            Feedback::Closed(_) => libm::roundf(self.servo.speed),
-        };
-        v as i32
-    }
-
-    /// The electrical angle and the share of the phase current to drive for the setpoint `sp`,
-    /// with the stall detection of the loop in force.
-    /// `moved` is the whole microsteps the setpoint moved this tick: in open loop the angle
-    /// advances by them, so that declaring a position (0x600E) does not turn the motor.
-    pub(crate) fn commutate(&mut self, now: Instant, sp: &Setpoint, moved: i64, inputs: &Inputs) -> (Setpoint, f32) {
-        let per_step = self.param(Obj::Microsteps).max(1);
-        if per_step != self.servo.last_per_step {
-            // A new resolution: the same electrical angle in the new microsteps.
-            let (new, old) = (i64::from(per_step), i64::from(self.servo.last_per_step.max(1)));
-            self.servo.last_angle = (self.servo.last_angle.saturating_mul(2 * new).div_euclid(old) + 1).div_euclid(2);
-            self.servo.last_per_step = per_step;
-        }
-        let Feedback::Closed(encoder) = self.servo.feedback else {
-            self.detect_stall_sensorless(now, sp, inputs, per_step);
-            return (Setpoint { whole: self.servo.last_angle.saturating_add(moved), ..*sp }, 1.0);
-        };
-        let per_rev = encoder.counts_per_rev();
-        let rotor = self.servo.rotor_angle(per_rev, per_step);
-        let following = sp.whole.saturating_sub(self.measured());
-        self.servo.following = following;
-        let to_micro = (STEPS_PER_REV as f32 * per_step as f32) / per_rev as f32;
-        let error = (small(following) + sp.fraction.to_num::<f32>()) * to_micro;
-        let velocity = sp.velocity * to_micro;
-        let at = |m: Micro, velocity: f32| Setpoint {
-            whole: m.whole,
-            fraction: U0F32::from_bits((m.fraction * 4_294_967_296.0) as u32),
-            velocity,
-            acceleration: 0.0,
-        };
-        if !self.power_stage_on() {
-            self.servo.relax();
-            return (at(rotor, 0.0), 0.0);
-        }
-        if libm::fabsf(error) > self.param(Obj::StallLength) as f32 {
-            // A following error beyond 0x605C: the position error alarm (25) and the stall bit.
-            self.status.controller |= STATUS_STALL;
-            self.latch(now, 0, FAULT_POSITION);
-            self.stop_motion();
-            self.servo.relax();
-            return (at(rotor, 0.0), 0.0);
-        }
-        let drive = if self.param(Obj::TorqueLoop) == 1 {
-            let g = Gains::from_objects(
-                self.param(Obj::Kp),
-                self.param(Obj::Ki),
-                self.param(Obj::Kd),
-                self.param(Obj::PreFilter),
-            );
-            self.servo.servo_loop(rotor, error / per_step as f32, per_step, &g)
-        } else {
-            self.servo.position_loop(rotor, error, per_step)
-        };
-        (at(drive.angle, velocity), drive.current)
-    }
-
-    /// Open loop: the sensorless stall detection (0x2107), from the phase currents and voltages.
-    fn detect_stall_sensorless(&mut self, now: Instant, sp: &Setpoint, inputs: &Inputs, per_step: u32) {
-        let (Some(ma), Some(mv)) = (inputs.phase_ma, inputs.phase_mv) else {
-            return self.servo.sensorless.reset();
-        };
-        if self.param(Obj::StallDetect) != 1 || !self.power_stage_on() {
-            return self.servo.sensorless.reset();
-        }
-        let x = SensorlessInput {
-            i: ma.map(|m| m as f32 * 1e-3),
-            v: mv.map(|m| m as f32 * 1e-3),
-            r: self.param(Obj::MotorResistance) as f32 * 1e-3,
-            l: self.param(Obj::MotorInductance) as f32 * 1e-6,
-            speed: sp.velocity / per_step as f32,
-            min_speed: self.param(Obj::StallMinSpeed) as f32,
-            limit: stall_limit(self.param(Obj::StallParams)),
-        };
-        if self.servo.sensorless.update(now, &x) && self.status.controller & STATUS_STALL == 0 {
-            self.status.controller |= STATUS_STALL;
-            if self.param(Obj::StallStop) == 1 {
-                self.stop_motion();
-            }
-        }
     }
 }
 

@@ -346,7 +346,7 @@ impl Job {
         Some(match drive.take_system_request()? {
             SystemRequest::Save => Job::Save(drive.state().params()),
             SystemRequest::SavePosition(position) => Job::SavePosition(position),
-            SystemRequest::SaveFaults => Job::SaveFaults(FaultHistory::of(drive.state())),
+            SystemRequest::SaveFaults => Job::SaveFaults(drive.state().fault_history()),
             SystemRequest::BootLoader => Job::BootLoader,
         })
     }
@@ -480,7 +480,7 @@ mod tests {
         p.set_fault_history(&h);
         assert_eq!(p.fault_history(), h);
         let mut drive = Drive::boot(DriveConfig { can_save: true, ..DriveConfig::default() }, &p, 0);
-        assert_eq!(FaultHistory::of(drive.state()), h);
+        assert_eq!(drive.state().fault_history(), h);
         assert!(!drive.has_system_request());
         assert_eq!(Job::take(&mut drive), None, "what was loaded is saved already");
         drive.tick_with(Instant::from_micros(1_000_000), &hot);
@@ -498,7 +498,7 @@ mod tests {
         p.set_fault_history(&short);
         let mut drive = Drive::boot(DriveConfig::default(), &p, 0);
         drive.tick_with(Instant::from_micros(500_000), &hot);
-        let shown = FaultHistory::of(drive.state());
+        let shown = drive.state().fault_history();
         let entries = [15 << 24 | 5, 13 << 24 | 7, 11 << 24 | 3, 0, 0, 0, 0, 0, 0, 0];
         assert_eq!(shown, FaultHistory { entries, count: 3 });
         assert!(!drive.has_system_request());

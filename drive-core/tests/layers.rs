@@ -46,6 +46,12 @@ fn the_lower_layers_import_nothing_from_above() {
     assert_only("motion", &["units"]);
     // The store persists what the faults part keeps, not the other way round.
     assert!(!imports("faults").contains("store"), "faults imports the store");
+    // The closed loop's and supervision's data know nothing of the drive or its dictionary
+    // (faults names the history objects), and the controller the tick owns nothing of the bus
+    // side: no dictionary, no maps, no planning of modes.
+    assert_only("servo", &["units"]);
+    assert_only("faults", &["od", "units"]);
+    assert_only("controller", &["faults", "modes", "motion", "servo", "units"]);
 }
 
 #[test]

@@ -521,7 +521,6 @@ mod tests {
             analog_in: 777,
             pvt_pointer: 9,
             encoder: -5,
-            storage: 0x11,
             faults: 0x03,
             comm: 0x01,
         };

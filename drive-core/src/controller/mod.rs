@@ -1,0 +1,284 @@
+//! The controller: what the control tick owns and runs every 50 µs. The motion it was handed
+//! (an [`Axis`] walking a plan or a PVT run), supervision (faults, power loss, the communication
+//! watchdog), the closed loop with stall detection, and the output stage's orders.
+//!
+//! The controller plans nothing and reads no register: it runs [`Settings`], an immutable
+//! struct of checked values the bus side builds from the dictionary whenever one of them
+//! changes, and what it measures ([`Inputs`]). What it decides on its own and the bus side must
+//! know (a stop it started, a set-point it joined, power failing) it reports as [`Events`].
+
+mod loops;
+pub(crate) mod run;
+mod supervise;
+
+use crate::faults::{FaultLog, Inputs};
+use crate::modes::PowerState;
+use crate::motion::axis::{Axis, Setpoint};
+use crate::motion::cubic::{Ahead, Table};
+use crate::servo::{Feedback, Gains, Servo};
+use crate::units::Instant;
+use fixed::types::U0F16;
+
+pub use run::{Pvt, STATUS_FIFO_EMPTY, STATUS_FIFO_HIGH, STATUS_FIFO_LOW};
+
+/// Controller status bit 2: a stall was detected (write 1 to clear; moves are refused while set).
+pub const STATUS_STALL: u8 = 1 << 2;
+/// Controller status bit 3: the motor is executing a move.
+pub const STATUS_BUSY: u8 = 1 << 3;
+
+/// What the output stage is told at one tick.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Outputs {
+    /// The position setpoint, with its fraction: microsteps in open loop, encoder counts in
+    /// closed loop (see [`crate::servo`]).
+    pub setpoint: Setpoint,
+    /// The electrical angle the power stage drives, in microsteps of `microsteps` a full step
+    /// (four full steps an electrical turn): the setpoint in open loop, the closed loop's
+    /// commutation otherwise.
+    pub commutation: Setpoint,
+    /// Whole microsteps of `commutation` to step this tick (signed): what a STEP/DIR stage emits.
+    pub steps: i64,
+    /// Phase current amplitude in mA; 0 frees the motor.
+    pub current_ma: u16,
+    /// Whether the power stage is on: enabled (0x6011), no fault latched, not freed by power loss.
+    /// Off, the bridges are open and `current_ma` is 0.
+    pub enabled: bool,
+    /// The brake's PWM duty in percent: 0x6038 releases it while the power stage is on, 0 applies
+    /// it (see [`crate::faults`]).
+    pub brake_duty: u8,
+    /// Microsteps per full step that positions count in (0x600C; 0 counts full steps).
+    pub microsteps: u16,
+    /// The share of fast decay in the chopper's off-time (0x6010).
+    pub fast_decay: U0F16,
+}
+
+/// The drive's running status bits and measurements: what the live objects report.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Status {
+    /// Error status bits (0x6000).
+    pub error: u8,
+    /// Controller status bits (0x6001).
+    pub controller: u8,
+    /// Step-notification bits (0x6061).
+    pub notify: u8,
+    /// GPIO levels (0x6031), inverted as the manual has them.
+    pub gpio: u16,
+    /// Analog input code (0x605F).
+    pub analog_in: u16,
+    /// PVT pointer (0x601A).
+    pub pvt_pointer: u16,
+    /// Encoder position in counts (0x6089).
+    pub encoder: i32,
+    /// Drive fault bits beyond 0x6000 (0x2135): `faults::FAULT_*`.
+    pub faults: u8,
+    /// Communication status bits (0x2138): `faults::COMM_TIMEOUT`.
+    pub comm: u8,
+}
+
+/// The settings the controller runs, checked and converted from the dictionary's values.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Settings {
+    /// The master enabled the power stage (0x6011 = 1).
+    pub enabled: bool,
+    /// The deceleration of a stop the controller starts on its own (watchdog, PVT FIFO dry, PVT
+    /// stop), pps²; 0 stops at once.
+    pub stop_decel: u32,
+    /// Phase current, mA (0x600D).
+    pub phase_current_ma: u32,
+    /// Standstill current, percent of the phase current (0x6034).
+    pub idle_current_pct: u32,
+    /// Standstill delay before the current drops, µs (0x6035).
+    pub idle_delay_us: u64,
+    /// Microsteps a full step (0x600C).
+    pub microsteps: u16,
+    /// Fast-decay share (0x6010).
+    pub fast_decay: U0F16,
+    /// Brake release duty, percent (0x6038).
+    pub brake_duty: u8,
+    /// Under-voltage level, mV.
+    pub under_voltage_mv: u32,
+    /// Over-voltage level, mV.
+    pub over_voltage_mv: u32,
+    /// Over-temperature level, °C.
+    pub over_temperature_c: u32,
+    /// Over-current level, mA.
+    pub over_current_ma: u32,
+    /// Communication timeout, µs; 0 is off.
+    pub comm_timeout_us: u64,
+    /// Below this supply the motor is freed (0 when 0x6082 bit 0 is off), mV.
+    pub free_below_mv: u32,
+    /// Below this supply the brake is applied (0 when 0x6082 bit 1 is off), mV.
+    pub brake_below_mv: u32,
+    /// The power-down position save is on (0x605E = 1).
+    pub auto_save: bool,
+    /// The position saved at the last power loss (0x6055).
+    pub saved_position: i32,
+    /// Encoder lines (0x6054): open loop counts an incremental encoder of this many for 0x6089.
+    pub encoder_cpr: u32,
+    /// Zero offset (0x6087), closed loop: the measured position is the encoder's plus this.
+    pub zero_offset: i32,
+    /// Following-error limit, microsteps (0x605C).
+    pub following_limit: u32,
+    /// The servo loop (0x605D = 1) instead of the position loop.
+    pub servo_loop: bool,
+    /// The servo loop's gains (0x6057..0x605A).
+    pub gains: Gains,
+    /// Sensorless stall detection on (0x2107).
+    pub stall_detect: bool,
+    /// A stall stops the motion (0x6053).
+    pub stall_stop: bool,
+    /// Winding resistance, Ω, and inductance, H.
+    pub motor_r: f32,
+    /// Winding inductance, H.
+    pub motor_l: f32,
+    /// Minimum speed for stall detection, full steps per second.
+    pub stall_min_speed: f32,
+    /// The load angle beyond which the rotor has pulled out, rad.
+    pub stall_limit: f32,
+}
+
+/// What the controller did on its own at a tick, for the bus side to take into account.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Events {
+    /// The controller stopped the motion (fault, stall, watchdog, PVT FIFO dry): any set-point
+    /// or PVT run is over.
+    pub stopped: bool,
+    /// The walk passed into the set-point appended after the running one.
+    pub joined: bool,
+    /// The supply began failing: the power-down position save is due if it is on.
+    pub power_failing: bool,
+    /// The closed loop's first reading set the zero offset to this (§5.5.15).
+    pub zero_offset: Option<i32>,
+}
+
+/// Fast-decay shares of 0x6010's values 0..=3: 0, 1/2, 3/4, 7/8.
+pub const DECAY: [U0F16; 4] = [U0F16::ZERO, U0F16::lit("0.5"), U0F16::lit("0.75"), U0F16::lit("0.875")];
+
+/// What the control tick owns.
+#[derive(Clone, Debug)]
+pub struct Controller {
+    /// What it runs.
+    pub(crate) settings: Settings,
+    /// The motion being executed.
+    pub(crate) axis: Axis,
+    /// The running status bits and measurements.
+    pub(crate) status: Status,
+    /// The fault history and the supervision's memory.
+    pub(crate) faults: FaultLog,
+    /// The closed loop and stall detection.
+    pub(crate) servo: Servo,
+    /// The PVT run, if one runs.
+    pub(crate) run: Option<run::Run>,
+    /// The next PVT segment's walk, built a piece a tick before it starts.
+    pub(crate) ahead: Option<Ahead>,
+    /// Since when the axis has stood still (for the standstill current).
+    still_since: Option<Instant>,
+    /// What happened since the bus side last took the events.
+    pub(crate) events: Events,
+}
+
+impl Controller {
+    /// The controller at power-up, standing at 0.
+    pub(crate) fn new(settings: Settings, feedback: Feedback, faults: FaultLog) -> Self {
+        Self {
+            settings,
+            axis: Axis::new(0),
+            status: Status::default(),
+            faults,
+            servo: Servo::new(feedback),
+            run: None,
+            ahead: None,
+            still_since: None,
+            events: Events::default(),
+        }
+    }
+
+    /// The running status.
+    pub fn status(&self) -> &Status {
+        &self.status
+    }
+
+    /// The motion being executed.
+    pub fn axis(&self) -> &Axis {
+        &self.axis
+    }
+
+    /// The settings in force.
+    pub fn settings(&self) -> &Settings {
+        &self.settings
+    }
+
+    /// What happened on its own since the last call.
+    pub(crate) fn take_events(&mut self) -> Events {
+        core::mem::take(&mut self.events)
+    }
+
+    /// What the power stage does: a fault first, then the master's enable, then power loss.
+    pub fn power_state(&self) -> PowerState {
+        if self.faulted() {
+            PowerState::Faulted
+        } else if !self.settings.enabled {
+            PowerState::Disabled
+        } else if self.faults.freed {
+            PowerState::Freed
+        } else {
+            PowerState::On
+        }
+    }
+
+    /// Whether the power stage drives the motor.
+    pub(crate) fn power_stage_on(&self) -> bool {
+        self.power_state() == PowerState::On
+    }
+
+    /// Decelerates to rest at the stop deceleration (a ramp of closed form) and ends a PVT run.
+    pub(crate) fn decelerate_to_stop(&mut self) {
+        self.axis.stop_ramp(self.settings.stop_decel);
+        self.run = None;
+        self.events.stopped = true;
+    }
+
+    /// Stops the setpoint where it is and ends a PVT run.
+    pub(crate) fn stop_motion(&mut self) {
+        self.axis.halt();
+        self.run = None;
+        self.events.stopped = true;
+    }
+
+    /// One control tick at `now` with what the drive measures: supervision, the next PVT
+    /// segment (its points from `pvt` and `table`), the motion, the loops; what the output stage
+    /// does.
+    pub fn tick(&mut self, now: Instant, inputs: &Inputs, pvt: &mut Pvt, table: &Table) -> Outputs {
+        self.sense(inputs);
+        self.supervise(now, inputs);
+        self.pvt_tick(now, pvt, table);
+        let (setpoint, moved) = self.axis.tick(now);
+        if self.axis.take_joined() {
+            self.events.joined = true;
+        }
+        let (commutation, share) = self.commutate(now, &setpoint, moved, inputs);
+        let steps = commutation.whole.saturating_sub(self.servo.last_angle);
+        self.servo.last_angle = commutation.whole;
+        // Standstill current reduction once the motor has stood for the delay.
+        let s = &self.settings;
+        let still = self.axis.is_still();
+        let since = *self.still_since.get_or_insert(now);
+        if !still {
+            self.still_since = None;
+        }
+        let idle = still && now.since(since) >= s.idle_delay_us;
+        let full = s.phase_current_ma * if idle { s.idle_current_pct } else { 100 } / 100;
+        let current = (full as f32 * share.clamp(0.0, 1.0)) as u32;
+        let enabled = self.power_stage_on();
+        Outputs {
+            setpoint,
+            commutation,
+            steps,
+            current_ma: if enabled { current as u16 } else { 0 },
+            enabled,
+            brake_duty: self.brake_duty(),
+            microsteps: self.settings.microsteps,
+            fast_decay: self.settings.fast_decay,
+        }
+    }
+}

@@ -1,0 +1,147 @@
+//! Supervision at each tick: faults latched from the measurements, power loss, the
+//! communication watchdog (see [`crate::faults`] for what each one means).
+
+use super::Controller;
+use crate::faults::{
+    COMM_TIMEOUT, ERR_A_OVER_CURRENT, ERR_B_OVER_CURRENT, ERR_COIL_A_OPEN, ERR_COIL_B_OPEN, ERR_OVER_TEMPERATURE,
+    ERR_UNDER_VOLTAGE, ERROR_ALARMS, FAULT_ALARMS, FAULT_ENCODER, FAULT_OVER_VOLTAGE, FAULT_OVERLOAD, Inputs,
+    OVERLOAD_MICROS, code_of,
+};
+use crate::units::Instant;
+
+impl Controller {
+    /// Whether a fault is latched (0x6000 or 0x2135): the power stage stays off.
+    pub fn faulted(&self) -> bool {
+        self.status.error != 0 || self.status.faults != 0
+    }
+
+    /// The alarm code 0x2134 shows: the most severe latched alarm, 0 for none.
+    pub(crate) fn alarm_code(&self) -> u8 {
+        code_of(&ERROR_ALARMS, self.status.error).or_else(|| code_of(&FAULT_ALARMS, self.status.faults)).unwrap_or(0)
+    }
+
+    /// Checks the measurements at `now`: latches faults, records them, and applies the fault and
+    /// power-loss reactions to the motion.
+    pub(crate) fn supervise(&mut self, now: Instant, inputs: &Inputs) {
+        let (error, faults) = self.detect(now, inputs);
+        self.latch(now, error, faults);
+        self.power_loss(inputs);
+        self.watchdog(now);
+        if self.faulted() || self.faults.freed {
+            // The power stage is off: the setpoint stops where it is, and a run or set-point
+            // accepted before the fault does not start.
+            self.stop_motion();
+        }
+    }
+
+    /// Latches the fault bits `error` (0x6000) and `faults` (0x2135), with a history entry for
+    /// each bit that was not latched yet.
+    pub(crate) fn latch(&mut self, now: Instant, error: u8, faults: u8) {
+        let (new_error, new_faults) = (error & !self.status.error, faults & !self.status.faults);
+        if new_error | new_faults == 0 {
+            return;
+        }
+        for &(bit, code) in ERROR_ALARMS.iter() {
+            if new_error & bit != 0 {
+                self.faults.record(code, now);
+            }
+        }
+        for &(bit, code) in FAULT_ALARMS.iter() {
+            if new_faults & bit != 0 {
+                self.faults.record(code, now);
+            }
+        }
+        self.status.error |= error;
+        self.status.faults |= faults;
+    }
+
+    /// The fault bits the measurements show at `now` (0x6000, 0x2135).
+    fn detect(&mut self, now: Instant, inputs: &Inputs) -> (u8, u8) {
+        let s = &self.settings;
+        let (mut error, mut faults) = (0u8, 0u8);
+        if let Some(mv) = inputs.supply_mv {
+            if mv < s.under_voltage_mv {
+                error |= ERR_UNDER_VOLTAGE;
+            }
+            if mv > s.over_voltage_mv {
+                faults |= FAULT_OVER_VOLTAGE;
+            }
+        }
+        if let Some(t) = inputs.temperature_c
+            && i64::from(t) > i64::from(s.over_temperature_c)
+        {
+            error |= ERR_OVER_TEMPERATURE;
+        }
+        if self.servo.feedback.encoder().is_some() && inputs.encoder.is_none() {
+            faults |= FAULT_ENCODER;
+        }
+        let [open_a, open_b] = inputs.coil_open;
+        error |= if open_a { ERR_COIL_A_OPEN } else { 0 } | if open_b { ERR_COIL_B_OPEN } else { 0 };
+        match inputs.phase_ma {
+            Some([a, b]) => {
+                let limit = i64::from(s.over_current_ma);
+                let over = |i: i32| i64::from(i).abs() > limit;
+                error |= if over(a) { ERR_A_OVER_CURRENT } else { 0 } | if over(b) { ERR_B_OVER_CURRENT } else { 0 };
+                // Overload: either phase above 1.5 times the setting, continuously. With a
+                // setting of 0 there is no current to compare with (over-current still applies).
+                let load = i64::from(s.phase_current_ma) * 3 / 2;
+                if load > 0 && i64::from(a).abs().max(i64::from(b).abs()) > load {
+                    let since = *self.faults.overload_since.get_or_insert(now);
+                    if now.since(since) >= OVERLOAD_MICROS {
+                        faults |= FAULT_OVERLOAD;
+                    }
+                } else {
+                    self.faults.overload_since = None;
+                }
+            }
+            None => self.faults.overload_since = None,
+        }
+        (error, faults)
+    }
+
+    /// A valid frame addressed to this drive (or broadcast) arrived at `now`: the
+    /// communication watchdog starts again.
+    pub(crate) fn heard(&mut self, now: Instant) {
+        self.faults.last_frame = Some(now);
+    }
+
+    /// The communication watchdog (0x2137): when it runs out, the status bit and a stop.
+    fn watchdog(&mut self, now: Instant) {
+        let limit = self.settings.comm_timeout_us;
+        // Before the first frame the watchdog counts from the first tick: the clock need not
+        // start at 0 when the drive powers up.
+        let since = now.since(*self.faults.last_frame.get_or_insert(now));
+        if limit != 0 && since >= limit && self.status.comm & COMM_TIMEOUT == 0 {
+            self.status.comm |= COMM_TIMEOUT;
+            self.decelerate_to_stop();
+        }
+    }
+
+    /// Power-loss behaviour (0x6082..0x6084): the motor freed, the brake applied, and the event
+    /// for the power-down position save.
+    fn power_loss(&mut self, inputs: &Inputs) {
+        let Some(mv) = inputs.supply_mv else {
+            (self.faults.freed, self.faults.braked) = (false, false);
+            return;
+        };
+        let s = &self.settings;
+        self.faults.freed = mv < s.free_below_mv;
+        self.faults.braked = mv < s.brake_below_mv;
+        let failing = mv < s.free_below_mv.max(s.brake_below_mv).max(s.under_voltage_mv);
+        if failing && !self.faults.power_failing {
+            self.events.power_failing = true;
+        }
+        self.faults.power_failing = failing;
+    }
+
+    /// The brake's release duty (0x6038) while the power stage is on and power loss does not
+    /// apply it; else 0, applied.
+    pub(crate) fn brake_duty(&self) -> u8 {
+        if self.power_stage_on() && !self.faults.braked { self.settings.brake_duty } else { 0 }
+    }
+
+    /// History entry `k` (0 newest) of the fault history.
+    pub(crate) fn history(&self, k: usize) -> u32 {
+        self.faults.entry(k)
+    }
+}
