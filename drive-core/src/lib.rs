@@ -20,22 +20,23 @@
 #![forbid(unsafe_code)]
 #![deny(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::indexing_slicing, missing_docs)]
 
-pub mod control;
 pub mod controller;
 pub mod crc;
 pub mod drive;
 pub mod faults;
 pub mod ident;
+pub mod maps;
 pub mod modes;
 pub mod motion;
 pub mod od;
 pub mod pdu;
-pub mod pvt;
 pub mod rtu;
 pub mod servo;
+pub mod state;
 pub mod store;
 pub mod units;
 
-pub use drive::{Drive, DriveConfig, DriveState, Params, SystemRequest};
+pub use drive::{Drive, DriveConfig};
 pub use pdu::Exception;
+pub use state::{DriveState, Params, SystemRequest, control, pvt};
 pub use units::{Baud, Instant, SlaveAddr};

@@ -33,8 +33,9 @@ use sequential_storage::map::{MapConfig, MapConfigError, MapStorage};
 use crate::drive::{Drive, Params, STORAGE_CORRUPT, STORAGE_EMPTY, STORAGE_FSET, STORAGE_SAVE_FAILED, SystemRequest};
 pub use crate::faults::FaultHistory;
 use crate::faults::HISTORY_LEN;
+use crate::maps::RegisterMap;
 use crate::motion::cubic::Table;
-use crate::od::{Access, OBJECTS, RegisterMap, Storage};
+use crate::od::{Access, OBJECTS, Storage};
 
 /// Map key of the parameter record.
 pub const PARAMS_KEY: u8 = 0;

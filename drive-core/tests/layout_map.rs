@@ -1,4 +1,4 @@
-//! A second register layout over the same drive (`drive_core::od::layout`): other addresses, low
+//! A second register layout over the same drive (`drive_core::maps::layout`): other addresses, low
 //! word first, a speed in 0.1 rev/s, a current in 100 mA, other exception codes. It passes the
 //! native map's transactional tests: half-writes stage and complete, multi-object writes are all
 //! or nothing, and a refused request changes nothing.
@@ -11,7 +11,7 @@ mod common;
 mod harness;
 
 use common::frame;
-use drive_core::od::layout::LayoutMap;
+use drive_core::maps::layout::LayoutMap;
 use drive_core::od::{OBJECTS, Obj};
 use drive_core::{Drive, DriveConfig, Instant};
 use harness::pdu_layout::LAYOUT;

@@ -15,8 +15,8 @@ use core::sync::atomic::{AtomicU32, Ordering};
 
 use defmt::warn;
 use drive_core::ident::Identity;
+use drive_core::maps::NativeMap;
 use drive_core::motion::cubic::Table;
-use drive_core::od::NativeMap;
 use drive_core::{Baud, DriveConfig, Instant, Params};
 use embassy_futures::select::{Either, select};
 use embassy_time::Timer;

@@ -1,4 +1,4 @@
-//! Request frames to a drive whose map is a layout table (`drive_core::od::layout`): low word
+//! Request frames to a drive whose map is a layout table (`drive_core::maps::layout`): low word
 //! first, scaled units, vendor exception codes. The input is records `[ctl, len, pdu..]`, each
 //! sent as one frame with its CRC after a silence; `ctl` bits 0-1 choose the function (0x03,
 //! 0x06, 0x10, 0x17), bit 2 fixes the quantities and byte counts to the data given, bits 3-5 the
@@ -9,7 +9,7 @@
 //! layout's model of that register says (the object's value scaled, in the layout's word order).
 
 use super::oracle::{self, ADDR};
-use drive_core::od::layout::{Entry, Exceptions, FULL_STEPS_PER_REV, Layout, LayoutMap, Scale, WordOrder};
+use drive_core::maps::layout::{Entry, Exceptions, FULL_STEPS_PER_REV, Layout, LayoutMap, Scale, WordOrder};
 use drive_core::od::{OBJECTS, Obj, Type};
 use drive_core::pdu::Exception;
 use drive_core::{Drive, DriveConfig, Instant};

@@ -248,7 +248,7 @@ fn tick_float_check(elf: &Path) -> Result<(), String> {
 /// is inlined, so the split is approximate.
 const PARTS: &[(&str, &[&str])] = &[
     ("S-curve planner", &["drive_core::motion::scurve"]),
-    ("PVT segments", &["drive_core::motion::cubic", "drive_core::pvt"]),
+    ("PVT segments", &["drive_core::motion::cubic", "drive_core::state::pvt", "drive_core::controller::run"]),
     ("axis and tracks", &["drive_core::motion::axis", "drive_core::motion::track"]),
     (
         "software f64 and 64/128-bit arithmetic",
@@ -266,7 +266,7 @@ const PARTS: &[(&str, &[&str])] = &[
             "__fix",
         ],
     ),
-    ("object dictionary", &["drive_core::od"]),
+    ("object dictionary and maps", &["drive_core::od", "drive_core::maps"]),
     ("parameter store", &["sequential_storage", "drive_core::store", "embassy_embedded_hal"]),
     ("drive: requests, tick, loops, faults", &["drive_core::"]),
     ("Embassy executor and tasks", &["embassy_executor"]),

@@ -6,12 +6,10 @@
 
 #[cfg(feature = "docs")]
 pub mod doc;
-pub mod index;
-pub mod layout;
-pub mod map;
+mod effects;
 pub mod native;
 
-pub use map::{NativeMap, RegisterMap};
+pub(crate) use effects::{has_effect, is_command, is_pvt_command};
 pub use native::{OBJECTS, Obj};
 
 /// How an object's value is encoded in registers.

@@ -270,7 +270,7 @@ objects! {
     /// PVT operation (chapter 5 prints 0x6016): 0 stop (decelerate to rest), 1 start at the next
     /// control tick, 2 push the point 0x6027..2C into the queue (refused, 04, when full or when
     /// its segment from the previous point would exceed 200 kpps or jump), 3 clear the queue
-    /// (refused while running). See `drive-core/src/pvt.rs` for runs and their checks.
+    /// (refused while running). See `drive-core/src/state/pvt.rs` for runs and their checks.
     PvtControl @ 0x6017: U8, Cmd, Ram, Span(0, 3), default 0, None, "PVT operation";
     /// PVT mode: 0 mode 1 (single run), 1 mode 2 (loop), 2 mode 3 (FIFO). Changing it clears
     /// the points; refused while a run is active.

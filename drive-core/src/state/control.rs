@@ -16,10 +16,10 @@
 //! - The jerk of the S-curve is the larger of the acceleration and deceleration divided by the
 //!   jerk time 0x2101 (our object, ms): the time the acceleration takes to build up.
 //!
-//! PVT (0x6007 = 2), synchronous positioning and group starts are in [`crate::pvt`].
+//! PVT (0x6007 = 2), synchronous positioning and group starts are in [`super::pvt`].
 
+use super::DriveState;
 use crate::controller::{DECAY, Events, STATUS_BUSY, Settings};
-use crate::drive::DriveState;
 use crate::faults::Inputs;
 use crate::modes::{PowerState, WorkMode};
 use crate::motion::axis::Axis;
@@ -36,24 +36,6 @@ pub use crate::units::{TICK_HZ, TICK_MICROS};
 
 /// Accelerations of the levels 1..=8 of 0x600A/0x600B, in pps² (level 0: no ramp).
 pub const LEVELS: [u32; 8] = [77_440, 48_410, 27_170, 21_510, 14_080, 10_460, 6_915, 5_210];
-
-/// Whether writing `obj` does more than store its value.
-pub(crate) const fn has_effect(obj: Obj) -> bool {
-    matches!(
-        obj,
-        Obj::RelativeMove
-            | Obj::AbsoluteMove
-            | Obj::MaxSpeed
-            | Obj::Mode
-            | Obj::Stop
-            | Obj::Enable
-            | Obj::Position
-            | Obj::Microsteps
-            | Obj::ControlWord
-            | Obj::PpRunSpeed
-            | Obj::ZeroOffset
-    ) || crate::pvt::is_pvt_command(obj)
-}
 
 /// Controlword bit 4: a new set-point, on its rising edge.
 pub const CW_NEW_SETPOINT: u16 = 1 << 4;
@@ -412,7 +394,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
 
     /// Checks a write to a motion object: refused when the drive cannot act on it now.
     pub(crate) fn check_motion(&self, obj: Obj, value: u32) -> Result<(), ObjError> {
-        if crate::pvt::is_pvt_command(obj) {
+        if crate::od::is_pvt_command(obj) {
             return self.check_pvt(obj, value);
         }
         let mut scratch = (self.ctl.axis, self.pp);
@@ -421,7 +403,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
 
     /// Writes a motion object, which [`DriveState::check_motion`] accepted.
     pub(crate) fn apply_motion(&mut self, obj: Obj, value: u32) {
-        if crate::pvt::is_pvt_command(obj) {
+        if crate::od::is_pvt_command(obj) {
             return self.apply_pvt(obj, value);
         }
         let mut planned = (self.ctl.axis, self.pp);

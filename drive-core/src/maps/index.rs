@@ -4,7 +4,7 @@
 //! object to the end of its last; every register of that span knows the index of the object at or
 //! after it. Reserved registers between objects thus lead to the next object.
 
-use super::{OBJECTS, Storage, Type};
+use crate::od::{OBJECTS, Storage, Type};
 
 /// One page's span of registers.
 #[derive(Clone, Copy)]
@@ -127,7 +127,8 @@ pub(crate) fn registers(addr: u16, qty: u16) -> Option<&'static [u16]> {
 /// object at or after `addr`.
 ///
 /// ```
-/// use drive_core::od::{index::locate, OBJECTS};
+/// use drive_core::maps::index::locate;
+/// use drive_core::od::OBJECTS;
 /// let i = locate(0x6003, 2).unwrap();
 /// assert_eq!(OBJECTS[i].addr, 0x6003);
 /// assert_eq!(OBJECTS[locate(0x6012, 1).unwrap()].addr, 0x6013); // reserved: the next object

@@ -44,8 +44,8 @@
 //! 0x6017 = 0 does. Any start, including 0x6017 = 1, takes effect at the next control tick after
 //! the frame, so every drive that receives one frame starts in the same tick.
 
+use super::DriveState;
 use crate::controller::run::{Phase, Source};
-use crate::drive::DriveState;
 use crate::modes::{PvtMode, WorkMode};
 use crate::motion::axis::Axis;
 use crate::motion::cubic::{Cubic, Point, TABLE_SIZE, Table, V_MAX};
@@ -68,11 +68,6 @@ pub(crate) enum Start {
     Pvt,
     /// The synchronous move of 0x6047/0x6049.
     Sync,
-}
-
-/// Whether `obj` is one of the PVT and group objects whose write does more than store.
-pub(crate) const fn is_pvt_command(obj: Obj) -> bool {
-    matches!(obj, Obj::PvtControl | Obj::PvtMode | Obj::PvtTime | Obj::GroupStart | Obj::GroupStop)
 }
 
 /// What an accepted PVT write does.

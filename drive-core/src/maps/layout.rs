@@ -11,7 +11,7 @@
 //! - a refused request changes nothing, and its reason ([`ObjError`]) becomes the layout's code.
 //!
 //! ```
-//! use drive_core::od::layout::{Entry, Exceptions, Layout, LayoutMap, Scale, WordOrder};
+//! use drive_core::maps::layout::{Entry, Exceptions, Layout, LayoutMap, Scale, WordOrder};
 //! use drive_core::od::Obj;
 //! use drive_core::{Drive, DriveConfig, Instant};
 //! static ENTRIES: [Entry; 1] = [Entry { addr: 0x0100, obj: Obj::PhaseCurrent, scale: Scale::Ratio(100, 1) }];
@@ -24,11 +24,11 @@
 //! assert_eq!(drive.state().read(Obj::PhaseCurrent), 1200);
 //! ```
 
-use super::map::{Op, RegisterMap};
-use super::{Access, Obj, ObjError, ObjectDef, Type};
-use crate::drive::DriveState;
+use super::native::{Op, RegisterMap};
 use crate::motion::cubic::Table;
+use crate::od::{Access, Obj, ObjError, ObjectDef, Type};
 use crate::pdu::{Exception, Words};
+use crate::state::DriveState;
 use core::borrow::BorrowMut;
 
 /// Full steps a revolution of the motors the drive runs (1.8°), for scales per revolution.

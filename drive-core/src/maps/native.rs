@@ -1,11 +1,10 @@
 //! Register maps: how the registers of a vendor's protocol reach the drive's objects.
 
 use super::index;
-use super::{Access, OBJECTS, Obj, ObjError, ObjectDef, Range, Type};
-use crate::control::has_effect;
-use crate::drive::DriveState;
 use crate::motion::cubic::Table;
+use crate::od::{Access, OBJECTS, Obj, ObjError, ObjectDef, Range, Type, is_command};
 use crate::pdu::{Exception, MAX_WRITE, Words};
+use crate::state::DriveState;
 use core::borrow::BorrowMut;
 use heapless::Vec;
 
@@ -299,27 +298,6 @@ const fn interval(ty: Type, range: Range) -> Option<(u32, u32)> {
     }
 }
 
-/// Whether writing each object does more than store it ([`has_effect`]), by object index: one
-/// load instead of a chain of comparisons, on every object of every write.
-static COMMAND: [bool; Obj::COUNT] = {
-    let mut table = [false; Obj::COUNT];
-    let mut i = 0;
-    while i < Obj::COUNT {
-        #[allow(clippy::indexing_slicing)] // const evaluation: out of bounds is a compile error
-        {
-            table[i] = has_effect(Obj::ALL[i]);
-        }
-        i += 1;
-    }
-    table
-};
-
-/// Whether writing `obj` does more than store the value: [`has_effect`], by table.
-#[inline(always)]
-pub(crate) fn is_command(obj: Obj) -> bool {
-    COMMAND.get(obj as usize).copied().unwrap_or(true)
-}
-
 /// Register `reg` of the `i`th object, a live value or a text.
 #[inline(never)]
 fn other_word<P: BorrowMut<Table>>(drive: &DriveState<P>, i: usize, reg: u32) -> u16 {
@@ -513,7 +491,7 @@ mod tests {
         for (k, p) in drive.params.iter_mut().enumerate() {
             *p = 0x0102_0304u32.wrapping_mul(k as u32 + 1);
         }
-        *drive.status_mut() = crate::drive::Status {
+        *drive.status_mut() = crate::state::Status {
             error: 3,
             controller: 5,
             notify: 1,

@@ -1,0 +1,581 @@
+//! The drive's state behind the object dictionary: the objects' values, the profile set-points,
+//! the PVT points, and the controller the control tick runs (see [`crate::controller`]). What a
+//! write to an object does is here and in [`control`] (the motion modes) and [`pvt`].
+
+pub mod control;
+pub mod pvt;
+
+use crate::controller::{Controller, Pvt};
+use crate::faults::FaultLog;
+use crate::faults::{FaultHistory, HISTORY_OBJECTS};
+use crate::ident::Identity;
+use crate::motion::cubic::Table;
+use crate::od::has_effect;
+use crate::od::is_command;
+use crate::od::{Access, OBJECTS, Obj, ObjError, ObjectDef, Storage};
+use crate::servo::Feedback;
+use crate::units::Instant;
+use control::{Pp, runs_on, settings_of};
+use core::borrow::BorrowMut;
+
+pub use crate::controller::{STATUS_BUSY, STATUS_STALL, Status};
+
+/// Storage status (0x2120) bit 0: no saved parameters were found at power-up; factory values.
+pub const STORAGE_EMPTY: u8 = 1 << 0;
+/// Storage status bit 1: the saved parameters could not be read at power-up (corrupt store or a
+/// record format this firmware does not know); factory values (a store the flash map cannot read
+/// is erased, so that the next save works).
+pub const STORAGE_CORRUPT: u8 = 1 << 1;
+/// Storage status bit 2: FSET was held low at power-up; factory values restored and saved.
+pub const STORAGE_FSET: u8 = 1 << 2;
+/// Storage status bit 3: a save is in progress (read only: it clears when the save ends).
+pub const STORAGE_SAVING: u8 = 1 << 3;
+/// Storage status bit 4: the last save failed; the flash holds the set saved before it.
+pub const STORAGE_SAVE_FAILED: u8 = 1 << 4;
+
+/// Requests the drive makes of its platform, collected with [`Drive::take_system_request`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SystemRequest {
+    /// Save every ROM object (0x200F = 2).
+    Save,
+    /// Jump to the boot loader (0x200F = 1).
+    BootLoader,
+    /// Power is failing and 0x605E is on: save this position as 0x6055 before it is gone.
+    SavePosition(i32),
+    /// An alarm was recorded: save the fault history and the alarm count (0x213C..0x214F,
+    /// 0x2136) as they are now, so that they survive a power cycle.
+    SaveFaults,
+}
+
+/// The values of the saved objects: what a save writes and what power-up loads.
+///
+/// Only objects a save covers ([`Params::covers`]) can be set; the others stay at their factory
+/// values and are ignored when a drive is built from a set, but for those with records of their
+/// own: the power-down position 0x6055 and the fault history with the alarm count.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Params {
+    pub(crate) values: [u32; Obj::COUNT],
+}
+
+impl Params {
+    /// Every object at its factory value.
+    pub fn factory() -> Self {
+        let mut values = [0; Obj::COUNT];
+        for (v, d) in values.iter_mut().zip(OBJECTS.iter()) {
+            *v = d.default;
+        }
+        Self { values }
+    }
+
+    /// Whether a save (0x200F = 2) covers the object `d` declares: the ROM objects a master can
+    /// write. 0x6055 (ROM, read only) has its own record, written at power loss.
+    pub fn covers(d: &ObjectDef) -> bool {
+        d.storage == Storage::Rom && d.access == Access::Rw
+    }
+
+    /// Copies the values of the objects a save covers into `values` (indexed by object), and
+    /// leaves the others.
+    pub(crate) fn copy_saved_into(&self, values: &mut [u32; Obj::COUNT]) {
+        for ((v, p), d) in values.iter_mut().zip(self.values.iter()).zip(OBJECTS.iter()) {
+            if Self::covers(d) {
+                *v = *p;
+            }
+        }
+    }
+
+    /// The value of `obj`.
+    pub fn get(&self, obj: Obj) -> u32 {
+        self.values.get(obj as usize).copied().unwrap_or(0)
+    }
+
+    /// Sets `obj` to `value` if a save covers it and its range accepts the value; whether it did.
+    pub fn set(&mut self, obj: Obj, value: u32) -> bool {
+        let d = obj.def();
+        let ok = Self::covers(d) && d.range.accepts(d.ty, value);
+        if ok && let Some(v) = self.values.get_mut(obj as usize) {
+            *v = value;
+        }
+        ok
+    }
+
+    /// Sets the position saved at the last power loss (0x6055), which has its own record.
+    pub fn set_saved_position(&mut self, position: i32) {
+        if let Some(v) = self.values.get_mut(Obj::SavedPosition as usize) {
+            *v = position as u32;
+        }
+    }
+
+    /// The fault history and alarm count loaded at power-up (their own record).
+    pub fn fault_history(&self) -> FaultHistory {
+        let mut history = FaultHistory { count: self.get(Obj::AlarmCount) as u16, ..FaultHistory::default() };
+        for (e, obj) in history.entries.iter_mut().zip(HISTORY_OBJECTS) {
+            *e = self.get(obj);
+        }
+        history
+    }
+
+    /// Sets the fault history and alarm count, which have their own record.
+    pub fn set_fault_history(&mut self, history: &FaultHistory) {
+        let pairs = history.entries.iter().zip(HISTORY_OBJECTS).map(|(&e, obj)| (obj, e));
+        for (obj, value) in pairs.chain([(Obj::AlarmCount, u32::from(history.count))]) {
+            if let Some(v) = self.values.get_mut(obj as usize) {
+                *v = value;
+            }
+        }
+    }
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Self::factory()
+    }
+}
+
+/// Everything the object dictionary reads and writes.
+///
+/// `P` holds the PVT point table (10 KB): the state owns it by default; a microcontroller keeps
+/// it in a static of its own and lends it (`&'static mut Table`), so that building the state
+/// never passes 10 KB through its stack.
+#[derive(Clone, Debug)]
+pub struct DriveState<P = Table> {
+    pub(crate) params: [u32; Obj::COUNT],
+    /// Storage status bits (0x2120): `STORAGE_*`.
+    storage: u8,
+    identity: Identity,
+    can_save: bool,
+    pub(crate) request: Option<SystemRequest>,
+    /// The time of the event being handled (a frame, a tick): when a command takes effect.
+    pub(crate) now: Instant,
+    /// The profile position and velocity modes' set-points.
+    pub(crate) pp: Pp,
+    /// Which slots of `table` hold PVT points.
+    pub(crate) pvt: Pvt,
+    /// The PVT points (10 KB: kept out of [`Checkpoint`]).
+    pub(crate) table: P,
+    /// What the control tick owns: the motion, supervision, the loops and the running status.
+    pub(crate) ctl: Controller,
+    /// The alarm count when the platform was last asked to save the history (changed only by
+    /// taking requests, so kept out of [`Checkpoint`] too).
+    faults_saved: u16,
+}
+
+/// Everything of a [`DriveState`] but the PVT point table: what a multi-object write restores
+/// when a later object of it is refused. (A table slot written by such a write lies beyond the
+/// restored count of points, so it is not a point.)
+#[derive(Clone, Debug)]
+pub struct Checkpoint {
+    params: [u32; Obj::COUNT],
+    storage: u8,
+    status: Status,
+    request: Option<SystemRequest>,
+    now: Instant,
+    axis: crate::motion::axis::Axis,
+    pp: Pp,
+    pvt: Pvt,
+    run: Option<crate::controller::run::Run>,
+}
+
+impl DriveState {
+    /// Factory state.
+    pub fn new(identity: Identity, can_save: bool) -> Self {
+        Self::booted(identity, can_save, Params::factory().values, 0, FaultLog::default(), Table::EMPTY)
+    }
+}
+
+impl<P: BorrowMut<Table>> DriveState<P> {
+    /// The state at power-up with the object values `params`, the storage status `storage` and
+    /// the fault history `faults` (as saved: not to be saved again).
+    ///
+    /// One struct expression, out of line: built in a local and then modified, the state would
+    /// be copied once more. (The compiler still builds it in a temporary and copies it to the
+    /// caller's place, which is why a microcontroller lends the 10 KB table: see
+    /// [`Drive::boot_with_table`].)
+    #[inline(never)]
+    pub(crate) fn booted(
+        identity: Identity,
+        can_save: bool,
+        params: [u32; Obj::COUNT],
+        storage: u8,
+        faults: FaultLog,
+        table: P,
+    ) -> Self {
+        let get = |obj: Obj| params.get(obj as usize).copied().unwrap_or(0);
+        let feedback = Feedback::from_objects(get(Obj::Feedback), get(Obj::EncoderCpr));
+        Self {
+            faults_saved: faults.count,
+            ctl: Controller::new(settings_of(&params), feedback, faults),
+            params,
+            storage,
+            identity,
+            can_save,
+            request: None,
+            now: Instant::from_micros(0),
+            pp: Pp::default(),
+            pvt: Pvt::default(),
+            table,
+        }
+    }
+
+    /// Everything but the PVT table, to [`DriveState::restore`] later.
+    pub fn checkpoint(&self) -> Checkpoint {
+        // Naming every field: a new one must be decided on here.
+        let Self { params, storage, identity: _, can_save: _, request, now, pp, pvt, table: _, ctl, faults_saved: _ } =
+            self;
+        Checkpoint {
+            params: *params,
+            storage: *storage,
+            status: ctl.status,
+            request: *request,
+            now: *now,
+            axis: ctl.axis,
+            pp: *pp,
+            pvt: *pvt,
+            run: ctl.run,
+        }
+    }
+
+    /// Writes values in order, all or nothing, as every map's multi-object write does: `value`
+    /// turns each item into its object and value, reading the drive as the writes before it left
+    /// it, or into nothing to write; at the first refusal the drive goes back to how it was
+    /// before the first write, and the refusal is returned. Out of line: the checkpoint
+    /// (everything but the PVT table) is on the stack only here.
+    #[inline(never)]
+    pub fn write_in_order<T>(
+        &mut self,
+        items: impl IntoIterator<Item = T>,
+        mut value: impl FnMut(&Self, T) -> Result<Option<(&'static ObjectDef, u32)>, ObjError>,
+    ) -> Result<(), ObjError> {
+        let saved = self.checkpoint();
+        for item in items {
+            let written = value(self, item).and_then(|w| w.map_or(Ok(()), |(d, v)| self.write_def(d, v)));
+            if let Err(e) = written {
+                self.restore(saved);
+                return Err(e);
+            }
+        }
+        Ok(())
+    }
+
+    /// Goes back to `c`.
+    pub fn restore(&mut self, c: Checkpoint) {
+        let Checkpoint { params, storage, status, request, now, axis, pp, pvt, run } = c;
+        (self.params, self.storage, self.request, self.now) = (params, storage, request, now);
+        (self.ctl.status, self.ctl.axis, self.ctl.run, self.pp, self.pvt) = (status, axis, run, pp, pvt);
+        self.refresh_settings();
+    }
+
+    /// The running status.
+    pub fn status(&self) -> &Status {
+        &self.ctl.status
+    }
+
+    /// The running status, for the platform's inputs (GPIO levels, the analog input).
+    pub fn status_mut(&mut self) -> &mut Status {
+        &mut self.ctl.status
+    }
+
+    /// What the power stage does ([`Controller::power_state`]).
+    pub fn power_state(&self) -> crate::modes::PowerState {
+        self.ctl.power_state()
+    }
+
+    /// Whether a fault is latched ([`Controller::faulted`]).
+    pub fn faulted(&self) -> bool {
+        self.ctl.faulted()
+    }
+
+    /// The sensorless stall detector's estimates ([`Controller::stall_estimate`]).
+    pub fn stall_estimate(&self) -> (f32, f32) {
+        self.ctl.stall_estimate()
+    }
+
+    /// What the control tick owns.
+    pub fn controller(&self) -> &Controller {
+        &self.ctl
+    }
+
+    /// Builds the controller's settings again from the objects.
+    #[inline(never)]
+    pub(crate) fn refresh_settings(&mut self) {
+        self.ctl.settings = settings_of(&self.params);
+    }
+
+    /// The storage status bits (0x2120): `STORAGE_*`.
+    pub fn storage(&self) -> u8 {
+        self.storage
+    }
+
+    /// The position setpoint in whole microsteps (it never wraps; 0x600E..F shows its low 32 bits).
+    pub fn position(&self) -> i64 {
+        self.ctl.axis.setpoint().whole
+    }
+
+    /// Declares the present position, as writing 0x600E..F does; refused while moving.
+    pub fn set_position(&mut self, position: i64) -> bool {
+        self.ctl.axis.set_position(position)
+    }
+
+    /// The present values of the objects a save covers: what 0x200F = 2 writes.
+    pub fn params(&self) -> Params {
+        let mut p = Params::factory();
+        for (v, (now, d)) in p.values.iter_mut().zip(self.params.iter().zip(OBJECTS.iter())) {
+            if Params::covers(d) {
+                *v = *now;
+            }
+        }
+        p
+    }
+
+    /// Power is failing: if the power-down save is on (0x605E = 1), asks the platform to save the
+    /// position ([`SystemRequest::SavePosition`]), replacing any request still pending (a
+    /// parameter save could not finish on the remaining charge anyway). The power-loss detector
+    /// calls this once; whether it asked is returned.
+    pub fn power_lost(&mut self) -> bool {
+        let on = self.read(Obj::AutoSave) == 1;
+        if on {
+            self.request = Some(SystemRequest::SavePosition(self.position() as i32));
+        }
+        on
+    }
+
+    /// Whether an alarm was recorded since the history was last handed to a platform that saves.
+    fn fault_save_due(&self) -> bool {
+        self.can_save && self.ctl.faults.count != self.faults_saved
+    }
+
+    /// [`SystemRequest::SaveFaults`] if [due](DriveState::fault_save_due); the history counts as
+    /// saved from here on (if the save fails, the next alarm saves the whole history again).
+    pub(crate) fn take_fault_save(&mut self) -> Option<SystemRequest> {
+        let due = self.fault_save_due();
+        self.faults_saved = self.ctl.faults.count;
+        due.then_some(SystemRequest::SaveFaults)
+    }
+
+    /// Whether a request for the platform is waiting ([`Drive::take_system_request`]).
+    pub(crate) fn has_request(&self) -> bool {
+        self.request.is_some() || self.fault_save_due()
+    }
+
+    /// The fault history and alarm count as the objects show them now.
+    pub fn fault_history(&self) -> FaultHistory {
+        let mut history = FaultHistory { count: self.ctl.faults.count, ..FaultHistory::default() };
+        for (k, e) in history.entries.iter_mut().enumerate() {
+            *e = self.ctl.history(k);
+        }
+        history
+    }
+
+    /// The identification strings.
+    pub fn identity(&self) -> &Identity {
+        &self.identity
+    }
+
+    /// The value of `obj` as its registers show it (S32 as two's complement).
+    pub fn read(&self, obj: Obj) -> u32 {
+        self.read_def(obj.def())
+    }
+
+    /// The value of the object `d` declares: from the running status for live objects, else stored.
+    #[inline]
+    pub fn read_def(&self, d: &ObjectDef) -> u32 {
+        if d.storage == Storage::Live {
+            self.live(d.obj)
+        } else {
+            self.params.get(d.obj as usize).copied().unwrap_or(0)
+        }
+    }
+
+    fn live(&self, obj: Obj) -> u32 {
+        let s = &self.ctl.status;
+        match obj {
+            // The axis's own state, not a copy: the register shows the low 32 bits of the setpoint.
+            Obj::Position => self.ctl.axis.setpoint().whole as u32,
+            Obj::ErrorStatus => u32::from(s.error),
+            Obj::ControllerStatus => {
+                u32::from(s.controller | self.fifo_status() | if self.ctl.axis.is_still() { 0 } else { STATUS_BUSY })
+            }
+            Obj::PvtCount => u32::from(self.pvt.count()),
+            Obj::PvtFault => u32::from(self.pvt.fault),
+            Obj::NotifyStatus => u32::from(s.notify),
+            Obj::GpioValue => u32::from(s.gpio),
+            Obj::AnalogIn => u32::from(s.analog_in),
+            Obj::StatusWord => u32::from(self.statusword()),
+            Obj::PvtPointer => u32::from(s.pvt_pointer),
+            Obj::RealSpeed => self.ctl.real_speed() as u32,
+            Obj::FollowingError => self.ctl.servo.following as i32 as u32,
+            Obj::EncoderPosition => s.encoder as u32,
+            Obj::StorageStatus => u32::from(self.storage),
+            Obj::AlarmCode => u32::from(self.ctl.alarm_code()),
+            Obj::DriveFaults => u32::from(s.faults),
+            Obj::CommStatus => u32::from(s.comm),
+            Obj::AlarmCount => u32::from(self.ctl.faults.count),
+            Obj::FaultHistory0 => self.ctl.history(0),
+            Obj::FaultHistory1 => self.ctl.history(1),
+            Obj::FaultHistory2 => self.ctl.history(2),
+            Obj::FaultHistory3 => self.ctl.history(3),
+            Obj::FaultHistory4 => self.ctl.history(4),
+            Obj::FaultHistory5 => self.ctl.history(5),
+            Obj::FaultHistory6 => self.ctl.history(6),
+            Obj::FaultHistory7 => self.ctl.history(7),
+            Obj::FaultHistory8 => self.ctl.history(8),
+            Obj::FaultHistory9 => self.ctl.history(9),
+            _ => self.params.get(obj as usize).copied().unwrap_or(0),
+        }
+    }
+
+    /// `obj` read as a signed value.
+    pub fn read_i32(&self, obj: Obj) -> i32 {
+        self.read(obj) as i32
+    }
+
+    /// Word `k` of a text object: two ASCII bytes, first one high, zero padded.
+    pub fn text_word(&self, obj: Obj, k: usize) -> u16 {
+        let text = match obj {
+            Obj::DeviceName => self.identity.device_name,
+            Obj::HardwareVersion => self.identity.hardware_version,
+            Obj::SoftwareVersion => self.identity.software_version,
+            _ => "",
+        }
+        .as_bytes();
+        let byte = |i: usize| text.get(i).copied().unwrap_or(0);
+        u16::from_be_bytes([byte(2 * k), byte(2 * k + 1)])
+    }
+
+    /// Whether writing `value` to `obj` would be accepted; nothing changes.
+    pub fn check(&self, obj: Obj, value: u32) -> Result<(), ObjError> {
+        self.check_def(obj.def(), value)
+    }
+
+    /// Whether `d` is a plain setting: [`DriveState::check_def`] accepts any value in its range
+    /// whatever the drive's state, and [`DriveState::apply_def`] stores it. The write path checks
+    /// these against a precomputed interval (`maps::native`): an object with a check beyond its range
+    /// must not be plain (a test compares the two).
+    pub(crate) const fn plain(d: &ObjectDef) -> bool {
+        matches!(d.access, Access::Rw)
+            && matches!(d.storage, Storage::Ram | Storage::Rom)
+            && !has_effect(d.obj)
+            && !runs_on(d.obj)
+            && !matches!(d.obj, Obj::SystemControl)
+    }
+
+    /// Whether the object `d` declares takes writes, and `value` is within its range.
+    fn check_writable(d: &ObjectDef, value: u32) -> Result<(), ObjError> {
+        if d.access == Access::Ro || d.storage == Storage::Const {
+            return Err(ObjError::ReadOnly);
+        }
+        if !d.range.accepts(d.ty, value) {
+            return Err(ObjError::OutOfRange);
+        }
+        Ok(())
+    }
+
+    /// [`DriveState::check`] for the object `d` declares.
+    #[inline(always)]
+    pub fn check_def(&self, d: &ObjectDef, value: u32) -> Result<(), ObjError> {
+        Self::check_writable(d, value)?;
+        match (d.obj, value) {
+            // No boot loader to jump to yet (see 0x200F's documentation).
+            (Obj::SystemControl, 1) => Err(ObjError::Unsupported),
+            (Obj::SystemControl, 2) if !self.can_save => Err(ObjError::Unsupported),
+            // A flash erase stalls the STM32G431's single bank for ~22 ms: never while moving. A
+            // second save waits for the first to end.
+            (Obj::SystemControl, 2 | 3) if !self.ctl.axis.is_still() || self.storage & STORAGE_SAVING != 0 => {
+                Err(ObjError::Busy)
+            }
+            (obj, _) if is_command(obj) => self.check_motion(obj, value),
+            _ => Ok(()),
+        }
+    }
+
+    /// [`DriveState::check_def`], then [`DriveState::apply_def`] if accepted; nothing changes if
+    /// refused. A motion command is planned once: checking it plans the motion (a plan proves a
+    /// move possible), and so does applying it, and a plan costs a Cortex-M4 hundreds of
+    /// thousands of instructions, during which the control tick waits for the bus task.
+    pub fn write_def(&mut self, d: &ObjectDef, value: u32) -> Result<(), ObjError> {
+        // The objects whose check is `check_motion` and whose write is `apply_motion`.
+        if is_command(d.obj) && has_effect(d.obj) && !crate::od::is_pvt_command(d.obj) && d.obj != Obj::Position {
+            Self::check_writable(d, value)?;
+            let mut planned = (self.ctl.axis, self.pp);
+            let changed = self.plan_motion(d.obj, value, &mut planned)?;
+            self.commit_motion(d.obj, value, changed.then_some(&planned));
+            return Ok(());
+        }
+        self.check_def(d, value)?;
+        self.apply_def(d, value);
+        Ok(())
+    }
+
+    /// Writes `value` to the object `d` declares, which [`DriveState::check`] accepted.
+    #[inline(always)]
+    pub fn apply_def(&mut self, d: &ObjectDef, value: u32) {
+        if d.access == Access::Rw && d.storage != Storage::Live && !is_command(d.obj) {
+            // A setting: stored, and handed to the controller if it runs it.
+            if let Some(p) = self.params.get_mut(d.obj as usize) {
+                *p = value;
+            }
+            if runs_on(d.obj) {
+                self.refresh_settings();
+            }
+        } else {
+            self.apply(d.obj, value);
+        }
+    }
+
+    /// Writes `value` to `obj`, which [`DriveState::check`] accepted.
+    pub fn apply(&mut self, obj: Obj, value: u32) {
+        let s = &mut self.ctl.status;
+        match obj {
+            Obj::ErrorStatus => s.error &= !(value as u8),
+            Obj::ControllerStatus => s.controller &= !(value as u8 & !STATUS_BUSY),
+            Obj::NotifyStatus => s.notify &= !(value as u8),
+            Obj::StorageStatus => self.storage &= !(value as u8 & !STORAGE_SAVING),
+            Obj::DriveFaults => s.faults &= !(value as u8),
+            Obj::CommStatus => s.comm &= !(value as u8),
+            Obj::PvtFault => self.pvt.fault &= !(value as u8),
+            Obj::GpioValue => {
+                // Only outputs take the written level.
+                let outputs = self.params.get(Obj::GpioDirection as usize).copied().unwrap_or(0) as u16;
+                s.gpio = (s.gpio & !outputs) | (value as u16 & outputs);
+            }
+            Obj::Position => {
+                let position = i64::from(value as i32);
+                if self.ctl.axis.set_position(position) && self.ctl.servo.feedback.encoder().is_some() {
+                    // Closed loop: the position is the encoder's plus the zero offset.
+                    self.set_param(Obj::ZeroOffset, position.wrapping_sub(self.ctl.servo.encoder) as u32);
+                }
+            }
+            obj if has_effect(obj) => self.apply_motion(obj, value),
+            _ => {
+                self.set_param(obj, value);
+                if obj == Obj::SystemControl {
+                    if value == 3 {
+                        self.restore_factory();
+                    }
+                    // Factory settings are saved too, so that they survive a restart as §3.11's
+                    // FSET reset does; without storage they hold until power-off.
+                    if (value == 2 || value == 3) && self.can_save {
+                        self.storage = (self.storage & !STORAGE_SAVE_FAILED) | STORAGE_SAVING;
+                        self.request = Some(SystemRequest::Save);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Puts every object a save covers back to its factory value (RAM objects, 0x6055 and the
+    /// status are untouched).
+    pub fn restore_factory(&mut self) {
+        Params::factory().copy_saved_into(&mut self.params);
+        self.refresh_settings();
+    }
+
+    /// The platform finished the save it was asked for ([`SystemRequest::Save`]); `ok` if the
+    /// flash holds the new set.
+    pub fn save_done(&mut self, ok: bool) {
+        let s = &mut self.storage;
+        *s &= !STORAGE_SAVING;
+        if !ok {
+            *s |= STORAGE_SAVE_FAILED;
+        }
+    }
+}
