@@ -279,7 +279,7 @@ impl<M: RegisterMap, P: BorrowMut<Table>> Drive<M, P> {
             return;
         }
         counters.slave_messages = counters.slave_messages.wrapping_add(1);
-        state.ctl.heard(state.now);
+        state.ctl.heard();
         let pdu = rest.get(..rest.len().saturating_sub(2)).unwrap_or_default();
         let function = pdu.first().copied().unwrap_or(0);
         if function & 0x80 != 0 {

@@ -175,6 +175,8 @@ pub struct Controller {
     still_since: Option<Instant>,
     /// What happened since the bus side last took the events.
     pub(crate) events: Events,
+    /// A frame for this drive arrived since the last tick (the watchdog restarts).
+    heard: bool,
 }
 
 impl Controller {
@@ -190,6 +192,7 @@ impl Controller {
             ahead: None,
             still_since: None,
             events: Events::default(),
+            heard: false,
         }
     }
 

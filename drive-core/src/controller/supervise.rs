@@ -99,15 +99,19 @@ impl Controller {
         (error, faults)
     }
 
-    /// A valid frame addressed to this drive (or broadcast) arrived at `now`: the
-    /// communication watchdog starts again.
-    pub(crate) fn heard(&mut self, now: Instant) {
-        self.faults.last_frame = Some(now);
+    /// A valid frame addressed to this drive (or broadcast) arrived: the communication
+    /// watchdog starts again at the next tick (a flag: the request path only sets it).
+    #[inline(always)]
+    pub(crate) fn heard(&mut self) {
+        self.heard = true;
     }
 
     /// The communication watchdog (0x2137): when it runs out, the status bit and a stop.
     fn watchdog(&mut self, now: Instant) {
         let limit = self.settings.comm_timeout_us;
+        if core::mem::take(&mut self.heard) {
+            self.faults.last_frame = Some(now);
+        }
         // Before the first frame the watchdog counts from the first tick: the clock need not
         // start at 0 when the drive powers up.
         let since = now.since(*self.faults.last_frame.get_or_insert(now));
