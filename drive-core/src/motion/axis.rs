@@ -21,6 +21,9 @@ enum Segment {
     Still,
     /// Walking the axis' track; `at` is the tick of the walker's sample.
     Track { walker: Walker, at: Instant },
+    /// A stop ramp of closed form ([`Walker::stop_ramp`]), off the track; `at` is the tick of
+    /// the walker's sample, `left` the ticks left until it stands.
+    Ramp { walker: Walker, at: Instant, left: u32 },
     /// A PVT segment from the anchor, started at the control tick `start`. Evaluated exactly in
     /// integers (walked tick by tick, `walk`); held on its end point until the next segment
     /// replaces it or the run ends.
@@ -64,6 +67,15 @@ pub struct Axis {
 /// 2^-32: the weight of a fraction's lowest bit.
 const TWO_POW_M32: f64 = 1.0 / 4_294_967_296.0;
 
+/// One tick of a stop ramp with `left` ticks left: its last tick stands where the one before
+/// left the walk (as a track's last piece does).
+fn ramp_step(walker: &mut Walker, left: &mut u32) {
+    if *left > 1 {
+        walker.ramp_step();
+    }
+    *left -= 1;
+}
+
 /// Whole control ticks from `start` to `now` (a PVT segment starts on a tick).
 fn cubic_tick(start: Instant, now: Instant) -> u64 {
     now.since(start) / TICK_MICROS
@@ -99,7 +111,7 @@ impl Axis {
         match &self.segment {
             Segment::Track { .. } => self.track.target(),
             Segment::Still => Some(self.anchor),
-            _ => None,
+            Segment::Ramp { .. } | Segment::Cubic { .. } => None,
         }
     }
 
@@ -130,6 +142,16 @@ impl Axis {
                 }
                 let whole = w.position().0;
                 (whole, w.state(whole))
+            }
+            &Segment::Ramp { walker, at: now, left } => {
+                let (mut w, mut t, mut left) = (walker, now, left);
+                while t.plus_micros(TICK_MICROS) <= at && left > 0 {
+                    ramp_step(&mut w, &mut left);
+                    t = t.plus_micros(TICK_MICROS);
+                }
+                let whole = w.position().0;
+                let state = if left > 0 { w.state(whole) } else { w.rest_state(whole) };
+                (whole, state)
             }
             Segment::Cubic { start, cubic, rates, .. } => {
                 let k = cubic_tick(*start, at);
@@ -226,7 +248,8 @@ impl Axis {
     pub fn settled(&self) -> bool {
         match &self.segment {
             Segment::Track { walker, .. } => walker.cruising(&self.track),
-            _ => true,
+            Segment::Ramp { .. } => false,
+            Segment::Still | Segment::Cubic { .. } => true,
         }
     }
 
@@ -310,16 +333,15 @@ impl Axis {
         }
         self.joint = None;
         let last = self.last;
-        match &mut self.segment {
-            Segment::Still => {}
-            Segment::Track { walker, .. } => walker.stop_ramp(&mut self.track, decel),
+        let (mut walker, at) = match self.segment {
+            Segment::Still => return,
+            Segment::Track { walker, at } | Segment::Ramp { walker, at, .. } => (walker, at),
             Segment::Cubic { start, .. } => {
-                let mut walker = Walker::moving(last.whole, last.fraction.to_bits(), last.velocity);
-                walker.stop_ramp(&mut self.track, decel);
-                let at = self.grid.unwrap_or(*start);
-                self.segment = Segment::Track { walker, at };
+                (Walker::moving(last.whole, last.fraction.to_bits(), last.velocity), self.grid.unwrap_or(start))
             }
-        }
+        };
+        let left = walker.stop_ramp(decel);
+        self.segment = Segment::Ramp { walker, at, left };
     }
 
     /// Stops at once where the axis is (seed 000 0x6053, disable, faults): no ramp.
@@ -336,7 +358,9 @@ impl Axis {
         if !self.is_still() {
             return false;
         }
-        *self = Self { grid: self.grid, ..Self::new(position) };
+        // The track is the planner's: standing, the axis does not read it.
+        (self.anchor, self.rest, self.joint, self.joined) = (position, 0, None, false);
+        self.last = Setpoint { whole: position, fraction: U0F32::ZERO, velocity: 0.0, acceleration: 0.0 };
         true
     }
 
@@ -365,6 +389,21 @@ impl Axis {
                     (whole, fraction, walker.velocity(), walker.acceleration())
                 }
             }
+            Segment::Ramp { walker, at, left } => {
+                while at.plus_micros(TICK_MICROS) <= now && *left > 0 {
+                    ramp_step(walker, left);
+                    *at = at.plus_micros(TICK_MICROS);
+                }
+                let (whole, fraction) = walker.position();
+                if *left == 0 {
+                    // Where the speed reached zero: the new anchor.
+                    (self.anchor, self.rest) = (whole, fraction);
+                    self.segment = Segment::Still;
+                    (whole, fraction, 0.0, 0.0)
+                } else {
+                    (whole, fraction, walker.velocity(), walker.acceleration())
+                }
+            }
             Segment::Cubic { start, cubic, walk, rates, .. } => {
                 // Exact: whole microsteps and fraction straight from the integer walk.
                 let k = cubic_tick(*start, now);
@@ -375,5 +414,35 @@ impl Axis {
         let moved = whole.saturating_sub(self.last.whole);
         self.last = Setpoint { whole, fraction: U0F32::from_bits(fraction), velocity, acceleration };
         (self.last, moved)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// What the control tick does on its own (walk, stop ramps, halts, a declared position)
+    /// leaves the planner's track as planned: a plan handed to the tick is never written there.
+    #[test]
+    fn the_tick_never_writes_the_track() {
+        let limits = Limits { v_max: 20_000.0, a_max: 50_000.0, d_max: 50_000.0, jerk: Some(1e6) };
+        let mut axis = Axis::new(0);
+        let t0 = Instant::from_micros(0);
+        assert!(axis.move_to(t0, 100_000, 0.0, 0.0, &limits).is_ok());
+        let planned = axis.track;
+        let mut now = t0;
+        for k in 0..20_000u32 {
+            now = now.plus_micros(TICK_MICROS);
+            axis.tick(now);
+            if k == 5_000 {
+                axis.stop_ramp(30_000);
+            }
+        }
+        assert!(axis.is_still(), "the ramp ends at rest");
+        axis.halt();
+        assert!(axis.set_position(7));
+        axis.tick(now.plus_micros(TICK_MICROS));
+        assert_eq!(axis.track, planned);
+        assert_eq!(axis.setpoint().whole, 7);
     }
 }

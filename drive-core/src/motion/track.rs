@@ -67,8 +67,6 @@ enum End {
     Rest(i64, u32),
     /// Nothing: the last piece lasts until the track is replaced.
     Cruise,
-    /// Stand where the last piece left the walk (a stop ramp's end).
-    Here,
 }
 
 /// A trajectory sampled on the control ticks: sample 0 is the tick it is activated on.
@@ -181,7 +179,7 @@ impl Track {
                 let v = last.d1 as f64 / Q40 * f64::from(TICK_HZ);
                 Some((last.whole, State { p: f64::from(last.frac) / 4_294_967_296.0, v, a: 0.0 }))
             }
-            End::Rest(..) | End::Here => None,
+            End::Rest(..) => None,
         }
     }
 
@@ -196,7 +194,7 @@ impl Track {
             End::Target(p) => {
                 self.push(1, p, 0.0, 0.0, 0.0, 0.0);
             }
-            End::Rest(..) | End::Here => {}
+            End::Rest(..) => {}
         }
         let joint = self.n;
         if self.sample_after(profile, anchor, false) {
@@ -242,18 +240,8 @@ impl Track {
     pub fn target(&self) -> Option<i64> {
         match self.end {
             End::Target(p) => Some(p),
-            End::Rest(..) | End::Cruise | End::Here => None,
+            End::Rest(..) | End::Cruise => None,
         }
-    }
-
-    /// Makes this a stop ramp of `ticks` (see [`Walker::stop_ramp`]): one piece whose
-    /// differences the walker holds, then standing where it ends. Writes one piece, not the
-    /// whole track: a control tick can afford it.
-    fn make_stop(&mut self, ticks: u32) {
-        if let Some(first) = self.pieces.first_mut() {
-            *first = Piece { ticks, ..Piece::default() };
-        }
-        (self.n, self.end) = (1, End::Here);
     }
 
     /// The pieces in use.
@@ -322,7 +310,7 @@ impl Walker {
                 match track.end {
                     End::Target(p) => self.p = i128::from(p) << 64,
                     End::Rest(p, frac) => self.p = (i128::from(p) << 64) | (i128::from(frac) << 32),
-                    End::Cruise | End::Here => {}
+                    End::Cruise => {}
                 }
             }
         }
@@ -336,42 +324,52 @@ impl Walker {
         Self { i: 0, j: 0, p, d1: i128::from(step) << 40, d2: 0, d3: 0 }
     }
 
-    /// Turns `track` into a ramp from this walker's state to rest at `decel` (pps², above 0) with
-    /// no jerk limit, and this walker to its start: the position and the next tick's step are
-    /// kept, the speed falls by `decel / 20 kHz` a tick. Closed form in integers and `f32`: what
-    /// a control tick runs when it must stop on its own (the watchdog, a PVT FIFO running dry).
+    /// Turns this walker into a ramp from its state to rest at `decel` (pps², above 0) with no
+    /// jerk limit, walked by [`Walker::ramp_step`] off any track: the position and the next
+    /// tick's step are kept, the speed falls by `decel / 20 kHz` a tick. Returns the ticks the
+    /// ramp lasts: after one step fewer it stands. Closed form in integers and `f32`: what a
+    /// control tick runs when it must stop on its own (the watchdog, a PVT FIFO running dry),
+    /// and it writes no track (a track is the planner's alone).
     ///
     /// ```
     /// use drive_core::motion::scurve::{Limits, Profile, State};
     /// use drive_core::motion::track::{Track, Walker};
     /// let lim = Limits { v_max: 4_000.0, a_max: 1e5, d_max: 1e5, jerk: None };
     /// let prof = Profile::to_velocity(State::default(), 4_000.0, &lim).unwrap();
-    /// let mut track = Track::from_profile(&prof, 0, true).unwrap();
+    /// let track = Track::from_profile(&prof, 0, true).unwrap();
     /// let mut w = Walker::new(&track);
     /// for _ in 0..20_000 {
     ///     w.step(&track);
     /// }
     /// // At 4000 pps, stop at 8000 pps²: half a second, 1000 microsteps.
     /// let (from, _) = w.position();
-    /// w.stop_ramp(&mut track, 8_000);
-    /// while !w.ended(&track) {
-    ///     w.step(&track);
+    /// let ticks = w.stop_ramp(8_000);
+    /// assert_eq!(ticks, 10_001);
+    /// for _ in 1..ticks {
+    ///     w.ramp_step();
     /// }
     /// assert!((w.position().0 - from - 1_000).abs() <= 1);
     /// ```
-    pub fn stop_ramp(&mut self, track: &mut Track, decel: u32) {
+    pub fn stop_ramp(&mut self, decel: u32) -> u32 {
         let rate = TICK_HZ as f32;
         let speed = to_f32::<24>(self.d1).abs() * rate;
         // Ticks to rest: the speed over the deceleration.
         // Steps `k` of the ramp are `v − (k + ½)·decel` a tick: the last is the last not below 0.
         let ticks = (speed / decel.max(1) as f32 * rate + 1.5) as u32;
         let d2 = i128::from(decel) * PER_TICK_SQUARED;
-        track.make_stop(ticks);
         (self.i, self.j) = (0, 0);
         self.d2 = if self.d1 < 0 { d2 } else { -d2 };
         self.d3 = 0;
         // The first step is the present one, then each smaller by the deceleration.
         self.d1 += self.d2 / 2;
+        ticks
+    }
+
+    /// To the next tick of a [stop ramp](Walker::stop_ramp).
+    #[inline]
+    pub fn ramp_step(&mut self) {
+        self.p += self.d1;
+        self.d1 += self.d2;
     }
 
     /// To the next tick of `track`.
@@ -434,6 +432,12 @@ impl Walker {
         let rel = self.p - (i128::from(anchor) << 64);
         let (d1, d2, d3) = (self.d1 as f64, self.d2 as f64, self.d3 as f64);
         State { p: rel as f64 / ONE, v: (d1 - d2 / 2.0 + d3 / 3.0) * per, a: (d2 - d3) * per * rate }
+    }
+
+    /// [`Walker::state`] standing: the position, no speed (a stop ramp that has ended).
+    pub fn rest_state(&self, anchor: i64) -> State {
+        let rel = self.p - (i128::from(anchor) << 64);
+        State { p: rel as f64 / 18_446_744_073_709_551_616.0, ..State::default() }
     }
 }
 
