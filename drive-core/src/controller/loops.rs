@@ -20,7 +20,7 @@ impl Controller {
         if first && matches!(encoder, Encoder::Incremental { .. }) && self.settings.auto_save {
             // §5.5.15: the incremental closed loop starts from the power-down position.
             self.settings.zero_offset = self.settings.saved_position;
-            self.events.zero_offset = Some(self.settings.zero_offset);
+            self.raise(super::Events::ZERO_OFFSET);
         }
         // While the power stage is off the setpoint follows the rotor (turned by hand, say), so
         // that enabling does not jump back.

@@ -137,18 +137,35 @@ pub struct Settings {
     pub stall_limit: f32,
 }
 
-/// What the controller did on its own at a tick, for the bus side to take into account.
+/// What the controller did on its own at a tick, for the bus side to take into account: a set
+/// of flags (one byte, so that a tick with nothing to report costs one comparison).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Events {
+pub struct Events(u8);
+
+impl Events {
     /// The controller stopped the motion (fault, stall, watchdog, PVT FIFO dry): any set-point
     /// or PVT run is over.
-    pub stopped: bool,
+    pub const STOPPED: Self = Self(1 << 0);
     /// The walk passed into the set-point appended after the running one.
-    pub joined: bool,
+    pub const JOINED: Self = Self(1 << 1);
     /// The supply began failing: the power-down position save is due if it is on.
-    pub power_failing: bool,
-    /// The closed loop's first reading set the zero offset to this (§5.5.15).
-    pub zero_offset: Option<i32>,
+    pub const POWER_FAILING: Self = Self(1 << 2);
+    /// The closed loop's first reading set the zero offset (§5.5.15) to the settings' value.
+    pub const ZERO_OFFSET: Self = Self(1 << 3);
+
+    /// Whether every flag of `e` is set.
+    pub const fn has(self, e: Self) -> bool {
+        self.0 & e.0 == e.0
+    }
+
+    /// Whether no flag is set.
+    pub const fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+
+    fn set(&mut self, e: Self) {
+        self.0 |= e.0;
+    }
 }
 
 /// Fast-decay shares of 0x6010's values 0..=3: 0, 1/2, 3/4, 7/8.
@@ -216,6 +233,11 @@ impl Controller {
         core::mem::take(&mut self.events)
     }
 
+    /// Sets the event `e`.
+    pub(crate) fn raise(&mut self, e: Events) {
+        self.events.set(e);
+    }
+
     /// What the power stage does: a fault first, then the master's enable, then power loss.
     pub fn power_state(&self) -> PowerState {
         if self.faulted() {
@@ -238,14 +260,14 @@ impl Controller {
     pub(crate) fn decelerate_to_stop(&mut self) {
         self.axis.stop_ramp(self.settings.stop_decel);
         self.run = None;
-        self.events.stopped = true;
+        self.events.set(Events::STOPPED);
     }
 
     /// Stops the setpoint where it is and ends a PVT run.
     pub(crate) fn stop_motion(&mut self) {
         self.axis.halt();
         self.run = None;
-        self.events.stopped = true;
+        self.events.set(Events::STOPPED);
     }
 
     /// One control tick at `now` with what the drive measures: supervision, the next PVT
@@ -257,7 +279,7 @@ impl Controller {
         self.pvt_tick(now, pvt, table);
         let (setpoint, moved) = self.axis.tick(now);
         if self.axis.take_joined() {
-            self.events.joined = true;
+            self.events.set(Events::JOINED);
         }
         let (commutation, share) = self.commutate(now, &setpoint, moved, inputs);
         let steps = commutation.whole.saturating_sub(self.servo.last_angle);

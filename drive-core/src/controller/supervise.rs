@@ -133,7 +133,7 @@ impl Controller {
         self.faults.braked = mv < s.brake_below_mv;
         let failing = mv < s.free_below_mv.max(s.brake_below_mv).max(s.under_voltage_mv);
         if failing && !self.faults.power_failing {
-            self.events.power_failing = true;
+            self.raise(super::Events::POWER_FAILING);
         }
         self.faults.power_failing = failing;
     }

@@ -170,7 +170,7 @@ impl Track {
     /// Where a move appended now would start: the whole microsteps and the state relative to
     /// them at the tick after the last piece (a move's target at rest, or the start of the
     /// cruise that ends a pass through a target, which the move replaces). `None` for a
-    /// speed change to rest or a stop ramp.
+    /// speed change to rest.
     pub fn end_state(&self) -> Option<(i64, State)> {
         match self.end {
             End::Target(p) => Some((p, State::default())),

@@ -447,10 +447,10 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     /// sets the zero offset. Out of line: most ticks have nothing to report.
     #[inline(never)]
     fn take_events(&mut self, events: Events) {
-        if events.stopped {
+        if events.has(Events::STOPPED) {
             self.pp = Pp::default();
         }
-        if events.joined
+        if events.has(Events::JOINED)
             && self.mode() == WorkMode::ProfilePosition
             && let Some(sp) = self.pp.buffered.take()
         {
@@ -459,11 +459,11 @@ impl<P: BorrowMut<Table>> DriveState<P> {
                 self.pp.ack = false;
             }
         }
-        if events.power_failing {
+        if events.has(Events::POWER_FAILING) {
             self.power_lost();
         }
-        if let Some(offset) = events.zero_offset {
-            self.set_param(Obj::ZeroOffset, offset as u32);
+        if events.has(Events::ZERO_OFFSET) {
+            self.set_param(Obj::ZeroOffset, self.ctl.settings.zero_offset as u32);
         }
     }
 
@@ -478,8 +478,8 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     pub fn tick_with(&mut self, now: Instant, inputs: &Inputs) -> Outputs {
         self.now = now;
         let out = self.ctl.tick(now, inputs, &mut self.pvt, self.table.borrow());
-        let events = self.ctl.take_events();
-        if events != Events::default() {
+        if !self.ctl.events.is_empty() {
+            let events = self.ctl.take_events();
             self.take_events(events);
         }
         out
