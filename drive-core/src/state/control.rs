@@ -397,6 +397,13 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         if crate::od::is_pvt_command(obj) {
             return self.check_pvt(obj, value);
         }
+        self.check_planned(obj, value)
+    }
+
+    /// Plans `obj` = `value` on a copy of the axis and set-points, to see whether it may be
+    /// written. Out of line, as [`DriveState::apply_motion`].
+    #[inline(never)]
+    fn check_planned(&self, obj: Obj, value: u32) -> Result<(), ObjError> {
         let mut scratch = (self.ctl.axis, self.pp);
         self.plan_motion(obj, value, &mut scratch).map(|_| ())
     }
@@ -406,6 +413,13 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         if crate::od::is_pvt_command(obj) {
             return self.apply_pvt(obj, value);
         }
+        self.apply_planned(obj, value);
+    }
+
+    /// Plans and writes the motion object `obj` = `value`. Out of line: the copy of the axis it
+    /// plans on is on the stack for this call only.
+    #[inline(never)]
+    fn apply_planned(&mut self, obj: Obj, value: u32) {
         let mut planned = (self.ctl.axis, self.pp);
         // Checked already: were it refused now, the axis stays.
         let changed = self.plan_motion(obj, value, &mut planned) == Ok(true);

@@ -495,13 +495,21 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         // The objects whose check is `check_motion` and whose write is `apply_motion`.
         if is_command(d.obj) && has_effect(d.obj) && !crate::od::is_pvt_command(d.obj) && d.obj != Obj::Position {
             Self::check_writable(d, value)?;
-            let mut planned = (self.ctl.axis, self.pp);
-            let changed = self.plan_motion(d.obj, value, &mut planned)?;
-            self.commit_motion(d.obj, value, changed.then_some(&planned));
-            return Ok(());
+            return self.write_motion(d.obj, value);
         }
         self.check_def(d, value)?;
         self.apply_def(d, value);
+        Ok(())
+    }
+
+    /// Plans the motion command `obj` = `value` on a copy of the axis and set-points, and takes
+    /// them if the plan changes them; nothing changes if it is refused. Out of line: the copy
+    /// (1 KB) is on the stack for this call only, not under every other write.
+    #[inline(never)]
+    fn write_motion(&mut self, obj: Obj, value: u32) -> Result<(), ObjError> {
+        let mut planned = (self.ctl.axis, self.pp);
+        let changed = self.plan_motion(obj, value, &mut planned)?;
+        self.commit_motion(obj, value, changed.then_some(&planned));
         Ok(())
     }
 
@@ -563,7 +571,9 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     }
 
     /// Puts every object a save covers back to its factory value (RAM objects, 0x6055 and the
-    /// status are untouched).
+    /// status are untouched). Out of line: the factory set (600 bytes) is on the stack for this
+    /// call only.
+    #[inline(never)]
     pub fn restore_factory(&mut self) {
         Params::factory().copy_saved_into(&mut self.params);
         self.refresh_settings();

@@ -187,24 +187,42 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         Ok((source, first, p))
     }
 
-    /// The synchronous move that a start would begin now: the axis planned, or why not.
-    fn plan_sync(&self, now: Instant) -> Result<Axis, ObjError> {
+    /// Plans on `axis` (a copy of the drive's) the synchronous move that a start would begin
+    /// now, or says why not (and `axis` is to be dropped).
+    fn plan_sync(&self, now: Instant, axis: &mut Axis) -> Result<(), ObjError> {
         let speed = f64::from(self.param(Obj::SyncSpeed) as i32);
         refuse(self.mode() == WorkMode::Position && speed != 0.0, ObjError::NotNow)?;
         self.may_move()?;
         refuse(self.ctl.axis.is_still(), ObjError::Busy)?;
         let target = i64::from(self.param(Obj::SyncPosition) as i32);
         let (depart, arrive) = self.jumps(speed.abs());
+        axis.move_to(now, target, depart, arrive, &self.scurve_limits(speed)).map_err(|_| ObjError::Infeasible)
+    }
+
+    /// Whether the synchronous move can start now: planned on a copy of the axis. Out of line,
+    /// as every copy of the axis (1 KB) in the write path: its frame is on the stack for this
+    /// call only.
+    #[inline(never)]
+    fn check_sync(&self) -> Result<(), ObjError> {
+        let mut scratch = self.ctl.axis;
+        self.plan_sync(self.now, &mut scratch)
+    }
+
+    /// Starts the synchronous move, which [`DriveState::check_sync`] accepted. Out of line, as
+    /// [`DriveState::check_sync`].
+    #[inline(never)]
+    fn start_sync(&mut self) {
         let mut axis = self.ctl.axis;
-        axis.move_to(now, target, depart, arrive, &self.scurve_limits(speed)).map_err(|_| ObjError::Infeasible)?;
-        Ok(axis)
+        if self.plan_sync(self.now, &mut axis).is_ok() {
+            self.ctl.axis = axis;
+        }
     }
 
     /// What a start (0x6017 = 1, or a group start) does in the present work mode.
     fn plan_start(&self) -> Result<Effect, ObjError> {
         match self.mode() {
             WorkMode::Pvt => self.plan_run().map(|_| Effect::Start(Start::Pvt)),
-            WorkMode::Position => self.plan_sync(self.now).map(|_| Effect::Start(Start::Sync)),
+            WorkMode::Position => self.check_sync().map(|()| Effect::Start(Start::Sync)),
             _ => Err(ObjError::NotNow),
         }
     }
@@ -248,12 +266,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         self.set_param(obj, value);
         // A start is planned here, on the bus side: the motion starts on the next control tick.
         match effect {
-            Ok(Effect::Start(Start::Sync)) => {
-                if let Ok(axis) = self.plan_sync(self.now) {
-                    self.ctl.axis = axis;
-                }
-                return;
-            }
+            Ok(Effect::Start(Start::Sync)) => return self.start_sync(),
             Ok(Effect::Start(Start::Pvt)) => return self.start_run(),
             _ => {}
         }
