@@ -197,8 +197,14 @@ pub struct Controller {
 }
 
 impl Controller {
-    /// The controller at power-up, standing at 0.
-    pub(crate) fn new(settings: Settings, feedback: Feedback, faults: FaultLog) -> Self {
+    /// A controller at power-up, standing at 0, with no fault history: what a test or a tool
+    /// runs on its own, without a drive around it.
+    pub fn new(settings: Settings, feedback: Feedback) -> Self {
+        Self::restored(settings, feedback, FaultLog::default())
+    }
+
+    /// The controller at power-up, standing at 0, with the fault history loaded.
+    pub(crate) fn restored(settings: Settings, feedback: Feedback, faults: FaultLog) -> Self {
         Self {
             settings,
             axis: Axis::new(0),
@@ -228,8 +234,13 @@ impl Controller {
         &self.settings
     }
 
+    /// The motion being executed, for the bus side that plans it.
+    pub fn axis_mut(&mut self) -> &mut Axis {
+        &mut self.axis
+    }
+
     /// What happened on its own since the last call.
-    pub(crate) fn take_events(&mut self) -> Events {
+    pub fn take_events(&mut self) -> Events {
         core::mem::take(&mut self.events)
     }
 

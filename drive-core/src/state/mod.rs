@@ -203,7 +203,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         let feedback = Feedback::from_objects(get(Obj::Feedback), get(Obj::EncoderCpr));
         Self {
             faults_saved: faults.count,
-            ctl: Controller::new(settings_of(&params), feedback, faults),
+            ctl: Controller::restored(settings_of(&params), feedback, faults),
             params,
             storage,
             identity,
