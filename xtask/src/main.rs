@@ -4,8 +4,9 @@
 //! - `ci`: everything CI runs (format, lints, host tests, firmware build and size, real masters).
 //! - `docs`: regenerate `docs/registers.md` from the object declarations.
 //! - `masters`: run pymodbus and mbpoll against the simulator.
-//! - `firmware`: cross-build the firmware, print its size against the budget, fail if it does not
-//!   fit the chip.
+//! - `firmware`: cross-build the firmware, print its size and its stack by the call graph against
+//!   the budgets, fail if it does not fit the chip or if the tick reaches software floating
+//!   point.
 //! - `qemu --tcp HOST:PORT`: build the QEMU variant and run it with its USART on that port.
 //! - `hil`: build the hardware-in-the-loop suite (`probe-rs` runs it on a board).
 //! - `tick-cost`: the control tick's instruction count under QEMU (`-icount`): the firmware's, and
@@ -167,7 +168,7 @@ fn firmware() -> Result<(), String> {
         println!("firmware (STM32G431CB): OVER the 80 KiB flash budget (fits the chip)");
     }
     flash_by_part(&elf, flash)?;
-    tick_float_check(&elf)?;
+    tick_float_check(&elf, statics)?;
     // The QEMU build shares the output path: keep the board's ELF for `tick-cost`.
     std::fs::copy(&elf, elf_dir().join("firmware-g431")).map_err(|e| e.to_string())?;
     Ok(())
@@ -188,58 +189,144 @@ fn is_soft_float(name: &str) -> bool {
     aeabi.iter().any(|p| rest.starts_with(p)) || libgcc.iter().any(|p| rest.starts_with(p))
 }
 
+/// The firmware's functions and their direct calls, from the disassembly: by start address,
+/// each one's name, the addresses it calls or jumps to, and its stack frame (registers pushed,
+/// FPU registers pushed, `sub sp`).
+struct CallGraph {
+    names: std::collections::BTreeMap<u64, String>,
+    calls: std::collections::BTreeMap<u64, Vec<u64>>,
+    frames: std::collections::BTreeMap<u64, u64>,
+}
+
+impl CallGraph {
+    fn read(elf: &Path) -> Result<Self, String> {
+        let out = Command::new("arm-none-eabi-objdump")
+            .args(["-d", "--no-show-raw-insn", "-C"])
+            .arg(elf)
+            .output()
+            .map_err(|e| format!("arm-none-eabi-objdump (binutils-arm-none-eabi, .ci/install): {e}"))?;
+        let text = String::from_utf8_lossy(&out.stdout);
+        let mut g = Self { names: Default::default(), calls: Default::default(), frames: Default::default() };
+        let mut current = None;
+        for line in text.lines() {
+            if let Some((addr, rest)) = line.split_once(" <")
+                && let Some(name) = rest.strip_suffix(">:")
+                && let Ok(addr) = u64::from_str_radix(addr, 16)
+            {
+                if !name.starts_with('$') {
+                    g.names.insert(addr, name.to_string());
+                    current = Some(addr);
+                }
+                continue;
+            }
+            let Some(from) = current else { continue };
+            let mut fields = line.split('\t').skip(1);
+            let (Some(op), Some(arg)) = (fields.next(), fields.next()) else { continue };
+            let op = op.trim();
+            if matches!(op, "bl" | "b" | "b.w" | "blx")
+                && let Some(target) = arg.split_whitespace().next().and_then(|a| u64::from_str_radix(a, 16).ok())
+            {
+                g.calls.entry(from).or_default().push(target);
+            }
+            let registers = || arg.split('{').nth(1).map_or(0, |r| r.split(',').count() as u64);
+            let bytes = match op {
+                "push" | "push.w" | "stmdb" if arg.starts_with("sp!") || op.starts_with("push") => 4 * registers(),
+                "vpush" => {
+                    // `{d8-d15}` or a list.
+                    let list = arg.split('{').nth(1).unwrap_or("").trim_end_matches('}');
+                    match list.split_once('-') {
+                        Some((lo, hi)) => {
+                            let n = |r: &str| r.trim().trim_start_matches(['d', 's']).parse::<u64>().unwrap_or(0);
+                            let size = if list.starts_with('d') { 8 } else { 4 };
+                            size * (n(hi) - n(lo) + 1)
+                        }
+                        None => 8 * registers(),
+                    }
+                }
+                "sub" | "sub.w" | "subw" if arg.starts_with("sp,") => {
+                    arg.split('#').nth(1).and_then(|n| n.split_whitespace().next()?.parse().ok()).unwrap_or(0)
+                }
+                _ => 0,
+            };
+            *g.frames.entry(from).or_default() += bytes;
+        }
+        Ok(g)
+    }
+
+    /// The function that holds address `a`.
+    fn owner(&self, a: u64) -> Option<u64> {
+        self.names.range(..=a).next_back().map(|(&s, _)| s)
+    }
+
+    /// The functions whose name is `name`, or contains it.
+    fn roots(&self, name: &str, exact: bool) -> Vec<u64> {
+        let hit = |n: &String| if exact { n == name } else { n.contains(name) };
+        self.names.iter().filter(|(_, n)| hit(n)).map(|(&a, _)| a).collect()
+    }
+
+    /// Every function reachable from `root` through direct calls.
+    fn reachable(&self, root: u64) -> std::collections::BTreeSet<u64> {
+        let mut seen = std::collections::BTreeSet::new();
+        let mut todo = vec![root];
+        while let Some(f) = todo.pop() {
+            if seen.insert(f) {
+                todo.extend(self.calls.get(&f).into_iter().flatten().filter_map(|&t| self.owner(t)));
+            }
+        }
+        seen
+    }
+
+    /// The deepest stack below `f` through direct calls (a call back into a function already on
+    /// the path counts nothing more: the firmware does not recurse).
+    fn depth(&self, f: u64, path: &mut Vec<u64>, memo: &mut std::collections::BTreeMap<u64, u64>) -> u64 {
+        if let Some(&d) = memo.get(&f) {
+            return d;
+        }
+        if path.contains(&f) {
+            return 0;
+        }
+        path.push(f);
+        let callees: Vec<u64> = self.calls.get(&f).into_iter().flatten().filter_map(|&t| self.owner(t)).collect();
+        let below = callees.into_iter().map(|c| self.depth(c, path, memo)).max().unwrap_or(0);
+        path.pop();
+        let d = self.frames.get(&f).copied().unwrap_or(0) + below;
+        memo.insert(f, d);
+        d
+    }
+}
+
 /// Fails if a software floating-point routine is reachable from the control tick's interrupt
 /// in the firmware's call graph (direct calls, from the disassembly): the tick runs on the
-/// FPU's `f32` and integers only.
-fn tick_float_check(elf: &Path) -> Result<(), String> {
-    let out = Command::new("arm-none-eabi-objdump")
-        .args(["-d", "--no-show-raw-insn", "-C"])
-        .arg(elf)
-        .output()
-        .map_err(|e| format!("arm-none-eabi-objdump (binutils-arm-none-eabi, .ci/install): {e}"))?;
-    let text = String::from_utf8_lossy(&out.stdout);
-    // Functions by start address, and the addresses each one calls or jumps to.
-    let mut names = std::collections::BTreeMap::<u64, String>::new();
-    let mut calls = std::collections::BTreeMap::<u64, Vec<u64>>::new();
-    let mut current = None;
-    for line in text.lines() {
-        if let Some((addr, rest)) = line.split_once(" <")
-            && let Some(name) = rest.strip_suffix(">:")
-            && let Ok(addr) = u64::from_str_radix(addr, 16)
-        {
-            if !name.starts_with('$') {
-                names.insert(addr, name.to_string());
-                current = Some(addr);
-            }
-            continue;
-        }
-        let mut fields = line.split('\t').skip(1);
-        if let (Some(op), Some(arg), Some(from)) = (fields.next(), fields.next(), current)
-            && matches!(op.trim(), "bl" | "b" | "b.w" | "blx")
-            && let Some(target) = arg.split_whitespace().next().and_then(|a| u64::from_str_radix(a, 16).ok())
-        {
-            calls.entry(from).or_default().push(target);
-        }
-    }
-    let owner = |a: u64| names.range(..=a).next_back().map(|(&s, _)| s);
-    let root = names.iter().find(|(_, n)| n.as_str() == TICK_HANDLER).map(|(&a, _)| a);
-    let mut seen = std::collections::BTreeSet::new();
-    let mut todo: Vec<u64> = root.into_iter().collect();
-    while let Some(f) = todo.pop() {
-        if seen.insert(f) {
-            todo.extend(calls.get(&f).into_iter().flatten().filter_map(|&t| owner(t)));
-        }
-    }
+/// FPU's `f32` and integers only. Also reports the stack the call graph allows.
+fn tick_float_check(elf: &Path, statics: u64) -> Result<(), String> {
+    let g = CallGraph::read(elf)?;
+    let root = g.roots(TICK_HANDLER, true).first().copied();
+    let seen = root.map(|r| g.reachable(r)).unwrap_or_default();
     if seen.len() < 10 {
         return Err(format!("the call graph from {TICK_HANDLER} has {} functions: not read", seen.len()));
     }
     let soft: Vec<&str> =
-        seen.iter().filter_map(|a| names.get(a)).map(String::as_str).filter(|n| is_soft_float(n)).collect();
+        seen.iter().filter_map(|a| g.names.get(a)).map(String::as_str).filter(|n| is_soft_float(n)).collect();
     println!(
         "firmware (STM32G431CB): the control tick ({TICK_HANDLER}) reaches {} functions, {} of software floating point",
         seen.len(),
         soft.len()
     );
+    // The deepest task (the executor polls one at a time) with the tick interrupt on top of it,
+    // and the Cortex-M4F's exception frame with the FPU context (26 words).
+    let mut memo = Default::default();
+    let task = g.roots("TaskStorage<F>::poll", false).into_iter().map(|r| g.depth(r, &mut vec![], &mut memo)).max();
+    let tick = root.map(|r| g.depth(r, &mut vec![], &mut memo));
+    if let (Some(task), Some(tick)) = (task, tick) {
+        let bound = task + tick + 104;
+        println!(
+            "firmware (STM32G431CB): stack by the call graph (direct calls only): the deepest task {task} B + the tick \
+             interrupt {tick} B + 104 B of exception frame = {bound} B; with the statics {} B ({:.1} % of the {RAM_BUDGET} B \
+             budget)",
+            statics + bound,
+            percent(statics + bound, RAM_BUDGET)
+        );
+    }
     if soft.is_empty() { Ok(()) } else { Err(format!("the control tick reaches software floating point: {soft:?}")) }
 }
 
