@@ -109,7 +109,7 @@ impl<M: RegisterMap> Drive<M> {
 impl<M: RegisterMap, P: BorrowMut<Table>> Drive<M, P> {
     /// [`Drive::boot_with_map`] with the PVT point table `table` (its points are not read: the
     /// table starts empty). A microcontroller passes a `&'static mut Table` from a static of
-    /// its own, so the drive it builds is about 3 KB instead of 13 KB:
+    /// its own, so the drive it builds is about 3 KB instead of 12 KB:
     ///
     /// ```
     /// use drive_core::{Drive, DriveConfig, Params};

@@ -26,7 +26,7 @@ use crate::board::Serial;
 use crate::frames::MAX_FRAME;
 use crate::power::PowerStage;
 
-/// The drive of the firmware: the native map, and the PVT point table (10 KB) in a static of its
+/// The drive of the firmware: the native map, and the PVT point table (9 KB) in a static of its
 /// own, lent to the drive, so that building the drive (about 3 KB) never passes the table through
 /// the stack.
 pub type Drive = drive_core::Drive<NativeMap, &'static mut Table>;

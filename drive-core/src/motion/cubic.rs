@@ -39,24 +39,29 @@ pub struct Point {
     pub time_ms: u16,
 }
 
-/// A point as stored: 10 bytes (position, velocity, time, little-endian), so 1000 points take
-/// 10 000 bytes of RAM instead of 12 000 for an aligned struct.
+/// The largest speed a stored point keeps, pps: 24 bits of velocity. The drive stores no point
+/// above [`V_MAX`] (a push beyond it is refused), far below this.
+pub const V_STORED: i32 = (1 << 23) - 1;
+
+/// A point as stored: 9 bytes (position, velocity in 24 bits, time; little-endian), so 1000
+/// points take 9 000 bytes of RAM instead of 12 000 for an aligned struct.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-struct Packed([u8; 10]);
+struct Packed([u8; 9]);
 
 impl Packed {
     fn pack(p: Point) -> Self {
         let [a, b, c, d] = p.position.to_le_bytes();
-        let [e, f, g, h] = p.velocity.to_le_bytes();
+        let [e, f, g, _] = p.velocity.clamp(-V_STORED, V_STORED).to_le_bytes();
         let [i, j] = p.time_ms.to_le_bytes();
-        Self([a, b, c, d, e, f, g, h, i, j])
+        Self([a, b, c, d, e, f, g, i, j])
     }
 
     fn unpack(self) -> Point {
-        let [a, b, c, d, e, f, g, h, i, j] = self.0;
+        let [a, b, c, d, e, f, g, i, j] = self.0;
         Point {
             position: i32::from_le_bytes([a, b, c, d]),
-            velocity: i32::from_le_bytes([e, f, g, h]),
+            // Sign-extended from 24 bits.
+            velocity: i32::from_le_bytes([0, e, f, g]) >> 8,
             time_ms: u16::from_le_bytes([i, j]),
         }
     }
@@ -71,8 +76,8 @@ pub struct Table {
 
 impl Table {
     /// Every slot empty. A constant, so that a table is built where it is stored: built by a
-    /// function it would be a 10 KB stack temporary, more than a microcontroller's stack holds.
-    pub const EMPTY: Self = Self { slots: [Packed([0; 10]); TABLE_SIZE] };
+    /// function it would be a 9 KB stack temporary, more than a microcontroller's stack holds.
+    pub const EMPTY: Self = Self { slots: [Packed([0; 9]); TABLE_SIZE] };
 }
 
 impl Default for Table {
@@ -502,10 +507,15 @@ mod tests {
     }
 
     #[test]
-    fn packs_into_ten_bytes() {
-        let p = Point { position: i32::MIN, velocity: -2, time_ms: 65535 };
-        assert_eq!(Packed::pack(p).unpack(), p);
-        assert_eq!(core::mem::size_of::<Table>(), 10 * TABLE_SIZE);
+    fn packs_into_nine_bytes() {
+        for velocity in [-2, 0, 1, V_MAX as i32, -(V_MAX as i32), V_STORED, -V_STORED] {
+            let p = Point { position: i32::MIN, velocity, time_ms: 65535 };
+            assert_eq!(Packed::pack(p).unpack(), p);
+        }
+        // Beyond 24 bits a speed is kept at the largest stored (the drive refuses it before).
+        let fast = Point { position: 5, velocity: i32::MIN, time_ms: 1 };
+        assert_eq!(Packed::pack(fast).unpack().velocity, -V_STORED);
+        assert_eq!(core::mem::size_of::<Table>(), 9 * TABLE_SIZE);
     }
 
     #[test]

@@ -133,9 +133,9 @@ impl Default for Params {
 
 /// Everything the object dictionary reads and writes.
 ///
-/// `P` holds the PVT point table (10 KB): the state owns it by default; a microcontroller keeps
+/// `P` holds the PVT point table (9 KB): the state owns it by default; a microcontroller keeps
 /// it in a static of its own and lends it (`&'static mut Table`), so that building the state
-/// never passes 10 KB through its stack.
+/// never passes 9 KB through its stack.
 #[derive(Clone, Debug)]
 pub struct DriveState<P = Table> {
     pub(crate) params: [u32; Obj::COUNT],
@@ -150,7 +150,7 @@ pub struct DriveState<P = Table> {
     pub(crate) pp: Pp,
     /// Which slots of `table` hold PVT points.
     pub(crate) pvt: Pvt,
-    /// The PVT points (10 KB: kept out of [`Checkpoint`]).
+    /// The PVT points (9 KB: kept out of [`Checkpoint`]).
     pub(crate) table: P,
     /// What the control tick owns: the motion, supervision, the loops and the running status.
     pub(crate) ctl: Controller,
@@ -188,7 +188,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     ///
     /// One struct expression, out of line: built in a local and then modified, the state would
     /// be copied once more. (The compiler still builds it in a temporary and copies it to the
-    /// caller's place, which is why a microcontroller lends the 10 KB table: see
+    /// caller's place, which is why a microcontroller lends the 9 KB table: see
     /// [`Drive::boot_with_table`].)
     #[inline(never)]
     pub(crate) fn booted(
