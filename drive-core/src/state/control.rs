@@ -1,5 +1,6 @@
-//! The native motion modes (seed 000 §5.5): what writing a motion object does, and the control
-//! tick that runs the axis.
+//! The native motion modes (seed 000 §5.5): what writing a motion object does (planned here, on
+//! the bus side, on a copy of the axis), the [`Settings`] the controller runs, built from the
+//! objects, and what the drive makes of the controller's [`Events`] after a tick.
 //!
 //! Decisions where the manual is silent or contradicts itself:
 //! - Direction 0x6002 = 0 ("forward") counts the position up, as §5.5.15 and §9.4.1 read. §5.5.4
