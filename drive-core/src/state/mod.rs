@@ -33,7 +33,7 @@ pub const STORAGE_SAVING: u8 = 1 << 3;
 /// Storage status bit 4: the last save failed; the flash holds the set saved before it.
 pub const STORAGE_SAVE_FAILED: u8 = 1 << 4;
 
-/// Requests the drive makes of its platform, collected with [`Drive::take_system_request`].
+/// Requests the drive makes of its platform, collected with `Drive::take_system_request`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SystemRequest {
     /// Save every ROM object (0x200F = 2).
@@ -189,7 +189,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     /// One struct expression, out of line: built in a local and then modified, the state would
     /// be copied once more. (The compiler still builds it in a temporary and copies it to the
     /// caller's place, which is why a microcontroller lends the 9 KB table: see
-    /// [`Drive::boot_with_table`].)
+    /// `Drive::boot_with_table`.)
     #[inline(never)]
     pub(crate) fn booted(
         identity: Identity,
@@ -351,7 +351,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         due.then_some(SystemRequest::SaveFaults)
     }
 
-    /// Whether a request for the platform is waiting ([`Drive::take_system_request`]).
+    /// Whether a request for the platform is waiting (`Drive::take_system_request`).
     pub(crate) fn has_request(&self) -> bool {
         self.request.is_some() || self.fault_save_due()
     }
