@@ -244,10 +244,20 @@ mod run {
 
     /// The parameters from the store, the drive, the board, and the Modbus task with the store.
     ///
-    /// Out of line: the store and the state of its loading (about 3 KB) are on the stack for this
-    /// call only, not in `main`'s frame under every task the executor polls.
+    /// Out of line: the store and the loaded parameters are on the stack for this call only, not
+    /// in `main`'s frame under every task the executor polls.
     #[inline(never)]
     fn power_up(spawner: embassy_executor::Spawner) {
+        let (store, loaded) = load();
+        app::start(board::HARDWARE, &loaded.params, loaded.status, true);
+        let serial = board::init();
+        spawner.spawn(unwrap!(app::modbus(serial, store)));
+    }
+
+    /// The store and what power-up loads from it. Out of line, as on the board: the state of the
+    /// loading (about 3 KB) is on the stack for this call only, not under the drive being built.
+    #[inline(never)]
+    fn load() -> (board::ParamStore, drive_core::store::Loaded) {
         // QEMU does not model the flash: the store runs on RAM, empty at every boot.
         let Some(flash) = board::param_flash() else {
             defmt::panic!("the store's RAM taken twice");
@@ -256,8 +266,6 @@ mod run {
             defmt::panic!("the store's range is not whole pages");
         };
         let loaded = embassy_futures::block_on(store.power_up(false));
-        app::start(board::HARDWARE, &loaded.params, loaded.status, true);
-        let serial = board::init();
-        spawner.spawn(unwrap!(app::modbus(serial, store)));
+        (store, loaded)
     }
 }

@@ -197,200 +197,37 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         stop_deceleration(self.mode(), self.param(Obj::PpDecel), self.param(Obj::DecelLevel))
     }
 
+    /// What planning reads of the drive ([`Planner`]).
+    fn planner(&self) -> Planner<'_> {
+        let encoder = self.ctl.servo.feedback.encoder().map(|_| self.ctl.servo.encoder);
+        Planner { params: &self.params, now: self.now, may_move: self.may_move(), encoder }
+    }
+
     /// The S-curve limits of the native position and velocity modes, for a speed of `speed`.
     pub(crate) fn scurve_limits(&self, speed: f64) -> Limits {
-        let level = |obj| LEVELS.get((self.param(obj) as usize).wrapping_sub(1)).map(|&a| f64::from(a));
-        // Level 0 disables the ramp: the motor jumps to speed and stops from it.
-        let (a, d) = (level(Obj::AccelLevel).unwrap_or(1e12), level(Obj::DecelLevel).unwrap_or(1e12));
-        let jerk_s = f64::from(self.param(Obj::JerkTime).max(1)) * 1e-3;
-        Limits { v_max: libm::fabs(speed), a_max: a, d_max: d, jerk: Some(a.max(d) / jerk_s) }
+        self.planner().scurve_limits(speed)
     }
 
     /// Start and stop speeds: the jumps from and to rest (all of the speed without a ramp).
     pub(crate) fn jumps(&self, speed: f64) -> (f64, f64) {
-        let ramp = |obj, speed_obj| if self.param(obj) == 0 { speed } else { f64::from(self.param(speed_obj)) };
-        (ramp(Obj::AccelLevel, Obj::StartSpeed), ramp(Obj::DecelLevel, Obj::StopSpeed))
+        self.planner().jumps(speed)
     }
 
-    /// The trapezoid limits of the PP and PV modes at `speed`, and their start and stop speeds.
-    fn pp_setpoint(&self, target: i64, speed: f64) -> SetPoint {
-        let limits = Limits {
-            v_max: libm::fabs(speed),
-            a_max: f64::from(self.param(Obj::PpAccel)),
-            d_max: f64::from(self.param(Obj::PpDecel)),
-            jerk: None,
-        };
-        let (depart, arrive) = (f64::from(self.param(Obj::PpStartSpeed)), f64::from(self.param(Obj::PpStopSpeed)));
-        SetPoint { target, limits, depart, arrive }
-    }
-
-    /// The axis and PP state after a controlword write in PP or PV mode.
-    // Out of line: inlined, its set-points would be in `plan_motion`'s frame for every motion
-    // write, not only the PP mode's.
-    #[inline(never)]
-    fn plan_controlword(&self, axis: &mut Axis, pp: &mut Pp, new: u16) -> Result<(), ObjError> {
-        let old = self.param(Obj::ControlWord) as u16;
-        let rise = |bit: u16| new & bit != 0 && old & bit == 0;
-        let fall = |bit: u16| new & bit == 0 && old & bit != 0;
-        let now = self.now;
-        let run_speed = f64::from(self.param(Obj::PpRunSpeed) as i32);
-        let failed = |_| ObjError::Infeasible;
-        let mode = self.mode();
-        if rise(CW_HALT) {
-            pp.halted = true;
-            if !axis.is_still() {
-                let sp = self.pp_setpoint(0, f64::from(libm::fabsf(axis.setpoint().velocity)).max(1.0));
-                axis.run_at(now, 0.0, 0.0, &sp.limits).map_err(failed)?;
-            }
-        } else if fall(CW_HALT) {
-            pp.halted = false;
-            self.may_move()?;
-            if mode == WorkMode::ProfileVelocity {
-                let sp = self.pp_setpoint(0, run_speed);
-                axis.run_at(now, run_speed, sp.depart, &sp.limits).map_err(failed)?;
-            } else if let Some(sp) = pp.active {
-                // PP: resume the interrupted move, and the buffered one after it.
-                axis.move_to(now, sp.target, sp.depart, sp.arrive, &sp.limits).map_err(failed)?;
-                if let Some(b) = pp.buffered {
-                    axis.then_move_to(b.target, b.depart, b.arrive, &b.limits).map_err(|_| ObjError::Busy)?;
-                }
-            }
-        }
-        if mode == WorkMode::ProfilePosition && rise(CW_NEW_SETPOINT) && !pp.ack {
-            // With the buffer full (acknowledge still set) a new set-point is ignored (§5.11.3, 4).
-            self.may_move()?;
-            let value = i64::from(self.param(Obj::PpTarget) as i32);
-            let base = match (pp.buffered, pp.active) {
-                (_, Some(a)) if !axis.is_still() => a.target,
-                _ => axis.setpoint().whole,
-            };
-            let target = if new & CW_RELATIVE != 0 { base.saturating_add(value) } else { value };
-            let sp = self.pp_setpoint(target, run_speed);
-            if axis.is_still() || new & CW_IMMEDIATE != 0 || pp.halted {
-                if !pp.halted {
-                    axis.move_to(now, sp.target, sp.depart, sp.arrive, &sp.limits).map_err(failed)?;
-                }
-                pp.active = Some(sp);
-                pp.buffered = None;
-            } else {
-                if let (true, Some(a)) = (new & CW_CHANGE_ON_SETPOINT != 0, pp.active) {
-                    // Keep going through the running target if the next one lies beyond it.
-                    let here = axis.setpoint().whole;
-                    let onward = (a.target - here).signum() == (sp.target - a.target).signum();
-                    if onward {
-                        let pass = a.limits.v_max.min(sp.limits.v_max);
-                        axis.pass_through(now, a.target, a.depart, pass, &a.limits).map_err(failed)?;
-                    }
-                }
-                // Planned now, after the running move: the control tick walks on into it. A
-                // walk already cruising past its target starts it from where it is.
-                if axis.then_move_to(sp.target, sp.depart, sp.arrive, &sp.limits).is_ok() {
-                    pp.buffered = Some(sp);
-                } else if axis.settled() {
-                    axis.move_to(now, sp.target, sp.depart, sp.arrive, &sp.limits).map_err(failed)?;
-                    pp.active = Some(sp);
-                } else {
-                    // The two moves do not fit in one track (more than 17 phases).
-                    return Err(ObjError::Busy);
-                }
-            }
-            pp.ack = true;
-        }
-        if fall(CW_NEW_SETPOINT) && pp.buffered.is_none() {
-            pp.ack = false;
-        }
-        Ok(())
-    }
-
-    /// Plans writing `value` to the motion object `obj` at `self.now` on `planned`, which holds
-    /// a copy of the axis and set-points (the one copy planning makes: a track is 700 bytes and
-    /// a microcontroller's stack is short): `Ok(true)` if the write changes them, `Ok(false)` if
-    /// it leaves them as they are, or why it is refused (and `planned` is to be dropped).
+    /// Plans writing `value` to the motion object `obj` at `self.now` on `planned`, a copy of
+    /// the axis and set-points: `Ok(true)` if the write changes them, `Ok(false)` if it leaves
+    /// them as they are, or why it is refused (and `planned` is to be dropped).
     pub(crate) fn plan_motion(&self, obj: Obj, value: u32, planned: &mut (Axis, Pp)) -> Result<bool, ObjError> {
-        let (axis, pp) = (&mut planned.0, &mut planned.1);
-        let now = self.now;
-        let busy = !axis.is_still();
-        let mode = self.mode();
-        let speed = f64::from(self.param(Obj::MaxSpeed) as i32);
-        let position = axis.setpoint().whole;
-        let go_to = |axis: &mut Axis, target: i64, speed: f64| {
-            let (depart, arrive) = self.jumps(libm::fabs(speed));
-            axis.move_to(now, target, depart, arrive, &self.scurve_limits(speed)).map_err(|_| ObjError::Infeasible)
-        };
-        match obj {
-            Obj::RelativeMove | Obj::AbsoluteMove => {
-                refuse(mode == WorkMode::Position && speed != 0.0, ObjError::NotNow)?;
-                self.may_move()?;
-                let target = if obj == Obj::AbsoluteMove {
-                    i64::from(value as i32)
-                } else if busy {
-                    return Ok(false);
-                } else if self.param(Obj::Direction) == 0 {
-                    position.saturating_add(i64::from(value))
-                } else {
-                    position.saturating_sub(i64::from(value))
-                };
-                go_to(axis, target, speed)?;
-            }
-            Obj::MaxSpeed => {
-                let v = f64::from(value as i32);
-                match (mode, axis.target()) {
-                    (WorkMode::Velocity, _) => {
-                        if v != 0.0 {
-                            self.may_move()?;
-                        }
-                        let (depart, _) = self.jumps(libm::fabs(v));
-                        // Speed 0 stops: the ramp's limits are those of the speed it stops from.
-                        let limit =
-                            if v == 0.0 { f64::from(libm::fabsf(axis.setpoint().velocity)).max(1.0) } else { v };
-                        axis.run_at(now, v, depart, &self.scurve_limits(limit)).map_err(|_| ObjError::Infeasible)?;
-                    }
-                    (WorkMode::Position, Some(target)) if busy => {
-                        refuse(v != 0.0, ObjError::NotNow)?;
-                        go_to(axis, target, v)?;
-                    }
-                    _ => return Ok(false),
-                }
-            }
-            Obj::Mode => {
-                // The declared set admits only modes.
-                let new = WorkMode::from_raw(value).ok_or(ObjError::OutOfRange)?;
-                if new == mode {
-                    return Ok(false);
-                }
-                // Leaving a mode while moving: the manual decelerates from velocity to position.
-                refuse(!busy || (mode == WorkMode::Velocity && new == WorkMode::Position), ObjError::Busy)?;
-                if busy {
-                    axis.run_at(now, 0.0, 0.0, &self.scurve_limits(speed)).map_err(|_| ObjError::Infeasible)?;
-                }
-                *pp = Pp::default();
-            }
-            Obj::ControlWord if mode.is_profile() => self.plan_controlword(axis, pp, value as u16)?,
-            Obj::PpRunSpeed if mode == WorkMode::ProfileVelocity && busy && !pp.halted => {
-                let v = f64::from(value as i32);
-                let sp = self.pp_setpoint(0, v);
-                axis.run_at(now, v, sp.depart, &sp.limits).map_err(|_| ObjError::Infeasible)?;
-            }
-            Obj::Stop => {
-                axis.halt();
-                *pp = Pp::default();
-            }
-            Obj::Enable if value == 0 => {
-                axis.halt();
-                *pp = Pp::default();
-            }
-            Obj::Enable => return Ok(false),
-            Obj::Position | Obj::Microsteps => refuse(!busy, ObjError::Busy)?,
-            Obj::ZeroOffset => {
-                refuse(!busy, ObjError::Busy)?;
-                if self.ctl.servo.feedback.encoder().is_some() {
-                    // The position moves with the offset, and the axis stands on it.
-                    axis.set_position(self.ctl.servo.encoder.wrapping_add(i64::from(value as i32)));
-                }
-            }
-            _ => return Ok(false),
-        }
-        Ok(true)
+        self.planner().plan_motion(obj, value, &mut planned.0, &mut planned.1)
+    }
+
+    /// Plans writing `value` to the motion object `obj` on the drive's own axis and set-points,
+    /// with no copy: for a multi-object write, whose checkpoint restores them if it is refused
+    /// (a refused plan may have halted the axis). What [`DriveState::plan_motion`] returns.
+    pub(crate) fn plan_motion_in_place(&mut self, obj: Obj, value: u32) -> Result<bool, ObjError> {
+        let encoder = self.ctl.servo.feedback.encoder().map(|_| self.ctl.servo.encoder);
+        let may_move = self.may_move();
+        let planner = Planner { params: &self.params, now: self.now, may_move, encoder };
+        planner.plan_motion(obj, value, &mut self.ctl.axis, &mut self.pp)
     }
 
     /// Checks a write to a motion object: refused when the drive cannot act on it now.
@@ -430,6 +267,17 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     /// Writes the motion object `obj` with the axis and set-points `planned` for it, if it
     /// changes them ([`DriveState::plan_motion`]).
     pub(crate) fn commit_motion(&mut self, obj: Obj, value: u32, planned: Option<&(Axis, Pp)>) {
+        if let Some((axis, pp)) = planned {
+            self.ctl.axis = *axis;
+            self.pp = *pp;
+        }
+        self.commit_value(obj, value, planned.is_some());
+    }
+
+    /// Stores the motion object `obj` = `value` whose plan is in place (it `changed` the axis
+    /// and set-points, or left them): the value, the direction a signed speed sets, and the end
+    /// of a PVT run that a stop or a disable halted.
+    pub(crate) fn commit_value(&mut self, obj: Obj, value: u32, changed: bool) {
         match obj {
             // Writing a signed speed sets the direction of relative moves (see the module doc).
             Obj::MaxSpeed if value != 0 => self.set_param(Obj::Direction, u32::from((value as i32) < 0)),
@@ -438,12 +286,8 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         if obj != Obj::Stop {
             self.set_param(obj, value);
         }
-        if let Some((axis, pp)) = planned {
-            self.ctl.axis = *axis;
-            self.pp = *pp;
-            if matches!(obj, Obj::Stop | Obj::Enable) {
-                self.ctl.run = None;
-            }
+        if changed && matches!(obj, Obj::Stop | Obj::Enable) {
+            self.ctl.run = None;
         }
     }
 
@@ -498,5 +342,221 @@ impl<P: BorrowMut<Table>> DriveState<P> {
             self.take_events(events);
         }
         out
+    }
+}
+
+/// What planning a motion command reads of the drive: the objects, the time of the request,
+/// whether a motion may start, and the encoder position in closed loop. Apart from the axis and
+/// set-points it plans on, so that those may be the drive's own (a write that is undone as a
+/// whole if refused) or a copy.
+struct Planner<'a> {
+    params: &'a [u32; Obj::COUNT],
+    now: Instant,
+    may_move: Result<(), ObjError>,
+    /// The encoder position, counts, in closed loop.
+    encoder: Option<i64>,
+}
+
+impl Planner<'_> {
+    fn param(&self, obj: Obj) -> u32 {
+        self.params.get(obj as usize).copied().unwrap_or(0)
+    }
+
+    fn mode(&self) -> WorkMode {
+        WorkMode::from_raw(self.param(Obj::Mode)).unwrap_or_default()
+    }
+
+    /// The S-curve limits of the native position and velocity modes, for a speed of `speed`.
+    fn scurve_limits(&self, speed: f64) -> Limits {
+        let level = |obj| LEVELS.get((self.param(obj) as usize).wrapping_sub(1)).map(|&a| f64::from(a));
+        // Level 0 disables the ramp: the motor jumps to speed and stops from it.
+        let (a, d) = (level(Obj::AccelLevel).unwrap_or(1e12), level(Obj::DecelLevel).unwrap_or(1e12));
+        let jerk_s = f64::from(self.param(Obj::JerkTime).max(1)) * 1e-3;
+        Limits { v_max: libm::fabs(speed), a_max: a, d_max: d, jerk: Some(a.max(d) / jerk_s) }
+    }
+
+    /// Start and stop speeds: the jumps from and to rest (all of the speed without a ramp).
+    fn jumps(&self, speed: f64) -> (f64, f64) {
+        let ramp = |obj, speed_obj| if self.param(obj) == 0 { speed } else { f64::from(self.param(speed_obj)) };
+        (ramp(Obj::AccelLevel, Obj::StartSpeed), ramp(Obj::DecelLevel, Obj::StopSpeed))
+    }
+
+    /// The trapezoid limits of the PP and PV modes at `speed`, and their start and stop speeds.
+    fn pp_setpoint(&self, target: i64, speed: f64) -> SetPoint {
+        let limits = Limits {
+            v_max: libm::fabs(speed),
+            a_max: f64::from(self.param(Obj::PpAccel)),
+            d_max: f64::from(self.param(Obj::PpDecel)),
+            jerk: None,
+        };
+        let (depart, arrive) = (f64::from(self.param(Obj::PpStartSpeed)), f64::from(self.param(Obj::PpStopSpeed)));
+        SetPoint { target, limits, depart, arrive }
+    }
+
+    /// The axis and PP state after a controlword write in PP or PV mode.
+    // Out of line: inlined, its set-points would be in `plan_motion`'s frame for every motion
+    // write, not only the PP mode's.
+    #[inline(never)]
+    fn plan_controlword(&self, axis: &mut Axis, pp: &mut Pp, new: u16) -> Result<(), ObjError> {
+        let old = self.param(Obj::ControlWord) as u16;
+        let rise = |bit: u16| new & bit != 0 && old & bit == 0;
+        let fall = |bit: u16| new & bit == 0 && old & bit != 0;
+        let now = self.now;
+        let run_speed = f64::from(self.param(Obj::PpRunSpeed) as i32);
+        let failed = |_| ObjError::Infeasible;
+        let mode = self.mode();
+        if rise(CW_HALT) {
+            pp.halted = true;
+            if !axis.is_still() {
+                let sp = self.pp_setpoint(0, f64::from(libm::fabsf(axis.setpoint().velocity)).max(1.0));
+                axis.run_at(now, 0.0, 0.0, &sp.limits).map_err(failed)?;
+            }
+        } else if fall(CW_HALT) {
+            pp.halted = false;
+            self.may_move?;
+            if mode == WorkMode::ProfileVelocity {
+                let sp = self.pp_setpoint(0, run_speed);
+                axis.run_at(now, run_speed, sp.depart, &sp.limits).map_err(failed)?;
+            } else if let Some(sp) = pp.active {
+                // PP: resume the interrupted move, and the buffered one after it.
+                axis.move_to(now, sp.target, sp.depart, sp.arrive, &sp.limits).map_err(failed)?;
+                if let Some(b) = pp.buffered {
+                    axis.then_move_to(b.target, b.depart, b.arrive, &b.limits).map_err(|_| ObjError::Busy)?;
+                }
+            }
+        }
+        if mode == WorkMode::ProfilePosition && rise(CW_NEW_SETPOINT) && !pp.ack {
+            // With the buffer full (acknowledge still set) a new set-point is ignored (§5.11.3, 4).
+            self.may_move?;
+            let value = i64::from(self.param(Obj::PpTarget) as i32);
+            let base = match (pp.buffered, pp.active) {
+                (_, Some(a)) if !axis.is_still() => a.target,
+                _ => axis.setpoint().whole,
+            };
+            let target = if new & CW_RELATIVE != 0 { base.saturating_add(value) } else { value };
+            let sp = self.pp_setpoint(target, run_speed);
+            if axis.is_still() || new & CW_IMMEDIATE != 0 || pp.halted {
+                if !pp.halted {
+                    axis.move_to(now, sp.target, sp.depart, sp.arrive, &sp.limits).map_err(failed)?;
+                }
+                pp.active = Some(sp);
+                pp.buffered = None;
+            } else {
+                if let (true, Some(a)) = (new & CW_CHANGE_ON_SETPOINT != 0, pp.active) {
+                    // Keep going through the running target if the next one lies beyond it.
+                    let here = axis.setpoint().whole;
+                    let onward = (a.target - here).signum() == (sp.target - a.target).signum();
+                    if onward {
+                        let pass = a.limits.v_max.min(sp.limits.v_max);
+                        axis.pass_through(now, a.target, a.depart, pass, &a.limits).map_err(failed)?;
+                    }
+                }
+                // Planned now, after the running move: the control tick walks on into it. A
+                // walk already cruising past its target starts it from where it is.
+                if axis.then_move_to(sp.target, sp.depart, sp.arrive, &sp.limits).is_ok() {
+                    pp.buffered = Some(sp);
+                } else if axis.settled() {
+                    axis.move_to(now, sp.target, sp.depart, sp.arrive, &sp.limits).map_err(failed)?;
+                    pp.active = Some(sp);
+                } else {
+                    // The two moves do not fit in one track (more than 17 phases).
+                    return Err(ObjError::Busy);
+                }
+            }
+            pp.ack = true;
+        }
+        if fall(CW_NEW_SETPOINT) && pp.buffered.is_none() {
+            pp.ack = false;
+        }
+        Ok(())
+    }
+
+    /// Plans writing `value` to the motion object `obj` at `self.now` on `axis` and `pp`:
+    /// `Ok(true)` if the write changes them, `Ok(false)` if it leaves them as they are, or why it
+    /// is refused (and they are to be dropped, or restored).
+    fn plan_motion(&self, obj: Obj, value: u32, axis: &mut Axis, pp: &mut Pp) -> Result<bool, ObjError> {
+        let now = self.now;
+        let busy = !axis.is_still();
+        let mode = self.mode();
+        let speed = f64::from(self.param(Obj::MaxSpeed) as i32);
+        let position = axis.setpoint().whole;
+        let go_to = |axis: &mut Axis, target: i64, speed: f64| {
+            let (depart, arrive) = self.jumps(libm::fabs(speed));
+            axis.move_to(now, target, depart, arrive, &self.scurve_limits(speed)).map_err(|_| ObjError::Infeasible)
+        };
+        match obj {
+            Obj::RelativeMove | Obj::AbsoluteMove => {
+                refuse(mode == WorkMode::Position && speed != 0.0, ObjError::NotNow)?;
+                self.may_move?;
+                let target = if obj == Obj::AbsoluteMove {
+                    i64::from(value as i32)
+                } else if busy {
+                    return Ok(false);
+                } else if self.param(Obj::Direction) == 0 {
+                    position.saturating_add(i64::from(value))
+                } else {
+                    position.saturating_sub(i64::from(value))
+                };
+                go_to(axis, target, speed)?;
+            }
+            Obj::MaxSpeed => {
+                let v = f64::from(value as i32);
+                match (mode, axis.target()) {
+                    (WorkMode::Velocity, _) => {
+                        if v != 0.0 {
+                            self.may_move?;
+                        }
+                        let (depart, _) = self.jumps(libm::fabs(v));
+                        // Speed 0 stops: the ramp's limits are those of the speed it stops from.
+                        let limit =
+                            if v == 0.0 { f64::from(libm::fabsf(axis.setpoint().velocity)).max(1.0) } else { v };
+                        axis.run_at(now, v, depart, &self.scurve_limits(limit)).map_err(|_| ObjError::Infeasible)?;
+                    }
+                    (WorkMode::Position, Some(target)) if busy => {
+                        refuse(v != 0.0, ObjError::NotNow)?;
+                        go_to(axis, target, v)?;
+                    }
+                    _ => return Ok(false),
+                }
+            }
+            Obj::Mode => {
+                // The declared set admits only modes.
+                let new = WorkMode::from_raw(value).ok_or(ObjError::OutOfRange)?;
+                if new == mode {
+                    return Ok(false);
+                }
+                // Leaving a mode while moving: the manual decelerates from velocity to position.
+                refuse(!busy || (mode == WorkMode::Velocity && new == WorkMode::Position), ObjError::Busy)?;
+                if busy {
+                    axis.run_at(now, 0.0, 0.0, &self.scurve_limits(speed)).map_err(|_| ObjError::Infeasible)?;
+                }
+                *pp = Pp::default();
+            }
+            Obj::ControlWord if mode.is_profile() => self.plan_controlword(axis, pp, value as u16)?,
+            Obj::PpRunSpeed if mode == WorkMode::ProfileVelocity && busy && !pp.halted => {
+                let v = f64::from(value as i32);
+                let sp = self.pp_setpoint(0, v);
+                axis.run_at(now, v, sp.depart, &sp.limits).map_err(|_| ObjError::Infeasible)?;
+            }
+            Obj::Stop => {
+                axis.halt();
+                *pp = Pp::default();
+            }
+            Obj::Enable if value == 0 => {
+                axis.halt();
+                *pp = Pp::default();
+            }
+            Obj::Enable => return Ok(false),
+            Obj::Position | Obj::Microsteps => refuse(!busy, ObjError::Busy)?,
+            Obj::ZeroOffset => {
+                refuse(!busy, ObjError::Busy)?;
+                if let Some(encoder) = self.encoder {
+                    // The position moves with the offset, and the axis stands on it.
+                    axis.set_position(encoder.wrapping_add(i64::from(value as i32)));
+                }
+            }
+            _ => return Ok(false),
+        }
+        Ok(true)
     }
 }

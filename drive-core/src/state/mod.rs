@@ -159,6 +159,12 @@ pub struct DriveState<P = Table> {
     faults_saved: u16,
 }
 
+/// Whether writing `obj` plans a motion (`state::control`): the commands but a declared
+/// position and the PVT objects.
+fn plans_motion(obj: Obj) -> bool {
+    is_command(obj) && has_effect(obj) && !crate::od::is_pvt_command(obj) && obj != Obj::Position
+}
+
 /// Everything of a [`DriveState`] but the PVT point table: what a multi-object write restores
 /// when a later object of it is refused. (A table slot written by such a write lies beyond the
 /// restored count of points, so it is not a point.)
@@ -247,7 +253,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     ) -> Result<(), ObjError> {
         let saved = self.checkpoint();
         for item in items {
-            let written = value(self, item).and_then(|w| w.map_or(Ok(()), |(d, v)| self.write_def(d, v)));
+            let written = value(self, item).and_then(|w| w.map_or(Ok(()), |(d, v)| self.write_undoable(d, v)));
             if let Err(e) = written {
                 self.restore(saved);
                 return Err(e);
@@ -493,9 +499,24 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     /// thousands of instructions, during which the control tick waits for the bus task.
     pub fn write_def(&mut self, d: &ObjectDef, value: u32) -> Result<(), ObjError> {
         // The objects whose check is `check_motion` and whose write is `apply_motion`.
-        if is_command(d.obj) && has_effect(d.obj) && !crate::od::is_pvt_command(d.obj) && d.obj != Obj::Position {
+        if plans_motion(d.obj) {
             Self::check_writable(d, value)?;
             return self.write_motion(d.obj, value);
+        }
+        self.check_def(d, value)?;
+        self.apply_def(d, value);
+        Ok(())
+    }
+
+    /// [`DriveState::write_def`] inside a write that a checkpoint undoes if refused: a motion
+    /// command is planned on the axis and set-points themselves, with no copy (a refused plan
+    /// may leave them halted, and the checkpoint restores them).
+    fn write_undoable(&mut self, d: &ObjectDef, value: u32) -> Result<(), ObjError> {
+        if plans_motion(d.obj) {
+            Self::check_writable(d, value)?;
+            let changed = self.plan_motion_in_place(d.obj, value)?;
+            self.commit_value(d.obj, value, changed);
+            return Ok(());
         }
         self.check_def(d, value)?;
         self.apply_def(d, value);
