@@ -168,7 +168,7 @@ fn firmware() -> Result<(), String> {
         println!("firmware (STM32G431CB): OVER the 80 KiB flash budget (fits the chip)");
     }
     flash_by_part(&elf, flash)?;
-    tick_float_check(&elf, statics)?;
+    call_graph_checks(&elf, statics)?;
     // The QEMU build shares the output path: keep the board's ELF for `tick-cost`.
     std::fs::copy(&elf, elf_dir().join("firmware-g431")).map_err(|e| e.to_string())?;
     Ok(())
@@ -230,7 +230,8 @@ impl CallGraph {
             }
             let registers = || arg.split('{').nth(1).map_or(0, |r| r.split(',').count() as u64);
             let bytes = match op {
-                "push" | "push.w" | "stmdb" if arg.starts_with("sp!") || op.starts_with("push") => 4 * registers(),
+                "push" | "push.w" => 4 * registers(),
+                "stmdb" if arg.starts_with("sp!") => 4 * registers(),
                 "vpush" => {
                     // `{d8-d15}` or a list.
                     let list = arg.split('{').nth(1).unwrap_or("").trim_end_matches('}');
@@ -295,10 +296,10 @@ impl CallGraph {
     }
 }
 
-/// Fails if a software floating-point routine is reachable from the control tick's interrupt
-/// in the firmware's call graph (direct calls, from the disassembly): the tick runs on the
-/// FPU's `f32` and integers only. Also reports the stack the call graph allows.
-fn tick_float_check(elf: &Path, statics: u64) -> Result<(), String> {
+/// From the firmware's call graph (direct calls, from the disassembly): fails if a software
+/// floating-point routine is reachable from the control tick's interrupt (the tick runs on the
+/// FPU's `f32` and integers only), and reports the stack the call graph allows.
+fn call_graph_checks(elf: &Path, statics: u64) -> Result<(), String> {
     let g = CallGraph::read(elf)?;
     let root = g.roots(TICK_HANDLER, true).first().copied();
     let seen = root.map(|r| g.reachable(r)).unwrap_or_default();

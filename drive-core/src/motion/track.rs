@@ -269,6 +269,9 @@ pub struct Walker {
     d3: i128,
 }
 
+/// One microstep in Q64.64, as `f64`.
+const Q64_ONE: f64 = 18_446_744_073_709_551_616.0;
+
 /// 1 pps² in Q64.64 microsteps a tick squared: 2^64 / 20 kHz².
 const PER_TICK_SQUARED: i128 = ((1u128 << 64) / (TICK_HZ as u128 * TICK_HZ as u128)) as i128;
 
@@ -426,18 +429,19 @@ impl Walker {
 
     /// The state here in `f64`, the position relative to `anchor` (for the planner).
     pub fn state(&self, anchor: i64) -> State {
-        const ONE: f64 = 18_446_744_073_709_551_616.0;
-        let rate = f64::from(TICK_HZ);
-        let per = rate / ONE;
-        let rel = self.p - (i128::from(anchor) << 64);
+        let per = f64::from(TICK_HZ) / Q64_ONE;
         let (d1, d2, d3) = (self.d1 as f64, self.d2 as f64, self.d3 as f64);
-        State { p: rel as f64 / ONE, v: (d1 - d2 / 2.0 + d3 / 3.0) * per, a: (d2 - d3) * per * rate }
+        State {
+            v: (d1 - d2 / 2.0 + d3 / 3.0) * per,
+            a: (d2 - d3) * per * f64::from(TICK_HZ),
+            ..self.rest_state(anchor)
+        }
     }
 
     /// [`Walker::state`] standing: the position, no speed (a stop ramp that has ended).
     pub fn rest_state(&self, anchor: i64) -> State {
         let rel = self.p - (i128::from(anchor) << 64);
-        State { p: rel as f64 / 18_446_744_073_709_551_616.0, ..State::default() }
+        State { p: rel as f64 / Q64_ONE, ..State::default() }
     }
 }
 

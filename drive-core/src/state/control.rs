@@ -191,26 +191,14 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         }
     }
 
-    /// The deceleration of a stop in the present mode, pps²: 0x6068 in the profile modes, else
-    /// the level of 0x600B; 0 (stop at once) for level 0, which has no ramp.
-    pub(crate) fn stop_deceleration(&self) -> u32 {
-        stop_deceleration(self.mode(), self.param(Obj::PpDecel), self.param(Obj::DecelLevel))
+    /// The encoder position, counts, in closed loop.
+    fn encoder_position(&self) -> Option<i64> {
+        self.ctl.servo.feedback.encoder().map(|_| self.ctl.servo.encoder)
     }
 
     /// What planning reads of the drive ([`Planner`]).
-    fn planner(&self) -> Planner<'_> {
-        let encoder = self.ctl.servo.feedback.encoder().map(|_| self.ctl.servo.encoder);
-        Planner { params: &self.params, now: self.now, may_move: self.may_move(), encoder }
-    }
-
-    /// The S-curve limits of the native position and velocity modes, for a speed of `speed`.
-    pub(crate) fn scurve_limits(&self, speed: f64) -> Limits {
-        self.planner().scurve_limits(speed)
-    }
-
-    /// Start and stop speeds: the jumps from and to rest (all of the speed without a ramp).
-    pub(crate) fn jumps(&self, speed: f64) -> (f64, f64) {
-        self.planner().jumps(speed)
+    pub(crate) fn planner(&self) -> Planner<'_> {
+        Planner { params: &self.params, now: self.now, may_move: self.may_move(), encoder: self.encoder_position() }
     }
 
     /// Plans writing `value` to the motion object `obj` at `self.now` on `planned`, a copy of
@@ -224,8 +212,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     /// with no copy: for a multi-object write, whose checkpoint restores them if it is refused
     /// (a refused plan may have halted the axis). What [`DriveState::plan_motion`] returns.
     pub(crate) fn plan_motion_in_place(&mut self, obj: Obj, value: u32) -> Result<bool, ObjError> {
-        let encoder = self.ctl.servo.feedback.encoder().map(|_| self.ctl.servo.encoder);
-        let may_move = self.may_move();
+        let (may_move, encoder) = (self.may_move(), self.encoder_position());
         let planner = Planner { params: &self.params, now: self.now, may_move, encoder };
         planner.plan_motion(obj, value, &mut self.ctl.axis, &mut self.pp)
     }
@@ -349,10 +336,11 @@ impl<P: BorrowMut<Table>> DriveState<P> {
 /// whether a motion may start, and the encoder position in closed loop. Apart from the axis and
 /// set-points it plans on, so that those may be the drive's own (a write that is undone as a
 /// whole if refused) or a copy.
-struct Planner<'a> {
+pub(crate) struct Planner<'a> {
     params: &'a [u32; Obj::COUNT],
     now: Instant,
-    may_move: Result<(), ObjError>,
+    /// Whether a motion may start ([`DriveState::may_move`]).
+    pub(crate) may_move: Result<(), ObjError>,
     /// The encoder position, counts, in closed loop.
     encoder: Option<i64>,
 }
@@ -367,7 +355,7 @@ impl Planner<'_> {
     }
 
     /// The S-curve limits of the native position and velocity modes, for a speed of `speed`.
-    fn scurve_limits(&self, speed: f64) -> Limits {
+    pub(crate) fn scurve_limits(&self, speed: f64) -> Limits {
         let level = |obj| LEVELS.get((self.param(obj) as usize).wrapping_sub(1)).map(|&a| f64::from(a));
         // Level 0 disables the ramp: the motor jumps to speed and stops from it.
         let (a, d) = (level(Obj::AccelLevel).unwrap_or(1e12), level(Obj::DecelLevel).unwrap_or(1e12));
@@ -376,7 +364,7 @@ impl Planner<'_> {
     }
 
     /// Start and stop speeds: the jumps from and to rest (all of the speed without a ramp).
-    fn jumps(&self, speed: f64) -> (f64, f64) {
+    pub(crate) fn jumps(&self, speed: f64) -> (f64, f64) {
         let ramp = |obj, speed_obj| if self.param(obj) == 0 { speed } else { f64::from(self.param(speed_obj)) };
         (ramp(Obj::AccelLevel, Obj::StartSpeed), ramp(Obj::DecelLevel, Obj::StopSpeed))
     }

@@ -190,13 +190,14 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     /// Plans on `axis` (a copy of the drive's) the synchronous move that a start would begin
     /// now, or says why not (and `axis` is to be dropped).
     fn plan_sync(&self, now: Instant, axis: &mut Axis) -> Result<(), ObjError> {
+        let planner = self.planner();
         let speed = f64::from(self.param(Obj::SyncSpeed) as i32);
         refuse(self.mode() == WorkMode::Position && speed != 0.0, ObjError::NotNow)?;
-        self.may_move()?;
+        planner.may_move?;
         refuse(self.ctl.axis.is_still(), ObjError::Busy)?;
         let target = i64::from(self.param(Obj::SyncPosition) as i32);
-        let (depart, arrive) = self.jumps(speed.abs());
-        axis.move_to(now, target, depart, arrive, &self.scurve_limits(speed)).map_err(|_| ObjError::Infeasible)
+        let (depart, arrive) = planner.jumps(speed.abs());
+        axis.move_to(now, target, depart, arrive, &planner.scurve_limits(speed)).map_err(|_| ObjError::Infeasible)
     }
 
     /// Whether the synchronous move can start now: planned on a copy of the axis. Out of line,
@@ -286,7 +287,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
                 self.ctl.run = None;
                 // 0x600B's ramp, without its jerk limit: a PVT segment may end with more
                 // acceleration than the jerk could take back in time.
-                self.ctl.axis.stop_ramp(self.stop_deceleration());
+                self.ctl.axis.stop_ramp(self.ctl.settings.stop_decel);
             }
             Ok(Effect::None) | Err(_) => {}
         }
