@@ -2,6 +2,7 @@
 //! replies out; the diagnostic counters.
 
 use crate::controller::Outputs;
+use crate::controller::handoff::Lent;
 use crate::crc;
 use crate::faults::{FaultLog, Inputs};
 use crate::ident::Identity;
@@ -11,7 +12,7 @@ use crate::od::Obj;
 use crate::pdu::{Exception, MAX_READ, Request, Words};
 use crate::rtu::{Framer, MAX_FRAME, RxError};
 use crate::units::{Baud, Instant, SlaveAddr};
-use core::borrow::BorrowMut;
+use core::borrow::Borrow;
 
 pub use crate::state::{
     Checkpoint, DriveState, Params, STATUS_BUSY, STATUS_STALL, STORAGE_CORRUPT, STORAGE_EMPTY, STORAGE_FSET,
@@ -102,11 +103,11 @@ impl<M: RegisterMap> Drive<M> {
     /// are those of `params` unless `config` overrides them (and the override is what the objects
     /// then show, and what a save stores).
     pub fn boot_with_map(config: DriveConfig, map: M, params: &Params, storage: u8) -> Self {
-        Self::boot_with_table(config, map, params, storage, Table::EMPTY)
+        Self::boot_with_table(config, map, params, storage, Table::new())
     }
 }
 
-impl<M: RegisterMap, P: BorrowMut<Table>> Drive<M, P> {
+impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
     /// [`Drive::boot_with_map`] with the PVT point table `table` (its points are not read: the
     /// table starts empty). A microcontroller passes a `&'static mut Table` from a static of
     /// its own, so the drive it builds is about 3 KB instead of 12 KB:
@@ -115,7 +116,7 @@ impl<M: RegisterMap, P: BorrowMut<Table>> Drive<M, P> {
     /// use drive_core::{Drive, DriveConfig, Params};
     /// use drive_core::motion::cubic::Table;
     /// use drive_core::maps::NativeMap;
-    /// let mut table = Table::EMPTY;
+    /// let mut table = Table::new();
     /// let d = Drive::boot_with_table(DriveConfig::default(), NativeMap::new(), &Params::factory(), 0, &mut table);
     /// assert!(core::mem::size_of_val(&d) < 4 * 1024);
     /// ```
@@ -193,7 +194,7 @@ impl<M: RegisterMap, P: BorrowMut<Table>> Drive<M, P> {
         if bytes.is_empty() {
             return;
         }
-        self.state.now = now;
+        self.state.set_request_time(now);
         // The bytes of one call arrived together: only the first can follow a silence.
         if self.framer.ended(now) {
             self.end_frame();
@@ -203,7 +204,7 @@ impl<M: RegisterMap, P: BorrowMut<Table>> Drive<M, P> {
 
     /// Time passes: a frame whose t3.5 has run out is processed.
     pub fn on_timer(&mut self, now: Instant) {
-        self.state.now = now;
+        self.state.set_request_time(now);
         if self.framer.ended(now) {
             self.end_frame();
         }
@@ -220,6 +221,13 @@ impl<M: RegisterMap, P: BorrowMut<Table>> Drive<M, P> {
         self.state.tick_with(now, inputs)
     }
 
+    /// Whether a request is complete at `now`, to be served by the next [`Drive::on_timer`] or
+    /// [`Drive::on_rx`]: where the tick owns a controller of its own, the moment to sync the
+    /// model first.
+    pub fn frame_due(&self, now: Instant) -> bool {
+        self.framer.ended(now)
+    }
+
     /// When [`Drive::on_timer`] next has something to do.
     pub fn deadline(&self) -> Option<Instant> {
         self.framer.deadline()
@@ -229,6 +237,14 @@ impl<M: RegisterMap, P: BorrowMut<Table>> Drive<M, P> {
     pub fn take_reply(&mut self) -> Option<&[u8]> {
         let n = core::mem::take(&mut self.tx_len);
         if n == 0 { None } else { self.tx.get(..n) }
+    }
+
+    /// [`Drive::take_reply`] and [`DriveState::lend`] at once: where the tick owns a controller
+    /// of its own, the reply goes out while the tick takes in what the request changed.
+    pub fn reply_and_lend(&mut self) -> (Option<&[u8]>, Lent<'_>) {
+        let n = core::mem::take(&mut self.tx_len);
+        let reply = if n == 0 { None } else { self.tx.get(..n) };
+        (reply, self.state.lend())
     }
 
     /// A request the drive makes of its platform (save, boot loader, power-down position, fault
@@ -358,7 +374,7 @@ struct Server<'a, M, P> {
 /// Conformity level of device identification: regular, stream and individual access.
 const CONFORMITY: u8 = 0x82;
 
-impl<M: RegisterMap, P: BorrowMut<Table>> Server<'_, M, P> {
+impl<M: RegisterMap, P: Borrow<Table>> Server<'_, M, P> {
     /// Whether a request executes when it gets no answer (broadcast, listen-only mode).
     fn silent_allowed(&self, req: &Request<'_>) -> bool {
         match *req {

@@ -23,7 +23,7 @@
 //! the drive, run on the flash without it, then reported back, if the drive sits behind a lock
 //! that the control tick also takes.
 
-use core::borrow::BorrowMut;
+use core::borrow::Borrow;
 use core::ops::Range;
 
 use embedded_storage_async::nor_flash::NorFlash;
@@ -254,7 +254,7 @@ impl<S: NorFlash> Store<S> {
     /// and [`Job::finish`] in one call, for a platform that can lend the drive for the flash
     /// operation. Returns the request and how it went; [`SystemRequest::BootLoader`] is the
     /// platform's to act on. Call it outside the control tick, after the reply has been sent.
-    pub async fn serve<M: RegisterMap, P: BorrowMut<Table>>(
+    pub async fn serve<M: RegisterMap, P: Borrow<Table>>(
         &mut self,
         drive: &mut Drive<M, P>,
     ) -> Option<(SystemRequest, Result<(), Error<S>>)> {
@@ -343,7 +343,7 @@ pub enum Job {
 impl Job {
     /// Takes the drive's pending request, if any, with a copy of its parameters for a save. The
     /// drive shows the save in progress (0x2120 bit 3) and refuses another until [`Job::finish`].
-    pub fn take<M: RegisterMap, P: BorrowMut<Table>>(drive: &mut Drive<M, P>) -> Option<Self> {
+    pub fn take<M: RegisterMap, P: Borrow<Table>>(drive: &mut Drive<M, P>) -> Option<Self> {
         Some(match drive.take_system_request()? {
             SystemRequest::Save => Job::Save(drive.state().params()),
             SystemRequest::SavePosition(position) => Job::SavePosition(position),
@@ -364,7 +364,7 @@ impl Job {
 
     /// Tells the drive how the job went (`ok`: the flash holds what it was asked to hold). Only a
     /// parameter save has a status in the drive (0x2120 bits 3 and 4).
-    pub fn finish<M: RegisterMap, P: BorrowMut<Table>>(&self, drive: &mut Drive<M, P>, ok: bool) {
+    pub fn finish<M: RegisterMap, P: Borrow<Table>>(&self, drive: &mut Drive<M, P>, ok: bool) {
         if matches!(self, Job::Save(_)) {
             drive.save_done(ok);
         }

@@ -1,45 +1,68 @@
-//! The application, the same on every board: the drive shared between the control tick and the
-//! Modbus task, the tick itself and the RTU slave task.
+//! The application, the same on every board: the drive's two owners and the handoff between
+//! them, the control tick, and the RTU slave task.
 //!
-//! The drive sits behind a lock that masks no interrupt. The tasks (thread mode) take it for one
-//! call each and never across an await. The control tick (a timer interrupt above every other
-//! one) only tries it: when a task holds it (serving a request that plans a motion takes about
-//! 1.3 ms), the tick does not wait, and the power stage coasts at the last speed (`coast`);
-//! the drive's next tick evaluates its motion at that tick's time, so the wait costs it nothing.
-//! Since the tick preempts the tasks and never the reverse, a task always finds the lock free.
-//! A parameter save works the same way: the request and a copy of the parameters are taken
-//! under the lock, the flash is written without it, and the result is reported under it.
+//! The control tick (a timer interrupt above every other one) owns its controller
+//! ([`TickSide`]: the motion it runs, supervision, the loops). The Modbus task owns the drive:
+//! framing, the dictionary, the planner, and a model of the controller that requests read and
+//! plan on. Neither ever waits for the other. Before the task serves a request it lends the tick
+//! its model ([`LENT`]), and the tick, at its next start, syncs it (tells it what it did) and
+//! hands it back; after the request, the task lends it again and the tick takes in what the
+//! request changed, a planned motion at the tick it was planned for (the board's
+//! `PLAN_MARGIN_US` after the request: longer than planning takes). See
+//! `drive_core::controller::handoff`.
+//!
+//! The PVT point table is shared: the task stores points in slots the tick does not read yet,
+//! and a sync tells the tick they are there.
 
+use core::future::poll_fn;
 use core::mem::MaybeUninit;
-use core::sync::atomic::{AtomicU32, Ordering};
+use core::ptr::null_mut;
+use core::sync::atomic::{AtomicPtr, AtomicU16, AtomicU32, Ordering};
+use core::task::Poll;
 
 use defmt::warn;
+use drive_core::controller::handoff::{Handover, Lent, TickSide};
 use drive_core::ident::Identity;
 use drive_core::maps::NativeMap;
 use drive_core::motion::cubic::Table;
 use drive_core::{Baud, DriveConfig, Instant, Params};
-use embassy_futures::select::{Either, select};
-use embassy_time::Timer;
-use embedded_io_async::{Read, Write};
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::signal::Signal;
+use embassy_sync::waitqueue::AtomicWaker;
+use embedded_io_async::Write;
 
 use crate::board::Serial;
-use crate::frames::MAX_FRAME;
 use crate::power::PowerStage;
 
-/// The drive of the firmware: the native map, and the PVT point table (9 KB) in a static of its
-/// own, lent to the drive, so that building the drive (about 3 KB) never passes the table through
-/// the stack.
-pub type Drive = drive_core::Drive<NativeMap, &'static mut Table>;
+/// The drive of the firmware: the native map, and the PVT point table in a static of its own.
+pub type Drive = drive_core::Drive<NativeMap, &'static Table>;
 
-/// The drive, once `start` has built it. A reference, so the mutex's initial value (`None`) is
-/// zero and lives in .bss: an `Option<Drive>` would copy its initial image from flash.
-static DRIVE: spin::Mutex<Option<&'static mut Drive>> = spin::Mutex::new(None);
+/// The PVT points (9 KB), shared by the task (stores) and the tick (reads).
+static TABLE: Table = Table::new();
+
+/// The tick's own, once `start` has built it: only the tick interrupt takes it after that.
+static TICK: critical_section::Mutex<core::cell::RefCell<Option<&'static mut TickSide>>> =
+    critical_section::Mutex::new(core::cell::RefCell::new(None));
+
+/// The model the task lends to the tick (a `Lent`), or null: set by the task, cleared by the
+/// tick once synced.
+static LENT: AtomicPtr<()> = AtomicPtr::new(null_mut());
+/// Wakes the task when the tick has synced its model.
+static SYNCED: AtomicWaker = AtomicWaker::new();
+/// Raised by the tick when the task should sync without waiting for a request (power failing,
+/// a new alarm: their saves).
+static ATTENTION: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 
 /// Control ticks run since power-up (the watchdog is fed only while this advances).
 pub static TICKS: AtomicU32 = AtomicU32::new(0);
+/// Plans handed over at their first tick, late (the task lent them after it), and dropped
+/// (the tick had stopped on its own since they were planned).
+pub static HANDOVERS: [AtomicU32; 3] = [const { AtomicU32::new(0) }; 3];
 
-/// Control ticks that found the drive held by a task and coasted.
-pub static COASTED: AtomicU32 = AtomicU32::new(0);
+/// The analog input code (0x605F), from the sense loop.
+pub static ANALOG_IN: AtomicU16 = AtomicU16::new(0);
+/// EXT1..3 as 0x6031 bits 7..9, from the input task.
+pub static EXT_INPUTS: AtomicU16 = AtomicU16::new(0);
 
 /// Who this firmware says it is (0x1022 hardware version from the board).
 fn identity(hardware: &'static str) -> Identity {
@@ -52,76 +75,152 @@ fn identity(hardware: &'static str) -> Identity {
 }
 
 /// Builds the drive from the parameters power-up loaded (`params`, storage status bits
-/// `status`); `can_save` if the board has a parameter store (else 0x200F = 2 is refused).
-/// Returns the serial line settings in force: the baud rate and the parity (0x2100).
-pub fn start(hardware: &'static str, params: &Params, status: u8, can_save: bool) -> (Baud, u32) {
+/// `status`) and hands the tick its side; `can_save` if the board has a parameter store (else
+/// 0x200F = 2 is refused). Returns the drive, for the Modbus task, and the serial line settings
+/// in force: the baud rate and the parity (0x2100).
+#[allow(clippy::mut_from_ref, reason = "the drive is a singleton's memory, not borrowed from the inputs")]
+pub fn start(hardware: &'static str, params: &Params, status: u8, can_save: bool) -> (&'static mut Drive, Baud, u32) {
     let config = DriveConfig { identity: identity(hardware), can_save, ..DriveConfig::default() };
-    // singleton! yields its memory once; uninitialised (the slot) or all zeros (the empty
-    // table), it is .bss with no flash image.
-    let (Some(slot), Some(table)) = (
+    // singleton! yields its memory once; uninitialised, it is .bss with no flash image.
+    let (Some(slot), Some(tick)) = (
         cortex_m::singleton!(: MaybeUninit<Drive> = MaybeUninit::uninit()),
-        cortex_m::singleton!(: Table = Table::EMPTY),
+        cortex_m::singleton!(: MaybeUninit<TickSide> = MaybeUninit::uninit()),
     ) else {
         defmt::panic!("app::start called twice");
     };
-    let drive = boot_into(slot, config, params, status, table);
-    let line = (drive.baud(), drive.state().read(drive_core::od::Obj::Parity));
-    DRIVE.lock().replace(drive);
-    line
+    let drive = boot_into(slot, config, params, status);
+    drive.state_mut().set_plan_margin(crate::board::PLAN_MARGIN_US);
+    let tick = tick_side_into(tick, drive);
+    critical_section::with(|cs| TICK.borrow_ref_mut(cs).replace(tick));
+    let (baud, parity) = (drive.baud(), drive.state().read(drive_core::od::Obj::Parity));
+    (drive, baud, parity)
 }
 
-/// Builds the drive in `slot`, lending it `table`. The compiler builds the drive (about 3 KB) in
-/// this frame and copies it into the static; out of line, so the copy is on the stack for this
-/// call only.
+/// Builds the drive in `slot`, lending it the table. The compiler builds the drive (about 3 KB)
+/// in this frame and copies it into the static; out of line, so the copy is on the stack for
+/// this call only.
 #[inline(never)]
 fn boot_into(
     slot: &'static mut MaybeUninit<Drive>,
     config: DriveConfig,
     params: &Params,
     status: u8,
-    table: &'static mut Table,
 ) -> &'static mut Drive {
-    slot.write(Drive::boot_with_table(config, NativeMap::new(), params, status, table))
+    slot.write(Drive::boot_with_table(config, NativeMap::new(), params, status, &TABLE))
 }
 
-/// Runs `f` on the drive, if it has been started. For the tasks (thread mode), never from an
-/// interrupt: the control tick may hold the drive only while it preempts them.
-pub fn with_drive<R>(f: impl FnOnce(&mut Drive) -> R) -> Option<R> {
-    DRIVE.lock().as_deref_mut().map(f)
+/// The tick's side of `drive` in `slot`; out of line as [`boot_into`].
+#[inline(never)]
+fn tick_side_into(slot: &'static mut MaybeUninit<TickSide>, drive: &Drive) -> &'static mut TickSide {
+    slot.write(drive.state().tick_side())
 }
 
-/// One control tick at `now` with what the board measures (`inputs`, read only if the tick runs
-/// the drive): the drive's motion, supervision and loops, then the power stage. Called from the
-/// tick interrupt; if a task holds the drive, the stage coasts instead, and the tick does not
-/// count (the watchdog is fed by drive ticks).
+/// One control tick at `now` with what the board measures (`inputs`): a sync first if the task
+/// lent its model, then the controller's tick, then the power stage. Called from the tick
+/// interrupt; it never waits for the task.
 pub fn control_tick(now: Instant, inputs: impl FnOnce() -> drive_core::faults::Inputs, stage: &mut impl PowerStage) {
-    match DRIVE.try_lock() {
-        Some(mut drive) => {
-            if let Some(d) = drive.as_deref_mut() {
-                run_tick(d, now, inputs, stage);
-            }
+    critical_section::with(|cs| {
+        if let Some(tick) = TICK.borrow_ref_mut(cs).as_deref_mut() {
+            run_tick(tick, now, inputs, stage);
         }
-        None => {
-            stage.coast_on();
-            COASTED.fetch_add(1, Ordering::Relaxed);
-        }
-    }
+    });
 }
 
-/// A tick that runs the drive, then its outputs to the stage. Out of line: its frame (about
-/// 1 KB) is on the stack only when the tick runs the drive, which it never does while a task is
-/// deep in a request (the task holds the drive then, and the tick coasts with a small frame).
-/// The inputs are made here, so that what a board never measures is known to the compiler.
+/// A tick of `tick`, then its outputs to the stage. Out of line, with the inputs made here, so
+/// that what a board never measures is known to the compiler.
 #[inline(never)]
 fn run_tick(
-    drive: &mut Drive,
+    tick: &mut TickSide,
     now: Instant,
     inputs: impl FnOnce() -> drive_core::faults::Inputs,
     stage: &mut impl PowerStage,
 ) {
-    let out = drive.tick_with(now, &inputs());
+    let lent = LENT.load(Ordering::Acquire);
+    if !lent.is_null() {
+        // SAFETY: the task stored a pointer to a live `Lent` and touches neither it nor what it
+        // borrows until it finds LENT null again (`sync`), which only this interrupt makes it.
+        let lent = unsafe { &mut *lent.cast::<Lent<'static>>() };
+        let handover = tick.sync(now, lent);
+        if handover != Handover::Waiting {
+            let counter = match handover {
+                Handover::Planned => HANDOVERS.first(),
+                Handover::Late(_) => HANDOVERS.get(1),
+                Handover::Dropped => HANDOVERS.get(2),
+                Handover::Waiting | Handover::Done => None,
+            };
+            if let Some(c) = counter {
+                c.fetch_add(1, Ordering::Relaxed);
+            }
+            LENT.store(null_mut(), Ordering::Release);
+            SYNCED.wake();
+        }
+    }
+    let out = tick.tick(now, &inputs(), &TABLE);
     stage.apply(&out);
+    if tick.needs_bus() {
+        ATTENTION.signal(());
+    }
     TICKS.fetch_add(1, Ordering::Relaxed);
+}
+
+/// Lends the drive's model to the tick and waits until the tick has synced it (at most one tick,
+/// or until the first tick of a motion planned into it), then acts on what the tick reported.
+pub async fn sync(drive: &mut Drive) {
+    lend(&mut drive.state_mut().lend()).await;
+    drive.state_mut().synced();
+}
+
+/// Lends `lent` to the tick until it has synced it.
+///
+/// Awaited to the end wherever it is called (never raced in a `select`): dropped while the
+/// model is lent, the tick would write into a model the task uses again.
+async fn lend(lent: &mut Lent<'_>) {
+    LENT.store(core::ptr::from_mut(lent).cast(), Ordering::Release);
+    poll_fn(|cx| {
+        SYNCED.register(cx.waker());
+        if LENT.load(Ordering::Acquire).is_null() { Poll::Ready(()) } else { Poll::Pending }
+    })
+    .await;
+}
+
+/// Before a request is served: the model synced, and the inputs the other tasks read into it.
+async fn before_request(drive: &mut Drive) {
+    sync(drive).await;
+    let s = drive.state_mut().status_mut();
+    s.analog_in = ANALOG_IN.load(Ordering::Relaxed);
+    s.gpio = (s.gpio & !(0b111 << 7)) | EXT_INPUTS.load(Ordering::Relaxed);
+}
+
+/// After the drive had its say: the reply out while the tick takes in what the request changed
+/// (a motion from the tick it was planned for), then the flash operations the request asked for.
+async fn after_request(drive: &mut Drive, serial: &mut Serial, store: &mut crate::board::ParamStore) {
+    let changed = drive.state().has_changes();
+    let (reply, mut lent) = drive.reply_and_lend();
+    let send = async {
+        if let Some(bytes) = reply
+            && serial.write_all(bytes).await.is_err()
+        {
+            warn!("uart: write failed");
+        }
+    };
+    let hand_over = async {
+        if changed {
+            lend(&mut lent).await;
+        }
+    };
+    embassy_futures::join::join(send, hand_over).await;
+    if changed {
+        drive.state_mut().synced();
+    }
+    // The reply must be on the wire before a page erase stalls the flash: the USART
+    // interrupt that feeds the transmitter runs from flash too, and a stalled reply would
+    // reach the master with a gap that breaks its frame.
+    if drive.has_system_request() {
+        if serial.flush().await.is_err() {
+            warn!("uart: flush failed");
+        }
+        serve_store(drive, store);
+    }
 }
 
 /// Now, on the drive's clock (embassy-time's, in microseconds).
@@ -129,42 +228,21 @@ pub fn now() -> Instant {
     Instant::from_micros(embassy_time::Instant::now().as_micros())
 }
 
-/// Copies the drive's pending reply out of the lock, so it is sent without holding the drive.
-fn take_reply(d: &mut Drive, out: &mut [u8; MAX_FRAME]) -> usize {
-    match d.take_reply() {
-        Some(r) => out.get_mut(..r.len()).map_or(0, |dst| {
-            dst.copy_from_slice(r);
-            r.len()
-        }),
-        None => 0,
-    }
-}
-
-async fn send(serial: &mut Serial, reply: &[u8; MAX_FRAME], n: usize) {
-    if let Some(bytes) = reply.get(..n)
-        && !bytes.is_empty()
-        && serial.write_all(bytes).await.is_err()
-    {
-        warn!("uart: write failed");
-    }
-}
-
-/// Carries out what the drive asked of its platform (a save), after the reply went out. The job
-/// (request and parameter copy) is taken under the lock and the flash written without it, so the
-/// control tick keeps its interrupt; a page erase still stalls every flash fetch for ~22 ms,
-/// which is why the drive refuses saves while the axis moves.
+/// Carries out what the drive asked of its platform (a save), after the reply went out; the
+/// control tick keeps running meanwhile, though a page erase stalls every flash fetch for
+/// ~22 ms, which is why the drive refuses saves while the axis moves.
 ///
 /// Out of line: the save's state (about 2 KB) is on the stack while a save runs, not in the
 /// Modbus task's frame for every request.
 #[inline(never)]
-pub fn serve_store(store: &mut crate::board::ParamStore) {
+pub fn serve_store(drive: &mut Drive, store: &mut crate::board::ParamStore) {
     use drive_core::store::Job;
-    while let Some(job) = with_drive(Job::take).flatten() {
+    while let Some(job) = Job::take(drive) {
         // The flash driver is blocking, so the save completes in one poll. Polled here, not
         // awaited, the job and the save's state (about 1.7 KB) sit on the stack for the moment
         // instead of in the task's static storage.
         let done = embassy_futures::block_on(store.run(&job));
-        with_drive(|d| job.finish(d, done.is_ok()));
+        job.finish(drive, done.is_ok());
         match (job, done) {
             (Job::Save(_), Err(_)) => warn!("parameter save failed"),
             (Job::SavePosition(_), Err(_)) => warn!("power-down position not saved"),
@@ -175,55 +253,46 @@ pub fn serve_store(store: &mut crate::board::ParamStore) {
     }
 }
 
-/// Whether the drive asked for a flash operation that has not been carried out yet (a parameter
-/// save, the power-down position, the fault history).
-fn save_pending() -> bool {
-    with_drive(|d| d.has_system_request()).unwrap_or(false)
-}
-
 /// The RTU slave on a line with baud timing: bytes in with their arrival time, t3.5 from a
-/// timer on `drive.deadline()`, replies out, then the saves a request asked for into `store`.
+/// timer on `drive.deadline()`, the model synced before a request is served, replies out, the
+/// request's changes handed to the tick, then the saves a request asked for into `store`.
 #[cfg(not(feature = "qemu"))]
 #[embassy_executor::task]
-pub async fn modbus(mut serial: Serial, mut store: crate::board::ParamStore) -> ! {
+pub async fn modbus(drive: &'static mut Drive, mut serial: Serial, mut store: crate::board::ParamStore) -> ! {
+    use embassy_futures::select::{Either3, select3};
+    use embassy_time::Timer;
+    use embedded_io_async::Read;
     // Bytes come one or a few at a time: the task reads them as they arrive.
     let mut buf = [0u8; 16];
-    let mut reply = [0u8; MAX_FRAME];
     loop {
-        let deadline = with_drive(|d| d.deadline()).flatten();
+        let deadline = drive.deadline();
         let timeout = async {
             match deadline {
                 Some(at) => Timer::at(embassy_time::Instant::from_micros(at.as_micros())).await,
                 None => core::future::pending().await,
             }
         };
-        let n = match select(serial.read(&mut buf), timeout).await {
+        match select3(serial.read(&mut buf), timeout, ATTENTION.wait()).await {
             // A chunk shares one stamp: with a read woken per byte, chunks are one byte unless
             // the task ran late, and then the stamp is late by at most that delay.
-            Either::First(Ok(n)) => {
-                let bytes = buf.get(..n).unwrap_or_default();
-                with_drive(|d| {
-                    d.on_rx(now(), bytes);
-                    take_reply(d, &mut reply)
-                })
+            Either3::First(Ok(n)) => {
+                let now = now();
+                if drive.frame_due(now) {
+                    before_request(drive).await;
+                }
+                drive.on_rx(now, buf.get(..n).unwrap_or_default());
             }
-            Either::First(Err(_)) => {
-                warn!("uart: receive error");
-                None
+            Either3::First(Err(_)) => warn!("uart: receive error"),
+            Either3::Second(()) => {
+                let now = now();
+                if drive.frame_due(now) {
+                    before_request(drive).await;
+                }
+                drive.on_timer(now);
             }
-            Either::Second(()) => with_drive(|d| {
-                d.on_timer(now());
-                take_reply(d, &mut reply)
-            }),
-        };
-        send(&mut serial, &reply, n.unwrap_or(0)).await;
-        // The reply must be on the wire before a page erase stalls the flash: the USART
-        // interrupt that feeds the transmitter runs from flash too, and a stalled reply would
-        // reach the master with a gap that breaks its frame.
-        if save_pending() && serial.flush().await.is_err() {
-            warn!("uart: flush failed");
+            Either3::Third(()) => sync(drive).await,
         }
-        serve_store(&mut store);
+        after_request(drive, &mut serial, &mut store).await;
     }
 }
 
@@ -241,45 +310,48 @@ const SILENCE_PARTIAL: embassy_time::Duration = embassy_time::Duration::from_mil
 /// `frames`) or by a long silence, then goes to the drive in one burst t3.5 before now.
 #[cfg(feature = "qemu")]
 #[embassy_executor::task]
-pub async fn modbus(mut serial: Serial, mut store: crate::board::ParamStore) -> ! {
+pub async fn modbus(drive: &'static mut Drive, mut serial: Serial, mut store: crate::board::ParamStore) -> ! {
+    use embassy_futures::select::{Either3, select3};
+    use embassy_time::Timer;
+    use embedded_io_async::Read;
     // Bytes come one or a few at a time: the task reads them as they arrive.
     let mut buf = [0u8; 16];
-    let mut reply = [0u8; MAX_FRAME];
     let mut frame = crate::frames::Assembler::new();
     loop {
         let silence = if frame.expects_more() { SILENCE_PARTIAL } else { SILENCE };
-        let n = match select(serial.read(&mut buf), Timer::after(silence)).await {
-            Either::First(Ok(n)) => {
-                let mut sent = None;
+        match select3(serial.read(&mut buf), Timer::after(silence), ATTENTION.wait()).await {
+            Either3::First(Ok(n)) => {
                 for &b in buf.get(..n).unwrap_or_default() {
                     if frame.push(b) {
-                        sent = deliver(&mut frame, &mut reply);
+                        deliver(drive, &mut frame, &mut serial, &mut store).await;
                     }
                 }
-                sent
             }
-            Either::First(Err(_)) => None,
-            Either::Second(()) if !frame.is_empty() => deliver(&mut frame, &mut reply),
-            Either::Second(()) => None,
-        };
-        send(&mut serial, &reply, n.unwrap_or(0)).await;
-        if save_pending() && serial.flush().await.is_err() {
-            warn!("uart: flush failed");
+            Either3::First(Err(_)) => {}
+            Either3::Second(()) if !frame.is_empty() => deliver(drive, &mut frame, &mut serial, &mut store).await,
+            Either3::Second(()) => {}
+            Either3::Third(()) => {
+                sync(drive).await;
+                after_request(drive, &mut serial, &mut store).await;
+            }
         }
-        serve_store(&mut store);
     }
 }
 
-/// Hands a complete request to the drive as a burst that ended t3.5 ago, and takes its reply.
+/// Hands a complete request to the drive as a burst that ended t3.5 ago, then what follows a
+/// request.
 #[cfg(feature = "qemu")]
-fn deliver(frame: &mut crate::frames::Assembler, reply: &mut [u8; MAX_FRAME]) -> Option<usize> {
-    let n = with_drive(|d| {
-        let t = now().as_micros();
-        let t35 = d.baud().t35_micros();
-        d.on_rx(Instant::from_micros(t.saturating_sub(t35)), frame.bytes());
-        d.on_timer(Instant::from_micros(t.max(t35)));
-        take_reply(d, reply)
-    });
+async fn deliver(
+    drive: &mut Drive,
+    frame: &mut crate::frames::Assembler,
+    serial: &mut Serial,
+    store: &mut crate::board::ParamStore,
+) {
+    before_request(drive).await;
+    let t = now().as_micros();
+    let t35 = drive.baud().t35_micros();
+    drive.on_rx(Instant::from_micros(t.saturating_sub(t35)), frame.bytes());
+    drive.on_timer(Instant::from_micros(t.max(t35)));
     frame.clear();
-    n
+    after_request(drive, serial, store).await;
 }

@@ -14,8 +14,6 @@
 #[cfg(not(target_os = "none"))]
 fn main() {}
 
-#[cfg_attr(not(target_os = "none"), allow(dead_code, reason = "used by the boards and the host tests"))]
-mod coast;
 #[cfg_attr(not(feature = "qemu"), allow(dead_code, reason = "used by the QEMU build and the host tests"))]
 mod frames;
 
@@ -106,12 +104,12 @@ mod run {
         // Power-up, before the drive answers anything: the FSET check and the parameters from
         // flash, then the drive, then the UART at their baud rate and parity.
         let (store, loaded) = power_up(flash, &mut inputs.fset);
-        let (baud, parity) = app::start(board::HARDWARE, &loaded.params, loaded.status, true);
+        let (drive, baud, parity) = app::start(board::HARDWARE, &loaded.params, loaded.status, true);
         board::set_serial(&mut uart, baud, parity);
         info!("drive up: {} baud, parity {}, storage status {:#x}", baud.get(), parity, loaded.status);
         board::start_tick(stage, encoder);
         watchdog.unleash();
-        spawner.spawn(unwrap!(app::modbus(uart, store)));
+        spawner.spawn(unwrap!(app::modbus(drive, uart, store)));
         spawner.spawn(unwrap!(watch_inputs(inputs)));
         sense_loop(sense, watchdog).await
     }
@@ -159,7 +157,7 @@ mod run {
             n = n.wrapping_add(1);
             let (v, t, a) = sense.read_adc();
             Sense::publish(v, t);
-            app::with_drive(|d| d.state_mut().status_mut().analog_in = a);
+            app::ANALOG_IN.store(a, Ordering::Relaxed);
             if n.is_multiple_of(100) {
                 let cost = board::TICK_CYCLES_MAX.load(Ordering::Relaxed);
                 info!(
@@ -186,10 +184,7 @@ mod run {
         loop {
             let low = [e1.is_low(), e2.is_low(), e3.is_low()];
             let bits = low.iter().enumerate().fold(0u16, |acc, (i, &l)| acc | (u16::from(l) << (7 + i)));
-            app::with_drive(|d| {
-                let s = d.state_mut().status_mut();
-                s.gpio = (s.gpio & !(0b111 << 7)) | bits;
-            });
+            app::EXT_INPUTS.store(bits, Ordering::Relaxed);
             select4(e1.wait_for_any_edge(), e2.wait_for_any_edge(), e3.wait_for_any_edge(), fset.wait_for_any_edge())
                 .await;
             if fset.is_low() {
@@ -249,9 +244,9 @@ mod run {
     #[inline(never)]
     fn power_up(spawner: embassy_executor::Spawner) {
         let (store, loaded) = load();
-        app::start(board::HARDWARE, &loaded.params, loaded.status, true);
+        let (drive, _, _) = app::start(board::HARDWARE, &loaded.params, loaded.status, true);
         let serial = board::init();
-        spawner.spawn(unwrap!(app::modbus(serial, store)));
+        spawner.spawn(unwrap!(app::modbus(drive, serial, store)));
     }
 
     /// The store and what power-up loads from it. Out of line, as on the board: the state of the

@@ -31,10 +31,6 @@ mod frames;
 mod power;
 
 #[cfg(target_os = "none")]
-#[path = "../src/coast.rs"]
-mod coast;
-
-#[cfg(target_os = "none")]
 #[defmt::panic_handler]
 fn defmt_panic() -> ! {
     board::power_off();
@@ -58,22 +54,28 @@ mod tests {
     use embassy_time::{Duration, Instant, Timer, with_timeout};
     use embedded_io_async::{Read, Write};
 
-    use crate::app;
+    use crate::app::{self, Drive};
     use crate::board::{self, Board};
 
+    /// The board, and the drive the Modbus task would own.
+    struct Hil {
+        board: Board,
+        drive: &'static mut Drive,
+    }
+
     #[init]
-    fn init() -> Board {
+    fn init() -> Hil {
         let board = board::init();
         // As after a power-up on erased store pages: factory values, saving allowed.
-        app::start(board::HARDWARE, &Params::factory(), 0, true);
-        board
+        let (drive, _, _) = app::start(board::HARDWARE, &Params::factory(), 0, true);
+        Hil { board, drive }
     }
 
     /// Bytes written to the USART come back through the transceiver, DE switching around them.
     #[test]
     #[timeout(5)]
-    async fn usart_loopback_through_the_transceiver(board: Board) {
-        let mut uart = board.uart;
+    async fn usart_loopback_through_the_transceiver(hil: Hil) {
+        let mut uart = hil.board.uart;
         let sent = *b"\x01\x03\x60\x0C\x00\x02\x1A\x08 loopback";
         uart.write_all(&sent).await.ok();
         let mut got = [0u8; 18];
@@ -91,8 +93,8 @@ mod tests {
     /// 20 kHz: the tick count over 200 ms, the spread of the period, and the tick's own cost.
     #[test]
     #[timeout(5)]
-    async fn control_tick_period_and_jitter(board: Board) {
-        board::start_tick(board.stage, board.encoder);
+    async fn control_tick_period_and_jitter(hil: Hil) {
+        board::start_tick(hil.board.stage, hil.board.encoder);
         Timer::after_millis(10).await;
         let (t0, n0) = (Instant::now(), app::TICKS.load(Relaxed));
         Timer::after_millis(200).await;
@@ -132,65 +134,76 @@ mod tests {
     }
 
     /// Once the move has ended (within 5 s) and its last pulse train is out: the pulses TIM2
-    /// counted ([`count_step_edges`]) and the drive's position.
-    async fn steps_when_still() -> (u32, Option<i64>) {
+    /// counted ([`count_step_edges`]) and the drive's position, as the Modbus task learns them
+    /// (by syncs with the tick).
+    async fn steps_when_still(drive: &mut Drive) -> (u32, i64) {
         let start = Instant::now();
-        while app::with_drive(|d| d.state().status().controller & drive_core::drive::STATUS_BUSY != 0) == Some(true) {
+        loop {
+            app::sync(drive).await;
+            if drive.state().status().controller & drive_core::drive::STATUS_BUSY == 0 {
+                break;
+            }
             assert!(start.elapsed() < Duration::from_secs(5), "move ends");
             Timer::after_millis(5).await;
         }
         Timer::after_millis(5).await; // the last pulse train
-        (pac::TIM2.cnt().read(), app::with_drive(|d| d.state().position()))
+        (pac::TIM2.cnt().read(), drive.state().position())
     }
 
     /// A relative move at seed 000's top speed: the output timer's pulses, counted by TIM2 from
     /// the STEP wire, are exactly the move's steps, and the drive's position agrees.
     #[test]
     #[timeout(10)]
-    async fn step_count_on_the_output_timer(board: Board) {
+    async fn step_count_on_the_output_timer(hil: Hil) {
+        let Hil { board, drive } = hil;
         count_step_edges();
 
         board::start_tick(board.stage, board.encoder);
         const STEPS: u32 = 40_000;
-        app::with_drive(|d| {
-            let s = d.state_mut();
-            // Level 0: no ramp, the whole move at 200 kpps (10 steps a tick).
-            s.apply(Obj::AccelLevel, 0);
-            s.apply(Obj::DecelLevel, 0);
-            s.apply(Obj::MaxSpeed, 200_000);
-            s.apply(Obj::RelativeMove, STEPS);
-        });
+        let s = drive.state_mut();
+        // Level 0: no ramp, the whole move at 200 kpps (10 steps a tick).
+        s.apply(Obj::AccelLevel, 0);
+        s.apply(Obj::DecelLevel, 0);
+        s.apply(Obj::MaxSpeed, 200_000);
+        s.apply(Obj::RelativeMove, STEPS);
+        app::sync(drive).await;
         let start = Instant::now();
-        let (counted, position) = steps_when_still().await;
+        let (counted, position) = steps_when_still(drive).await;
         info!("{} pulses counted, position {}, in {} ms", counted, position, start.elapsed().as_millis());
         assert_eq!(counted, STEPS);
-        assert_eq!(position, Some(i64::from(STEPS)));
+        assert_eq!(position, i64::from(STEPS));
     }
 
-    /// A re-target while cruising: the drive plans it under its lock for about a millisecond
-    /// (`cargo xtask tick-cost`), the ticks meanwhile coast at the last speed, and still the
-    /// pulses counted on the STEP wire are exactly the drive's final position.
+    /// A re-target while cruising: the Modbus task plans it (about a millisecond, `cargo
+    /// xtask tick-cost`) while the tick runs on, and hands it over at the tick it was planned
+    /// for; the pulses counted on the STEP wire are exactly the drive's final position.
     #[test]
     #[timeout(10)]
-    async fn a_retarget_while_cruising_loses_no_step(board: Board) {
+    async fn a_retarget_while_cruising_loses_no_step(hil: Hil) {
+        let Hil { board, drive } = hil;
         count_step_edges();
 
         board::start_tick(board.stage, board.encoder);
         // Ramped (factory levels), 40 kpps: two steps a tick while cruising.
-        app::with_drive(|d| {
-            let s = d.state_mut();
-            s.apply(Obj::MaxSpeed, 40_000);
-            s.apply(Obj::RelativeMove, 40_000);
-        });
+        let s = drive.state_mut();
+        s.apply(Obj::MaxSpeed, 40_000);
+        s.apply(Obj::RelativeMove, 40_000);
+        app::sync(drive).await;
         Timer::after_millis(300).await;
-        let coasted = app::COASTED.load(Relaxed);
-        app::with_drive(|d| d.state_mut().apply(Obj::AbsoluteMove, 60_000));
-        let coasted = app::COASTED.load(Relaxed).wrapping_sub(coasted);
-        let (counted, position) = steps_when_still().await;
-        info!("{} ticks coasted during the re-target; {} pulses counted, position {}", coasted, counted, position);
-        assert!(coasted > 0, "planning the re-target held the drive across ticks");
+        let handed = |i: usize| app::HANDOVERS[i].load(Relaxed);
+        let before = [handed(0), handed(1), handed(2)];
+        app::sync(drive).await;
+        drive.state_mut().apply(Obj::AbsoluteMove, 60_000);
+        app::sync(drive).await;
+        let after = [handed(0), handed(1), handed(2)];
+        let (counted, position) = steps_when_still(drive).await;
+        info!(
+            "handovers planned/late/dropped {} -> {}; {} pulses counted, position {}",
+            before, after, counted, position
+        );
+        assert_eq!(after, [before[0] + 1, before[1], before[2]], "the re-target taken over at its tick");
         assert_eq!(counted, 60_000);
-        assert_eq!(position, Some(60_000));
+        assert_eq!(position, 60_000);
     }
 
     /// A changed set, saved the way the Modbus task saves (the drive's request taken under the
@@ -198,7 +211,8 @@ mod tests {
     /// same pages loads. The pages get back what they held before.
     #[test]
     #[timeout(10)]
-    async fn flash_save_and_reload(board: Board) {
+    async fn flash_save_and_reload(hil: Hil) {
+        let Hil { board, drive } = hil;
         let Ok(mut store) = Store::new(BlockingAsync::new(board.flash), board::STORE) else {
             defmt::panic!("the store's range is not whole pages");
         };
@@ -206,22 +220,21 @@ mod tests {
         info!("store status before the test {:#x}", before.status);
 
         board::start_tick(board.stage, board.encoder);
-        app::with_drive(|d| {
-            let s = d.state_mut();
-            s.apply(Obj::GroupId, 5);
-            s.apply(Obj::PhaseCurrent, 1234);
-            s.apply(Obj::BaudRate, 57_600);
-            s.apply(Obj::Parity, 1);
-            s.apply(Obj::SystemControl, 2);
-        });
+        let s = drive.state_mut();
+        s.apply(Obj::GroupId, 5);
+        s.apply(Obj::PhaseCurrent, 1234);
+        s.apply(Obj::BaudRate, 57_600);
+        s.apply(Obj::Parity, 1);
+        s.apply(Obj::SystemControl, 2);
+        app::sync(drive).await;
         let (t0, n0) = (Instant::now(), app::TICKS.load(Relaxed));
-        app::serve_store(&mut store);
+        app::serve_store(drive, &mut store);
         let (spent, ticks) = (t0.elapsed(), app::TICKS.load(Relaxed).wrapping_sub(n0));
         info!("save: {} us, {} control ticks ran meanwhile", spent.as_micros(), ticks);
         assert!(ticks > 0, "the control tick is not masked during the save");
-        let status = app::with_drive(|d| d.state().read(Obj::StorageStatus) as u8).unwrap_or(0xFF);
+        let status = drive.state().read(Obj::StorageStatus) as u8;
         assert_eq!(status & (STORAGE_SAVING | STORAGE_SAVE_FAILED), 0, "save ended and succeeded");
-        let Some(saved) = app::with_drive(|d| d.state().params()) else { defmt::panic!("no drive") };
+        let saved = drive.state().params();
 
         // A new store on the same pages: what a reset would load.
         let Ok(mut again) = Store::new(store.into_flash(), board::STORE) else { defmt::panic!("store range") };

@@ -15,8 +15,9 @@ use std::io::{self, BufWriter, Write};
 use std::path::Path;
 
 use drive_core::control::{Outputs, TICK_MICROS};
+use drive_core::controller::handoff::{Handover, TickSide};
 use drive_core::faults::Inputs;
-use drive_core::{Drive, Instant};
+use drive_core::{Drive, DriveState, Instant};
 
 use crate::encoder::{Encoder, EncoderKind};
 use crate::inject::{Change, Injector, Scheduled, Supply};
@@ -28,6 +29,9 @@ use crate::trace::{CSV_HEADER, Decimator, TraceRow};
 #[derive(Debug)]
 pub struct Plant {
     drive: Drive,
+    /// The control tick's own controller, synced with the drive's model as on a microcontroller
+    /// ([`drive_core::controller::handoff`]); `None` ticks the drive's controller itself.
+    tick: Option<TickSide>,
     motor: Motor,
     /// The time of the next control tick.
     next_tick: Instant,
@@ -75,10 +79,22 @@ pub fn driver_command(out: &Outputs) -> DriverCommand {
 impl Plant {
     /// `drive` and `motor`, at time 0, with the default encoder (`inc:1000`) and the driver at
     /// [`AMBIENT_C`].
+    ///
+    /// The control tick owns a controller of its own, synced with the drive's model before a
+    /// tick that has something to take in and after every tick, as the firmware does at its
+    /// syncs: what the master and the tests see goes through the handoff.
     pub fn new(drive: Drive, motor: Motor) -> Self {
+        let tick = Some(drive.state().tick_side());
+        Self { tick, ..Self::combined(drive, motor) }
+    }
+
+    /// [`Plant::new`] with the drive's own controller ticked (no handoff): what the handoff is
+    /// compared against.
+    pub fn combined(drive: Drive, motor: Motor) -> Self {
         let supply = Supply::steady(motor.inputs().supply_v);
         let encoder = Encoder::new(EncoderKind::default(), &motor);
         Self {
+            tick: None,
             drive,
             motor,
             next_tick: Instant::from_micros(0),
@@ -225,7 +241,7 @@ impl Plant {
     pub fn advance_to(&mut self, now: Instant) {
         while self.next_tick <= now {
             self.disturb();
-            let out = self.drive.tick_with(self.next_tick, &self.measurements());
+            let out = self.tick();
             let cmd = driver_command(&out);
             let tick_s = TICK_MICROS as f64 * 1e-6;
             self.motor.advance(&cmd, tick_s);
@@ -243,6 +259,26 @@ impl Plant {
             }
             self.last = Some(out);
             self.next_tick = self.next_tick.plus_micros(TICK_MICROS);
+        }
+    }
+
+    /// One control tick at the next tick's time: the drive's, or the tick's own controller's
+    /// between two syncs.
+    fn tick(&mut self) -> Outputs {
+        let (now, inputs) = (self.next_tick, self.measurements());
+        let Some(tick) = &mut self.tick else { return self.drive.tick_with(now, &inputs) };
+        let state = self.drive.state_mut();
+        if state.has_changes() {
+            Self::sync(tick, state, now);
+        }
+        let out = tick.tick(now, &inputs, state.table());
+        Self::sync(tick, state, now.plus_micros(TICK_MICROS));
+        out
+    }
+
+    fn sync(tick: &mut TickSide, state: &mut DriveState, now: Instant) {
+        if tick.sync(now, &mut state.lend()) != Handover::Waiting {
+            state.synced();
         }
     }
 

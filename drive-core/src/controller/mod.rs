@@ -7,6 +7,7 @@
 //! changes, and what it measures ([`Inputs`]). What it decides on its own and the bus side must
 //! know (a stop it started, a set-point it joined, power failing) it reports as [`Events`].
 
+pub mod handoff;
 mod loops;
 pub(crate) mod run;
 mod supervise;
@@ -193,7 +194,7 @@ pub struct Controller {
     /// What happened since the bus side last took the events.
     pub(crate) events: Events,
     /// A frame for this drive arrived since the last tick (the watchdog restarts).
-    heard: bool,
+    pub(crate) heard: bool,
 }
 
 impl Controller {

@@ -133,11 +133,23 @@ impl Source {
 
 impl Controller {
     /// Starts the PVT run `source` on the next control tick after `now`: its first segment from
-    /// where the axis stands to `p`, the point at `index`.
-    pub(crate) fn start_run(&mut self, now: Instant, source: Source, index: u16, p: Point) {
+    /// where the axis stands to its first point (from `pvt` and `table`), built here. A first
+    /// point of no time is where the axis stands: the run starts with the segment after it, so
+    /// that the tick that starts the run builds nothing. Nothing happens if `source` is empty.
+    pub(crate) fn start_run(&mut self, now: Instant, mut source: Source, pvt: &mut Pvt, table: &Table) {
+        let Some((mut index, mut to)) = pvt.next_point(&mut source, table) else { return };
+        let mut cubic = Cubic::new(self.axis.setpoint().whole, 0, to);
+        for _ in 0..SEGMENTS_PER_TICK {
+            if cubic.ticks() > 0 {
+                break;
+            }
+            let Some((i, p)) = pvt.next_point(&mut source, table) else { break };
+            cubic = Cubic::new(cubic.p1(), to.velocity, p);
+            (index, to) = (i, p);
+        }
         let at = self.axis.next_tick(now);
-        self.axis.follow(at, Cubic::new(self.axis.setpoint().whole, 0, p), None);
-        self.run = Some(Run { source, to: p });
+        self.axis.follow(at, cubic, None);
+        self.run = Some(Run { source, to });
         self.status.pvt_pointer = index;
     }
 

@@ -29,7 +29,7 @@ use crate::motion::cubic::Table;
 use crate::od::{Access, Obj, ObjError, ObjectDef, Type};
 use crate::pdu::{Exception, Words};
 use crate::state::DriveState;
-use core::borrow::BorrowMut;
+use core::borrow::Borrow;
 
 /// Full steps a revolution of the motors the drive runs (1.8°), for scales per revolution.
 pub const FULL_STEPS_PER_REV: i64 = 200;
@@ -180,7 +180,7 @@ impl Layout {
 }
 
 /// Microsteps a revolution at the drive's resolution (0x600C; 0 is full steps).
-fn per_rev<P: BorrowMut<Table>>(drive: &DriveState<P>) -> i64 {
+fn per_rev<P: Borrow<Table>>(drive: &DriveState<P>) -> i64 {
     FULL_STEPS_PER_REV * i64::from(drive.read(Obj::Microsteps).max(1))
 }
 
@@ -221,7 +221,7 @@ impl LayoutMap {
     }
 
     /// The map's value of `e` now, as register bits (32 at most).
-    fn map_value<P: BorrowMut<Table>>(&self, drive: &DriveState<P>, e: &Entry) -> u32 {
+    fn map_value<P: Borrow<Table>>(&self, drive: &DriveState<P>, e: &Entry) -> u32 {
         let d = e.obj.def();
         let v = signed(d, drive.read_def(d));
         // A drive value beyond the map's range reads as its low bits.
@@ -229,14 +229,14 @@ impl LayoutMap {
     }
 
     /// The drive's raw value of the map's register bits `bits` for `e`.
-    fn drive_value<P: BorrowMut<Table>>(&self, drive: &DriveState<P>, e: &Entry, bits: u32) -> Result<u32, ObjError> {
+    fn drive_value<P: Borrow<Table>>(&self, drive: &DriveState<P>, e: &Entry, bits: u32) -> Result<u32, ObjError> {
         let d = e.obj.def();
         let v = e.scale.to_drive(signed(d, bits), per_rev(drive)).ok_or(ObjError::OutOfRange)?;
         raw_of(d, v).ok_or(ObjError::OutOfRange)
     }
 
     /// Decodes a write into what it does to each object, or the first address error.
-    fn plan<P: BorrowMut<Table>>(
+    fn plan<P: Borrow<Table>>(
         &self,
         drive: &DriveState<P>,
         addr: u16,
@@ -282,7 +282,7 @@ impl LayoutMap {
 }
 
 impl RegisterMap for LayoutMap {
-    fn read<P: BorrowMut<Table>>(&self, drive: &DriveState<P>, addr: u16, out: &mut [u8]) -> Result<(), Exception> {
+    fn read<P: Borrow<Table>>(&self, drive: &DriveState<P>, addr: u16, out: &mut [u8]) -> Result<(), Exception> {
         for (slot, reg) in out.chunks_exact_mut(2).zip(u32::from(addr)..) {
             let (e, k) = self.layout.at(reg).ok_or(self.layout.exceptions.unknown)?;
             let v = self.map_value(drive, e);
@@ -303,7 +303,7 @@ impl RegisterMap for LayoutMap {
         if all { Ok(()) } else { Err(self.layout.exceptions.unknown) }
     }
 
-    fn write<P: BorrowMut<Table>>(
+    fn write<P: Borrow<Table>>(
         &mut self,
         drive: &mut DriveState<P>,
         addr: u16,

@@ -5,17 +5,17 @@ use crate::motion::cubic::Table;
 use crate::od::{Access, OBJECTS, Obj, ObjError, ObjectDef, Range, Type, is_command};
 use crate::pdu::{Exception, MAX_WRITE, Words};
 use crate::state::DriveState;
-use core::borrow::BorrowMut;
+use core::borrow::Borrow;
 use heapless::Vec;
 
 /// A vendor's register layout over the drive's objects.
 pub trait RegisterMap {
     /// Reads `out.len() / 2` registers from `addr` into `out`, big-endian.
-    fn read<P: BorrowMut<Table>>(&self, drive: &DriveState<P>, addr: u16, out: &mut [u8]) -> Result<(), Exception>;
+    fn read<P: Borrow<Table>>(&self, drive: &DriveState<P>, addr: u16, out: &mut [u8]) -> Result<(), Exception>;
     /// Whether `qty` registers from `addr` could be read (checked before 0x17 writes anything).
     fn check_read(&self, addr: u16, qty: u16) -> Result<(), Exception>;
     /// Writes `values` from `addr`: all of them, or none and an exception.
-    fn write<P: BorrowMut<Table>>(
+    fn write<P: Borrow<Table>>(
         &mut self,
         drive: &mut DriveState<P>,
         addr: u16,
@@ -120,7 +120,7 @@ impl NativeMap {
     /// the first refusal goes to `refused`: an address error anywhere in the request still comes
     /// first, and a request with commands among several objects is checked again by the caller.
     #[inline]
-    fn plan<P: BorrowMut<Table>>(
+    fn plan<P: Borrow<Table>>(
         &self,
         drive: &DriveState<P>,
         addr: u16,
@@ -196,11 +196,7 @@ impl NativeMap {
     /// it in the same request (a speed, then a move), so each value is checked on the drive that
     /// has taken the ones before, all or nothing ([`DriveState::write_in_order`]).
     #[inline(never)]
-    fn commit_in_order<P: BorrowMut<Table>>(
-        &mut self,
-        drive: &mut DriveState<P>,
-        plan: &Plan,
-    ) -> Result<(), Exception> {
+    fn commit_in_order<P: Borrow<Table>>(&mut self, drive: &mut DriveState<P>, plan: &Plan) -> Result<(), Exception> {
         drive
             .write_in_order(plan.iter(), |_, s| {
                 Ok(match s.get() {
@@ -219,7 +215,7 @@ impl NativeMap {
     /// changes, all or nothing.
     // Out of line, with its plan on the stack: a one-register write does without both.
     #[inline(never)]
-    fn write_planned<P: BorrowMut<Table>>(
+    fn write_planned<P: Borrow<Table>>(
         &mut self,
         drive: &mut DriveState<P>,
         addr: u16,
@@ -300,7 +296,7 @@ const fn interval(ty: Type, range: Range) -> Option<(u32, u32)> {
 
 /// Register `reg` of the `i`th object, a live value or a text.
 #[inline(never)]
-fn other_word<P: BorrowMut<Table>>(drive: &DriveState<P>, i: usize, reg: u32) -> u16 {
+fn other_word<P: Borrow<Table>>(drive: &DriveState<P>, i: usize, reg: u32) -> u16 {
     let Some(d) = OBJECTS.get(i) else { return 0 };
     let Some(k) = reg.checked_sub(u32::from(d.addr)) else { return 0 };
     match d.ty {
@@ -356,7 +352,7 @@ type Plan = Vec<Step, PLAN_CAPACITY>;
 
 impl RegisterMap for NativeMap {
     #[inline(always)]
-    fn read<P: BorrowMut<Table>>(&self, drive: &DriveState<P>, addr: u16, out: &mut [u8]) -> Result<(), Exception> {
+    fn read<P: Borrow<Table>>(&self, drive: &DriveState<P>, addr: u16, out: &mut [u8]) -> Result<(), Exception> {
         let regs = index::registers(addr, (out.len() / 2) as u16).ok_or(Exception::IllegalDataAddress)?;
         for ((slot, &e), reg) in out.chunks_exact_mut(2).zip(regs).zip(u32::from(addr)..) {
             // A stored value, or a reserved register (shifted out), as the index entry says;
@@ -377,7 +373,7 @@ impl RegisterMap for NativeMap {
     }
 
     #[inline(always)]
-    fn write<P: BorrowMut<Table>>(
+    fn write<P: Borrow<Table>>(
         &mut self,
         drive: &mut DriveState<P>,
         addr: u16,

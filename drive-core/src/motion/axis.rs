@@ -62,6 +62,9 @@ pub struct Axis {
     joint: Option<u8>,
     /// The walk has reached the appended move (taken by [`Axis::take_joined`]).
     joined: bool,
+    /// Counts the changes of course: every plan, stop, halt, PVT segment and declared position
+    /// (not the walk). Two owners of copies of one axis tell by it which of them changed it.
+    version: u32,
 }
 
 /// 2^-32: the weight of a fraction's lowest bit.
@@ -93,7 +96,60 @@ impl Axis {
             grid: None,
             joint: None,
             joined: false,
+            version: 0,
         }
+    }
+
+    /// The count of changes of course ([`Axis::version`] is bumped by every one).
+    pub fn version(&self) -> u32 {
+        self.version
+    }
+
+    fn changed(&mut self) {
+        self.version = self.version.wrapping_add(1);
+    }
+
+    /// The time of the last tick (none yet: `None`).
+    pub fn last_tick(&self) -> Option<Instant> {
+        self.grid
+    }
+
+    /// The tick the segment under way is sampled at: a plan's first tick, until a tick walks it.
+    /// `None` standing.
+    pub fn activation(&self) -> Option<Instant> {
+        match self.segment {
+            Segment::Still => None,
+            Segment::Track { at, .. } | Segment::Ramp { at, .. } => Some(at),
+            Segment::Cubic { start, .. } => Some(start),
+        }
+    }
+
+    /// Takes `plan`'s course, planned on a copy of this axis from its state at the plan's first
+    /// tick: a motion keeps the setpoint this axis gave last (what moves at the next tick counts
+    /// from there); a plan to stand halts this axis where it is if it moves (a stop), or is taken
+    /// whole if it stands (a declared position).
+    pub fn take_plan(&mut self, plan: &Self) {
+        match plan.activation() {
+            None if !self.is_still() => {
+                self.halt();
+                self.track = plan.track;
+            }
+            None => *self = *plan,
+            Some(_) => {
+                let (last, grid) = (self.last, self.grid);
+                *self = *plan;
+                (self.last, self.grid) = (last, grid);
+            }
+        }
+    }
+
+    /// Takes `other`'s course and walk but keeps this axis' track: what one owner learns of the
+    /// other's axis when both hold the same track (the tick never writes one). Cheaper than a
+    /// copy by the track's 700 bytes.
+    pub fn follow_walk_of(&mut self, other: &Self) {
+        let Self { anchor, rest, segment, track: _, last, grid, joint, joined, version } = *other;
+        (self.anchor, self.rest, self.segment, self.last, self.grid) = (anchor, rest, segment, last, grid);
+        (self.joint, self.joined, self.version) = (joint, joined, version);
     }
 
     /// Whether the axis is standing still with nothing to do.
@@ -169,6 +225,7 @@ impl Axis {
     pub fn follow(&mut self, start: Instant, cubic: Cubic, ahead: Option<Ahead>) {
         let ahead = ahead.filter(|a| a.cubic == cubic).unwrap_or(Ahead::new(cubic));
         let (walk, rates) = ahead.finish();
+        self.changed();
         self.anchor = cubic.p0;
         self.segment = Segment::Cubic { start, cubic, walk, rates };
     }
@@ -176,6 +233,7 @@ impl Axis {
     /// Ends a PVT segment that has arrived at rest: the axis stands exactly on its end point.
     pub fn stand_on_cubic_end(&mut self) {
         if let Segment::Cubic { cubic, .. } = self.segment {
+            self.changed();
             (self.anchor, self.rest) = (cubic.p1(), 0);
             self.segment = Segment::Still;
         }
@@ -276,6 +334,7 @@ impl Axis {
     ) -> Result<(), PlanError> {
         let mut profile = Profile::EMPTY;
         self.joint = None;
+        self.changed();
         let planned = plan(&mut profile).and_then(|()| {
             if self.track.sample(&profile, anchor, cruise) {
                 self.segment = Segment::Track { walker: Walker::new(&self.track), at };
@@ -315,6 +374,7 @@ impl Axis {
         let mut profile = Profile::EMPTY;
         Profile::to_position_into(&mut profile, start, goal, arrive_v.min(limits.v_max), limits)?;
         self.joint = Some(self.track.append(&profile, anchor).ok_or(PlanError::NoSolution)?);
+        self.changed();
         Ok(())
     }
 
@@ -341,11 +401,16 @@ impl Axis {
             }
         };
         let left = walker.stop_ramp(decel);
+        self.changed();
         self.segment = Segment::Ramp { walker, at, left };
     }
 
     /// Stops at once where the axis is (seed 000 0x6053, disable, faults): no ramp.
     pub fn halt(&mut self) {
+        // Standing on a whole microstep already, nothing changes (a fault halts every tick).
+        if !self.is_still() || self.rest != 0 || self.anchor != self.last.whole {
+            self.changed();
+        }
         (self.anchor, self.rest) = (self.last.whole, 0);
         self.segment = Segment::Still;
         self.joint = None;
@@ -358,6 +423,7 @@ impl Axis {
         if !self.is_still() {
             return false;
         }
+        self.changed();
         // The track is the planner's: standing, the axis does not read it.
         (self.anchor, self.rest, self.joint, self.joined) = (position, 0, None, false);
         self.last = Setpoint { whole: position, fraction: U0F32::ZERO, velocity: 0.0, acceleration: 0.0 };

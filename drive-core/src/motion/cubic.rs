@@ -18,6 +18,7 @@
 //! 1.5 · 200 kpps · 65.5 s ≈ 2^24.2). The largest term is then below 2^118.
 
 use crate::units::TICK_HZ;
+use core::sync::atomic::{AtomicU8, Ordering};
 
 /// Points the table holds (seed 000 0x6019: up to 1000).
 pub const TABLE_SIZE: usize = 1000;
@@ -69,33 +70,53 @@ impl Packed {
 
 /// The PVT point storage: a fixed array of [`TABLE_SIZE`] packed points (no heap). Which slots
 /// hold points (a table from 0, or a ring) is kept by the caller.
-#[derive(Clone, Debug)]
+///
+/// Its bytes are atomic, so that the bus side may store a point through `&Table` while the
+/// control tick reads another: a microcontroller shares one table between the two, and a
+/// point is published by the handoff that tells the tick it exists (its release and acquire
+/// order the bytes).
+#[derive(Debug)]
 pub struct Table {
-    slots: [Packed; TABLE_SIZE],
+    slots: [[AtomicU8; 9]; TABLE_SIZE],
 }
 
 impl Table {
-    /// Every slot empty. A constant, so that a table is built where it is stored: built by a
-    /// function it would be a 9 KB stack temporary, more than a microcontroller's stack holds.
-    pub const EMPTY: Self = Self { slots: [Packed([0; 9]); TABLE_SIZE] };
+    /// Every slot empty. A `const fn`, so that a table is built where it is stored (a static):
+    /// built at run time it would be a 9 KB stack temporary, more than a microcontroller's stack
+    /// holds.
+    pub const fn new() -> Self {
+        Self { slots: [const { [const { AtomicU8::new(0) }; 9] }; TABLE_SIZE] }
+    }
 }
 
 impl Default for Table {
     fn default() -> Self {
-        Self::EMPTY
+        Self::new()
+    }
+}
+
+impl Clone for Table {
+    fn clone(&self) -> Self {
+        let t = Self::new();
+        for (i, p) in (0..TABLE_SIZE).filter_map(|i| self.get(i).map(|p| (i, p))) {
+            t.set(i, p);
+        }
+        t
     }
 }
 
 impl Table {
     /// The point in slot `i`, if there is such a slot.
     pub fn get(&self, i: usize) -> Option<Point> {
-        self.slots.get(i).map(|p| p.unpack())
+        self.slots.get(i).map(|s| Packed(s.each_ref().map(|b| b.load(Ordering::Relaxed))).unpack())
     }
 
     /// Stores `p` in slot `i` (nothing happens outside the table).
-    pub fn set(&mut self, i: usize, p: Point) {
-        if let Some(s) = self.slots.get_mut(i) {
-            *s = Packed::pack(p);
+    pub fn set(&self, i: usize, p: Point) {
+        if let Some(s) = self.slots.get(i) {
+            for (b, v) in s.iter().zip(Packed::pack(p).0) {
+                b.store(v, Ordering::Relaxed);
+            }
         }
     }
 }

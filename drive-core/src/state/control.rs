@@ -20,6 +20,7 @@
 //! PVT (0x6007 = 2), synchronous positioning and group starts are in [`super::pvt`].
 
 use super::DriveState;
+use crate::controller::handoff::{Lent, Orders, TickSide};
 use crate::controller::{DECAY, Events, STATUS_BUSY, Settings};
 use crate::faults::Inputs;
 use crate::modes::{PowerState, WorkMode};
@@ -29,7 +30,7 @@ use crate::motion::scurve::Limits;
 use crate::od::{Obj, ObjError, refuse};
 use crate::servo::{Gains, stall_limit};
 use crate::units::Instant;
-use core::borrow::BorrowMut;
+use core::borrow::Borrow;
 use fixed::types::U0F16;
 
 pub use crate::controller::Outputs;
@@ -160,7 +161,7 @@ fn stop_deceleration(mode: WorkMode, pp_decel: u32, level: u32) -> u32 {
     if mode.is_profile() { pp_decel } else { LEVELS.get((level as usize).wrapping_sub(1)).copied().unwrap_or(0) }
 }
 
-impl<P: BorrowMut<Table>> DriveState<P> {
+impl<P: Borrow<Table>> DriveState<P> {
     pub(crate) fn param(&self, obj: Obj) -> u32 {
         self.params.get(obj as usize).copied().unwrap_or(0)
     }
@@ -311,6 +312,56 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         if events.has(Events::ZERO_OFFSET) {
             self.set_param(Obj::ZeroOffset, self.ctl.settings.zero_offset as u32);
         }
+    }
+
+    /// Lends the model of the controller to a control tick that owns a controller of its own,
+    /// for [`Controller::sync`](crate::controller::Controller::sync); then
+    /// [`DriveState::synced`]. See [`crate::controller::handoff`].
+    pub fn lend(&mut self) -> Lent<'_> {
+        Lent { model: &mut self.ctl, pvt: &mut self.pvt, base: &mut self.base, orders: &mut self.orders }
+    }
+
+    /// The tick's side of this drive, where the tick runs apart from the bus side: a copy of the
+    /// controller and the PVT queue, before the first tick.
+    pub fn tick_side(&self) -> TickSide {
+        TickSide::new(&self.ctl, &self.pvt)
+    }
+
+    /// The PVT point table, which the tick's side reads.
+    pub fn table(&self) -> &Table {
+        self.table.borrow()
+    }
+
+    /// After a sync: acts on what the tick reported (as [`DriveState::tick_with`] does).
+    pub fn synced(&mut self) {
+        if !self.ctl.events.is_empty() {
+            let events = self.ctl.take_events();
+            self.take_events(events);
+        }
+    }
+
+    /// Whether the model holds something the tick's own controller has not taken in: a change
+    /// to hand over by a sync.
+    pub fn has_changes(&self) -> bool {
+        let (c, b) = (&self.ctl, &self.base);
+        c.axis.version() != b.version()
+            || self.orders != Orders::default()
+            || c.heard
+            || c.status != b.status()
+            || c.run != b.run()
+            || self.pvt != b.pvt()
+    }
+
+    /// Where the control tick owns a controller of its own: motion starts `margin_us` after the
+    /// request that commands it (planned from the axis as it will be then), which must be
+    /// longer than serving a request and handing the plan over take.
+    pub fn set_plan_margin(&mut self, margin_us: u64) {
+        self.margin = margin_us;
+    }
+
+    /// The time a request at `now` plans for.
+    pub(crate) fn set_request_time(&mut self, now: Instant) {
+        self.now = now.plus_micros(self.margin);
     }
 
     /// One control tick at `now` on a platform that measures nothing: [`DriveState::tick_with`]

@@ -5,6 +5,7 @@
 pub mod control;
 pub mod pvt;
 
+use crate::controller::handoff::{Base, Orders};
 use crate::controller::{Controller, Pvt};
 use crate::faults::FaultLog;
 use crate::faults::{FaultHistory, HISTORY_OBJECTS};
@@ -16,7 +17,7 @@ use crate::od::{Access, OBJECTS, Obj, ObjError, ObjectDef, Storage};
 use crate::servo::Feedback;
 use crate::units::Instant;
 use control::{Pp, runs_on, settings_of};
-use core::borrow::BorrowMut;
+use core::borrow::Borrow;
 
 pub use crate::controller::{STATUS_BUSY, STATUS_STALL, Status};
 
@@ -157,6 +158,14 @@ pub struct DriveState<P = Table> {
     /// The alarm count when the platform was last asked to save the history (changed only by
     /// taking requests, so kept out of [`Checkpoint`] too).
     faults_saved: u16,
+    /// What the tick's controller was at the last sync, where the tick owns one of its own
+    /// ([`crate::controller::handoff`]); unused where `ctl` is ticked itself.
+    base: Base,
+    /// Orders for the tick's controller since the last sync.
+    orders: Orders,
+    /// How long after a request its motion starts, µs: 0 where `ctl` is ticked itself; where the
+    /// tick owns a controller of its own, longer than planning and handing over take.
+    margin: u64,
 }
 
 /// Whether writing `obj` plans a motion (`state::control`): the commands but a declared
@@ -179,16 +188,17 @@ pub struct Checkpoint {
     pp: Pp,
     pvt: Pvt,
     run: Option<crate::controller::run::Run>,
+    orders: Orders,
 }
 
 impl DriveState {
     /// Factory state.
     pub fn new(identity: Identity, can_save: bool) -> Self {
-        Self::booted(identity, can_save, Params::factory().values, 0, FaultLog::default(), Table::EMPTY)
+        Self::booted(identity, can_save, Params::factory().values, 0, FaultLog::default(), Table::new())
     }
 }
 
-impl<P: BorrowMut<Table>> DriveState<P> {
+impl<P: Borrow<Table>> DriveState<P> {
     /// The state at power-up with the object values `params`, the storage status `storage` and
     /// the fault history `faults` (as saved: not to be saved again).
     ///
@@ -219,14 +229,31 @@ impl<P: BorrowMut<Table>> DriveState<P> {
             pp: Pp::default(),
             pvt: Pvt::default(),
             table,
+            base: Base::default(),
+            orders: Orders::default(),
+            margin: 0,
         }
     }
 
     /// Everything but the PVT table, to [`DriveState::restore`] later.
     pub fn checkpoint(&self) -> Checkpoint {
         // Naming every field: a new one must be decided on here.
-        let Self { params, storage, identity: _, can_save: _, request, now, pp, pvt, table: _, ctl, faults_saved: _ } =
-            self;
+        let Self {
+            params,
+            storage,
+            identity: _,
+            can_save: _,
+            request,
+            now,
+            pp,
+            pvt,
+            table: _,
+            ctl,
+            faults_saved: _,
+            base: _,
+            orders,
+            margin: _,
+        } = self;
         Checkpoint {
             params: *params,
             storage: *storage,
@@ -237,6 +264,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
             pp: *pp,
             pvt: *pvt,
             run: ctl.run,
+            orders: *orders,
         }
     }
 
@@ -264,8 +292,8 @@ impl<P: BorrowMut<Table>> DriveState<P> {
 
     /// Goes back to `c`.
     pub fn restore(&mut self, c: Checkpoint) {
-        let Checkpoint { params, storage, status, request, now, axis, pp, pvt, run } = c;
-        (self.params, self.storage, self.request, self.now) = (params, storage, request, now);
+        let Checkpoint { params, storage, status, request, now, axis, pp, pvt, run, orders } = c;
+        (self.params, self.storage, self.request, self.now, self.orders) = (params, storage, request, now, orders);
         (self.ctl.status, self.ctl.axis, self.ctl.run, self.pp, self.pvt) = (status, axis, run, pp, pvt);
         self.refresh_settings();
     }
@@ -304,6 +332,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     #[inline(never)]
     pub(crate) fn refresh_settings(&mut self) {
         self.ctl.settings = settings_of(&self.params);
+        self.orders.settings = true;
     }
 
     /// The storage status bits (0x2120): `STORAGE_*`.

@@ -51,7 +51,7 @@ use crate::motion::axis::Axis;
 use crate::motion::cubic::{Cubic, Point, TABLE_SIZE, Table, V_MAX};
 use crate::od::{Obj, ObjError, refuse};
 use crate::units::Instant;
-use core::borrow::BorrowMut;
+use core::borrow::Borrow;
 
 pub use crate::controller::run::{FAULT_UNDERFLOW, STATUS_FIFO_EMPTY, STATUS_FIFO_HIGH, STATUS_FIFO_LOW};
 
@@ -81,7 +81,7 @@ enum Effect {
     Stop,
 }
 
-impl<P: BorrowMut<Table>> DriveState<P> {
+impl<P: Borrow<Table>> DriveState<P> {
     fn pvt_mode(&self) -> PvtMode {
         PvtMode::from_raw(self.param(Obj::PvtMode)).unwrap_or_default()
     }
@@ -275,7 +275,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
         match effect {
             Ok(Effect::Push(p)) => {
                 let slot = (usize::from(pvt.head) + usize::from(pvt.len)) % TABLE_SIZE;
-                self.table.borrow_mut().set(slot, p);
+                self.table.borrow().set(slot, p);
                 pvt.len += 1;
                 pvt.last = Some(p);
             }
@@ -285,6 +285,8 @@ impl<P: BorrowMut<Table>> DriveState<P> {
             Ok(Effect::Start(_)) => {}
             Ok(Effect::Stop) => {
                 self.ctl.run = None;
+                // The tick stops from where its axis is when the order arrives.
+                self.orders.stop = true;
                 // 0x600B's ramp, without its jerk limit: a PVT segment may end with more
                 // acceleration than the jerk could take back in time.
                 self.ctl.axis.stop_ramp(self.ctl.settings.stop_decel);
@@ -296,10 +298,7 @@ impl<P: BorrowMut<Table>> DriveState<P> {
     /// Starts the PVT run on the next control tick: its first segment from where the axis
     /// stands (built here, not in the tick).
     fn start_run(&mut self) {
-        let Ok((mut source, _, _)) = self.plan_run() else { return };
-        let table = self.table.borrow();
-        if let Some((i, p)) = self.pvt.next_point(&mut source, table) {
-            self.ctl.start_run(self.now, source, i, p);
-        }
+        let Ok((source, _, _)) = self.plan_run() else { return };
+        self.ctl.start_run(self.now, source, &mut self.pvt, self.table.borrow());
     }
 }

@@ -27,18 +27,29 @@
 #![no_main]
 
 use core::mem::MaybeUninit;
+use core::sync::atomic::{AtomicU32, Ordering};
 
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::{Peripherals, SYST};
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
 use drive_core::control::{Outputs, TICK_MICROS};
+use drive_core::controller::handoff::{Handover, TickSide};
 use drive_core::crc::crc16;
 use drive_core::faults::Inputs;
+use drive_core::maps::NativeMap;
+use drive_core::motion::cubic::Table;
 use drive_core::od::Obj;
-use drive_core::{Drive, DriveConfig, Instant, Params};
+use drive_core::{DriveConfig, Instant, Params};
 // The chip's interrupt vectors; defmt's linker script wants a logger to be linked.
 use {defmt_rtt as _, stm32_metapac as _};
+
+/// The drive as the firmware has it: the PVT table in a static of its own (a case's points are
+/// beyond the queue of the next case's new drive).
+type Drive = drive_core::Drive<NativeMap, &'static Table>;
+
+/// The PVT points of every case's drive.
+static TABLE: Table = Table::new();
 
 /// What every case measures besides its loop's own inputs: all within the thresholds.
 const MEASURED: Inputs = Inputs {
@@ -143,36 +154,75 @@ const SYST_MASK: u32 = 0x00FF_FFFF;
 /// The drive's address (factory).
 const SLAVE: u8 = 1;
 
-/// A drive, its clock and the outputs of its last tick.
+/// How long after a request its motion starts, as on the G431 (`board::g431::PLAN_MARGIN_US`).
+const PLAN_MARGIN_US: u64 = 2_000;
+
+/// A drive (the bus side), the tick's side, their clock and the outputs of the last tick.
 struct Rig<'a> {
     case: Case,
     drive: &'a mut Drive,
+    tick: &'a mut TickSide,
+    /// The drive's model is lent to the tick: the next tick syncs it (as the firmware's tick
+    /// does when the Modbus task has lent it).
+    lent: bool,
     now: u64,
     last: Outputs,
 }
 
+/// The most counts of a tick that synced the model, and of one that took a plan over, in every
+/// case and request.
+static SYNC_MOST: [AtomicU32; 2] = [const { AtomicU32::new(0) }; 2];
+
 impl<'a> Rig<'a> {
-    /// The drive of `case`, booted into `slot` and ticked once; `None` if a setting is refused.
-    fn new(case: Case, slot: &'a mut MaybeUninit<Drive>) -> Option<Self> {
+    /// The drive of `case`, booted into `slot` (its tick's side into `tick`) and ticked once;
+    /// `None` if a setting is refused.
+    fn new(case: Case, slot: &'a mut MaybeUninit<Drive>, tick: &'a mut MaybeUninit<TickSide>) -> Option<Self> {
         let mut params = Params::factory();
         let settings = [(Obj::Microsteps, 32), (Obj::PhaseCurrent, 1000), (Obj::AccelLevel, 1)];
         if !settings.iter().chain(case.settings()).all(|&(obj, v)| params.set(obj, v)) {
             return None;
         }
         let drive = boot_into(slot, &params);
-        let last = drive.tick_with(Instant::from_micros(0), &case.measure(None));
-        Some(Self { case, drive, now: 0, last })
+        drive.state_mut().set_plan_margin(PLAN_MARGIN_US);
+        let tick = tick.write(drive.state().tick_side());
+        let last = tick.tick(Instant::from_micros(0), &case.measure(None), &TABLE);
+        Some(Self { case, drive, tick, lent: false, now: 0, last })
     }
 
-    /// The next tick; the SysTick counts it took.
+    /// The next tick (a sync first if the model is lent, as the firmware's tick); the SysTick
+    /// counts it took.
     fn tick(&mut self) -> u32 {
         self.now += TICK_MICROS;
         let inputs = self.case.measure(Some(&self.last));
+        let now = Instant::from_micros(self.now);
         let before = SYST::get_current();
-        self.last = self.drive.tick_with(Instant::from_micros(self.now), &inputs);
+        let handover = if self.lent { Some(self.tick.sync(now, &mut self.drive.state_mut().lend())) } else { None };
+        self.last = self.tick.tick(now, &inputs, &TABLE);
         let after = SYST::get_current();
         // SysTick counts down, 24 bits.
-        before.wrapping_sub(after) & SYST_MASK
+        let spent = before.wrapping_sub(after) & SYST_MASK;
+        match handover {
+            Some(Handover::Waiting) | None => {}
+            Some(h) => {
+                self.lent = false;
+                self.drive.state_mut().synced();
+                let planned = matches!(h, Handover::Planned | Handover::Late(_));
+                for (most, counts) in SYNC_MOST.iter().zip([true, planned]) {
+                    if counts {
+                        most.fetch_max(spent, Ordering::Relaxed);
+                    }
+                }
+            }
+        }
+        spent
+    }
+
+    /// Ticks until the tick has synced the model lent to it.
+    fn sync(&mut self) {
+        self.lent = true;
+        while self.lent {
+            self.tick();
+        }
     }
 
     /// Ticks for `us` microseconds.
@@ -183,24 +233,27 @@ impl<'a> Rig<'a> {
         }
     }
 
-    /// Writes `value` to `obj` as the dictionary would; whether it was accepted.
+    /// Writes `value` to `obj` as the dictionary would, and hands it to the tick; whether it was
+    /// accepted.
     fn set(&mut self, obj: Obj, value: u32) -> bool {
         let state = self.drive.state_mut();
         let fits = state.check(obj, value).is_ok();
         if fits {
             state.apply(obj, value);
+            self.sync();
         }
         fits
     }
 
-    /// Sends the request `body` (its CRC appended) as one burst, ticks until its t3.5 has passed
-    /// and fires the timer; whether the reply is a normal one (not an exception).
+    /// Sends the request `body` (its CRC appended) as one burst, ticks until its t3.5 has passed,
+    /// syncs the model and fires the timer, then hands what it changed to the tick; whether the
+    /// reply is a normal one (not an exception).
     fn request(&mut self, body: &[u8]) -> bool {
         self.timed_request(body).0
     }
 
     /// [`Rig::request`], and the SysTick counts the drive took to serve it at t3.5 (the
-    /// `on_timer` call, which the firmware's bus task makes holding the drive).
+    /// `on_timer` call, which the firmware's bus task makes while the tick runs on).
     fn timed_request(&mut self, body: &[u8]) -> (bool, u32) {
         let mut frame = [0u8; 32];
         let n = body.len();
@@ -213,10 +266,15 @@ impl<'a> Rig<'a> {
         while self.now + TICK_MICROS <= deadline.as_micros() {
             self.tick();
         }
+        self.sync();
         let before = SYST::get_current();
-        self.drive.on_timer(deadline);
+        self.drive.on_timer(Instant::from_micros(deadline.as_micros().max(self.now)));
         let spent = before.wrapping_sub(SYST::get_current()) & SYST_MASK;
-        (matches!(self.drive.take_reply(), Some(r) if r.get(1) == body.get(1)), spent)
+        let ok = matches!(self.drive.take_reply(), Some(r) if r.get(1) == body.get(1));
+        if self.drive.state().has_changes() {
+            self.sync();
+        }
+        (ok, spent)
     }
 
     /// PVT mode 1 with push on time: four points, 100 ms apart, from rest up to 20000 pps and
@@ -239,18 +297,17 @@ impl<'a> Rig<'a> {
     }
 }
 
-/// Builds the drive in `slot`, static: the drive (the table inside, unlike the firmware's, which
-/// lends it) is 12 KB and the stack below the statics about 19 KB, so the one copy `Drive::boot`
-/// makes goes through this frame only.
+/// Builds the drive in `slot`, lending it the table as the firmware does; out of line, so the
+/// one copy `Drive::boot_with_table` makes (3 KB) goes through this frame only.
 #[inline(never)]
 fn boot_into<'a>(slot: &'a mut MaybeUninit<Drive>, params: &Params) -> &'a mut Drive {
-    slot.write(Drive::boot(DriveConfig::default(), params, 0))
+    slot.write(Drive::boot_with_table(DriveConfig::default(), NativeMap::new(), params, 0, &TABLE))
 }
 
 /// Cost of the measured ticks of `case`: (mean, most) SysTick counts, whether the drive was in
 /// the situation named (moving, powered, no fault) throughout.
-fn run(case: Case, slot: &mut MaybeUninit<Drive>) -> (u32, u32, bool) {
-    let Some(mut rig) = Rig::new(case, slot) else { return (0, 0, false) };
+fn run(case: Case, slot: &mut MaybeUninit<Drive>, tick: &mut MaybeUninit<TickSide>) -> (u32, u32, bool) {
+    let Some(mut rig) = Rig::new(case, slot, tick) else { return (0, 0, false) };
     let (ok, setup_us) = match case {
         Case::OpenPvt => (rig.start_pvt(), 50_000),
         Case::OpenRamp | Case::ServoLoopRamp => {
@@ -264,10 +321,13 @@ fn run(case: Case, slot: &mut MaybeUninit<Drive>) -> (u32, u32, bool) {
         let spent = rig.tick();
         sum += u64::from(spent);
         most = most.max(spent);
-        let state = rig.drive.state();
+        // What the tick's controller runs (the bus side's model is synced only for requests).
+        let ctl = rig.tick.controller();
         let accelerating = rig.last.setpoint.acceleration != 0.0;
-        moving &= state.read(Obj::DriveFaults) == 0
-            && state.read(Obj::ControllerStatus) == 0x08
+        moving &= ctl.status().faults == 0
+            && ctl.status().error == 0
+            && ctl.status().controller == 0
+            && !ctl.axis().is_still()
             && match case {
                 Case::OpenPvt => rig.last.setpoint.velocity > 0.0,
                 Case::OpenRamp | Case::ServoLoopRamp => accelerating,
@@ -288,8 +348,8 @@ fn write32(reg: u16, v: i32) -> [u8; 11] {
 /// while cruising at 32000 pps (planned from the moving state), one behind the axis (a reversal),
 /// a stop, and a relative move too short to reach the speed limit. Prints a line each;
 /// whether every request was accepted.
-fn requests(slot: &mut MaybeUninit<Drive>) -> bool {
-    let Some(mut rig) = Rig::new(Case::Open, slot) else { return false };
+fn requests(slot: &mut MaybeUninit<Drive>, tick: &mut MaybeUninit<TickSide>) -> bool {
+    let Some(mut rig) = Rig::new(Case::Open, slot, tick) else { return false };
     let mut ok = rig.set(Obj::MaxSpeed, 32_000);
     let mut measure = |rig: &mut Rig, name: &str, body: &[u8]| {
         let (accepted, spent) = rig.timed_request(body);
@@ -317,10 +377,15 @@ fn main() -> ! {
     core.SYST.set_reload(SYST_MASK);
     core.SYST.clear_current();
     core.SYST.enable_counter();
-    let Some(slot) = cortex_m::singleton!(: MaybeUninit<Drive> = MaybeUninit::uninit()) else { exit(false) };
+    let (Some(slot), Some(tick)) = (
+        cortex_m::singleton!(: MaybeUninit<Drive> = MaybeUninit::uninit()),
+        cortex_m::singleton!(: MaybeUninit<TickSide> = MaybeUninit::uninit()),
+    ) else {
+        exit(false)
+    };
     let mut all_ok = true;
     for case in Case::ALL {
-        let (mean, most, ok) = run(case, slot);
+        let (mean, most, ok) = run(case, slot, tick);
         all_ok &= ok;
         hprintln!(
             "tick_cost {} mean {} most {} counts{}",
@@ -330,7 +395,9 @@ fn main() -> ! {
             if ok { "" } else { " NOT IN ITS SITUATION" }
         );
     }
-    all_ok &= requests(slot);
+    all_ok &= requests(slot, tick);
+    let [synced, planned] = SYNC_MOST.each_ref().map(|m| m.load(Ordering::Relaxed));
+    hprintln!("tick_cost handover synced {} planned {} counts", synced, planned);
     exit(all_ok)
 }
 

@@ -27,6 +27,9 @@ use crate::power::PowerStage;
 
 /// What the 0x1022 hardware version says.
 pub const HARDWARE: &str = "QEMU L475";
+/// How long after a request its motion starts, µs: under `-icount` a planned move takes a few
+/// virtual milliseconds, and the plan is handed over at the next tick (1 ms here).
+pub const PLAN_MARGIN_US: u64 = 20_000;
 /// SysTick clock: the core clock at reset (MSI, 4 MHz), which nothing here changes.
 const CORE_HZ: u32 = 4_000_000;
 /// SysTick counts in one millisecond.
@@ -240,12 +243,11 @@ embassy_time_driver::time_driver_impl!(static DRIVER: SysTickDriver = SysTickDri
 
 /// The emulated chip's power stage: none. The drive core counts the steps itself; this counts
 /// the steps the stage would emit, for `cargo xtask tick-cost` to check against the drive's
-/// position (coasting must neither lose nor add one), and notes whether the tick stepped.
+/// position (the handovers must neither lose nor add one), and notes whether the tick stepped.
 struct NoStage {
     moving: bool,
     /// Steps emitted since power-up (signed).
     emitted: i64,
-    coast: crate::coast::Coast,
 }
 
 impl PowerStage for NoStage {
@@ -254,16 +256,13 @@ impl PowerStage for NoStage {
         self.emitted = self.emitted.wrapping_add(steps);
     }
     fn set_current(&mut self, _milliamps: u16) {}
-    fn coast(&mut self) -> &mut crate::coast::Coast {
-        &mut self.coast
-    }
 }
 
 /// Read by `cargo xtask tick-cost` through QEMU's monitor. The control tick's cost in SysTick
 /// counts (a count is 250 virtual ns, 15.6 instructions under `qemu -icount shift=4`): [0] idle
 /// ticks, [1] their total counts, [2] ticks that stepped, [3] their total counts, [4] most
-/// counts of one tick; [5] ticks that coasted because the bus task held the drive; [6] steps
-/// the stage emitted since power-up (`i32` bits), [7] of them, in ticks that coasted.
+/// counts of one tick; [5] plans the tick took over after their first tick or dropped; [6] steps
+/// the stage emitted since power-up (`i32` bits); [7] plans taken over at their first tick.
 #[unsafe(no_mangle)]
 static TICK_COST: [AtomicU32; 8] = [const { AtomicU32::new(0) }; 8];
 
@@ -277,15 +276,14 @@ fn add_cost(i: usize, v: u32) {
 /// Every millisecond: time, then the control tick, then the timers due.
 #[cortex_m_rt::exception]
 fn SysTick() {
-    // The stage lives from tick to tick: coasting continues from the last tick that ran.
-    static mut STAGE: NoStage = NoStage { moving: false, emitted: 0, coast: crate::coast::Coast::new(TICK_HZ) };
+    static mut STAGE: NoStage = NoStage { moving: false, emitted: 0 };
     critical_section::with(|cs| {
         let m = MILLIS.borrow(cs);
         m.set(m.get() + 1);
     });
     let now = micros();
     STAGE.moving = false;
-    let (emitted, coasted) = (STAGE.emitted, crate::app::COASTED.load(Ordering::Relaxed));
+    let emitted = STAGE.emitted;
     let before = cortex_m::peripheral::SYST::get_current();
     // The emulated chip measures nothing: no supervision of supply or temperature, open loop.
     crate::app::control_tick(drive_core::Instant::from_micros(now), drive_core::faults::Inputs::default, STAGE);
@@ -300,9 +298,10 @@ fn SysTick() {
     // Wrapping to 32 bits: the reader takes the words as `i32`.
     let steps = STAGE.emitted.wrapping_sub(emitted) as u32;
     add_cost(6, steps);
-    if crate::app::COASTED.load(Ordering::Relaxed) != coasted {
-        add_cost(5, 1);
-        add_cost(7, steps);
+    let handed = |i: usize| crate::app::HANDOVERS.get(i).map_or(0, |c| c.load(Ordering::Relaxed));
+    if let (Some(missed), Some(planned)) = (TICK_COST.get(5), TICK_COST.get(7)) {
+        missed.store(handed(1) + handed(2), Ordering::Relaxed);
+        planned.store(handed(0), Ordering::Relaxed);
     }
     critical_section::with(|cs| {
         let mut q = QUEUE.borrow_ref_mut(cs);

@@ -1,0 +1,230 @@
+//! The handoff between two owners of the controller: the control tick, which owns the one that
+//! runs, and the bus side, which keeps a model of it inside the drive's state (what requests
+//! read, and what they plan on).
+//!
+//! Neither waits for the other. The bus side lends its model to the tick ([`Lent`]) and leaves
+//! it alone until the tick has synced it ([`Controller::sync`], at the start of a tick: a few
+//! hundred instructions, no planning). A sync first takes in what the bus side changed since
+//! the last one, merged against what it learned then ([`Base`]), then tells the model what the
+//! tick did since:
+//!
+//! - the settings are the bus side's: the tick takes them whole;
+//! - the axis: a plan the bus side made (its [`Axis::version`] moved) replaces the tick's axis
+//!   at the plan's first tick (the sync waits for it), if the tick has not changed course on its
+//!   own since (a fault, a stop, the watchdog: then the plan is dropped, the tick's stop wins);
+//!   the bus side plans from the axis extrapolated to that tick, so the handover is seamless.
+//!   Otherwise the model takes the tick's walk;
+//! - status bits: the bits the bus side cleared (or set) are cleared (or set), the tick's
+//!   others kept; the measurements are the tick's;
+//! - a PVT run the bus side started or ended, PVT points it pushed or cleared, an ordered stop,
+//!   a frame heard (the watchdog);
+//! - the events the tick raised go up, for the bus side to act on.
+
+use core::ops::{BitAnd, BitOr, BitXor, Not};
+
+use super::run::{Pvt, Run};
+use super::{Controller, Events, Outputs, Status};
+use crate::faults::Inputs;
+use crate::motion::cubic::Table;
+use crate::units::{Instant, TICK_MICROS};
+
+/// What the bus side learned of the tick's controller at the last sync: what its own changes
+/// are told apart by.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Base {
+    status: Status,
+    run: Option<Run>,
+    pvt: Pvt,
+    version: u32,
+}
+
+impl Base {
+    /// The status bits and measurements at the last sync.
+    pub(crate) fn status(&self) -> Status {
+        self.status
+    }
+
+    /// The PVT run at the last sync.
+    pub(crate) fn run(&self) -> Option<Run> {
+        self.run
+    }
+
+    /// The PVT queue at the last sync.
+    pub(crate) fn pvt(&self) -> Pvt {
+        self.pvt
+    }
+
+    /// The axis' version at the last sync.
+    pub(crate) fn version(&self) -> u32 {
+        self.version
+    }
+}
+
+/// What the bus side orders the tick to do on its own state (a stop ramp from wherever the axis
+/// is when the order arrives: a PVT stop), or tells it (new settings).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Orders {
+    pub(crate) stop: bool,
+    /// The settings changed.
+    pub(crate) settings: bool,
+}
+
+/// The bus side's model of the controller, lent to the tick until a sync has taken it in.
+#[derive(Debug)]
+pub struct Lent<'a> {
+    pub(crate) model: &'a mut Controller,
+    pub(crate) pvt: &'a mut Pvt,
+    pub(crate) base: &'a mut Base,
+    pub(crate) orders: &'a mut Orders,
+}
+
+/// How a sync went.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Handover {
+    /// The plan lent starts at a later tick: nothing was done, the model stays lent.
+    Waiting,
+    /// Synced: the model is the bus side's again.
+    Done,
+    /// Synced, and the bus side's plan took over at its first tick.
+    Planned,
+    /// Synced, but the plan took over this many ticks after its first (the bus side was late:
+    /// ticks gave setpoints of the old course from the plan's first on).
+    Late(u32),
+    /// Synced, but the plan was dropped: the tick changed course on its own since the bus side
+    /// planned (its stop stands).
+    Dropped,
+}
+
+/// Bits of `tick` with those the bus side changed from `base` to `model` changed so.
+fn merge<T>(tick: T, base: T, model: T) -> T
+where
+    T: Copy + BitAnd<Output = T> + BitOr<Output = T> + BitXor<Output = T> + Not<Output = T>,
+{
+    let changed = base ^ model;
+    (tick & !changed) | (model & changed)
+}
+
+impl Controller {
+    /// Takes in the bus side's model `lent` at `now` (before this tick's work) and tells it what
+    /// the tick did; `pvt` is the tick's own queue. See the module.
+    pub fn sync(&mut self, pvt: &mut Pvt, now: Instant, lent: &mut Lent<'_>) -> Handover {
+        let Lent { model, pvt: model_pvt, base, orders } = lent;
+        let planned = model.axis.version() != base.version && !orders.stop;
+        let starts = if planned { model.axis.activation() } else { None };
+        if starts.is_some_and(|at| now < at) {
+            return Handover::Waiting;
+        }
+        let Orders { stop, settings: _ } = core::mem::take(*orders);
+        // What the tick set in the settings (the zero offset at the closed loop's first reading)
+        // goes up before the bus side's settings come down.
+        if self.events.has(Events::ZERO_OFFSET) {
+            model.settings.zero_offset = self.settings.zero_offset;
+        }
+        self.settings = model.settings;
+        self.heard |= core::mem::take(&mut model.heard);
+        let s = &mut self.status;
+        let (b, m) = (&base.status, &model.status);
+        s.error = merge(s.error, b.error, m.error);
+        s.controller = merge(s.controller, b.controller, m.controller);
+        s.notify = merge(s.notify, b.notify, m.notify);
+        s.gpio = merge(s.gpio, b.gpio, m.gpio);
+        s.faults = merge(s.faults, b.faults, m.faults);
+        s.comm = merge(s.comm, b.comm, m.comm);
+        if m.analog_in != b.analog_in {
+            s.analog_in = m.analog_in;
+        }
+        if model.run != base.run {
+            self.run = model.run;
+            self.status.pvt_pointer = model.status.pvt_pointer;
+        }
+        // Points pushed since are appended; a queue the bus side emptied is taken whole.
+        if model_pvt.head != base.pvt.head || model_pvt.len < base.pvt.len {
+            (pvt.head, pvt.len) = (model_pvt.head, model_pvt.len);
+        } else {
+            pvt.len = pvt.len.saturating_add(model_pvt.len - base.pvt.len);
+        }
+        pvt.last = model_pvt.last;
+        pvt.fault = merge(pvt.fault, base.pvt.fault, model_pvt.fault);
+        let handover = if stop {
+            self.axis.stop_ramp(self.settings.stop_decel);
+            Handover::Done
+        } else if !planned {
+            Handover::Done
+        } else if self.axis.version() != base.version {
+            Handover::Dropped
+        } else {
+            // Late if a tick already gave a setpoint at or after the plan's first (on the old
+            // course); a board whose tick is slower than the drive's grid takes every plan at its
+            // first tick after the plan's first, as it takes every other sample.
+            let late = match (starts, self.axis.last_tick()) {
+                (Some(at), Some(last)) if last >= at => Some(last.since(at) / TICK_MICROS + 1),
+                _ => None,
+            };
+            self.axis.take_plan(&model.axis);
+            late.map_or(Handover::Planned, |n| Handover::Late(n as u32))
+        };
+        // Up: the tick's state into the model (the track stays the model's: the tick's is the
+        // same, or a dropped plan's that nothing walks).
+        model.axis.follow_walk_of(&self.axis);
+        model.status = self.status;
+        model.faults = self.faults;
+        model.servo = self.servo;
+        model.run = self.run;
+        model.still_since = self.still_since;
+        model.events = Events(model.events.0 | core::mem::take(&mut self.events).0);
+        (model_pvt.head, model_pvt.len, model_pvt.fault) = (pvt.head, pvt.len, pvt.fault);
+        **base = Base { status: self.status, run: self.run, pvt: **model_pvt, version: self.axis.version() };
+        handover
+    }
+}
+
+/// What the control tick owns where it runs apart from the bus side: its controller and its
+/// PVT queue (the points themselves are in the shared [`Table`]).
+#[derive(Clone, Debug)]
+pub struct TickSide {
+    ctl: Controller,
+    pvt: Pvt,
+    /// The alarm count at the last tick, to tell a new alarm.
+    alarms: u16,
+}
+
+impl TickSide {
+    /// The tick's side of a drive whose state holds the model `ctl` and the queue `pvt`, before
+    /// the first tick (both still equal).
+    pub fn new(ctl: &Controller, pvt: &Pvt) -> Self {
+        Self { ctl: ctl.clone(), pvt: *pvt, alarms: ctl.faults.count }
+    }
+
+    /// [`Controller::sync`] with the model `lent`.
+    pub fn sync(&mut self, now: Instant, lent: &mut Lent<'_>) -> Handover {
+        self.ctl.sync(&mut self.pvt, now, lent)
+    }
+
+    /// One control tick ([`Controller::tick`]) with the PVT points of `table`.
+    pub fn tick(&mut self, now: Instant, inputs: &Inputs, table: &Table) -> Outputs {
+        self.ctl.tick(now, inputs, &mut self.pvt, table)
+    }
+
+    /// Whether the bus side should sync soon without waiting for a request: power is failing
+    /// (the position save) or an alarm was recorded (the history save). Once a tick.
+    pub fn needs_bus(&mut self) -> bool {
+        let alarms = core::mem::replace(&mut self.alarms, self.ctl.faults.count);
+        self.ctl.events.has(Events::POWER_FAILING) || alarms != self.alarms
+    }
+
+    /// The controller the tick runs.
+    pub fn controller(&self) -> &Controller {
+        &self.ctl
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::merge;
+
+    #[test]
+    fn merge_keeps_the_tick_bits_the_bus_side_left() {
+        // The tick set bit 0 since; the bus side cleared bit 2 and set bit 4.
+        assert_eq!(merge::<u8>(0b0000_0101, 0b0000_0100, 0b0001_0000), 0b0001_0001);
+    }
+}

@@ -1,0 +1,209 @@
+//! The handoff with a planning margin, as on a microcontroller: the bus side plans a request's
+//! motion for a tick `margin` later, lends its model, and the tick takes the plan over at that
+//! tick, seamlessly; a plan lent late is taken late (and said so); a plan the tick's own stop
+//! overtook is dropped and the motor stays stopped.
+
+use drive_core::control::{Outputs, TICK_MICROS};
+use drive_core::controller::handoff::{Handover, TickSide};
+use drive_core::faults::Inputs;
+use drive_core::{Drive, Instant, crc};
+
+const MARGIN_US: u64 = 2_000;
+
+fn frame(body: &[u8]) -> Vec<u8> {
+    let mut f = body.to_vec();
+    f.extend(crc::crc16(body).to_le_bytes());
+    f
+}
+
+fn w32(reg: u16, v: i32) -> Vec<u8> {
+    let ([rh, rl], [a, b, c, d]) = (reg.to_be_bytes(), v.to_be_bytes());
+    frame(&[1, 0x10, rh, rl, 0, 2, 4, a, b, c, d])
+}
+
+/// Serves `request` on `drive` at `now` (the frame arrived whole t3.5 earlier); whether accepted.
+fn serve(drive: &mut Drive, now: Instant, request: &[u8]) -> bool {
+    let t35 = drive.baud().t35_micros();
+    drive.on_rx(Instant::from_micros(now.as_micros() - t35), request);
+    drive.on_timer(now);
+    drive.take_reply().is_some_and(|r| r[1] & 0x80 == 0)
+}
+
+fn tick_time(k: u64) -> Instant {
+    Instant::from_micros(1_000_000 + k * TICK_MICROS)
+}
+
+/// A drive at 20000 pps (0x6003; its factory speed is 0).
+fn drive() -> Drive {
+    let mut d = Drive::factory();
+    assert!(serve(&mut d, Instant::from_micros(500_000), &w32(0x6003, 20_000)));
+    d
+}
+
+/// A drive whose tick owns its controller, with the planning margin.
+fn split() -> (Drive, TickSide) {
+    let mut d = drive();
+    d.state_mut().set_plan_margin(MARGIN_US);
+    let tick = d.state().tick_side();
+    (d, tick)
+}
+
+/// Ticks `tick` at tick `k`, syncing first if `lent`; the handover if it synced.
+fn tick_at(d: &mut Drive, tick: &mut TickSide, k: u64, lent: bool, inputs: &Inputs) -> (Outputs, Option<Handover>) {
+    let now = tick_time(k);
+    let h = lent.then(|| tick.sync(now, &mut d.state_mut().lend()));
+    if h.is_some_and(|h| h != Handover::Waiting) {
+        d.state_mut().synced();
+    }
+    let out = tick.tick(now, inputs, d.state().table());
+    (out, h)
+}
+
+#[test]
+fn a_plan_takes_over_at_its_tick_as_if_requested_a_margin_later() {
+    let (mut d, mut tick) = split();
+    let mut shared = drive();
+    let request_at = 100;
+    let margin_ticks = MARGIN_US / TICK_MICROS;
+    let mut lent = false;
+    let mut planned_at = None;
+    for k in 0..40_000u64 {
+        let (out, h) = tick_at(&mut d, &mut tick, k, lent, &Inputs::default());
+        match h {
+            Some(Handover::Waiting) | None => {}
+            Some(Handover::Planned) => {
+                (lent, planned_at) = (false, Some(k));
+            }
+            Some(other) => panic!("{other:?} at tick {k}"),
+        }
+        let expected = shared.tick(tick_time(k));
+        assert_eq!(out, expected, "tick {k}");
+        // Requests arrive between ticks.
+        if k == request_at {
+            assert!(serve(&mut d, tick_time(k).plus_micros(10), &w32(0x6005, 20_000)));
+            lent = true;
+        }
+        if k == request_at + margin_ticks {
+            assert!(serve(&mut shared, tick_time(k).plus_micros(10), &w32(0x6005, 20_000)));
+        }
+    }
+    assert_eq!(planned_at, Some(request_at + margin_ticks + 1));
+    // A sync before a request refreshes the model.
+    assert_eq!(tick.sync(tick_time(40_000), &mut d.state_mut().lend()), Handover::Done);
+    d.state_mut().synced();
+    let position = |d: &Drive| d.state().read(drive_core::od::Obj::Position);
+    assert!(position(&d) > 0);
+    assert_eq!(position(&d), position(&shared), "the model learns where the axis is");
+}
+
+#[test]
+fn a_plan_lent_late_is_taken_late() {
+    let (mut d, mut tick) = split();
+    assert!(serve(&mut d, tick_time(10), &w32(0x6005, 20_000)));
+    // The first tick that syncs is 30 ticks after the plan's first.
+    let first = 10 + MARGIN_US / TICK_MICROS;
+    for k in 0..first + 30 {
+        tick_at(&mut d, &mut tick, k, false, &Inputs::default());
+    }
+    let (_, h) = tick_at(&mut d, &mut tick, first + 30, true, &Inputs::default());
+    assert_eq!(h, Some(Handover::Late(30)));
+}
+
+#[test]
+fn a_plan_overtaken_by_a_fault_is_dropped_and_nothing_moves() {
+    let (mut d, mut tick) = split();
+    let hot = Inputs { temperature_c: Some(150), ..Inputs::default() };
+    let (mut lent, mut handovers, mut stopped_at) = (false, Vec::new(), None);
+    for k in 0..3_000u64 {
+        match k {
+            10 => lent = serve(&mut d, tick_time(k), &w32(0x6005, 200_000)),
+            // A re-target while moving, overtaken by a fault before its first tick.
+            1_000 => lent = serve(&mut d, tick_time(k), &w32(0x6044, -5_000)),
+            _ => {}
+        }
+        let inputs = if k >= 1_010 { hot } else { Inputs::default() };
+        let (out, h) = tick_at(&mut d, &mut tick, k, lent, &inputs);
+        if let Some(h) = h.filter(|&h| h != Handover::Waiting) {
+            handovers.push(h);
+            lent = false;
+        }
+        if k >= 1_010 {
+            assert_eq!(*stopped_at.get_or_insert(out.setpoint.whole), out.setpoint.whole, "tick {k}: stopped");
+            assert!(!out.enabled);
+        }
+    }
+    assert_eq!(handovers, [Handover::Planned, Handover::Dropped]);
+    assert!(stopped_at.is_some_and(|p| p > 0), "the move had started");
+    assert_ne!(d.state().read(drive_core::od::Obj::ErrorStatus), 0, "the model shows the fault");
+}
+
+fn w16(reg: u16, v: u16) -> Vec<u8> {
+    let ([rh, rl], [vh, vl]) = (reg.to_be_bytes(), v.to_be_bytes());
+    frame(&[1, 0x06, rh, rl, vh, vl])
+}
+
+/// As `cargo xtask tick-cost` drives the firmware under QEMU: a move, re-targeted four times
+/// while it cruises; each request served on a freshly synced model and handed over `deliver`
+/// ticks later. The tick's steps add up to the model's position, which is the last target.
+fn retargets(margin_us: u64, deliver: u64) -> (i64, i64, Vec<Handover>) {
+    let mut d = drive();
+    d.state_mut().set_plan_margin(margin_us);
+    let mut tick = d.state().tick_side();
+    let mut requests: Vec<Vec<u8>> =
+        vec![frame(&[1, 0x10, 0x60, 0x02, 0, 5, 10, 0, 0, 0, 0, 0x0F, 0xA0, 0, 0, 0x1F, 0x40])];
+    let retargets = [(1000, 12_000u16), (3000, 14_000), (5000, 16_000), (7000, 18_000)];
+    let (mut emitted, mut handovers, mut lend_at, mut next) = (0i64, Vec::new(), None, 0usize);
+    for k in 0..200_000u64 {
+        let lent = lend_at.is_some_and(|at| k >= at);
+        let (out, h) = tick_at(&mut d, &mut tick, k, lent, &Inputs::default());
+        emitted += out.steps;
+        if std::env::var("DBG").is_ok()
+            && (h.is_some_and(|h| h != Handover::Waiting && h != Handover::Done) || k % 5000 == 0)
+        {
+            eprintln!(
+                "{k} {h:?} set {} com {} emitted {emitted} v {}",
+                out.setpoint.whole, out.commutation.whole, out.setpoint.velocity
+            );
+        }
+        if let Some(h) = h.filter(|&h| h != Handover::Waiting) {
+            if h != Handover::Done {
+                handovers.push(h);
+            }
+            lend_at = None;
+        }
+        if lend_at.is_none()
+            && requests.is_empty()
+            && let Some(&(past, target)) = retargets.get(next)
+            && out.setpoint.whole >= past
+        {
+            requests = vec![w16(0x6044, 0), w16(0x6045, target)];
+            next += 1;
+        }
+        if lend_at.is_none() && !requests.is_empty() {
+            // Synced at this tick: the model is fresh; serve one request, hand it over later.
+            assert_eq!(tick.sync(tick_time(k + 1), &mut d.state_mut().lend()), Handover::Done);
+            d.state_mut().synced();
+            let r = requests.remove(0);
+            assert!(serve(&mut d, tick_time(k).plus_micros(10), &r));
+            lend_at = Some(k + deliver);
+        }
+    }
+    assert_eq!(tick.sync(tick_time(200_000), &mut d.state_mut().lend()), Handover::Done);
+    d.state_mut().synced();
+    (emitted, d.state().position(), handovers)
+}
+
+#[test]
+fn re_targets_handed_over_in_time_end_where_the_model_says() {
+    let (emitted, position, handovers) = retargets(20_000, 20);
+    assert_eq!((emitted, position), (18_000, 18_000));
+    assert!(handovers.iter().all(|&h| h == Handover::Planned), "{handovers:?}");
+    assert_eq!(handovers.len(), 5);
+}
+
+#[test]
+fn re_targets_handed_over_late_still_end_where_the_model_says() {
+    let (emitted, position, handovers) = retargets(2_000, 100);
+    assert_eq!((emitted, position), (18_000, 18_000));
+    assert!(handovers.iter().all(|&h| matches!(h, Handover::Late(_))), "{handovers:?}");
+}
