@@ -194,7 +194,7 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
         if bytes.is_empty() {
             return;
         }
-        self.state.set_request_time(now);
+        self.state.now = now;
         // The bytes of one call arrived together: only the first can follow a silence.
         if self.framer.ended(now) {
             self.end_frame();
@@ -204,7 +204,7 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
 
     /// Time passes: a frame whose t3.5 has run out is processed.
     pub fn on_timer(&mut self, now: Instant) {
-        self.state.set_request_time(now);
+        self.state.now = now;
         if self.framer.ended(now) {
             self.end_frame();
         }
@@ -219,6 +219,19 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
     /// [`Drive::tick`] with what the drive measures: faults and protections are checked against it.
     pub fn tick_with(&mut self, now: Instant, inputs: &Inputs) -> Outputs {
         self.state.tick_with(now, inputs)
+    }
+
+    /// Whether the model of the controller holds something the tick's own controller has not
+    /// taken in: where the tick owns a controller of its own, a change to hand over by a sync.
+    pub fn has_changes(&self) -> bool {
+        self.state.has_changes()
+    }
+
+    /// Lends the model of the controller to a control tick that owns a controller of its own,
+    /// for [`TickSide::sync`](crate::controller::handoff::TickSide::sync); then
+    /// [`DriveState::synced`]. See [`crate::controller::handoff`].
+    pub fn lend(&mut self) -> Lent<'_> {
+        self.state.lend()
     }
 
     /// Whether a request is complete at `now`, to be served by the next [`Drive::on_timer`] or

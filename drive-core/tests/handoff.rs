@@ -51,7 +51,7 @@ fn split() -> (Drive, TickSide) {
 /// Ticks `tick` at tick `k`, syncing first if `lent`; the handover if it synced.
 fn tick_at(d: &mut Drive, tick: &mut TickSide, k: u64, lent: bool, inputs: &Inputs) -> (Outputs, Option<Handover>) {
     let now = tick_time(k);
-    let h = lent.then(|| tick.sync(now, &mut d.state_mut().lend()));
+    let h = lent.then(|| tick.sync(now, &mut d.lend()));
     if h.is_some_and(|h| h != Handover::Waiting) {
         d.state_mut().synced();
     }
@@ -89,7 +89,7 @@ fn a_plan_takes_over_at_its_tick_as_if_requested_a_margin_later() {
     }
     assert_eq!(planned_at, Some(request_at + margin_ticks + 1));
     // A sync before a request refreshes the model.
-    assert_eq!(tick.sync(tick_time(40_000), &mut d.state_mut().lend()), Handover::Done);
+    assert_eq!(tick.sync(tick_time(40_000), &mut d.lend()), Handover::Done);
     d.state_mut().synced();
     let position = |d: &Drive| d.state().read(drive_core::od::Obj::Position);
     assert!(position(&d) > 0);
@@ -181,14 +181,14 @@ fn retargets(margin_us: u64, deliver: u64) -> (i64, i64, Vec<Handover>) {
         }
         if lend_at.is_none() && !requests.is_empty() {
             // Synced at this tick: the model is fresh; serve one request, hand it over later.
-            assert_eq!(tick.sync(tick_time(k + 1), &mut d.state_mut().lend()), Handover::Done);
+            assert_eq!(tick.sync(tick_time(k + 1), &mut d.lend()), Handover::Done);
             d.state_mut().synced();
             let r = requests.remove(0);
             assert!(serve(&mut d, tick_time(k).plus_micros(10), &r));
             lend_at = Some(k + deliver);
         }
     }
-    assert_eq!(tick.sync(tick_time(200_000), &mut d.state_mut().lend()), Handover::Done);
+    assert_eq!(tick.sync(tick_time(200_000), &mut d.lend()), Handover::Done);
     d.state_mut().synced();
     (emitted, d.state().position(), handovers)
 }

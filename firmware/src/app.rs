@@ -166,7 +166,7 @@ fn run_tick(
 /// Lends the drive's model to the tick and waits until the tick has synced it (at most one tick,
 /// or until the first tick of a motion planned into it), then acts on what the tick reported.
 pub async fn sync(drive: &mut Drive) {
-    lend(&mut drive.state_mut().lend()).await;
+    lend(&mut drive.lend()).await;
     drive.state_mut().synced();
 }
 
@@ -194,7 +194,7 @@ async fn before_request(drive: &mut Drive) {
 /// After the drive had its say: the reply out while the tick takes in what the request changed
 /// (a motion from the tick it was planned for), then the flash operations the request asked for.
 async fn after_request(drive: &mut Drive, serial: &mut Serial, store: &mut crate::board::ParamStore) {
-    let changed = drive.state().has_changes();
+    let changed = drive.has_changes();
     let (reply, mut lent) = drive.reply_and_lend();
     let send = async {
         if let Some(bytes) = reply

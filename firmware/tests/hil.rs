@@ -193,6 +193,8 @@ mod tests {
         let handed = |i: usize| app::HANDOVERS[i].load(Relaxed);
         let before = [handed(0), handed(1), handed(2)];
         app::sync(drive).await;
+        // The request's time, as the Modbus task gives it: the plan starts PLAN_MARGIN_US on.
+        drive.on_timer(app::now());
         drive.state_mut().apply(Obj::AbsoluteMove, 60_000);
         app::sync(drive).await;
         let after = [handed(0), handed(1), handed(2)];

@@ -17,7 +17,7 @@ use std::path::Path;
 use drive_core::control::{Outputs, TICK_MICROS};
 use drive_core::controller::handoff::{Handover, TickSide};
 use drive_core::faults::Inputs;
-use drive_core::{Drive, DriveState, Instant};
+use drive_core::{Drive, Instant};
 
 use crate::encoder::{Encoder, EncoderKind};
 use crate::inject::{Change, Injector, Scheduled, Supply};
@@ -267,18 +267,17 @@ impl Plant {
     fn tick(&mut self) -> Outputs {
         let (now, inputs) = (self.next_tick, self.measurements());
         let Some(tick) = &mut self.tick else { return self.drive.tick_with(now, &inputs) };
-        let state = self.drive.state_mut();
-        if state.has_changes() {
-            Self::sync(tick, state, now);
+        if self.drive.has_changes() {
+            Self::sync(tick, &mut self.drive, now);
         }
-        let out = tick.tick(now, &inputs, state.table());
-        Self::sync(tick, state, now.plus_micros(TICK_MICROS));
+        let out = tick.tick(now, &inputs, self.drive.state().table());
+        Self::sync(tick, &mut self.drive, now.plus_micros(TICK_MICROS));
         out
     }
 
-    fn sync(tick: &mut TickSide, state: &mut DriveState, now: Instant) {
-        if tick.sync(now, &mut state.lend()) != Handover::Waiting {
-            state.synced();
+    fn sync(tick: &mut TickSide, drive: &mut Drive, now: Instant) {
+        if tick.sync(now, &mut drive.lend()) != Handover::Waiting {
+            drive.state_mut().synced();
         }
     }
 

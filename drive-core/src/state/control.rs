@@ -199,10 +199,15 @@ impl<P: Borrow<Table>> DriveState<P> {
 
     /// What planning reads of the drive ([`Planner`]).
     pub(crate) fn planner(&self) -> Planner<'_> {
-        Planner { params: &self.params, now: self.now, may_move: self.may_move(), encoder: self.encoder_position() }
+        Planner {
+            params: &self.params,
+            now: self.plan_time(),
+            may_move: self.may_move(),
+            encoder: self.encoder_position(),
+        }
     }
 
-    /// Plans writing `value` to the motion object `obj` at `self.now` on `planned`, a copy of
+    /// Plans writing `value` to the motion object `obj` at the plan time on `planned`, a copy of
     /// the axis and set-points: `Ok(true)` if the write changes them, `Ok(false)` if it leaves
     /// them as they are, or why it is refused (and `planned` is to be dropped).
     pub(crate) fn plan_motion(&self, obj: Obj, value: u32, planned: &mut (Axis, Pp)) -> Result<bool, ObjError> {
@@ -214,7 +219,7 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// (a refused plan may have halted the axis). What [`DriveState::plan_motion`] returns.
     pub(crate) fn plan_motion_in_place(&mut self, obj: Obj, value: u32) -> Result<bool, ObjError> {
         let (may_move, encoder) = (self.may_move(), self.encoder_position());
-        let planner = Planner { params: &self.params, now: self.now, may_move, encoder };
+        let planner = Planner { params: &self.params, now: self.plan_time(), may_move, encoder };
         planner.plan_motion(obj, value, &mut self.ctl.axis, &mut self.pp)
     }
 
@@ -317,7 +322,7 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// Lends the model of the controller to a control tick that owns a controller of its own,
     /// for [`Controller::sync`](crate::controller::Controller::sync); then
     /// [`DriveState::synced`]. See [`crate::controller::handoff`].
-    pub fn lend(&mut self) -> Lent<'_> {
+    pub(crate) fn lend(&mut self) -> Lent<'_> {
         Lent { model: &mut self.ctl, pvt: &mut self.pvt, base: &mut self.base, orders: &mut self.orders }
     }
 
@@ -342,7 +347,7 @@ impl<P: Borrow<Table>> DriveState<P> {
 
     /// Whether the model holds something the tick's own controller has not taken in: a change
     /// to hand over by a sync.
-    pub fn has_changes(&self) -> bool {
+    pub(crate) fn has_changes(&self) -> bool {
         let (c, b) = (&self.ctl, &self.base);
         c.axis.version() != b.version()
             || self.orders != Orders::default()
@@ -359,9 +364,10 @@ impl<P: Borrow<Table>> DriveState<P> {
         self.margin = margin_us;
     }
 
-    /// The time a request at `now` plans for.
-    pub(crate) fn set_request_time(&mut self, now: Instant) {
-        self.now = now.plus_micros(self.margin);
+    /// The time the motion a request commands starts at (the plan's first tick is the first
+    /// at or after it): the request's time, and the margin where the tick runs apart.
+    pub(crate) fn plan_time(&self) -> Instant {
+        self.now.plus_micros(self.margin)
     }
 
     /// One control tick at `now` on a platform that measures nothing: [`DriveState::tick_with`]
@@ -510,7 +516,7 @@ impl Planner<'_> {
         Ok(())
     }
 
-    /// Plans writing `value` to the motion object `obj` at `self.now` on `axis` and `pp`:
+    /// Plans writing `value` to the motion object `obj` at the plan time on `axis` and `pp`:
     /// `Ok(true)` if the write changes them, `Ok(false)` if it leaves them as they are, or why it
     /// is refused (and they are to be dropped, or restored).
     fn plan_motion(&self, obj: Obj, value: u32, axis: &mut Axis, pp: &mut Pp) -> Result<bool, ObjError> {

@@ -206,7 +206,7 @@ impl<P: Borrow<Table>> DriveState<P> {
     #[inline(never)]
     fn check_sync(&self) -> Result<(), ObjError> {
         let mut scratch = self.ctl.axis;
-        self.plan_sync(self.now, &mut scratch)
+        self.plan_sync(self.plan_time(), &mut scratch)
     }
 
     /// Starts the synchronous move, which [`DriveState::check_sync`] accepted. Out of line, as
@@ -214,7 +214,7 @@ impl<P: Borrow<Table>> DriveState<P> {
     #[inline(never)]
     fn start_sync(&mut self) {
         let mut axis = self.ctl.axis;
-        if self.plan_sync(self.now, &mut axis).is_ok() {
+        if self.plan_sync(self.plan_time(), &mut axis).is_ok() {
             self.ctl.axis = axis;
         }
     }
@@ -299,6 +299,6 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// stands (built here, not in the tick).
     fn start_run(&mut self) {
         let Ok((source, _, _)) = self.plan_run() else { return };
-        self.ctl.start_run(self.now, source, &mut self.pvt, self.table.borrow());
+        self.ctl.start_run(self.plan_time(), source, &mut self.pvt, self.table.borrow());
     }
 }

@@ -196,7 +196,7 @@ impl<'a> Rig<'a> {
         let inputs = self.case.measure(Some(&self.last));
         let now = Instant::from_micros(self.now);
         let before = SYST::get_current();
-        let handover = if self.lent { Some(self.tick.sync(now, &mut self.drive.state_mut().lend())) } else { None };
+        let handover = if self.lent { Some(self.tick.sync(now, &mut self.drive.lend())) } else { None };
         self.last = self.tick.tick(now, &inputs, &TABLE);
         let after = SYST::get_current();
         // SysTick counts down, 24 bits.
@@ -271,7 +271,7 @@ impl<'a> Rig<'a> {
         self.drive.on_timer(Instant::from_micros(deadline.as_micros().max(self.now)));
         let spent = before.wrapping_sub(SYST::get_current()) & SYST_MASK;
         let ok = matches!(self.drive.take_reply(), Some(r) if r.get(1) == body.get(1));
-        if self.drive.state().has_changes() {
+        if self.drive.has_changes() {
             self.sync();
         }
         (ok, spent)
