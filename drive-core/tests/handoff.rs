@@ -207,3 +207,44 @@ fn re_targets_handed_over_late_still_end_where_the_model_says() {
     assert_eq!((emitted, position), (18_000, 18_000));
     assert!(handovers.iter().all(|&h| matches!(h, Handover::Late(_))), "{handovers:?}");
 }
+
+/// Serves `requests` (each at its tick) as the firmware does, handing each over `deliver`
+/// ticks later; the handovers that were not plain syncs.
+fn served(requests: &[(u64, Vec<u8>)], ticks: u64, deliver: u64) -> Vec<Handover> {
+    let (mut d, mut tick) = split();
+    let (mut handovers, mut lend_at) = (Vec::new(), None);
+    for k in 0..ticks {
+        let lent = lend_at.is_some_and(|at| k >= at);
+        let (_, h) = tick_at(&mut d, &mut tick, k, lent, &Inputs::default());
+        if let Some(h) = h.filter(|&h| h != Handover::Waiting) {
+            if h != Handover::Done {
+                handovers.push(h);
+            }
+            lend_at = None;
+        }
+        if let Some((_, r)) = requests.iter().find(|(at, _)| *at == k) {
+            assert!(lend_at.is_none(), "a request while one is handed over");
+            assert_eq!(tick.sync(tick_time(k + 1), &mut d.lend()), Handover::Done);
+            d.state_mut().synced();
+            assert!(serve(&mut d, tick_time(k).plus_micros(10), r), "request at tick {k}");
+            lend_at = Some(k + deliver);
+        }
+    }
+    handovers
+}
+
+#[test]
+fn a_buffered_set_point_appended_to_the_running_one_is_never_late() {
+    let requests = [
+        (10, w16(0x6007, 4)),
+        (20, w32(0x6072, 20_000)),
+        (30, w32(0x6074, 30_000)),
+        (40, w16(0x6070, 0x10)),
+        (200, w16(0x6070, 0x00)),
+        (300, w32(0x6074, 10_000)),
+        // Buffered behind the running one: appended to its track, handed over ticks later.
+        (400, w16(0x6070, 0x10)),
+    ];
+    let handovers = served(&requests, 20_000, 5);
+    assert_eq!(handovers, [Handover::Planned, Handover::Planned]);
+}

@@ -10,6 +10,7 @@ use hal_sim::DEFAULT_MOTOR;
 use hal_sim::inject::Change;
 use hal_sim::motor::{Motor, MotorCatalog, MotorInputs};
 use hal_sim::plant::Plant;
+use proptest::prelude::*;
 
 fn motor() -> Motor {
     let params = MotorCatalog::builtin().get(DEFAULT_MOTOR).cloned().expect("catalogue motor");
@@ -46,8 +47,16 @@ enum Step {
 }
 
 /// Runs `steps` on both arrangements to `end_ms`; every tick's outputs and every reply must be
-/// the same. Returns the split plant's outputs at the end and the replies.
+/// the same, and the motor must have moved. Returns the split plant's outputs at the end and
+/// the replies.
 fn both(steps: Vec<(u64, Step)>, end_ms: u64) -> (Outputs, Vec<Vec<u8>>) {
+    let (out, replies, moved) = both_compared(steps, end_ms);
+    assert!(moved > 0, "the scenario moves the motor");
+    (out, replies)
+}
+
+/// [`both`] without the motion check; the steps taken too.
+fn both_compared(steps: Vec<(u64, Step)>, end_ms: u64) -> (Outputs, Vec<Vec<u8>>, i64) {
     let mut split = Plant::new(Drive::factory(), motor());
     let mut shared = Plant::combined(Drive::factory(), motor());
     let mut steps = steps.into_iter().peekable();
@@ -84,12 +93,55 @@ fn both(steps: Vec<(u64, Step)>, end_ms: u64) -> (Outputs, Vec<Vec<u8>>) {
         assert_eq!(a, b, "outputs at {} µs", now.as_micros());
         moved += a.map_or(0, |o| o.steps.abs());
     }
-    assert!(moved > 0, "the scenario moves the motor");
     assert_eq!(
         split.drive().state().read(drive_core::od::Obj::Position),
         shared.drive().state().read(drive_core::od::Obj::Position)
     );
-    (split.outputs().expect("ticked"), replies)
+    (split.outputs().expect("ticked"), replies, moved)
+}
+
+/// A request of the kinds a master sends a drive while it moves: speeds, moves, re-targets,
+/// stops, modes, the controlword and PP targets, enable, fault clearing, the watchdog, ramp
+/// levels, a declared position, PVT control, reads.
+fn any_request() -> impl Strategy<Value = Vec<u8>> {
+    prop_oneof![
+        (0..60_000i32).prop_map(|v| w32(0x6003, v)),
+        (-200_000..200_000i32).prop_map(|v| w32(0x6005, v)),
+        (-200_000..200_000i32).prop_map(|v| w32(0x6044, v)),
+        Just(w16(0x6053, 0)),
+        prop::sample::select(vec![0u16, 1, 4, 5]).prop_map(|m| w16(0x6007, m)),
+        (0..0x40u16).prop_map(|cw| w16(0x6070, cw)),
+        (-100_000..100_000i32).prop_map(|v| w32(0x6074, v)),
+        (0..40_000i32).prop_map(|v| w32(0x6072, v)),
+        (0..2u16).prop_map(|e| w16(0x6011, e)),
+        Just(w16(0x6000, 0xFF)),
+        (0..3u16).prop_map(|t| w16(0x2137, t)),
+        (0..9u16).prop_map(|l| w16(0x600A, l)),
+        (0..9u16).prop_map(|l| w16(0x600B, l)),
+        (-1_000..1_000i32).prop_map(|v| w32(0x600E, v)),
+        (0..4u16).prop_map(|c| w16(0x6017, c)),
+        Just(read(0x6000, 2)),
+        Just(read(0x600E, 2)),
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+    /// Whatever a master sends, whenever: the handoff gives every tick the outputs and every
+    /// request the reply of one shared controller.
+    #[test]
+    fn any_requests_any_time(requests in prop::collection::vec((10..120u64, any_request()), 1..24)) {
+        let mut at = 0;
+        let steps = requests
+            .into_iter()
+            .map(|(gap, body)| {
+                at += gap;
+                frame(at, body)
+            })
+            .collect();
+        both_compared(steps, at + 500);
+    }
 }
 
 fn frame(at: u64, body: Vec<u8>) -> (u64, Step) {

@@ -155,9 +155,10 @@ impl Controller {
         } else {
             // Late if a tick already gave a setpoint at or after the plan's first (on the old
             // course); a board whose tick is slower than the drive's grid takes every plan at its
-            // first tick after the plan's first, as it takes every other sample.
+            // first tick after the plan's first, as it takes every other sample. A move appended
+            // to the one under way is never late: the course is the same until it is reached.
             let late = match (starts, self.axis.last_tick()) {
-                (Some(at), Some(last)) if last >= at => Some(last.since(at) / TICK_MICROS + 1),
+                (Some(at), Some(last)) if last >= at && !model.axis.appends() => Some(last.since(at) / TICK_MICROS + 1),
                 _ => None,
             };
             self.axis.take_plan(&model.axis);

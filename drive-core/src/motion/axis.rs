@@ -109,6 +109,12 @@ impl Axis {
         self.version = self.version.wrapping_add(1);
     }
 
+    /// Whether a move appended to the one under way ([`Axis::then_move_to`]) is yet to be
+    /// reached: the course is the same as before until then.
+    pub fn appends(&self) -> bool {
+        self.joint.is_some()
+    }
+
     /// The time of the last tick (none yet: `None`).
     pub fn last_tick(&self) -> Option<Instant> {
         self.grid
@@ -130,10 +136,7 @@ impl Axis {
     /// whole if it stands (a declared position).
     pub fn take_plan(&mut self, plan: &Self) {
         match plan.activation() {
-            None if !self.is_still() => {
-                self.halt();
-                self.track = plan.track;
-            }
+            None if !self.is_still() => self.halt(),
             None => *self = *plan,
             Some(_) => {
                 let (last, grid) = (self.last, self.grid);
