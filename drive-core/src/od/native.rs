@@ -147,8 +147,9 @@ objects! {
     /// 0x6017 = 2 does, so one write of 0x6027..0x602C is one point.
     PvtAutoPush @ 0x2112: U8, Rw, Ram, Span(0, 1), default 0, None, "PVT push on time";
     /// Group start (our object): writing g, usually by broadcast (`00 06 21 13 00 gg`), starts
-    /// every drive whose group id 0x200E is g at the next control tick: the PVT run in PVT mode,
-    /// the synchronous move (0x6047, 0x6049) in position mode. Other drives ignore it.
+    /// every drive whose group id 0x200E is g at the same control tick (a board's planning margin
+    /// after the frame): the PVT run in PVT mode, the synchronous move (0x6047, 0x6049) in
+    /// position mode. Other drives ignore it.
     GroupStart @ 0x2113: U8, Cmd, Ram, Span(1, 127), default 0, None, "group start";
     /// Group stop (our object): writing g makes every drive of group g decelerate to rest, as
     /// 0x6017 = 0 does.
@@ -267,8 +268,8 @@ objects! {
     ExtStopTrigger @ 0x6014: U8, Rw, Rom, Bits(0x13), default 0, None, "external stop trigger";
     /// Sensor type: 0 NPN (pull-down on rising, pull-up on falling), 1 PNP (the opposite).
     SensorType @ 0x6015: U8, Rw, Rom, Span(0, 1), default 0, None, "sensor type";
-    /// PVT operation (chapter 5 prints 0x6016): 0 stop (decelerate to rest), 1 start at the next
-    /// control tick, 2 push the point 0x6027..2C into the queue (refused, 04, when full or when
+    /// PVT operation (chapter 5 prints 0x6016): 0 stop (decelerate to rest), 1 start (at the
+    /// control tick a board's planning margin after the frame), 2 push the point 0x6027..2C into the queue (refused, 04, when full or when
     /// its segment from the previous point would exceed 200 kpps or jump), 3 clear the queue
     /// (refused while running). See `drive-core/src/state/pvt.rs` for runs and their checks.
     PvtControl @ 0x6017: U8, Cmd, Ram, Span(0, 3), default 0, None, "PVT operation";

@@ -41,8 +41,9 @@
 //! with the S-curve of the position mode. One broadcast frame, `00 06 21 13 00 gg CRC`, starts a
 //! whole group. Drives of other groups (and of group 0) ignore it; a member that cannot start
 //! refuses it as a start would (04, or nothing if broadcast). 0x2114 = g stops the group as
-//! 0x6017 = 0 does. Any start, including 0x6017 = 1, takes effect at the next control tick after
-//! the frame, so every drive that receives one frame starts in the same tick.
+//! 0x6017 = 0 does. Any start, including 0x6017 = 1, takes effect at the first control tick the
+//! plan margin after the frame (the next tick where the tick is not apart), so every drive that
+//! receives one frame starts in the same tick.
 
 use super::DriveState;
 use crate::controller::run::{Phase, Source};
