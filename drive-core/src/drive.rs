@@ -194,9 +194,9 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
         if bytes.is_empty() {
             return;
         }
-        self.state.now = now;
         // The bytes of one call arrived together: only the first can follow a silence.
         if self.framer.ended(now) {
+            self.state.now = now;
             self.end_frame();
         }
         self.framer.extend(now, bytes);
@@ -204,6 +204,7 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
 
     /// Time passes: a frame whose t3.5 has run out is processed.
     pub fn on_timer(&mut self, now: Instant) {
+        // The time a request is served at, the time its motion is planned for.
         self.state.now = now;
         if self.framer.ended(now) {
             self.end_frame();
