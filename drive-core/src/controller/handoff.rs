@@ -3,8 +3,8 @@
 //! read, and what they plan on).
 //!
 //! Neither waits for the other. The bus side lends its model to the tick ([`Lent`]) and leaves
-//! it alone until the tick has synced it ([`Controller::sync`], at the start of a tick: a few
-//! hundred instructions, no planning). A sync first takes in what the bus side changed since
+//! it alone until the tick has synced it ([`Controller::sync`], at the start of a tick: about
+//! 900 instructions on the Cortex-M4, 3 000 when it takes a plan over; no planning). A sync first takes in what the bus side changed since
 //! the last one, merged against what it learned then ([`Base`]), then tells the model what the
 //! tick did since:
 //!
@@ -64,6 +64,7 @@ impl Base {
 /// is when the order arrives: a PVT stop), or tells it (new settings).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Orders {
+    /// Stop: a ramp at the stop deceleration, and the PVT run ends.
     pub(crate) stop: bool,
     /// The settings changed.
     pub(crate) settings: bool,
