@@ -5,8 +5,10 @@
 //! count is 0.98 instructions.
 //!
 //! No board, no Embassy: the drive core alone, booted, set moving through its objects, and
-//! ticked every 50 µs of its own time, each tick given what a drive measures. The measured
-//! window holds only [`Drive::tick_with`]; making up the measurements is outside it. Most cases
+//! ticked every 50 µs of its own time, each tick given what a drive measures, arranged as the
+//! firmware arranges it: the tick owns a `TickSide`, the drive's model is lent to it before and
+//! after each request. The measured window holds the tick and, when the model is lent, its sync;
+//! making up the measurements is outside it. Most cases
 //! cruise at 32000 pps (1/32 microsteps, acceleration level 1, a relative move of ten million
 //! steps; in closed loop the same in encoder counts) for a second, then 4000 ticks are measured:
 //!
@@ -343,8 +345,8 @@ fn write32(reg: u16, v: i32) -> [u8; 11] {
     [SLAVE, 0x10, rh, rl, 0x00, 0x02, 0x04, a, b, c, d]
 }
 
-/// What serving a request costs (the time the bus task holds the drive, so the time a control
-/// tick may wait): a read, a relative move from rest (planned), a re-targeting absolute move
+/// What serving a request costs (from its last byte to the reply; the tick runs on meanwhile,
+/// and the plan must be ready before its first tick, `PLAN_MARGIN_US` on): a read, a relative move from rest (planned), a re-targeting absolute move
 /// while cruising at 32000 pps (planned from the moving state), one behind the axis (a reversal),
 /// a stop, and a relative move too short to reach the speed limit. Prints a line each;
 /// whether every request was accepted.
