@@ -2,7 +2,7 @@
 //! replies out; the diagnostic counters.
 
 use crate::controller::Outputs;
-use crate::controller::handoff::Lent;
+use crate::controller::handoff::{Handover, Lent, TickSide};
 use crate::crc;
 use crate::faults::{FaultLog, Inputs};
 use crate::ident::Identity;
@@ -233,6 +233,17 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
     /// [`DriveState::synced`]. See [`crate::controller::handoff`].
     pub fn lend(&mut self) -> Lent<'_> {
         self.state.lend()
+    }
+
+    /// Syncs the model with `tick` at `now` where both run in one thread (a simulator, a test):
+    /// [`TickSide::sync`](crate::controller::handoff::TickSide::sync) with [`Drive::lend`], then
+    /// [`DriveState::synced`] unless the sync waits for a plan's first tick.
+    pub fn sync_here(&mut self, tick: &mut TickSide, now: Instant) -> Handover {
+        let handover = tick.sync(now, &mut self.lend());
+        if handover != Handover::Waiting {
+            self.state.synced();
+        }
+        handover
     }
 
     /// Whether a request is complete at `now`, to be served by the next [`Drive::on_timer`] or

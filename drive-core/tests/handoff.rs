@@ -6,14 +6,16 @@
 use drive_core::control::{Outputs, TICK_MICROS};
 use drive_core::controller::handoff::{Handover, TickSide};
 use drive_core::faults::Inputs;
-use drive_core::{Drive, Instant, crc};
+use drive_core::{Drive, Instant};
+
+mod common;
+use common::frame;
 
 const MARGIN_US: u64 = 2_000;
 
-fn frame(body: &[u8]) -> Vec<u8> {
-    let mut f = body.to_vec();
-    f.extend(crc::crc16(body).to_le_bytes());
-    f
+fn w16(reg: u16, v: u16) -> Vec<u8> {
+    let ([rh, rl], [vh, vl]) = (reg.to_be_bytes(), v.to_be_bytes());
+    frame(&[1, 0x06, rh, rl, vh, vl])
 }
 
 fn w32(reg: u16, v: i32) -> Vec<u8> {
@@ -51,10 +53,7 @@ fn split() -> (Drive, TickSide) {
 /// Ticks `tick` at tick `k`, syncing first if `lent`; the handover if it synced.
 fn tick_at(d: &mut Drive, tick: &mut TickSide, k: u64, lent: bool, inputs: &Inputs) -> (Outputs, Option<Handover>) {
     let now = tick_time(k);
-    let h = lent.then(|| tick.sync(now, &mut d.lend()));
-    if h.is_some_and(|h| h != Handover::Waiting) {
-        d.state_mut().synced();
-    }
+    let h = lent.then(|| d.sync_here(tick, now));
     let out = tick.tick(now, inputs, d.state().table());
     (out, h)
 }
@@ -89,8 +88,7 @@ fn a_plan_takes_over_at_its_tick_as_if_requested_a_margin_later() {
     }
     assert_eq!(planned_at, Some(request_at + margin_ticks + 1));
     // A sync before a request refreshes the model.
-    assert_eq!(tick.sync(tick_time(40_000), &mut d.lend()), Handover::Done);
-    d.state_mut().synced();
+    assert_eq!(d.sync_here(&mut tick, tick_time(40_000)), Handover::Done);
     let position = |d: &Drive| d.state().read(drive_core::od::Obj::Position);
     assert!(position(&d) > 0);
     assert_eq!(position(&d), position(&shared), "the model learns where the axis is");
@@ -137,11 +135,6 @@ fn a_plan_overtaken_by_a_fault_is_dropped_and_nothing_moves() {
     assert_ne!(d.state().read(drive_core::od::Obj::ErrorStatus), 0, "the model shows the fault");
 }
 
-fn w16(reg: u16, v: u16) -> Vec<u8> {
-    let ([rh, rl], [vh, vl]) = (reg.to_be_bytes(), v.to_be_bytes());
-    frame(&[1, 0x06, rh, rl, vh, vl])
-}
-
 /// As `cargo xtask tick-cost` drives the firmware under QEMU: a move, re-targeted four times
 /// while it cruises; each request served on a freshly synced model and handed over `deliver`
 /// ticks later. The tick's steps add up to the model's position, which is the last target.
@@ -181,15 +174,13 @@ fn retargets(margin_us: u64, deliver: u64) -> (i64, i64, Vec<Handover>) {
         }
         if lend_at.is_none() && !requests.is_empty() {
             // Synced at this tick: the model is fresh; serve one request, hand it over later.
-            assert_eq!(tick.sync(tick_time(k + 1), &mut d.lend()), Handover::Done);
-            d.state_mut().synced();
+            assert_eq!(d.sync_here(&mut tick, tick_time(k + 1)), Handover::Done);
             let r = requests.remove(0);
             assert!(serve(&mut d, tick_time(k).plus_micros(10), &r));
             lend_at = Some(k + deliver);
         }
     }
-    assert_eq!(tick.sync(tick_time(200_000), &mut d.lend()), Handover::Done);
-    d.state_mut().synced();
+    assert_eq!(d.sync_here(&mut tick, tick_time(200_000)), Handover::Done);
     (emitted, d.state().position(), handovers)
 }
 
@@ -224,8 +215,7 @@ fn served(requests: &[(u64, Vec<u8>)], ticks: u64, deliver: u64) -> Vec<Handover
         }
         if let Some((_, r)) = requests.iter().find(|(at, _)| *at == k) {
             assert!(lend_at.is_none(), "a request while one is handed over");
-            assert_eq!(tick.sync(tick_time(k + 1), &mut d.lend()), Handover::Done);
-            d.state_mut().synced();
+            assert_eq!(d.sync_here(&mut tick, tick_time(k + 1)), Handover::Done);
             assert!(serve(&mut d, tick_time(k).plus_micros(10), r), "request at tick {k}");
             lend_at = Some(k + deliver);
         }

@@ -15,7 +15,7 @@ use std::io::{self, BufWriter, Write};
 use std::path::Path;
 
 use drive_core::control::{Outputs, TICK_MICROS};
-use drive_core::controller::handoff::{Handover, TickSide};
+use drive_core::controller::handoff::TickSide;
 use drive_core::faults::Inputs;
 use drive_core::{Drive, Instant};
 
@@ -268,17 +268,11 @@ impl Plant {
         let (now, inputs) = (self.next_tick, self.measurements());
         let Some(tick) = &mut self.tick else { return self.drive.tick_with(now, &inputs) };
         if self.drive.has_changes() {
-            Self::sync(tick, &mut self.drive, now);
+            self.drive.sync_here(tick, now);
         }
         let out = tick.tick(now, &inputs, self.drive.state().table());
-        Self::sync(tick, &mut self.drive, now.plus_micros(TICK_MICROS));
+        self.drive.sync_here(tick, now.plus_micros(TICK_MICROS));
         out
-    }
-
-    fn sync(tick: &mut TickSide, drive: &mut Drive, now: Instant) {
-        if tick.sync(now, &mut drive.lend()) != Handover::Waiting {
-            drive.state_mut().synced();
-        }
     }
 
     /// Starts the plant's clock at `t` instead of 0: a drive powered up while others on its bus

@@ -32,32 +32,10 @@ use crate::units::{Instant, TICK_MICROS};
 /// are told apart by.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Base {
-    status: Status,
-    run: Option<Run>,
-    pvt: Pvt,
-    version: u32,
-}
-
-impl Base {
-    /// The status bits and measurements at the last sync.
-    pub(crate) fn status(&self) -> Status {
-        self.status
-    }
-
-    /// The PVT run at the last sync.
-    pub(crate) fn run(&self) -> Option<Run> {
-        self.run
-    }
-
-    /// The PVT queue at the last sync.
-    pub(crate) fn pvt(&self) -> Pvt {
-        self.pvt
-    }
-
-    /// The axis' version at the last sync.
-    pub(crate) fn version(&self) -> u32 {
-        self.version
-    }
+    pub(crate) status: Status,
+    pub(crate) run: Option<Run>,
+    pub(crate) pvt: Pvt,
+    pub(crate) version: u32,
 }
 
 /// What the bus side orders the tick to do on its own state (a stop ramp from wherever the axis

@@ -349,12 +349,12 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// to hand over by a sync.
     pub(crate) fn has_changes(&self) -> bool {
         let (c, b) = (&self.ctl, &self.base);
-        c.axis.version() != b.version()
+        c.axis.version() != b.version
             || self.orders != Orders::default()
             || c.heard
-            || c.status != b.status()
-            || c.run != b.run()
-            || self.pvt != b.pvt()
+            || c.status != b.status
+            || c.run != b.run
+            || self.pvt != b.pvt
     }
 
     /// Where the control tick owns a controller of its own: motion starts `margin_us` after the
