@@ -20,8 +20,11 @@ use std::time::{Duration, Instant};
 
 const TARGET: &str = "thumbv7em-none-eabihf";
 /// The flash budget of the G431 build with every feature: reported (OVER), not enforced while
-/// the build is above it.
+/// the build is above it; [`FLASH_CEILING`] is.
 const FLASH_BUDGET: u64 = 80 * 1024;
+/// Flash the build may not grow past (the task fails): the build as it stands and a little
+/// headroom, so that a change that adds code says so by raising it.
+const FLASH_CEILING: u64 = 96 * 1024;
 /// RAM budget: the statics plus the stack's peak, as `tick-cost` measures it (it fails over it).
 const RAM_BUDGET: u64 = 24 * 1024;
 /// The control tick's budget, instructions: a mean of a quarter of a 20 kHz tick at 170 MHz in
@@ -164,8 +167,11 @@ fn firmware() -> Result<(), String> {
     if flash > FLASH_CAPACITY || statics > RAM_CAPACITY {
         return Err("the firmware does not fit the chip".into());
     }
+    if flash > FLASH_CEILING {
+        return Err(format!("the firmware grew past its {FLASH_CEILING} B ceiling: {flash} B"));
+    }
     if flash > FLASH_BUDGET {
-        println!("firmware (STM32G431CB): OVER the 80 KiB flash budget (fits the chip)");
+        println!("firmware (STM32G431CB): OVER the 80 KiB flash budget (under the {FLASH_CEILING} B ceiling)");
     }
     flash_by_part(&elf, flash)?;
     call_graph_checks(&elf, statics)?;
