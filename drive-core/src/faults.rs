@@ -12,9 +12,10 @@
 //!   the supply stays below. When the supply first falls below the highest of these levels and
 //!   the under-voltage threshold, the drive asks for the power-down position save once (the position save of
 //!   0x605E); it is armed again once the supply is back above that level.
-//! - The brake 0x6038 is the release duty of a spring-applied brake: while the power stage is on,
-//!   `Outputs::brake_duty` is 0x6038 (released); off (disabled, faulted) or in power loss below
-//!   0x6084 it is 0 (applied). With 0x6038 = 0 the duty is always 0: no brake fitted.
+//! - The coil output 0x6038 is by default the release duty of a spring-applied brake: while the
+//!   power stage is on, `Outputs::coil_duty` is 0x6038 (released); off (disabled, faulted) or in
+//!   power loss below 0x6084 it is 0 (applied). As a general output (0x2141 = 1) it is the duty
+//!   written, cut only while a fault is latched.
 
 use crate::od::Obj;
 use crate::units::Instant;
@@ -107,6 +108,10 @@ pub struct Inputs {
     /// one's turns × 4096 + angle, wrapping at 2^32. `None` in closed loop: the encoder is lost
     /// (line break, no answer).
     pub encoder: Option<u32>,
+    /// The pins' levels, 1 high, bits as 0x6031 (`controller::io` numbers them).
+    pub levels: u16,
+    /// The analog input, 12-bit ADC code (0x605F), if the platform has one.
+    pub analog: Option<u16>,
 }
 
 /// The fault history and the supervision's memory between ticks.

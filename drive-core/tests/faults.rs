@@ -16,6 +16,8 @@ const NOMINAL: Inputs = Inputs {
     coil_open: [false; 2],
     phase_mv: None,
     encoder: None,
+    levels: 0,
+    analog: None,
 };
 
 /// A factory drive with a move speed set.
@@ -60,7 +62,7 @@ fn read(bus: &Bus, obj: Obj) -> u32 {
 fn under_voltage_latches_frees_the_motor_and_refuses_moves_until_cleared() {
     let mut bus = drive();
     assert!(run(&mut bus, &NOMINAL, 1000).enabled);
-    let low = Inputs { supply_mv: Some(17_000), ..NOMINAL };
+    let low = Inputs { supply_mv: Some(9_000), ..NOMINAL };
     let out = run(&mut bus, &low, 1000);
     assert!(!out.enabled);
     assert_eq!(out.current_ma, 0);
@@ -88,7 +90,7 @@ fn under_voltage_latches_frees_the_motor_and_refuses_moves_until_cleared() {
 #[test]
 fn a_condition_still_present_latches_again_with_a_new_entry() {
     let mut bus = drive();
-    let low = Inputs { supply_mv: Some(10_000), ..NOMINAL };
+    let low = Inputs { supply_mv: Some(8_000), ..NOMINAL };
     run(&mut bus, &low, 200_000);
     assert!(write(&mut bus, 0x6000, 0x3F));
     run(&mut bus, &low, 100);
@@ -112,7 +114,7 @@ fn each_measurement_sets_its_bit_and_code() {
         (|i| i.phase_ma = Some([0, 9000]), Obj::ErrorStatus, 1 << 4, alarm::OVER_CURRENT),
         (|i| i.temperature_c = Some(86), Obj::ErrorStatus, 1 << 0, alarm::OVER_TEMPERATURE),
         (|i| i.supply_mv = Some(60_001), Obj::DriveFaults, 1 << 0, alarm::OVER_VOLTAGE),
-        (|i| i.supply_mv = Some(17_999), Obj::ErrorStatus, 1 << 5, alarm::UNDER_VOLTAGE),
+        (|i| i.supply_mv = Some(9_999), Obj::ErrorStatus, 1 << 5, alarm::UNDER_VOLTAGE),
     ];
     for (make, obj, bit, code) in cases {
         let mut bus = drive();
@@ -127,7 +129,7 @@ fn each_measurement_sets_its_bit_and_code() {
     }
     // At the thresholds exactly: no fault.
     let mut bus = drive();
-    let edge = Inputs { supply_mv: Some(18_000), temperature_c: Some(85), phase_ma: Some([8000, -8000]), ..NOMINAL };
+    let edge = Inputs { supply_mv: Some(10_000), temperature_c: Some(85), phase_ma: Some([8000, -8000]), ..NOMINAL };
     assert!(run(&mut bus, &edge, 100).enabled);
     assert_eq!((read(&bus, Obj::ErrorStatus), read(&bus, Obj::DriveFaults)), (0, 0));
 }
@@ -135,7 +137,7 @@ fn each_measurement_sets_its_bit_and_code() {
 #[test]
 fn the_most_severe_alarm_shows_and_each_gets_an_entry() {
     let mut bus = drive();
-    let both = Inputs { supply_mv: Some(12_000), coil_open: [true, false], ..NOMINAL };
+    let both = Inputs { supply_mv: Some(9_000), coil_open: [true, false], ..NOMINAL };
     run(&mut bus, &both, 100);
     assert_eq!(read(&bus, Obj::AlarmCount), 2);
     assert_eq!(read(&bus, Obj::AlarmCode), u32::from(alarm::PHASE_LOSS));
@@ -206,18 +208,18 @@ fn a_fault_stops_a_moving_axis_where_it_is() {
 #[test]
 fn the_brake_is_released_while_enabled_and_applied_on_disable_and_fault() {
     let mut bus = drive();
-    assert_eq!(run(&mut bus, &NOMINAL, 100).brake_duty, 0);
+    assert_eq!(run(&mut bus, &NOMINAL, 100).coil_duty, 0);
     assert!(write(&mut bus, 0x6038, 60));
-    assert_eq!(run(&mut bus, &NOMINAL, 100).brake_duty, 60);
+    assert_eq!(run(&mut bus, &NOMINAL, 100).coil_duty, 60);
     assert!(write(&mut bus, 0x6011, 0));
-    assert_eq!(run(&mut bus, &NOMINAL, 100).brake_duty, 0);
+    assert_eq!(run(&mut bus, &NOMINAL, 100).coil_duty, 0);
     assert!(write(&mut bus, 0x6011, 1));
-    assert_eq!(run(&mut bus, &NOMINAL, 100).brake_duty, 60);
+    assert_eq!(run(&mut bus, &NOMINAL, 100).coil_duty, 60);
     let hot = Inputs { temperature_c: Some(120), ..NOMINAL };
-    assert_eq!(run(&mut bus, &hot, 100).brake_duty, 0);
-    assert_eq!(run(&mut bus, &NOMINAL, 100).brake_duty, 0);
+    assert_eq!(run(&mut bus, &hot, 100).coil_duty, 0);
+    assert_eq!(run(&mut bus, &NOMINAL, 100).coil_duty, 0);
     assert!(write(&mut bus, 0x6000, 1));
-    assert_eq!(run(&mut bus, &NOMINAL, 100).brake_duty, 60);
+    assert_eq!(run(&mut bus, &NOMINAL, 100).coil_duty, 60);
 }
 
 #[test]
@@ -230,7 +232,7 @@ fn power_loss_frees_the_motor_and_applies_the_brake_as_configured() {
     assert!(write(&mut bus, 0x6084, 20_000));
     let sagging = Inputs { supply_mv: Some(20_500), ..NOMINAL };
     let out = run(&mut bus, &sagging, 100);
-    assert!(!out.enabled && out.current_ma == 0 && out.brake_duty == 0);
+    assert!(!out.enabled && out.current_ma == 0 && out.coil_duty == 0);
     assert_eq!(read(&bus, Obj::ErrorStatus), 0, "power loss is not a fault");
     assert_eq!(write32(&mut bus, 0x6005, 100), Some(4));
     // Back above: driven again, without clearing anything.
@@ -238,9 +240,9 @@ fn power_loss_frees_the_motor_and_applies_the_brake_as_configured() {
     // Brake only, below 20 V: the motor holds, the brake is applied.
     assert!(write(&mut bus, 0x6082, 2));
     let out = run(&mut bus, &sagging, 100);
-    assert!(out.enabled && out.brake_duty == 100);
+    assert!(out.enabled && out.coil_duty == 100);
     let out = run(&mut bus, &Inputs { supply_mv: Some(19_500), ..NOMINAL }, 100);
-    assert!(out.enabled && out.current_ma > 0 && out.brake_duty == 0);
+    assert!(out.enabled && out.current_ma > 0 && out.coil_duty == 0);
 }
 
 #[test]
@@ -251,15 +253,15 @@ fn power_loss_requests_the_position_save_once_per_drop() {
     run(&mut bus, &NOMINAL, 1_000_000);
     assert_eq!(bus.drive.take_system_request(), None);
     let ramp = |mv| Inputs { supply_mv: Some(mv), ..NOMINAL };
-    run(&mut bus, &ramp(18_500), 1000);
+    run(&mut bus, &ramp(10_500), 1000);
     assert_eq!(bus.drive.take_system_request(), None);
-    run(&mut bus, &ramp(17_500), 1000);
+    run(&mut bus, &ramp(9_500), 1000);
     assert_eq!(bus.drive.take_system_request(), Some(SystemRequest::SavePosition(1234)));
-    run(&mut bus, &ramp(5_000), 1000);
+    run(&mut bus, &ramp(4_000), 1000);
     assert_eq!(bus.drive.take_system_request(), None);
     // Power comes back, then fails again: a second save.
     run(&mut bus, &NOMINAL, 1000);
-    run(&mut bus, &ramp(17_000), 1000);
+    run(&mut bus, &ramp(9_000), 1000);
     assert_eq!(bus.drive.take_system_request(), Some(SystemRequest::SavePosition(1234)));
 }
 

@@ -17,7 +17,7 @@
 use core::future::poll_fn;
 use core::mem::MaybeUninit;
 use core::ptr::null_mut;
-use core::sync::atomic::{AtomicPtr, AtomicU16, AtomicU32, Ordering};
+use core::sync::atomic::{AtomicPtr, AtomicU32, Ordering};
 use core::task::Poll;
 
 use defmt::warn;
@@ -58,11 +58,6 @@ pub static TICKS: AtomicU32 = AtomicU32::new(0);
 /// Plans handed over at their first tick, late (the task lent them after it), and dropped
 /// (the tick had stopped on its own since they were planned).
 pub static HANDOVERS: [AtomicU32; 3] = [const { AtomicU32::new(0) }; 3];
-
-/// The analog input code (0x605F), from the sense loop.
-pub static ANALOG_IN: AtomicU16 = AtomicU16::new(0);
-/// EXT1..3 as 0x6031 bits 7..9, from the input task.
-pub static EXT_INPUTS: AtomicU16 = AtomicU16::new(0);
 
 /// Who this firmware says it is (0x1022 hardware version from the board).
 fn identity(hardware: &'static str) -> Identity {
@@ -183,12 +178,9 @@ async fn lend(lent: &mut Lent<'_>) {
     .await;
 }
 
-/// Before a request is served: the model synced, and the inputs the other tasks read into it.
+/// Before a request is served: the model synced.
 async fn before_request(drive: &mut Drive) {
     sync(drive).await;
-    let s = drive.state_mut().status_mut();
-    s.analog_in = ANALOG_IN.load(Ordering::Relaxed);
-    s.gpio = (s.gpio & !(0b111 << 7)) | EXT_INPUTS.load(Ordering::Relaxed);
 }
 
 /// After the drive had its say: the reply out while the tick takes in what the request changed

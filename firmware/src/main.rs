@@ -84,7 +84,7 @@ mod run {
     use drive_core::store::{Loaded, Store};
     use embassy_embedded_hal::adapter::BlockingAsync;
     use embassy_executor::Spawner;
-    use embassy_futures::select::{Either, select, select4};
+    use embassy_futures::select::{Either, select};
     use embassy_stm32::exti::ExtiInput;
     use embassy_stm32::flash::{Blocking, Flash};
     use embassy_stm32::mode::Async;
@@ -155,8 +155,7 @@ mod run {
             ticker.next().await;
             n = n.wrapping_add(1);
             let (v, t, a) = sense.read_adc();
-            Sense::publish(v, t);
-            app::ANALOG_IN.store(a, Ordering::Relaxed);
+            Sense::publish(v, t, a);
             if n.is_multiple_of(100) {
                 let cost = board::TICK_CYCLES_MAX.load(Ordering::Relaxed);
                 info!(
@@ -175,20 +174,14 @@ mod run {
         }
     }
 
-    /// EXT1..3 into 0x6031 bits 7..9 (inverted: 1 is a low level); FSET after power-up is only
-    /// logged (it acts at power-up, `fset_held`).
+    /// FSET after power-up is only logged (it acts at power-up, `fset_held`). The EXT inputs
+    /// are the control tick's: it samples them every tick (`board::measure`).
     #[embassy_executor::task]
     async fn watch_inputs(inputs: Inputs) -> ! {
-        let Inputs { ext: [mut e1, mut e2, mut e3], mut fset } = inputs;
+        let Inputs { mut fset } = inputs;
         loop {
-            let low = [e1.is_low(), e2.is_low(), e3.is_low()];
-            let bits = low.iter().enumerate().fold(0u16, |acc, (i, &l)| acc | (u16::from(l) << (7 + i)));
-            app::EXT_INPUTS.store(bits, Ordering::Relaxed);
-            select4(e1.wait_for_any_edge(), e2.wait_for_any_edge(), e3.wait_for_any_edge(), fset.wait_for_any_edge())
-                .await;
-            if fset.is_low() {
-                info!("FSET pressed");
-            }
+            fset.wait_for_falling_edge().await;
+            info!("FSET pressed");
         }
     }
 }

@@ -1,6 +1,7 @@
 //! The motor's power stage as the control tick sees it.
 
 use drive_core::control::Outputs;
+use drive_core::controller::io::PinConfig;
 
 /// What the control tick asks of a power stage, once per tick.
 pub trait PowerStage {
@@ -10,9 +11,17 @@ pub trait PowerStage {
     /// Sets the phase current reference in mA; 0 frees the motor (stage disabled).
     fn set_current(&mut self, milliamps: u16);
 
+    /// Sets the pins up as `pins` says (pulls, directions, drivers) and the outputs to `levels`
+    /// (1 high, bits as 0x6031). A board without the pins ignores it.
+    fn set_pins(&mut self, _pins: &PinConfig, _levels: u16) {}
+    /// Sets the coil output's PWM duty, percent. A board without the output ignores it.
+    fn set_coil(&mut self, _duty: u8) {}
+
     /// Applies one tick's outputs: current first, so a freed motor takes no step.
     fn apply(&mut self, out: &Outputs) {
         self.set_current(out.current_ma);
         self.step(out.steps);
+        self.set_pins(&out.pins, out.gpio);
+        self.set_coil(out.coil_duty);
     }
 }

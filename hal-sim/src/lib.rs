@@ -71,6 +71,7 @@ use crate::plant::Plant;
 pub mod encoder;
 pub mod flash;
 pub mod inject;
+pub mod machine;
 pub mod motor;
 pub mod plant;
 pub mod plot;
@@ -125,6 +126,10 @@ pub struct SimOptions {
     pub faults: Vec<inject::Scheduled>,
     /// The encoder on each motor's shaft (`--encoder`).
     pub encoder: encoder::EncoderKind,
+    /// Switches and the analog source around each motor (`--switch`, `--analog`).
+    pub machine: machine::Machine,
+    /// Hard stops at these rotor positions, full steps from the power-up position (`--hard-stop`).
+    pub hard_stops: (Option<f64>, Option<f64>),
 }
 
 /// The trace or flash file of the drive at `address` when several share the bus: `-axisN`
@@ -171,8 +176,10 @@ pub struct Snapshot {
     pub velocity: f64,
     /// Whether the drive's power stage is on.
     pub enabled: bool,
-    /// The brake's PWM duty the drive outputs, % (0: applied).
-    pub brake_duty: u8,
+    /// The coil output's PWM duty the drive outputs, % (a brake: 0 applied).
+    pub coil_duty: u8,
+    /// The drive's output pins' levels (1 high, bits as 0x6031).
+    pub gpio_out: u16,
     /// The larger of the two phase currents' magnitudes in the motor, A.
     pub current_a: f64,
 }
@@ -404,6 +411,8 @@ fn build<T>(
         let mut plant = Plant::new(drive, Motor::new(params.clone(), opts.motor.inputs));
         plant.schedule(opts.faults.clone());
         plant.set_encoder(opts.encoder);
+        *plant.machine_mut() = opts.machine.clone();
+        plant.motor_mut().set_hard_stops(opts.hard_stops.0, opts.hard_stops.1);
         if let Some((path, every)) = &opts.motor.trace {
             let path = match address {
                 Some(a) if !opts.axes.is_empty() => axis_trace_path(path, a),
@@ -577,7 +586,8 @@ impl Sim<'_> {
                     setpoint: out.map_or(0, |o| o.setpoint.whole),
                     velocity: out.map_or(0.0, |o| f64::from(o.setpoint.velocity)),
                     enabled: out.is_some_and(|o| o.enabled),
-                    brake_duty: out.map_or(0, |o| o.brake_duty),
+                    coil_duty: out.map_or(0, |o| o.coil_duty),
+                    gpio_out: out.map_or(0, |o| o.gpio),
                     current_a: a.abs().max(b.abs()),
                 };
             }

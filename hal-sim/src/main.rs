@@ -76,6 +76,23 @@ struct Args {
     /// 12 bits), `abs12mt` (multi-turn: turns x 4096 + angle) or `none`.
     #[arg(long, value_name = "KIND", default_value = "inc:1000")]
     encoder: hal_sim::encoder::EncoderKind,
+    /// A switch on the machine (repeatable): `PIN:KIND:AT[:OPTION..]`. PIN `ext1`..`ext3` or
+    /// `gpio1`..`gpio8`; KIND `npn`, `pnp` (open collector, pulls low / high when actuated) or
+    /// `contact` (to ground); AT the rotor position in full steps from power-up where it is
+    /// actuated, at and above it unless `below`; options `to=POS` (actuated only up to POS: a
+    /// cam), `hyst=STEPS` (released that far back,
+    /// default 0.5), `bounce=MS` (the contact chatters that long after a change), `nc` (normally
+    /// closed). E.g. `--switch ext1:npn:-400:below:bounce=3` is a home switch 400 steps back.
+    #[arg(long = "switch", value_name = "SPEC", value_parser = hal_sim::machine::Switch::parse)]
+    switches: Vec<hal_sim::machine::Switch>,
+    /// Hard stops that block the rotor: `LOW:HIGH` in full steps from power-up, either may be
+    /// empty (`-2000:` is one stop 2000 steps back).
+    #[arg(long, value_name = "LOW:HIGH", value_parser = parse_hard_stops)]
+    hard_stop: Option<(Option<f64>, Option<f64>)>,
+    /// A source on the analog input (0-3.3 V full scale): `V`, `V~NOISE` (uniform noise of
+    /// ±NOISE V), `ramp=FROM/TO/S` or `sine=MID/AMP/PERIOD_S`.
+    #[arg(long, value_name = "SPEC", value_parser = hal_sim::machine::Analog::parse)]
+    analog: Option<hal_sim::machine::Analog>,
     /// Record time, commanded and rotor position and velocity, and phase currents as CSV.
     #[arg(long, value_name = "FILE.csv")]
     trace: Option<PathBuf>,
@@ -90,6 +107,15 @@ struct Args {
     /// Render a trace CSV to a PNG plot and exit.
     #[arg(long, num_args = 2, value_names = ["TRACE.csv", "PLOT.png"])]
     plot: Option<Vec<PathBuf>>,
+}
+
+/// `LOW:HIGH` of `--hard-stop`, either side empty for none.
+fn parse_hard_stops(s: &str) -> Result<(Option<f64>, Option<f64>), String> {
+    let (low, high) = s.split_once(':').ok_or("LOW:HIGH")?;
+    let side = |t: &str| -> Result<Option<f64>, String> {
+        if t.trim().is_empty() { Ok(None) } else { t.trim().parse().map(Some).map_err(|e| format!("{t:?}: {e}")) }
+    };
+    Ok((side(low)?, side(high)?))
 }
 
 /// The addresses of `--axes`.
@@ -128,6 +154,8 @@ fn main() -> ExitCode {
         },
         trace: args.trace.map(|path| (path, args.trace_every)),
     };
+    let machine = hal_sim::machine::Machine::new(args.switches, args.analog);
+    let hard_stops = args.hard_stop.unwrap_or_default();
     if let Some(path) = &args.script {
         let opts = SimOptions {
             address: args.address,
@@ -135,6 +163,8 @@ fn main() -> ExitCode {
             motor,
             faults: args.faults,
             encoder: args.encoder,
+            machine,
+            hard_stops,
             ..Default::default()
         };
         return run_script(path, &opts);
@@ -153,6 +183,8 @@ fn main() -> ExitCode {
         axes: args.axes.map(|a| a.0).unwrap_or_default(),
         faults: args.faults,
         encoder: args.encoder,
+        machine,
+        hard_stops,
     };
     let sim = match Simulator::bind(opts) {
         Ok(sim) => sim,

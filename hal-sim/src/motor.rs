@@ -391,6 +391,8 @@ pub struct Motor {
     // Injected faults.
     phase_faults: [PhaseFault; 2],
     blocked: bool,
+    /// Hard stops, full steps: the rotor cannot go below the first or above the second.
+    hard_stops: (Option<f64>, Option<f64>),
     short_decay_h: f64,
 }
 
@@ -438,6 +440,7 @@ impl Motor {
             carry_s: 0.0,
             phase_faults: [PhaseFault::None; 2],
             blocked: false,
+            hard_stops: (None, None),
             short_decay_h: 0.0,
         };
         motor.derive();
@@ -476,6 +479,28 @@ impl Motor {
     /// Whether the rotor is held.
     pub fn blocked(&self) -> bool {
         self.blocked
+    }
+
+    /// Puts hard stops at `low` and `high` full steps from the start (either may be absent): the
+    /// rotor meets them and stays there, at no speed, while the torque pushes it on (an
+    /// inelastic end stop, as a machine's frame).
+    pub fn set_hard_stops(&mut self, low: Option<f64>, high: Option<f64>) {
+        self.hard_stops = (low, high);
+    }
+
+    /// At a hard stop: the rotor back on it, its speed into it gone.
+    fn meet_hard_stops(&mut self) {
+        let position = self.rotor_full_steps();
+        let stop = match self.hard_stops {
+            (Some(low), _) if position < low => low,
+            (_, Some(high)) if position > high => high,
+            _ => return,
+        };
+        let spr = f64::from(self.params.steps_per_rev);
+        let turns = (stop / spr).floor();
+        self.turns = turns as i64;
+        self.angle = ((stop - turns * spr) * TAU / spr).clamp(0.0, TAU * (1.0 - f64::EPSILON));
+        self.omega = 0.0;
     }
 
     /// Whether the bridges drove the phases over the last sub-step.
@@ -632,6 +657,9 @@ impl Motor {
                 self.angle += TAU;
                 self.turns -= 1;
             }
+        }
+        if self.hard_stops != (None, None) {
+            self.meet_hard_stops();
         }
         self.substep += 1;
     }

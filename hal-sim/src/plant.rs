@@ -17,10 +17,12 @@ use std::path::Path;
 use drive_core::control::{Outputs, TICK_MICROS};
 use drive_core::controller::handoff::TickSide;
 use drive_core::faults::Inputs;
+use drive_core::od::{Obj, ObjError};
 use drive_core::{Drive, Instant};
 
 use crate::encoder::{Encoder, EncoderKind};
 use crate::inject::{Change, Injector, Scheduled, Supply};
+use crate::machine::Machine;
 use crate::motor::{BridgeMeans, DriverCommand, Motor, MotorInputs, PhaseFault};
 use crate::thermal::{Thermal, ThermalParams};
 use crate::trace::{CSV_HEADER, Decimator, TraceRow};
@@ -49,6 +51,10 @@ pub struct Plant {
     schedule: Vec<Scheduled>,
     /// Changes sent from another thread.
     injector: Injector,
+    /// Switches and the analog source.
+    machine: Machine,
+    /// What the drive measured at the last tick.
+    last_inputs: Option<Inputs>,
 }
 
 /// Ambient and driver temperature at power-up, °C.
@@ -106,6 +112,8 @@ impl Plant {
             bridge: BridgeMeans::default(),
             schedule: Vec::new(),
             injector: Injector::default(),
+            machine: Machine::default(),
+            last_inputs: None,
         }
     }
 
@@ -130,6 +138,11 @@ impl Plant {
     /// present position.
     pub fn set_encoder(&mut self, kind: EncoderKind) {
         self.encoder = Encoder::new(kind, &self.motor);
+    }
+
+    /// The switches and the analog source around the motor, to add or move them.
+    pub fn machine_mut(&mut self) -> &mut Machine {
+        &mut self.machine
     }
 
     /// The encoder on the shaft.
@@ -176,6 +189,9 @@ impl Plant {
             coil_open: [open(fa), open(fb)],
             phase_mv: Some(self.bridge.volts.map(milli)),
             encoder: self.encoder.reading(&self.motor, self.next_tick.as_micros() / TICK_MICROS),
+            // The pins and the analog input: the machine's, at the tick (`Plant::tick`).
+            levels: 0,
+            analog: None,
         }
     }
 
@@ -226,6 +242,11 @@ impl Plant {
         &mut self.motor
     }
 
+    /// What the drive measured at the last tick (its pins' levels among them).
+    pub fn last_inputs(&self) -> Option<Inputs> {
+        self.last_inputs
+    }
+
     /// The drive's outputs at the last tick.
     pub fn outputs(&self) -> Option<Outputs> {
         self.last
@@ -235,6 +256,21 @@ impl Plant {
     pub fn rotor_microsteps(&self) -> f64 {
         let per_step = self.last.map_or(1, |o| microsteps_per_step(o.microsteps));
         self.motor.rotor_microsteps(per_step)
+    }
+
+    /// Writes `value` to `obj` as a request would: checked, then applied; refused as the drive
+    /// refuses it.
+    pub fn write(&mut self, obj: Obj, value: u32) -> Result<(), ObjError> {
+        let state = self.drive.state_mut();
+        state.check(obj, value)?;
+        state.apply(obj, value);
+        Ok(())
+    }
+
+    /// Runs the control ticks of the next `secs` of simulated time.
+    pub fn run_for(&mut self, secs: f64) {
+        let end = self.next_tick.plus_micros((secs * 1e6) as u64);
+        self.advance_to(end);
     }
 
     /// Runs every control tick up to and including `now`.
@@ -252,7 +288,11 @@ impl Plant {
             {
                 let per_step = microsteps_per_step(out.microsteps);
                 let commanded = out.setpoint.whole as f64 + out.setpoint.fraction.to_num::<f64>();
-                let row = TraceRow::from_motor(&self.motor, commanded, f64::from(out.setpoint.velocity), per_step);
+                let row = TraceRow {
+                    gpio_out: out.gpio,
+                    coil_pct: out.coil_duty,
+                    ..TraceRow::from_motor(&self.motor, commanded, f64::from(out.setpoint.velocity), per_step)
+                };
                 if row.write_csv_line(file).is_err() {
                     self.trace = None;
                 }
@@ -265,7 +305,13 @@ impl Plant {
     /// One control tick at the next tick's time: the drive's, or the tick's own controller's
     /// between two syncs.
     fn tick(&mut self) -> Outputs {
-        let (now, inputs) = (self.next_tick, self.measurements());
+        let (now, mut inputs) = (self.next_tick, self.measurements());
+        // The pins as the switches and the drive's own outputs make them at this tick.
+        let t = now.as_micros() as f64 * 1e-6;
+        let (pins, gpio) = self.last.map_or((Default::default(), 0), |o| (o.pins, o.gpio));
+        inputs.levels = self.machine.levels(t, self.motor.rotor_full_steps(), &pins, gpio);
+        inputs.analog = self.machine.analog_code(t);
+        self.last_inputs = Some(inputs);
         let Some(tick) = &mut self.tick else { return self.drive.tick_with(now, &inputs) };
         if self.drive.has_changes() {
             self.drive.sync_here(tick, now);

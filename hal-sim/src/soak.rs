@@ -1029,7 +1029,7 @@ impl Soak {
         self.save(i)
     }
 
-    /// A supply dip on axis `i` (to 20-22 V and back, the under-voltage threshold is 18 V) or a
+    /// A supply dip on axis `i` (to 20-22 V and back, above the under-voltage threshold) or a
     /// load step within the motor's torque.
     fn disturb(&mut self, i: usize) -> Check {
         let addr = self.addr(i);

@@ -1,8 +1,10 @@
 //! Motion traces: what the drive commanded against what the simulated rotor did, as CSV.
 //!
 //! A row is (t_s, commanded_position_usteps, commanded_velocity_pps, rotor_position_usteps,
-//! rotor_velocity_pps, i_a, i_b): time in seconds, positions in microsteps from the start,
-//! velocities in microsteps per second ("pulses per second"), phase currents in amperes. Rows are
+//! rotor_velocity_pps, i_a, i_b, gpio_out, coil_pct): time in seconds, positions in microsteps
+//! from the start, velocities in microsteps per second ("pulses per second"), phase currents in
+//! amperes, the drive's output pins' levels (1 high, bits as 0x6031) and the coil output's PWM
+//! duty in percent. Rows are
 //! decimated: only every Nth row offered is kept, so a long run at the model's 80 kHz stays small.
 //!
 //! [`Trace`] keeps its rows in memory (for tests and [`crate::plot`]); [`TraceWriter`] streams them
@@ -15,8 +17,7 @@ use std::path::Path;
 use crate::motor::Motor;
 
 /// The CSV header line (without its newline), naming the columns of [`TraceRow`] in order.
-pub const CSV_HEADER: &str =
-    "t_s,commanded_position_usteps,commanded_velocity_pps,rotor_position_usteps,rotor_velocity_pps,i_a,i_b";
+pub const CSV_HEADER: &str = "t_s,commanded_position_usteps,commanded_velocity_pps,rotor_position_usteps,rotor_velocity_pps,i_a,i_b,gpio_out,coil_pct";
 
 /// One sample of a trace.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -35,6 +36,10 @@ pub struct TraceRow {
     pub i_a: f64,
     /// Phase B current, A.
     pub i_b: f64,
+    /// The drive's output pins' levels (1 high, bits as 0x6031).
+    pub gpio_out: u16,
+    /// The coil output's PWM duty, %.
+    pub coil_pct: u8,
 }
 
 impl TraceRow {
@@ -55,6 +60,8 @@ impl TraceRow {
             rotor_velocity_pps: motor.speed_microsteps_per_s(microsteps_per_step),
             i_a,
             i_b,
+            gpio_out: 0,
+            coil_pct: 0,
         }
     }
 
@@ -63,29 +70,31 @@ impl TraceRow {
     pub fn write_csv_line<W: Write>(&self, out: &mut W) -> io::Result<()> {
         writeln!(
             out,
-            "{:.7},{:.4},{:.3},{:.4},{:.3},{:.5},{:.5}",
+            "{:.7},{:.4},{:.3},{:.4},{:.3},{:.5},{:.5},{},{}",
             self.t_s,
             self.commanded_position_usteps,
             self.commanded_velocity_pps,
             self.rotor_position_usteps,
             self.rotor_velocity_pps,
             self.i_a,
-            self.i_b
+            self.i_b,
+            self.gpio_out,
+            self.coil_pct
         )
     }
 
-    /// Parses one CSV line of seven numbers.
+    /// Parses one CSV line of nine numbers.
     pub fn parse_csv_line(line: &str) -> Result<Self, String> {
-        let mut v = [0.0; 7];
+        let mut v = [0.0; 9];
         let mut fields = line.trim().split(',');
         for (k, slot) in v.iter_mut().enumerate() {
             let field = fields.next().ok_or_else(|| format!("only {k} fields in {line:?}"))?;
             *slot = field.trim().parse().map_err(|e| format!("field {} of {line:?}: {e}", k + 1))?;
         }
         if fields.next().is_some() {
-            return Err(format!("more than 7 fields in {line:?}"));
+            return Err(format!("more than 9 fields in {line:?}"));
         }
-        let [t_s, cp, cv, rp, rv, i_a, i_b] = v;
+        let [t_s, cp, cv, rp, rv, i_a, i_b, gpio, coil] = v;
         Ok(Self {
             t_s,
             commanded_position_usteps: cp,
@@ -94,6 +103,8 @@ impl TraceRow {
             rotor_velocity_pps: rv,
             i_a,
             i_b,
+            gpio_out: gpio as u16,
+            coil_pct: coil as u8,
         })
     }
 }
@@ -269,6 +280,8 @@ mod tests {
             rotor_velocity_pps: 99.5,
             i_a: 1.25,
             i_b: -0.5,
+            gpio_out: 0x800,
+            coil_pct: 40,
         }
     }
 

@@ -35,9 +35,7 @@ fn plant_with(feedback: u32, torque_loop: u32, inputs: MotorInputs) -> Plant {
 }
 
 fn set(plant: &mut Plant, obj: Obj, value: u32) {
-    let state = plant.drive_mut().state_mut();
-    assert_eq!(state.check(obj, value), Ok(()), "{obj:?} = {value}");
-    state.apply(obj, value);
+    assert_eq!(plant.write(obj, value), Ok(()), "{obj:?} = {value}");
 }
 
 fn read(plant: &Plant, obj: Obj) -> i32 {
@@ -45,8 +43,7 @@ fn read(plant: &Plant, obj: Obj) -> i32 {
 }
 
 fn run(plant: &mut Plant, secs: f64) {
-    let end = plant.next_tick().plus_micros((secs * 1e6) as u64);
-    plant.advance_to(end);
+    plant.run_for(secs);
 }
 
 /// The rotor in position units: microsteps (1/16) in open loop, encoder counts in closed loop.

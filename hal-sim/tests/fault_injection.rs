@@ -19,14 +19,11 @@ fn plant() -> Plant {
 }
 
 fn set(plant: &mut Plant, obj: Obj, value: u32) {
-    let state = plant.drive_mut().state_mut();
-    assert_eq!(state.check(obj, value), Ok(()), "{obj:?} = {value}");
-    state.apply(obj, value);
+    assert_eq!(plant.write(obj, value), Ok(()), "{obj:?} = {value}");
 }
 
 fn run(plant: &mut Plant, secs: f64) {
-    let end = plant.next_tick().plus_micros((secs * 1e6) as u64);
-    plant.advance_to(end);
+    plant.run_for(secs);
 }
 
 fn read(plant: &Plant, obj: Obj) -> u32 {

@@ -107,6 +107,7 @@ impl Controller {
         s.controller = merge(s.controller, b.controller, m.controller);
         s.notify = merge(s.notify, b.notify, m.notify);
         s.gpio = merge(s.gpio, b.gpio, m.gpio);
+        s.gpio_out = merge(s.gpio_out, b.gpio_out, m.gpio_out);
         s.faults = merge(s.faults, b.faults, m.faults);
         s.comm = merge(s.comm, b.comm, m.comm);
         if m.analog_in != b.analog_in {

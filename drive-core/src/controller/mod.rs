@@ -8,6 +8,7 @@
 //! know (a stop it started, a set-point it joined, power failing) it reports as [`Events`].
 
 pub mod handoff;
+pub mod io;
 mod loops;
 pub(crate) mod run;
 mod supervise;
@@ -22,7 +23,16 @@ use fixed::types::U0F16;
 
 pub use run::{Pvt, STATUS_FIFO_EMPTY, STATUS_FIFO_HIGH, STATUS_FIFO_LOW};
 
-/// Controller status bit 2: a stall was detected (write 1 to clear; moves are refused while set).
+/// Controller status bit 0: external stop 1 (EXT1) stopped the motor.
+pub const STATUS_EXT1: u8 = 1 << 0;
+/// Controller status bit 1: external stop 2 (EXT2) stopped the motor.
+pub const STATUS_EXT2: u8 = 1 << 1;
+/// Controller status bit 4: external stop 3 (EXT3) stopped the motor.
+pub const STATUS_EXT3: u8 = 1 << 4;
+/// The external stops' bits: moves are refused while one is set (§5.6).
+pub const STATUS_EXT: u8 = STATUS_EXT1 | STATUS_EXT2 | STATUS_EXT3;
+/// Controller status bit 2: a stall was detected (write 1 to clear). Moves are refused while it
+/// is set if the stall stopped the motor (0x6043 = 1, or the closed loop's following error).
 pub const STATUS_STALL: u8 = 1 << 2;
 /// Controller status bit 3: the motor is executing a move.
 pub const STATUS_BUSY: u8 = 1 << 3;
@@ -44,9 +54,12 @@ pub struct Outputs {
     /// Whether the power stage is on: enabled (0x6011), no fault latched, not freed by power loss.
     /// Off, the bridges are open and `current_ma` is 0.
     pub enabled: bool,
-    /// The brake's PWM duty in percent: 0x6038 releases it while the power stage is on, 0 applies
-    /// it (see [`crate::faults`]).
-    pub brake_duty: u8,
+    /// The coil output's PWM duty in percent (0x6038; see [`io`] for when it is cut).
+    pub coil_duty: u8,
+    /// The output pins' levels, 1 high (bits as 0x6031; inputs' bits 0).
+    pub gpio: u16,
+    /// How the pins are set up (directions, pulls, drivers).
+    pub pins: io::PinConfig,
     /// Microsteps per full step that positions count in (0x600C; 0 counts full steps).
     pub microsteps: u16,
     /// The share of fast decay in the chopper's off-time (0x6010).
@@ -64,6 +77,8 @@ pub struct Status {
     pub notify: u8,
     /// GPIO levels (0x6031), inverted as the manual has them.
     pub gpio: u16,
+    /// What the master wrote to the output pins' bits of 0x6031 (inverted: 1 low).
+    pub gpio_out: u16,
     /// Analog input code (0x605F).
     pub analog_in: u16,
     /// PVT pointer (0x601A).
@@ -86,7 +101,7 @@ pub struct Settings {
     pub stop_decel: u32,
     /// Phase current, mA (0x600D).
     pub phase_current_ma: u32,
-    /// Standstill current, percent of the phase current (0x6034).
+    /// Standstill current, percent of the phase current (0x2102).
     pub idle_current_pct: u32,
     /// Standstill delay before the current drops, µs (0x6035).
     pub idle_delay_us: u64,
@@ -94,8 +109,22 @@ pub struct Settings {
     pub microsteps: u16,
     /// Fast-decay share (0x6010).
     pub fast_decay: U0F16,
-    /// Brake release duty, percent (0x6038).
+    /// Coil output duty, percent (0x6038).
     pub brake_duty: u8,
+    /// The coil output is a general output (0x2141 = 1), not a brake.
+    pub coil_general: bool,
+    /// External stops enabled (0x6013: bits 0, 1, 4).
+    pub ext_enable: u8,
+    /// External stops on the rising edge (0x6014), else the falling one.
+    pub ext_rising: u8,
+    /// External stop confirmation delay, µs (0x6042).
+    pub ext_delay_us: u64,
+    /// The pins' directions and modes (0x602E, 0x602F, 0x6013..0x6015).
+    pub pins: io::PinConfig,
+    /// Step notification positions (0x6062, 0x6064).
+    pub notify: [i64; 2],
+    /// The step notifications' output pulse (0x2140).
+    pub notify_output: io::NotifyOutput,
     /// Under-voltage level, mV.
     pub under_voltage_mv: u32,
     /// Over-voltage level, mV.
@@ -189,6 +218,8 @@ pub struct Controller {
     pub(crate) run: Option<run::Run>,
     /// The next PVT segment's walk, built a piece a tick before it starts.
     pub(crate) ahead: Option<Ahead>,
+    /// The pins' memory (debouncers, the notifications' last position).
+    pub(crate) io: io::Pins,
     /// Since when the axis has stood still (for the standstill current).
     still_since: Option<Instant>,
     /// What happened since the bus side last took the events.
@@ -214,6 +245,7 @@ impl Controller {
             servo: Servo::new(feedback),
             run: None,
             ahead: None,
+            io: io::Pins::default(),
             still_since: None,
             events: Events::default(),
             heard: false,
@@ -288,8 +320,13 @@ impl Controller {
     pub fn tick(&mut self, now: Instant, inputs: &Inputs, pvt: &mut Pvt, table: &Table) -> Outputs {
         self.sense(inputs);
         self.supervise(now, inputs);
+        self.pins(now, inputs.levels);
+        if let Some(code) = inputs.analog {
+            self.status.analog_in = code;
+        }
         self.pvt_tick(now, pvt, table);
         let (setpoint, moved) = self.axis.tick(now);
+        self.notify(setpoint.whole);
         if self.axis.take_joined() {
             self.events.set(Events::JOINED);
         }
@@ -313,7 +350,9 @@ impl Controller {
             steps,
             current_ma: if enabled { current as u16 } else { 0 },
             enabled,
-            brake_duty: self.brake_duty(),
+            coil_duty: self.coil_duty(),
+            gpio: self.output_levels(),
+            pins: self.settings.pins,
             microsteps: self.settings.microsteps,
             fast_decay: self.settings.fast_decay,
         }

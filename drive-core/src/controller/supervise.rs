@@ -138,12 +138,6 @@ impl Controller {
         self.faults.power_failing = failing;
     }
 
-    /// The brake's release duty (0x6038) while the power stage is on and power loss does not
-    /// apply it; else 0, applied.
-    pub(crate) fn brake_duty(&self) -> u8 {
-        if self.power_stage_on() && !self.faults.braked { self.settings.brake_duty } else { 0 }
-    }
-
     /// History entry `k` (0 newest) of the fault history.
     pub(crate) fn history(&self, k: usize) -> u32 {
         self.faults.entry(k)

@@ -492,6 +492,7 @@ mod tests {
             controller: 5,
             notify: 1,
             gpio: 0x1234,
+            gpio_out: 0,
             analog_in: 777,
             pvt_pointer: 9,
             encoder: -5,

@@ -330,6 +330,13 @@ impl Mixed {
         Self { q: (a << 32) + c, r: e }
     }
 
+    /// `x·2^32 / den` from `x = a·den + b` (`(a, b)`): the remainder's fraction the second of
+    /// [`Mixed::scaled`]'s two divisions.
+    fn from_whole((a, b): (i128, i128), den: i128) -> Self {
+        let (c, e) = div_floor(b << 32, den);
+        Self { q: (a << 32) + c, r: e }
+    }
+
     /// Adds `o`, both over `den`.
     fn add(&mut self, o: Mixed, den: i128) {
         self.q += o.q;
@@ -413,14 +420,32 @@ impl Walk {
     /// Computes the `i`-th forward difference (1-3) at the start of `c` (one 128-bit division):
     /// with `num(k) = A·k³ + B·k² + C·k`, they are `A + B + C`, `6A + 2B` and `6A`.
     fn scale_difference(&mut self, c: &Cubic, i: u8) {
+        let whole = self.difference_whole(c, i);
+        self.difference_rest(i, whole);
+    }
+
+    /// The first half of [`Walk::scale_difference`]: the `i`-th difference's numerator divided
+    /// by the denominator, quotient and remainder.
+    fn difference_whole(&self, c: &Cubic, i: u8) -> (i128, i128) {
         if c.n == 0 {
-            return;
+            return (0, 0);
         }
         let [a, b, cc] = c.coefficients();
+        let x = match i {
+            1 => a + b + cc,
+            2 => 6 * a + 2 * b,
+            _ => 6 * a,
+        };
+        div_floor(x, self.den)
+    }
+
+    /// The second half: the remainder's 32 bits of fraction, and the difference set.
+    fn difference_rest(&mut self, i: u8, whole: (i128, i128)) {
+        let d = Mixed::from_whole(whole, self.den);
         match i {
-            1 => self.d1 = Mixed::scaled(a + b + cc, self.den),
-            2 => self.d2 = Mixed::scaled(6 * a + 2 * b, self.den),
-            _ => self.d3 = Mixed::scaled(6 * a, self.den),
+            1 => self.d1 = d,
+            2 => self.d2 = d,
+            _ => self.d3 = d,
         }
     }
 
@@ -446,14 +471,15 @@ impl Walk {
 }
 
 /// The walk and rates of a segment that has not started yet, built a piece at a time
-/// ([`Ahead::advance`], about a thousand Cortex-M4 instructions each) in the control ticks before
-/// it starts: all at once they cost a tick three times what following a segment does.
+/// ([`Ahead::advance`]: the rates, then one 128-bit division, up to about 1 500 Cortex-M4
+/// instructions each) in the control ticks before it starts: all at once they cost a tick
+/// several times what following a segment does.
 ///
 /// ```
 /// use drive_core::motion::cubic::{Ahead, Cubic, Point, Walk};
 /// let c = Cubic::new(7, 300, Point { position: 1234, velocity: -700, time_ms: 37 });
 /// let mut ahead = Ahead::new(c);
-/// assert!(!ahead.advance()); // the rates; three differences to go
+/// assert!(!ahead.advance()); // the rates; three differences (two divisions each) to go
 /// assert_eq!(ahead.finish(), (Walk::new(&c, 0), c.rates()));
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -462,25 +488,36 @@ pub struct Ahead {
     pub cubic: Cubic,
     walk: Walk,
     rates: Rates,
-    /// Pieces built: the rates, then the walk's third, second and first differences.
+    /// The difference being scaled: its quotient and remainder by the denominator.
+    whole: (i128, i128),
+    /// Pieces built: the rates, then the walk's third, second and first differences, each in
+    /// two divisions.
     built: u8,
 }
 
 impl Ahead {
-    /// The pieces: the rates and three differences.
-    const PIECES: u8 = 4;
+    /// The pieces: the rates and two divisions for each of three differences.
+    const PIECES: u8 = 7;
 
     /// Nothing built yet.
     pub fn new(cubic: Cubic) -> Self {
         let blank = Rates { n: 0, per_tick: 0.0, v0: 0.0, v1: 0.0, b: 0.0, a: 0.0, acc0: 0.0, acc1: 0.0 };
-        Self { cubic, walk: Walk::blank(&cubic), rates: blank, built: 0 }
+        Self { cubic, walk: Walk::blank(&cubic), rates: blank, whole: (0, 0), built: 0 }
     }
 
     /// Builds one more piece; whether all are built.
     pub fn advance(&mut self) -> bool {
         match self.built {
             0 => self.rates = self.cubic.rates(),
-            i @ 1..=3 => self.walk.scale_difference(&self.cubic, 4 - i),
+            // Differences 3, 2, 1: the quotient by the denominator, then the fraction.
+            i @ 1..=6 => {
+                let which = 3 - (i - 1) / 2;
+                if i % 2 == 1 {
+                    self.whole = self.walk.difference_whole(&self.cubic, which);
+                } else {
+                    self.walk.difference_rest(which, self.whole);
+                }
+            }
             _ => return true,
         }
         self.built += 1;

@@ -127,9 +127,10 @@ objects! {
     Feedback @ 0x2104: U8, Rw, Rom, Span(0, 2), default 0, None, "feedback";
     /// Following error (our object): setpoint − measured position, closed loop; 0 in open loop.
     FollowingError @ 0x2105: S32, Ro, Live, S32_ANY, default 0, Counts, "following error";
-    /// Sensorless stall detection in open loop (our object): 1 on. Off until commissioned: it
-    /// needs the motor's resistance and inductance (0x2108, 0x2109) and the threshold 0x6039.
-    StallDetect @ 0x2107: U8, Rw, Rom, Span(0, 1), default 0, None, "stall detection";
+    /// Sensorless stall detection in open loop (our object): 1 on, as §5.5.20-21 have it (the
+    /// detection always runs; 0x6043 says whether a stall stops the motor); 0 turns it off for a
+    /// motor whose resistance and inductance (0x2108, 0x2109) are not known.
+    StallDetect @ 0x2107: U8, Rw, Rom, Span(0, 1), default 1, None, "stall detection";
     /// Motor winding resistance (our object), for the back-EMF estimate of the stall detection.
     MotorResistance @ 0x2108: U16, Rw, Rom, Span(10, 60_000), default 1400, MilliOhms, "motor resistance";
     /// Motor winding inductance (our object), for the back-EMF estimate of the stall detection.
@@ -159,9 +160,10 @@ objects! {
     /// held low at power-up (factory values restored and saved), 3 save in progress, 4 last save
     /// failed (the flash keeps the set saved before it).
     StorageStatus @ 0x2120: U8, W1c, Live, Bits(0x1F), default 0, None, "storage status";
-    /// Under-voltage threshold (our object): a supply below it latches 0x6000 bit 5, alarm 13
-    /// (seed 002 alarms under 18 V).
-    UnderVoltage @ 0x2130: U16, Rw, Rom, Any, default 18_000, MilliVolts, "under-voltage threshold";
+    /// Under-voltage threshold (our object): a supply below it latches 0x6000 bit 5, alarm 13.
+    /// 10 V by default: seed 000 rates the drive for 12-48 V DC, and a 12 V supply sags under
+    /// load; raise it for a higher supply.
+    UnderVoltage @ 0x2130: U16, Rw, Rom, Any, default 10_000, MilliVolts, "under-voltage threshold";
     /// Over-voltage threshold (our object): a supply above it latches 0x2135 bit 0, alarm 14
     /// (seed 002 alarms above 60 V).
     OverVoltage @ 0x2131: U16, Rw, Rom, Any, default 60_000, MilliVolts, "over-voltage threshold";
@@ -222,6 +224,15 @@ objects! {
     /// Fault history entry 9 (our object; 0 newest): bits 31-24 the alarm code, bits 23-0 when it
     /// was raised, in 100 ms since power-up (wraps after 19.4 days). 0: no entry.
     FaultHistory9 @ 0x214E: U32, Ro, Live, Any, default 0, None, "fault history 9";
+    /// Step notification output (our object): bits 0-3 a GPIO (1-7 GPIO1-7, 8 GPIO8; 0 none)
+    /// that goes high for bits 8-15 ms when a bit of 0x6061 sets. The pin must be an output
+    /// (0x602E); its level in 0x6031 is the master's outside the pulse.
+    NotifyOutput @ 0x2150: U16, Rw, Rom, Bits(0xFF0F), default 0, None, "step notify output";
+    /// Coil output function (our object): 0 brake, 1 general output. As a brake (§5.14) 0x6038 is
+    /// the release duty while the power stage is on, and 0 (applied) when it is off, on a fault,
+    /// or in power loss below 0x6084. As a general output (§3.10: valve, magnet, DC load) 0x6038
+    /// is the duty whatever the motor does, cut to 0 while a fault is latched.
+    CoilMode @ 0x2151: U8, Rw, Rom, Span(0, 1), default 0, None, "coil output function";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake
@@ -236,8 +247,9 @@ objects! {
     /// Maximum (run) speed. In velocity mode its sign is the direction.
     MaxSpeed @ 0x6003: S32, Rw, Ram, Span(-200_000, 200_000), default 0, Pps, "maximum speed";
     /// Relative move: completing the value (low word) starts a move of that many steps in the
-    /// direction of 0x6002.
-    RelativeMove @ 0x6005: U32, Cmd, Ram, Any, default 0, Steps, "relative move";
+    /// direction of 0x6002; a negative count moves the opposite way. Signed as appendix 1 types
+    /// it (INT32; chapter 5 prints U32): a master that writes -3200 means 3200 steps back.
+    RelativeMove @ 0x6005: S32, Cmd, Ram, S32_ANY, default 0, Steps, "relative move";
     /// Work mode: 0 position, 1 velocity, 2 PVT, 4 profile position (PP), 5 profile velocity (PV).
     /// 3 (encoder follower) needs a special firmware and is refused.
     Mode @ 0x6007: U8, Rw, Ram, Set(MODES), default 0, None, "work mode";
@@ -262,11 +274,18 @@ objects! {
     CurrentDecay @ 0x6010: U8, Rw, Rom, Span(0, 3), default 2, None, "current decay";
     /// Motor enable: 0 frees the motor (current off) and ignores moves until 1.
     Enable @ 0x6011: U8, Rw, Ram, Span(0, 1), default 1, None, "motor enable";
-    /// External emergency stop enable: bit 0 EXT1, bit 1 EXT2, bit 4 EXT3.
+    /// External stop enable (§5.6): bit 0 EXT1, bit 1 EXT2, bit 4 EXT3. An enabled input's
+    /// edge (0x6014), confirmed after 0x6042, stops the motor in that control tick with the
+    /// moves' deceleration (0x600B's level; 0x6069 in PP/PV), sets its bit of 0x6001 (0, 1, 4),
+    /// and moves are refused (04) until the master clears it.
     ExtStopEnable @ 0x6013: U8, Rw, Rom, Bits(0x13), default 0, None, "external stop enable";
     /// External stop trigger edge, per bit as 0x6013: 0 falling, 1 rising.
     ExtStopTrigger @ 0x6014: U8, Rw, Rom, Bits(0x13), default 0, None, "external stop trigger";
-    /// Sensor type: 0 NPN (pull-down on rising, pull-up on falling), 1 PNP (the opposite).
+    /// Sensor type, as §5.6.3 has it: 0 pulls an enabled EXT input against its edge (falling:
+    /// up, rising: down), so that the sensor's actuation drives the pin against the pull: an NPN
+    /// output or a contact to ground on the falling edge, a PNP output on the rising edge. 1 pulls
+    /// with the edge (rising: up, falling: down): the edge is then a sensor letting go. It sets
+    /// the pulls of enabled EXT inputs in place of their 0x602F fields.
     SensorType @ 0x6015: U8, Rw, Rom, Span(0, 1), default 0, None, "sensor type";
     /// PVT operation (chapter 5 prints 0x6016): 0 stop (decelerate to rest), 1 start (at the
     /// control tick a board's planning margin after the frame), 2 push the point 0x6027..2C into the queue (refused, 04, when full or when
@@ -320,17 +339,16 @@ objects! {
     GpioConfig @ 0x602F: U32, Rw, Rom, Bits(0x00FF_FFFF), default 0, None, "GPIO configuration";
     /// GPIO levels, inverted as the manual says (0 high, 1 low); writes affect outputs only.
     GpioValue @ 0x6031: U16, Rw, Live, Bits(0x0FFF), default 0, None, "GPIO value";
-    /// OCD1 (appendix only, meaning not documented): kept and returned.
-    Ocd1 @ 0x6034: U8, Rw, Rom, Any, default 0, None, "OCD1";
-    /// Brake output PWM duty: the release duty of a spring-applied brake. Output while the power
-    /// stage is on (released); 0 (applied) when disabled, on a fault, or in power loss below
-    /// 0x6084. 0: no brake fitted, the output stays 0.
+    /// Coil output PWM duty (Coil+/Coil-, at the supply voltage, up to 800 mA): a brake's release
+    /// duty or a general output's, as 0x2151 chooses; a duty under 100 keeps a held coil cooler.
+    /// 0: off.
     Brake @ 0x6038: U8, Rw, Ram, Span(0, 100), default 0, Percent, "brake control";
     /// Open-loop stall detection: bits 0-6 the threshold, signed (typically -10..10): the load
     /// angle limit is 110° − 4° × threshold, so a larger threshold detects sooner (see
     /// `drive_core::servo`); bits 7-15 reserved. Detection itself is switched by 0x2107.
     StallParams @ 0x6039: U16, Rw, Rom, Bits(0x7F), default 0, None, "stall parameters";
-    /// EXT1/2/3 debounce: the input is checked again this long after an edge.
+    /// EXT1/2/3 stabilisation delay: an edge counts only if the input still has the edge's
+    /// level this long after it (bounces in between are ignored); 0 acts on the edge.
     ExtDebounce @ 0x6042: U16, Rw, Rom, Span(0, 200), default 100, Millis, "EXT debounce";
     /// Stop on stall (open loop): 1 stops the motor when a stall is detected.
     StallStop @ 0x6043: U8, Rw, Rom, Span(0, 1), default 0, None, "stop on stall";
@@ -357,8 +375,10 @@ objects! {
     /// Closed loop: prefilter: the servo loop low-passes the error's rate over this many control
     /// ticks (the manual: larger at high speed, no larger than the microstep resolution).
     PreFilter @ 0x605A: U8, Rw, Rom, Span(1, 128), default 32, None, "prefilter";
-    /// Closed loop: postfilter (reserved by the manual).
-    PostFilter @ 0x605B: U16, Rw, Rom, Span(1, 255), default 16, None, "postfilter";
+    /// Closed loop: postfilter. §5.8.6 reserves it ("暂时保留") and gives it no meaning: only its
+    /// default 16 is accepted (a master that writes the manual's values goes through), any other
+    /// value is refused (03) rather than stored to do nothing.
+    PostFilter @ 0x605B: U16, Rw, Rom, Span(16, 16), default 16, None, "postfilter";
     /// Closed loop: following error, in microsteps of 0x600C, that counts as a stall and latches
     /// the position error (0x2135 bit 2, alarm 25) (chapter 5 prints 0x6028).
     StallLength @ 0x605C: U16, Rw, Rom, Span(1, 255), default 64, Steps, "stall length";

@@ -21,7 +21,8 @@
 
 use super::DriveState;
 use crate::controller::handoff::{Lent, Orders, TickSide};
-use crate::controller::{DECAY, Events, STATUS_BUSY, Settings};
+use crate::controller::io::{NotifyOutput, PinConfig};
+use crate::controller::{DECAY, Events, STATUS_EXT, STATUS_STALL, Settings};
 use crate::faults::Inputs;
 use crate::modes::{PowerState, WorkMode};
 use crate::motion::axis::Axis;
@@ -114,6 +115,16 @@ pub(crate) const fn runs_on(obj: Obj) -> bool {
             | Obj::MotorInductance
             | Obj::StallMinSpeed
             | Obj::StallParams
+            | Obj::CoilMode
+            | Obj::ExtStopEnable
+            | Obj::ExtStopTrigger
+            | Obj::SensorType
+            | Obj::ExtDebounce
+            | Obj::GpioDirection
+            | Obj::GpioConfig
+            | Obj::NotifyPos1
+            | Obj::NotifyPos2
+            | Obj::NotifyOutput
     )
 }
 
@@ -132,6 +143,19 @@ pub(crate) fn settings_of(params: &[u32; Obj::COUNT]) -> Settings {
         microsteps: get(Obj::Microsteps) as u16,
         fast_decay: DECAY.get(get(Obj::CurrentDecay) as usize).copied().unwrap_or(U0F16::ZERO),
         brake_duty: get(Obj::Brake) as u8,
+        coil_general: get(Obj::CoilMode) == 1,
+        ext_enable: get(Obj::ExtStopEnable) as u8,
+        ext_rising: get(Obj::ExtStopTrigger) as u8,
+        ext_delay_us: u64::from(get(Obj::ExtDebounce)) * 1000,
+        pins: PinConfig::new(
+            get(Obj::GpioDirection) as u16,
+            get(Obj::GpioConfig),
+            get(Obj::ExtStopEnable) as u8,
+            get(Obj::ExtStopTrigger) as u8,
+            get(Obj::SensorType) == 1,
+        ),
+        notify: [i64::from(get(Obj::NotifyPos1) as i32), i64::from(get(Obj::NotifyPos2) as i32)],
+        notify_output: NotifyOutput::from_object(get(Obj::NotifyOutput)),
         under_voltage_mv: get(Obj::UnderVoltage),
         over_voltage_mv: get(Obj::OverVoltage),
         over_temperature_c: get(Obj::OverTemperature),
@@ -184,7 +208,9 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// and the power stage on (enabled, not freed by power loss).
     pub(crate) fn may_move(&self) -> Result<(), ObjError> {
         let s = &self.ctl.status;
-        refuse(s.controller & !STATUS_BUSY == 0 && s.comm == 0, ObjError::Faulted)?;
+        // An external stop latched, or a stall that stopped the motor: the master clears it first.
+        let stall = if self.ctl.settings.stall_stop { STATUS_STALL } else { 0 };
+        refuse(s.controller & (STATUS_EXT | stall) == 0 && s.comm == 0, ObjError::Faulted)?;
         match self.ctl.power_state() {
             PowerState::On => Ok(()),
             PowerState::Faulted => Err(ObjError::Faulted),
@@ -538,9 +564,9 @@ impl Planner<'_> {
                 } else if busy {
                     return Ok(false);
                 } else if self.param(Obj::Direction) == 0 {
-                    position.saturating_add(i64::from(value))
+                    position.saturating_add(i64::from(value as i32))
                 } else {
-                    position.saturating_sub(i64::from(value))
+                    position.saturating_sub(i64::from(value as i32))
                 };
                 go_to(axis, target, speed)?;
             }

@@ -7,7 +7,7 @@ pub mod pvt;
 
 use crate::controller::handoff::{Base, Orders};
 use crate::controller::{Controller, Pvt};
-use crate::faults::FaultLog;
+use crate::faults::{FAULT_POSITION, FaultLog};
 use crate::faults::{FaultHistory, HISTORY_OBJECTS};
 use crate::ident::Identity;
 use crate::motion::cubic::Table;
@@ -584,15 +584,28 @@ impl<P: Borrow<Table>> DriveState<P> {
         let s = &mut self.ctl.status;
         match obj {
             Obj::ErrorStatus => s.error &= !(value as u8),
-            Obj::ControllerStatus => s.controller &= !(value as u8 & !STATUS_BUSY),
+            Obj::ControllerStatus => {
+                s.controller &= !(value as u8 & !STATUS_BUSY);
+                // A closed-loop stall latches the position error too (0x2135 bit 2): clearing
+                // the stall as §5.5.2 says clears both, and the other way round.
+                if value as u8 & STATUS_STALL != 0 {
+                    s.faults &= !FAULT_POSITION;
+                }
+            }
             Obj::NotifyStatus => s.notify &= !(value as u8),
             Obj::StorageStatus => self.storage &= !(value as u8 & !STORAGE_SAVING),
-            Obj::DriveFaults => s.faults &= !(value as u8),
+            Obj::DriveFaults => {
+                s.faults &= !(value as u8);
+                if value as u8 & FAULT_POSITION != 0 {
+                    s.controller &= !STATUS_STALL;
+                }
+            }
             Obj::CommStatus => s.comm &= !(value as u8),
             Obj::PvtFault => self.pvt.fault &= !(value as u8),
             Obj::GpioValue => {
-                // Only outputs take the written level.
-                let outputs = self.params.get(Obj::GpioDirection as usize).copied().unwrap_or(0) as u16;
+                // Only outputs take the written level (§5.7.2).
+                let outputs = self.ctl.settings.pins.outputs;
+                s.gpio_out = (s.gpio_out & !outputs) | (value as u16 & outputs);
                 s.gpio = (s.gpio & !outputs) | (value as u16 & outputs);
             }
             Obj::Position => {

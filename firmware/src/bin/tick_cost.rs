@@ -61,6 +61,8 @@ const MEASURED: Inputs = Inputs {
     coil_open: [false; 2],
     phase_mv: None,
     encoder: None,
+    levels: 0,
+    analog: None,
 };
 
 /// The cases, in the order printed.

@@ -13,7 +13,9 @@
 //! | bus voltage     | PB12        | ADC1_IN11                   | 100 kΩ / 4.7 kΩ divider from the supply    |
 //! | analog in       | PB14        | ADC1_IN5                    | 0..3.3 V, 0x605F                           |
 //! | temperature     | (internal)  | ADC1 temperature sensor     | the die's, for the power stage's           |
-//! | EXT1 / 2 / 3    | PA4 / 5 / 6 | GPIO in, pull-up, EXTI4/5/6 | 0x6031 bits 7-9                            |
+//! | EXT1 / 2 / 3    | PA4 / 5 / 6 | GPIO in, pulls as 0x6015    | 0x6031 bits 7-9, sampled every tick        |
+//! | GPIO8           | PB7         | GPIO in or out (0x602E/2F)  | 0x6031 bit 11; GPIO1-7 are not brought out |
+//! | Coil+ / Coil-   | PA7         | TIM17_CH1 (AF1), 20 kHz PWM | gate of the coil's low-side switch, 0x6038 |
 //! | FSET            | PC13        | GPIO in, pull-up, EXTI13    | factory-settings button to ground          |
 //! | SWDIO / SWCLK   | PA13 / PA14 | debug                       | left alone for the probe (RTT logs)        |
 //!
@@ -26,7 +28,8 @@
 //!
 //! Timers: TIM3 is embassy-time's free-running 1 MHz clock (the time stamps of received bytes
 //! and the t3.5 timer); TIM6 is the 20 kHz control tick (interrupt priority 0, above all
-//! others); TIM1 emits step pulses; TIM4 the current reference; TIM2 counts the encoder.
+//! others); TIM1 emits step pulses; TIM4 the current reference; TIM2 counts the encoder; TIM17
+//! the coil output's PWM.
 
 use core::cell::{Cell, RefCell};
 use core::ops::Range;
@@ -35,6 +38,7 @@ use cortex_m::singleton;
 use critical_section::Mutex;
 use drive_core::Baud;
 use drive_core::control::TICK_HZ;
+use drive_core::controller::io::{PinConfig, PinMode};
 use drive_core::faults::Inputs as Measured;
 use drive_core::store::Store;
 use embassy_embedded_hal::adapter::BlockingAsync;
@@ -56,8 +60,6 @@ use crate::power::PowerStage;
 
 bind_interrupts!(struct Irqs {
     USART1 => usart::BufferedInterruptHandler<peripherals::USART1>;
-    EXTI4 => exti::InterruptHandler<interrupt::typelevel::EXTI4>;
-    EXTI9_5 => exti::InterruptHandler<interrupt::typelevel::EXTI9_5>;
     EXTI15_10 => exti::InterruptHandler<interrupt::typelevel::EXTI15_10>;
     TIM6_DAC => TickHandler;
 });
@@ -119,8 +121,6 @@ pub struct Board {
 
 /// The digital inputs, with edge interrupts.
 pub struct Inputs {
-    /// EXT1..EXT3 (limit/home switches and general inputs).
-    pub ext: [ExtiInput<'static, Async>; 3],
     /// The factory-settings button.
     pub fset: ExtiInput<'static, Async>,
 }
@@ -160,13 +160,14 @@ impl Sense {
     }
 
     /// Hands the bus voltage and temperature readings to the control tick, which checks them
-    /// (under- and over-voltage, power loss, over-temperature).
-    pub fn publish(supply_code: u16, temperature_code: u16) {
+    /// (under- and over-voltage, power loss, over-temperature), and the analog input's code.
+    pub fn publish(supply_code: u16, temperature_code: u16, analog_code: u16) {
         let supply = supply_mv(supply_code);
         let temperature = temperature_c(temperature_code);
         critical_section::with(|cs| {
             let m = MEASURED.borrow(cs);
-            m.set(Measured { supply_mv: Some(supply), temperature_c: temperature, ..m.get() });
+            let analog = Some(analog_code);
+            m.set(Measured { supply_mv: Some(supply), temperature_c: temperature, analog, ..m.get() });
         });
     }
 }
@@ -205,6 +206,8 @@ static MEASURED: Mutex<Cell<Measured>> = Mutex::new(Cell::new(Measured {
     coil_open: [false; 2],
     phase_mv: None,
     encoder: None,
+    levels: 0,
+    analog: None,
 }));
 
 /// The encoder's 16-bit quadrature counter, owned by the control tick, with the count extended to
@@ -227,7 +230,11 @@ fn measure(cs: critical_section::CriticalSection<'_>) -> Measured {
         e.last = raw;
         e.count
     });
-    Measured { encoder, ..MEASURED.borrow(cs).get() }
+    // EXT1-3 on PA4-6, sampled every tick: the drive confirms an edge by reading the level again
+    // after 0x6042, so a tick's sample is what it needs.
+    let idr = pac::GPIOA.idr().read().0;
+    let levels = ((idr >> 4) & 0b111) as u16 * drive_core::controller::io::PIN_EXT1;
+    Measured { encoder, levels, ..MEASURED.borrow(cs).get() }
 }
 
 /// STEP (TIM1 pulses), DIR and ENABLE to an external step/direction driver, and its current
@@ -237,6 +244,8 @@ pub struct StepDir {
     enable: Output<'static>,
     /// Steps asked for and not yet started (signed).
     pending: i64,
+    /// The pins as last set up, and the outputs' levels (set again only when they change).
+    pins: Option<(PinConfig, u16)>,
 }
 
 impl StepDir {
@@ -274,7 +283,46 @@ impl PowerStage for StepDir {
         pac::TIM4.ccr(0).write(|w| w.set_ccr(duty));
         self.enable.set_level(if milliamps == 0 { Level::High } else { Level::Low });
     }
+
+    fn set_pins(&mut self, pins: &PinConfig, levels: u16) {
+        if self.pins == Some((*pins, levels)) {
+            return;
+        }
+        self.pins = Some((*pins, levels));
+        use pac::gpio::vals::{Moder, Ot, Pupdr};
+        let pull = |k: u32| match pins.mode(k) {
+            PinMode::PullUp => Pupdr::PULL_UP,
+            PinMode::PullDown => Pupdr::PULL_DOWN,
+            _ => Pupdr::FLOATING,
+        };
+        // EXT1-3 (0x6031 bits 7-9) on PA4-6: inputs, their pulls.
+        for (k, pin) in [(7, 4), (8, 5), (9, 6)] {
+            pac::GPIOA.pupdr().modify(|w| w.set_pupdr(pin, pull(k)));
+        }
+        // GPIO8 (bit 11) on PB7.
+        let g = pac::GPIOB;
+        if pins.outputs & GPIO8 != 0 {
+            let ot = if pins.mode(11) == PinMode::PushPull { Ot::PUSH_PULL } else { Ot::OPEN_DRAIN };
+            g.otyper().modify(|w| w.set_ot(7, ot));
+            g.bsrr().write(|w| if levels & GPIO8 != 0 { w.set_bs(7, true) } else { w.set_br(7, true) });
+            g.moder().modify(|w| w.set_moder(7, Moder::OUTPUT));
+        } else {
+            g.pupdr().modify(|w| w.set_pupdr(7, pull(11)));
+            g.moder().modify(|w| w.set_moder(7, Moder::INPUT));
+        }
+    }
+
+    fn set_coil(&mut self, duty: u8) {
+        let ccr = u32::from(duty.min(100)) * COIL_PWM_PERIOD / 100;
+        pac::TIM17.ccr(0).write(|w| w.set_ccr(ccr as u16));
+    }
 }
+
+/// GPIO8's bit in 0x6031.
+const GPIO8: u16 = 1 << 11;
+
+/// Timer counts in a period of the coil output's PWM: 20 kHz at 170 MHz.
+const COIL_PWM_PERIOD: u32 = 8500;
 
 /// Cuts the power stage with raw register writes, whatever state the drivers are in: ENABLE
 /// high (off), pulse timer stopped, current reference 0. For the panic and fault handlers.
@@ -282,6 +330,8 @@ pub fn power_off() {
     pac::GPIOB.bsrr().write(|w| w.set_bs(2, true));
     pac::TIM1.cr1().modify(|w| w.set_cen(false));
     pac::TIM4.ccr(0).write(|w| w.set_ccr(0));
+    // The coil off too: a brake applies, a valve or magnet drops.
+    pac::TIM17.ccr(0).write(|w| w.set_ccr(0));
 }
 
 /// The power stage the tick interrupt drives, handed over by [`start_tick`].
@@ -381,28 +431,23 @@ pub fn init() -> Board {
         defmt::unwrap!(BufferedUart::new_with_de(p.USART1, p.PA10, p.PA9, p.PA12, Irqs, tx_buf, rx_buf, uart_config));
     // Below the control tick: a burst of bytes delays the tick by one short handler at most.
     interrupt::USART1.set_priority(Priority::P2);
-    for irq in [interrupt::EXTI4, interrupt::EXTI9_5, interrupt::EXTI15_10] {
-        irq.set_priority(Priority::P3);
-    }
+    interrupt::EXTI15_10.set_priority(Priority::P3);
 
     // Held by the stage, not dropped: a dropped pin returns to analog and the driver's inputs float.
     let stage = StepDir {
         dir: Output::new(p.PB1, Level::Low, Speed::Low),
         enable: Output::new(p.PB2, Level::High, Speed::Low), // motor off until told otherwise
         pending: 0,
+        pins: None,
     };
-    let _ = (p.TIM1, p.TIM4, p.PB0, p.PB6); // owned by the raw timer setup below
+    let _ = (p.TIM1, p.TIM4, p.TIM17, p.PB0, p.PB6, p.PA7); // owned by the raw timer setup below
     setup_step_timer();
     setup_current_pwm();
+    setup_coil_pwm();
+    // EXT1-3 and GPIO8: inputs at reset, set up by the control tick's outputs (`set_pins`).
+    let _ = (p.PA4, p.PA5, p.PA6, p.PB7);
 
-    let inputs = Inputs {
-        ext: [
-            ExtiInput::new(p.PA4, p.EXTI4, Pull::Up, Irqs),
-            ExtiInput::new(p.PA5, p.EXTI5, Pull::Up, Irqs),
-            ExtiInput::new(p.PA6, p.EXTI6, Pull::Up, Irqs),
-        ],
-        fset: ExtiInput::new(p.PC13, p.EXTI13, Pull::Up, Irqs),
-    };
+    let inputs = Inputs { fset: ExtiInput::new(p.PC13, p.EXTI13, Pull::Up, Irqs) };
     let adc = Adc::new(p.ADC1, AdcConfig::default());
     let temperature = adc.enable_temperature();
     let encoder = Qei::new(p.TIM2, p.PA0, p.PA1, QeiConfig::default());
@@ -458,6 +503,26 @@ fn setup_step_timer() {
     t.ccer().modify(|w| w.set_ccne(1, true));
     t.bdtr().modify(|w| w.set_moe(true));
     gpiob_af(0, 6);
+}
+
+/// TIM17 channel 1 on PA7: the coil output's 20 kHz PWM, duty 0 until the drive asks for it.
+fn setup_coil_pwm() {
+    pac::RCC.apb2enr().modify(|w| w.set_tim17en(true));
+    let t = pac::TIM17;
+    t.psc().write_value(0);
+    t.arr().write(|w| w.set_arr((COIL_PWM_PERIOD - 1) as u16));
+    t.ccr(0).write(|w| w.set_ccr(0));
+    t.ccmr_output(0).modify(|w| {
+        w.set_ocm(0, pac::timer::vals::Ocm::PWM_MODE1);
+        w.set_ocpe(0, true);
+    });
+    t.ccer().modify(|w| w.set_cce(0, true));
+    t.bdtr().modify(|w| w.set_moe(true));
+    t.egr().write(|w| w.set_ug(true));
+    t.cr1().modify(|w| w.set_cen(true));
+    let g = pac::GPIOA;
+    g.afr(0).modify(|w| w.set_afr(7, 1));
+    g.moder().modify(|w| w.set_moder(7, pac::gpio::vals::Moder::ALTERNATE));
 }
 
 /// TIM4 channel 1 on PB6: 100 kHz PWM, duty 0 until the drive asks for current.

@@ -1,0 +1,266 @@
+//! The drive's pins at each tick: the external stops (§5.6), the GPIO levels (§5.7), the step
+//! notifications (§5.16) and the coil output (§3.10, §5.14).
+//!
+//! Pins are numbered as 0x6031's bits: GPIO1-7 in bits 0-6, EXT1 7, EXT2 8, EXT3/ENC1 9, ENC2
+//! 10, GPIO8 11. [`Inputs::levels`](crate::faults::Inputs::levels) has a pin's level in its bit
+//! (1 high); 0x6031 shows it inverted, as the manual has it (1 low).
+//!
+//! An external stop is a stop ramp at the deceleration of the moves (0x600B's level, 0x6069 in
+//! the profile modes), started in the tick that confirms the edge. A stepper stopped dead from
+//! speed overshoots by up to a pole pitch and may lose steps, which would leave the position a
+//! zero search sets wrong by that much; a ramp the moves already use is one the motor follows.
+//! A master that needs a shorter stop sets a harder deceleration (level 0 of 0x600B stops at
+//! once).
+
+use super::{Controller, STATUS_EXT1, STATUS_EXT2, STATUS_EXT3};
+use crate::units::Instant;
+
+/// 0x6031's bits of pins that exist (bits 0-11).
+pub const PINS: u16 = 0x0FFF;
+/// EXT1's bit in 0x6031, 0x602E and [`crate::faults::Inputs::levels`].
+pub const PIN_EXT1: u16 = 1 << 7;
+/// EXT2's bit.
+pub const PIN_EXT2: u16 = 1 << 8;
+/// EXT3's (ENC1's) bit.
+pub const PIN_EXT3: u16 = 1 << 9;
+/// ENC2's bit.
+pub const PIN_ENC2: u16 = 1 << 10;
+/// Pins that are inputs whatever 0x602E says.
+pub const INPUT_ONLY: u16 = PIN_EXT1 | PIN_EXT2 | PIN_EXT3 | PIN_ENC2;
+
+/// The three external stops: their pin, their bit in 0x6013/0x6014, their bit in 0x6001.
+pub const EXT: [(u16, u8, u8); 3] =
+    [(PIN_EXT1, 1 << 0, STATUS_EXT1), (PIN_EXT2, 1 << 1, STATUS_EXT2), (PIN_EXT3, 1 << 4, STATUS_EXT3)];
+
+/// An input's pull or an output's driver, as 0x602F encodes them (2 bits a pin).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PinMode {
+    /// Input, no pull (0).
+    Floating,
+    /// Input with a pull-up (1).
+    PullUp,
+    /// Input with a pull-down (2).
+    PullDown,
+    /// Analog input (3).
+    Analog,
+    /// Output, open drain (0).
+    OpenDrain,
+    /// Output, push-pull (1).
+    PushPull,
+}
+
+/// How the pins are set up: directions (0x602E, 1 output) and 0x602F's 2-bit fields, with the
+/// external stops' pulls of 0x6014/0x6015 in EXT1-3's fields while the stop is enabled.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PinConfig {
+    /// 1 output, bit as 0x6031.
+    pub outputs: u16,
+    /// 2 bits a pin: pin `k` in bits `2k+1..2k` (0x602F's layout).
+    pub fields: u32,
+}
+
+impl PinConfig {
+    /// The pins as `dir` (0x602E), `config` (0x602F), and the external stops enabled in `ext`
+    /// (0x6013) with edges `rising` (0x6014) for sensors of type `pnp` (0x6015 = 1): §5.6.3
+    /// pulls type 0's rising edge down and its falling edge up, type 1's the other way round.
+    pub fn new(dir: u16, config: u32, ext: u8, rising: u8, pnp: bool) -> Self {
+        let outputs = dir & PINS & !INPUT_ONLY;
+        let mut fields = config;
+        for &(pin, bit, _) in EXT.iter() {
+            if ext & bit != 0 {
+                let up = (rising & bit != 0) == pnp;
+                let shift = 2 * pin.trailing_zeros();
+                fields = (fields & !(3 << shift)) | (if up { 1 } else { 2 }) << shift;
+            }
+        }
+        Self { outputs, fields }
+    }
+
+    /// The mode of pin `k` (0..=11).
+    ///
+    /// ```
+    /// use drive_core::controller::io::{PinConfig, PinMode};
+    /// // EXT1 enabled, falling edge, NPN: pulled up; GPIO1 a push-pull output.
+    /// let c = PinConfig::new(0b1, 0b01, 0b1, 0, false);
+    /// assert_eq!((c.mode(7), c.mode(0), c.mode(1)), (PinMode::PullUp, PinMode::PushPull, PinMode::Floating));
+    /// ```
+    pub fn mode(&self, k: u32) -> PinMode {
+        let field = self.fields.checked_shr(2 * k).unwrap_or(0) & 3;
+        if self.outputs.checked_shr(k).unwrap_or(0) & 1 != 0 {
+            return if field & 1 != 0 { PinMode::PushPull } else { PinMode::OpenDrain };
+        }
+        match field {
+            0 => PinMode::Floating,
+            1 => PinMode::PullUp,
+            2 => PinMode::PullDown,
+            _ => PinMode::Analog,
+        }
+    }
+}
+
+/// An edge confirmed after a delay (0x6042): an edge towards the active level starts the delay,
+/// further edges meanwhile are bounces, and when it has run out the level is read again: still
+/// active, the edge counts (once); back, it was a pulse too short to count.
+///
+/// ```
+/// use drive_core::controller::io::Debouncer;
+/// use drive_core::Instant;
+/// let mut d = Debouncer::default();
+/// let t = |ms: u64| Instant::from_micros(ms * 1000);
+/// assert_eq!(d.update(t(0), false, true, 10_000, 5), None); // the first reading is no edge
+/// assert_eq!(d.update(t(1), true, true, 10_000, 7), None); // rising: the delay starts
+/// assert_eq!(d.update(t(2), false, true, 10_000, 9), None); // a bounce
+/// assert_eq!(d.update(t(3), true, true, 10_000, 11), None);
+/// assert_eq!(d.update(t(11), true, true, 10_000, 30), Some(7)); // confirmed: where the edge was
+/// ```
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Debouncer {
+    /// The position at the edge being confirmed.
+    at: i64,
+    /// When that edge came: the clock's low 32 bits, µs (a delay is at most 200 ms).
+    since: u32,
+    /// An edge is being confirmed.
+    pending: bool,
+    /// The last level read, plus one (0: none yet).
+    level: u8,
+}
+
+impl Debouncer {
+    /// Reads `level` at `now` with the axis at `position`; `active` is the level an edge goes
+    /// to (true: a rising edge), `delay_us` 0x6042. The position at the edge once an edge is
+    /// confirmed.
+    pub fn update(&mut self, now: Instant, level: bool, active: bool, delay_us: u64, position: i64) -> Option<i64> {
+        // `Default` is all zero: "none yet" is stored as the level plus one.
+        let last = core::mem::replace(&mut self.level, u8::from(level) + 1);
+        let edge = last != 0 && (last == 2) != level && level == active;
+        let now = now.as_micros() as u32;
+        if edge && !self.pending {
+            (self.pending, self.since, self.at) = (true, now, position);
+        }
+        if !self.pending || u64::from(now.wrapping_sub(self.since)) < delay_us {
+            return None;
+        }
+        self.pending = false;
+        (level == active).then_some(self.at)
+    }
+
+    /// Forgets an edge being confirmed (the input was disabled).
+    pub fn reset(&mut self) {
+        self.pending = false;
+    }
+}
+
+/// What the tick keeps of the pins between ticks.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct Pins {
+    /// The external stops' debouncers.
+    ext: [Debouncer; 3],
+    /// The setpoint's position at the last tick, for the step notifications (the axis starts
+    /// at 0).
+    last_position: i64,
+    /// Ticks the notification output's pulse still lasts.
+    pulse_ticks: u16,
+}
+
+impl Controller {
+    /// The input pins at `now`: 0x6031's input levels and the external stops.
+    #[inline]
+    pub(crate) fn pins(&mut self, now: Instant, levels: u16) {
+        let s = &self.settings;
+        let inputs = PINS & !s.pins.outputs;
+        self.status.gpio = (self.status.gpio_out & s.pins.outputs) | (!levels & inputs);
+        if s.ext_enable != 0 {
+            self.external_stops(now, levels);
+        }
+    }
+
+    /// The enabled external stops: an edge confirmed stops the motor and latches its bit.
+    #[inline(never)]
+    fn external_stops(&mut self, now: Instant, levels: u16) {
+        let s = &self.settings;
+        let position = self.axis.setpoint().whole;
+        let mut stop = false;
+        for (d, &(pin, bit, status)) in self.io.ext.iter_mut().zip(EXT.iter()) {
+            if s.ext_enable & bit == 0 {
+                d.reset();
+            } else if d.update(now, levels & pin != 0, s.ext_rising & bit != 0, s.ext_delay_us, position).is_some() {
+                self.status.controller |= status;
+                stop = true;
+            }
+        }
+        if stop {
+            self.decelerate_to_stop();
+        }
+    }
+
+    /// Step notifications: a bit for each position 0x6062/0x6064 the setpoint (at `position`
+    /// now) reached or crossed since the last tick, and the notification output's pulse.
+    #[inline]
+    pub(crate) fn notify(&mut self, position: i64) {
+        self.io.pulse_ticks = self.io.pulse_ticks.saturating_sub(1);
+        let last = core::mem::replace(&mut self.io.last_position, position);
+        if last != position {
+            self.notify_between(last, position);
+        }
+    }
+
+    /// The notifications the setpoint reached or crossed going from `last` to `position`: the
+    /// start of the step excluded, its end included.
+    #[inline(never)]
+    fn notify_between(&mut self, last: i64, position: i64) {
+        let [a, b] = self.settings.notify;
+        let (lo, hi) = if last < position { (last + 1, position) } else { (position, last - 1) };
+        let hit = u8::from(lo <= a && a <= hi) | u8::from(lo <= b && b <= hi) << 1;
+        if hit != 0 {
+            self.status.notify |= hit;
+            self.io.pulse_ticks = self.settings.notify_output.pulse_ticks;
+        }
+    }
+
+    /// The output pins' levels (1 high, bit as 0x6031): what 0x6031 holds for them (inverted),
+    /// and the notification output high during its pulse.
+    #[inline]
+    pub(crate) fn output_levels(&self) -> u16 {
+        let s = &self.settings;
+        let pulse = if self.io.pulse_ticks != 0 { s.notify_output.pin } else { 0 };
+        (!self.status.gpio_out | pulse) & s.pins.outputs
+    }
+
+    /// The coil output's duty (0x6038): in brake mode released only while the power stage is on
+    /// and power loss does not apply it; as a general output (valve, magnet, DC load) the duty
+    /// written, cut while a fault is latched.
+    pub(crate) fn coil_duty(&self) -> u8 {
+        let s = &self.settings;
+        let on = if s.coil_general { !self.faulted() } else { self.power_stage_on() && !self.faults.braked };
+        if on { s.brake_duty } else { 0 }
+    }
+}
+
+/// The step notifications' output (our object 0x2150): a GPIO pulsed high when a notification
+/// bit sets.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct NotifyOutput {
+    /// The pin's bit (as 0x6031), 0 for none.
+    pub pin: u16,
+    /// The pulse's length, control ticks.
+    pub pulse_ticks: u16,
+}
+
+impl NotifyOutput {
+    /// From 0x2150: bits 0-3 the GPIO (1-7 GPIO1-7, 8 GPIO8; 0 none), bits 8-15 the pulse in ms.
+    ///
+    /// ```
+    /// use drive_core::controller::io::NotifyOutput;
+    /// assert_eq!(NotifyOutput::from_object(0x0208), NotifyOutput { pin: 1 << 11, pulse_ticks: 40 });
+    /// assert_eq!(NotifyOutput::from_object(0x0200).pin, 0);
+    /// ```
+    pub fn from_object(value: u32) -> Self {
+        let pin = match value & 0xF {
+            k @ 1..=7 => 1 << (k - 1),
+            8 => 1 << 11,
+            _ => 0,
+        };
+        let ms = (value >> 8) & 0xFF;
+        Self { pin, pulse_ticks: if pin == 0 { 0 } else { (ms * crate::units::TICK_HZ / 1000) as u16 } }
+    }
+}
