@@ -389,6 +389,7 @@ const MEASURED: Inputs = Inputs {
     encoder: None,
     levels: 0,
     analog: None,
+    index: false,
 };
 
 #[library_benchmark]

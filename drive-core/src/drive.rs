@@ -122,6 +122,27 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
     /// ```
     #[inline(never)]
     pub fn boot_with_table(config: DriveConfig, map: M, params: &Params, storage: u8, table: P) -> Self {
+        Self::assemble(config, map, params, storage, table)
+    }
+
+    /// [`Drive::boot_with_table`] built in `slot`, where a microcontroller keeps its drive: the
+    /// drive is written where it lives, not built on the stack (4 KB on a Cortex-M4) and copied.
+    #[inline(never)]
+    pub fn boot_in<'a>(
+        slot: &'a mut core::mem::MaybeUninit<Self>,
+        config: DriveConfig,
+        map: M,
+        params: &Params,
+        storage: u8,
+        table: P,
+    ) -> &'a mut Self {
+        slot.write(Self::assemble(config, map, params, storage, table))
+    }
+
+    /// The drive [`Drive::boot_with_table`] builds; inlined into each caller, so that the one
+    /// writing into a slot builds it there.
+    #[inline(always)]
+    fn assemble(config: DriveConfig, map: M, params: &Params, storage: u8, table: P) -> Self {
         // The values are settled first and the drive is one struct expression (as the state is,
         // `DriveState::booted`), so that the drive is not built aside and copied once more.
         let mut values = Params::factory().values;
@@ -156,7 +177,7 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
             state: DriveState::booted(
                 config.identity,
                 config.can_save,
-                values,
+                &values,
                 storage & !STORAGE_SAVING,
                 faults,
                 table,
@@ -209,6 +230,9 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
         if self.framer.ended(now) {
             self.end_frame();
         }
+        if self.state.service_due().is_some_and(|due| now >= due) {
+            self.state.service(now);
+        }
     }
 
     /// One control tick at `now` (every [`TICK_MICROS`](crate::units::TICK_MICROS)): runs the
@@ -255,7 +279,10 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
 
     /// When [`Drive::on_timer`] next has something to do.
     pub fn deadline(&self) -> Option<Instant> {
-        self.framer.deadline()
+        match (self.framer.deadline(), self.state.service_due()) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
     }
 
     /// The reply frame to send, once.

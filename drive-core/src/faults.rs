@@ -112,6 +112,8 @@ pub struct Inputs {
     pub levels: u16,
     /// The analog input, 12-bit ADC code (0x605F), if the platform has one.
     pub analog: Option<u16>,
+    /// The encoder's index pulse came since the last tick.
+    pub index: bool,
 }
 
 /// The fault history and the supervision's memory between ticks.

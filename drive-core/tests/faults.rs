@@ -18,6 +18,7 @@ const NOMINAL: Inputs = Inputs {
     encoder: None,
     levels: 0,
     analog: None,
+    index: false,
 };
 
 /// A factory drive with a move speed set.

@@ -91,17 +91,14 @@ pub fn start(hardware: &'static str, params: &Params, status: u8, can_save: bool
     (drive, baud, parity)
 }
 
-/// Builds the drive in `slot`, lending it the table. The compiler builds the drive (about 3 KB)
-/// in this frame and copies it into the static; out of line, so the copy is on the stack for
-/// this call only.
-#[inline(never)]
+/// Builds the drive in `slot`, lending it the table.
 fn boot_into(
     slot: &'static mut MaybeUninit<Drive>,
     config: DriveConfig,
     params: &Params,
     status: u8,
 ) -> &'static mut Drive {
-    slot.write(Drive::boot_with_table(config, NativeMap::new(), params, status, &TABLE))
+    Drive::boot_in(slot, config, NativeMap::new(), params, status, &TABLE)
 }
 
 /// The tick's side of `drive` in `slot`; out of line as [`boot_into`].
@@ -250,7 +247,7 @@ pub fn serve_store(drive: &mut Drive, store: &mut crate::board::ParamStore) {
 /// request's changes handed to the tick, then the saves a request asked for into `store`.
 #[cfg(not(feature = "qemu"))]
 #[embassy_executor::task]
-pub async fn modbus(drive: &'static mut Drive, mut serial: Serial, mut store: crate::board::ParamStore) -> ! {
+pub async fn modbus(drive: &'static mut Drive, mut serial: Serial, store: &'static mut crate::board::ParamStore) -> ! {
     use embassy_futures::select::{Either3, select3};
     use embassy_time::Timer;
     use embedded_io_async::Read;
@@ -276,15 +273,15 @@ pub async fn modbus(drive: &'static mut Drive, mut serial: Serial, mut store: cr
             }
             Either3::First(Err(_)) => warn!("uart: receive error"),
             Either3::Second(()) => {
+                // A request that ended, or the bus side's own work in time (a homing's checks):
+                // either reads the tick's state.
                 let now = now();
-                if drive.frame_due(now) {
-                    before_request(drive).await;
-                }
+                before_request(drive).await;
                 drive.on_timer(now);
             }
             Either3::Third(()) => sync(drive).await,
         }
-        after_request(drive, &mut serial, &mut store).await;
+        after_request(drive, &mut serial, store).await;
     }
 }
 
@@ -302,7 +299,7 @@ const SILENCE_PARTIAL: embassy_time::Duration = embassy_time::Duration::from_mil
 /// `frames`) or by a long silence, then goes to the drive in one burst t3.5 before now.
 #[cfg(feature = "qemu")]
 #[embassy_executor::task]
-pub async fn modbus(drive: &'static mut Drive, mut serial: Serial, mut store: crate::board::ParamStore) -> ! {
+pub async fn modbus(drive: &'static mut Drive, mut serial: Serial, store: &'static mut crate::board::ParamStore) -> ! {
     use embassy_futures::select::{Either3, select3};
     use embassy_time::Timer;
     use embedded_io_async::Read;
@@ -315,16 +312,16 @@ pub async fn modbus(drive: &'static mut Drive, mut serial: Serial, mut store: cr
             Either3::First(Ok(n)) => {
                 for &b in buf.get(..n).unwrap_or_default() {
                     if frame.push(b) {
-                        deliver(drive, &mut frame, &mut serial, &mut store).await;
+                        deliver(drive, &mut frame, &mut serial, store).await;
                     }
                 }
             }
             Either3::First(Err(_)) => {}
-            Either3::Second(()) if !frame.is_empty() => deliver(drive, &mut frame, &mut serial, &mut store).await,
+            Either3::Second(()) if !frame.is_empty() => deliver(drive, &mut frame, &mut serial, store).await,
             Either3::Second(()) => {}
             Either3::Third(()) => {
                 sync(drive).await;
-                after_request(drive, &mut serial, &mut store).await;
+                after_request(drive, &mut serial, store).await;
             }
         }
     }

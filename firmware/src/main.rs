@@ -119,12 +119,21 @@ mod run {
     /// completion rather than awaited, and out of line: its state (about 2 KB) is on the stack for
     /// this call only, neither in the main task's static storage nor in its poll frame.
     #[inline(never)]
-    fn power_up(flash: Flash<'static, Blocking>, fset: &mut ExtiInput<'static, Async>) -> (ParamStore, Loaded) {
+    fn power_up(
+        flash: Flash<'static, Blocking>,
+        fset: &mut ExtiInput<'static, Async>,
+    ) -> (&'static mut ParamStore, Loaded) {
+        // Where the Modbus task will use it (its buffer holds a whole record): kept once, not
+        // moved from frame to frame.
+        let Some(slot) = cortex_m::singleton!(: Option<ParamStore> = None) else {
+            defmt::panic!("the store made twice");
+        };
+        let Ok(store) = Store::new(BlockingAsync::new(flash), board::STORE) else {
+            defmt::panic!("the store's flash range is not whole pages");
+        };
+        let store = slot.insert(store);
         embassy_futures::block_on(async {
             let fset_low = fset_held(fset).await;
-            let Ok(mut store) = Store::new(BlockingAsync::new(flash), board::STORE) else {
-                defmt::panic!("the store's flash range is not whole pages");
-            };
             let loaded = store.power_up(fset_low).await;
             (store, loaded)
         })
@@ -244,14 +253,17 @@ mod run {
     /// The store and what power-up loads from it. Out of line, as on the board: the state of the
     /// loading (about 3 KB) is on the stack for this call only, not under the drive being built.
     #[inline(never)]
-    fn load() -> (board::ParamStore, drive_core::store::Loaded) {
+    fn load() -> (&'static mut board::ParamStore, drive_core::store::Loaded) {
         // QEMU does not model the flash: the store runs on RAM, empty at every boot.
-        let Some(flash) = board::param_flash() else {
+        let (Some(flash), Some(slot)) =
+            (board::param_flash(), cortex_m::singleton!(: Option<board::ParamStore> = None))
+        else {
             defmt::panic!("the store's RAM taken twice");
         };
-        let Ok(mut store) = drive_core::store::Store::new(BlockingAsync::new(flash), board::STORE) else {
+        let Ok(store) = drive_core::store::Store::new(BlockingAsync::new(flash), board::STORE) else {
             defmt::panic!("the store's range is not whole pages");
         };
+        let store = slot.insert(store);
         let loaded = embassy_futures::block_on(store.power_up(false));
         (store, loaded)
     }

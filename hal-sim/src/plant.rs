@@ -55,6 +55,9 @@ pub struct Plant {
     machine: Machine,
     /// What the drive measured at the last tick.
     last_inputs: Option<Inputs>,
+    /// The rotor's whole turns at the last tick: the incremental encoder's index pulse comes
+    /// once a turn, where the rotor was at power-up.
+    last_turns: i64,
 }
 
 /// Ambient and driver temperature at power-up, °C.
@@ -114,6 +117,7 @@ impl Plant {
             injector: Injector::default(),
             machine: Machine::default(),
             last_inputs: None,
+            last_turns: 0,
         }
     }
 
@@ -192,6 +196,7 @@ impl Plant {
             // The pins and the analog input: the machine's, at the tick (`Plant::tick`).
             levels: 0,
             analog: None,
+            index: false,
         }
     }
 
@@ -311,14 +316,31 @@ impl Plant {
         let (pins, gpio) = self.last.map_or((Default::default(), 0), |o| (o.pins, o.gpio));
         inputs.levels = self.machine.levels(t, self.motor.rotor_full_steps(), &pins, gpio);
         inputs.analog = self.machine.analog_code(t);
+        let turns = self.motor.turns();
+        let incremental = matches!(self.encoder.kind(), crate::encoder::EncoderKind::Incremental { .. });
+        inputs.index = incremental && turns != core::mem::replace(&mut self.last_turns, turns);
         self.last_inputs = Some(inputs);
-        let Some(tick) = &mut self.tick else { return self.drive.tick_with(now, &inputs) };
+        let Some(tick) = &mut self.tick else {
+            let out = self.drive.tick_with(now, &inputs);
+            self.service(now);
+            return out;
+        };
         if self.drive.has_changes() {
             self.drive.sync_here(tick, now);
         }
         let out = tick.tick(now, &inputs, self.drive.state().table());
         self.drive.sync_here(tick, now.plus_micros(TICK_MICROS));
+        self.service(now);
         out
+    }
+
+    /// The bus side's work in time (a homing's checks) when it is due, as a board's bus task
+    /// does when its timer wakes it.
+    fn service(&mut self, now: Instant) {
+        let state = self.drive.state_mut();
+        if state.service_due().is_some_and(|due| now >= due) {
+            state.service(now);
+        }
     }
 
     /// Starts the plant's clock at `t` instead of 0: a drive powered up while others on its bus

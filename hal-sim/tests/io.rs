@@ -255,3 +255,70 @@ fn a_hard_stop_holds_the_rotor_while_the_drive_pushes_on() {
     assert!((rotor - 10.0).abs() < 1e-9, "{rotor}");
     assert_eq!(p.outputs().expect("ticked").setpoint.whole, 40 * PER_STEP, "the setpoint went on");
 }
+
+/// The plant with an analog source `spec` (`--analog`'s syntax).
+fn with_analog(spec: &str) -> Plant {
+    let mut p = plant(&[]);
+    *p.machine_mut() = Machine::new(Vec::new(), Some(hal_sim::machine::Analog::parse(spec).expect("analog spec")));
+    p
+}
+
+/// The share of the ticks over `secs` in which the setpoint moves.
+fn moving(p: &mut Plant, secs: f64) -> f64 {
+    let ticks = (secs * 20_000.0) as u32;
+    let n: u32 = (0..ticks)
+        .map(|_| {
+            tick(p);
+            u32::from(velocity(p) != 0.0)
+        })
+        .sum();
+    f64::from(n) / f64::from(ticks)
+}
+
+#[test]
+fn analog_positioning_follows_a_ramp_and_holds_still_on_a_noisy_constant() {
+    // 0 → 3.3 V over 4 s: the target runs from 0x607B (0) to 0x607D (64 000).
+    let mut p = with_analog("ramp=0/3.3/4");
+    set(&mut p, Obj::Mode, 4);
+    set(&mut p, Obj::AnalogPosEnable, 1);
+    run(&mut p, 2.0);
+    let halfway = p.outputs().expect("ticked").setpoint.whole;
+    // Behind the input by the interval's averaging, the planning and the motion's dynamics.
+    assert!((24_000..36_000).contains(&halfway), "half-way up the ramp: {halfway}");
+    run(&mut p, 4.0);
+    assert_eq!(p.outputs().expect("ticked").setpoint.whole, 64_000);
+    // 1.65 V with ±10 mV of noise (±12 codes, ±190 steps a reading): averaged over 100 ms and
+    // with a dead band of 200 steps the motor stands; acting on every wobble (0 dead band and
+    // a 10 ms interval) it hunts.
+    let mut p = with_analog("1.65~0.01");
+    set(&mut p, Obj::Mode, 4);
+    set(&mut p, Obj::AnalogTrigger, 200);
+    set(&mut p, Obj::AnalogPosEnable, 1);
+    run(&mut p, 3.0);
+    let at = p.outputs().expect("ticked").setpoint.whole;
+    assert!((at - 32_008).abs() < 300, "near mid-scale: {at}");
+    assert_eq!(moving(&mut p, 3.0), 0.0, "holds still");
+    set(&mut p, Obj::AnalogTrigger, 0);
+    set(&mut p, Obj::AnalogInterval, 10);
+    let hunting = moving(&mut p, 3.0);
+    assert!(hunting > 0.5, "without filter and dead band it hunts: moving {hunting}");
+}
+
+#[test]
+fn analog_speed_follows_the_input_in_the_velocity_mode() {
+    let mut p = with_analog("ramp=0/3.3/2");
+    set(&mut p, Obj::Mode, 1);
+    set(&mut p, Obj::AnalogSpeedEnable, 1);
+    set(&mut p, Obj::AnalogSpeedFull, 3200);
+    run(&mut p, 1.0);
+    let v = velocity(&p);
+    assert!((1200.0..2000.0).contains(&v), "half-way: {v} pps");
+    run(&mut p, 2.0);
+    // Within the dead band (0x2173, 50 pps) of full scale.
+    assert!((velocity(&p) - 3200.0).abs() <= 50.0, "full scale: {}", velocity(&p));
+    // Off: the input no longer sets the speed.
+    set(&mut p, Obj::AnalogSpeedEnable, 0);
+    set(&mut p, Obj::MaxSpeed, 0);
+    run(&mut p, 2.0);
+    assert_eq!(velocity(&p), 0.0);
+}

@@ -101,6 +101,9 @@ impl Controller {
         }
         self.settings = model.settings;
         self.heard |= core::mem::take(&mut model.heard);
+        // A watch belongs to its plan (its version): one that fired here meanwhile stays
+        // spent, as the stop it made changed the axis' version.
+        (self.watch, self.suspend) = (model.watch, model.suspend);
         let s = &mut self.status;
         let (b, m) = (&base.status, &model.status);
         s.error = merge(s.error, b.error, m.error);
@@ -152,6 +155,8 @@ impl Controller {
         model.servo = self.servo;
         model.run = self.run;
         model.still_since = self.still_since;
+        model.watch = self.watch;
+        model.caught = self.caught.take().or(model.caught);
         model.events = Events(model.events.0 | core::mem::take(&mut self.events).0);
         (model_pvt.head, model_pvt.len, model_pvt.fault) = (pvt.head, pvt.len, pvt.fault);
         **base = Base { status: self.status, run: self.run, pvt: **model_pvt, version: self.axis.version() };
@@ -187,10 +192,11 @@ impl TickSide {
     }
 
     /// Whether the bus side should sync soon without waiting for a request: power is failing
-    /// (the position save) or an alarm was recorded (the history save). Once a tick.
+    /// (the position save), an alarm was recorded (the history save), or a watch caught what
+    /// it waited for (the next step of a homing). Once a tick.
     pub fn needs_bus(&mut self) -> bool {
         let alarms = core::mem::replace(&mut self.alarms, self.ctl.faults.count);
-        self.ctl.events.has(Events::POWER_FAILING) || alarms != self.alarms
+        self.ctl.events.has(Events::POWER_FAILING) || self.ctl.events.has(Events::CAUGHT) || alarms != self.alarms
     }
 
     /// The controller the tick runs.

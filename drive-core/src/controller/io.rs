@@ -174,6 +174,27 @@ impl Controller {
         }
     }
 
+    /// The watch the bus side armed: its condition met while its plan runs, the setpoint's
+    /// position noted and the axis stopped.
+    #[inline(never)]
+    pub(crate) fn check_watch(&mut self, inputs: &crate::faults::Inputs) {
+        let Some(w) = self.watch else { return };
+        if self.axis.version() != w.version {
+            return;
+        }
+        let met = match w.on {
+            super::WatchOn::Pin { pin, high } => (inputs.levels & pin != 0) == high,
+            super::WatchOn::Index => inputs.index,
+            super::WatchOn::Stall => self.status.controller & super::STATUS_STALL != 0,
+        };
+        if met {
+            self.caught = Some(self.axis.setpoint().whole);
+            self.watch = None;
+            self.axis.stop_ramp(w.decel);
+            self.events.set(super::Events::CAUGHT);
+        }
+    }
+
     /// The enabled external stops: an edge confirmed stops the motor and latches its bit.
     #[inline(never)]
     fn external_stops(&mut self, now: Instant, levels: u16) {
@@ -181,7 +202,7 @@ impl Controller {
         let position = self.axis.setpoint().whole;
         let mut stop = false;
         for (d, &(pin, bit, status)) in self.io.ext.iter_mut().zip(EXT.iter()) {
-            if s.ext_enable & bit == 0 {
+            if s.ext_enable & bit == 0 || self.suspend & pin != 0 {
                 d.reset();
             } else if d.update(now, levels & pin != 0, s.ext_rising & bit != 0, s.ext_delay_us, position).is_some() {
                 self.status.controller |= status;

@@ -182,6 +182,9 @@ impl Events {
     pub const POWER_FAILING: Self = Self(1 << 2);
     /// The closed loop's first reading set the zero offset (§5.5.15) to the settings' value.
     pub const ZERO_OFFSET: Self = Self(1 << 3);
+    /// The watch the bus side armed saw what it waited for: the position is in
+    /// [`Controller::caught`], and the axis is stopping.
+    pub const CAUGHT: Self = Self(1 << 4);
 
     /// Whether every flag of `e` is set.
     pub const fn has(self, e: Self) -> bool {
@@ -226,6 +229,41 @@ pub struct Controller {
     pub(crate) events: Events,
     /// A frame for this drive arrived since the last tick (the watchdog restarts).
     pub(crate) heard: bool,
+    /// What the tick watches for on the bus side's behalf (a homing step).
+    pub(crate) watch: Option<Watch>,
+    /// Pins whose external stop is suspended (the switches a homing searches).
+    pub(crate) suspend: u16,
+    /// Where the setpoint was when the watch saw its condition.
+    pub(crate) caught: Option<i64>,
+}
+
+/// A condition the tick watches for while the plan of `version` runs, for the bus side (a
+/// homing's search): when it holds, the tick notes the setpoint's position, stops the axis
+/// (a ramp at `decel`, 0 at once) and raises [`Events::CAUGHT`]. The tick decides nothing else.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Watch {
+    /// The condition.
+    pub on: WatchOn,
+    /// The axis version of the plan it belongs to: a watch outlives no change of course.
+    pub version: u32,
+    /// The stop's deceleration, pps².
+    pub decel: u32,
+}
+
+/// What a [`Watch`] waits for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WatchOn {
+    /// A pin (bit of 0x6031) at a level (true high).
+    Pin {
+        /// The pin's bit.
+        pin: u16,
+        /// The level.
+        high: bool,
+    },
+    /// The encoder's index pulse.
+    Index,
+    /// A stall (the sensorless detection, or the closed loop's following error).
+    Stall,
 }
 
 impl Controller {
@@ -247,6 +285,9 @@ impl Controller {
             ahead: None,
             io: io::Pins::default(),
             still_since: None,
+            watch: None,
+            suspend: 0,
+            caught: None,
             events: Events::default(),
             heard: false,
         }
@@ -321,6 +362,9 @@ impl Controller {
         self.sense(inputs);
         self.supervise(now, inputs);
         self.pins(now, inputs.levels);
+        if self.watch.is_some() {
+            self.check_watch(inputs);
+        }
         if let Some(code) = inputs.analog {
             self.status.analog_in = code;
         }

@@ -420,33 +420,42 @@ impl Walk {
     /// Computes the `i`-th forward difference (1-3) at the start of `c` (one 128-bit division):
     /// with `num(k) = A·k³ + B·k² + C·k`, they are `A + B + C`, `6A + 2B` and `6A`.
     fn scale_difference(&mut self, c: &Cubic, i: u8) {
-        let whole = self.difference_whole(c, i);
-        self.difference_rest(i, whole);
+        self.difference_whole(c, i);
+        self.difference_rest(i);
+    }
+
+    /// The `i`-th difference (1-3).
+    fn difference(&mut self, i: u8) -> &mut Mixed {
+        match i {
+            1 => &mut self.d1,
+            2 => &mut self.d2,
+            _ => &mut self.d3,
+        }
     }
 
     /// The first half of [`Walk::scale_difference`]: the `i`-th difference's numerator divided
-    /// by the denominator, quotient and remainder.
-    fn difference_whole(&self, c: &Cubic, i: u8) -> (i128, i128) {
-        if c.n == 0 {
-            return (0, 0);
-        }
-        let [a, b, cc] = c.coefficients();
-        let x = match i {
-            1 => a + b + cc,
-            2 => 6 * a + 2 * b,
-            _ => 6 * a,
+    /// by the denominator, its quotient and remainder kept in the difference until
+    /// [`Walk::difference_rest`].
+    fn difference_whole(&mut self, c: &Cubic, i: u8) {
+        let (q, r) = if c.n == 0 {
+            (0, 0)
+        } else {
+            let [a, b, cc] = c.coefficients();
+            let x = match i {
+                1 => a + b + cc,
+                2 => 6 * a + 2 * b,
+                _ => 6 * a,
+            };
+            div_floor(x, self.den)
         };
-        div_floor(x, self.den)
+        *self.difference(i) = Mixed { q, r };
     }
 
-    /// The second half: the remainder's 32 bits of fraction, and the difference set.
-    fn difference_rest(&mut self, i: u8, whole: (i128, i128)) {
-        let d = Mixed::from_whole(whole, self.den);
-        match i {
-            1 => self.d1 = d,
-            2 => self.d2 = d,
-            _ => self.d3 = d,
-        }
+    /// The second half: the remainder's 32 bits of fraction.
+    fn difference_rest(&mut self, i: u8) {
+        let den = self.den;
+        let d = self.difference(i);
+        *d = Mixed::from_whole((d.q, d.r), den);
     }
 
     /// The position of `c` (the segment this walk was made for) at tick `k`, as [`Cubic::at`]:
@@ -488,8 +497,6 @@ pub struct Ahead {
     pub cubic: Cubic,
     walk: Walk,
     rates: Rates,
-    /// The difference being scaled: its quotient and remainder by the denominator.
-    whole: (i128, i128),
     /// Pieces built: the rates, then the walk's third, second and first differences, each in
     /// two divisions.
     built: u8,
@@ -502,7 +509,7 @@ impl Ahead {
     /// Nothing built yet.
     pub fn new(cubic: Cubic) -> Self {
         let blank = Rates { n: 0, per_tick: 0.0, v0: 0.0, v1: 0.0, b: 0.0, a: 0.0, acc0: 0.0, acc1: 0.0 };
-        Self { cubic, walk: Walk::blank(&cubic), rates: blank, whole: (0, 0), built: 0 }
+        Self { cubic, walk: Walk::blank(&cubic), rates: blank, built: 0 }
     }
 
     /// Builds one more piece; whether all are built.
@@ -513,9 +520,9 @@ impl Ahead {
             i @ 1..=6 => {
                 let which = 3 - (i - 1) / 2;
                 if i % 2 == 1 {
-                    self.whole = self.walk.difference_whole(&self.cubic, which);
+                    self.walk.difference_whole(&self.cubic, which);
                 } else {
-                    self.walk.difference_rest(which, self.whole);
+                    self.walk.difference_rest(which);
                 }
             }
             _ => return true,

@@ -18,6 +18,7 @@ pub(crate) const fn has_effect(obj: Obj) -> bool {
             | Obj::ControlWord
             | Obj::PpRunSpeed
             | Obj::ZeroOffset
+            | Obj::HomingControl
     ) || is_pvt_command(obj)
 }
 

@@ -18,6 +18,8 @@ const MICROSTEPS: &[u32] = &[0, 2, 4, 8, 16, 32, 64, 128, 256];
 const ENCODER_CPR: &[u32] = &[12, 200, 400, 500, 600, 800, 1000, 1200, 1600];
 /// Modes of 0x6007 (3, encoder follower, needs a special firmware and is refused).
 const MODES: &[u32] = &crate::modes::WorkMode::RAW;
+/// The homing methods 0x2160 takes (as the register holds them: -1 is 0xFFFF).
+const HOMING_METHODS: [u32; 18] = [1, 2, 3, 4, 5, 6, 17, 18, 19, 20, 21, 22, 33, 34, 35, 37, 0xFFFF, 0xFFFE];
 /// A PVT table index or count.
 const PVT_INDEX: Range = Span(0, 1000);
 /// Full signed 32-bit range.
@@ -233,6 +235,48 @@ objects! {
     /// or in power loss below 0x6084. As a general output (§3.10: valve, magnet, DC load) 0x6038
     /// is the duty whatever the motor does, cut to 0 while a fault is latched.
     CoilMode @ 0x2151: U8, Rw, Rom, Span(0, 1), default 0, None, "coil output function";
+    /// Homing method (our object; CiA 402's numbers as a signed 16-bit value): 17/18 on the
+    /// negative/positive limit switch, 19/20 a home switch actuated above home, 21/22 one
+    /// actuated below, 1-6 the same then the first index pulse, 33/34 the index alone, 35/37
+    /// the present position, -1/-2 a hard stop found by the stall detection (negative,
+    /// positive). See `drive_core::state::homing` for each one's moves; 7-14 and 23-30 are refused.
+    HomingMethod @ 0x2160: U16, Rw, Rom, Set(&HOMING_METHODS), default 35, None, "homing method";
+    /// Homing command (our object): 1 starts (refused, 04, while moving or when the method's
+    /// switch has no input in 0x216C, or when a hard stop cannot be felt: the stall detection
+    /// off or the creep speed below 0x210A), 0 stops it at 0x2167. Moves are refused meanwhile as
+    /// ever (a new motion command interrupts it).
+    HomingControl @ 0x2161: U8, Cmd, Ram, Span(0, 1), default 0, None, "homing command";
+    /// Homing result (our object): 0 not homed since power-up, 1 running, 2 homed (the position
+    /// where the home was caught is 0x2169 now), 3 the timeout 0x216B ran out, 4 interrupted
+    /// (0x2161 = 0, another motion command, a stop, an EXT stop, a fault).
+    HomingResult @ 0x2162: U8, Ro, Live, Span(0, 4), default 0, None, "homing result";
+    /// Homing search speed (our object): the searches for a switch.
+    HomingSearchSpeed @ 0x2163: U32, Rw, Rom, Span(1, 200_000), default 3200, Pps, "homing search speed";
+    /// Homing creep speed (our object): every edge, index and hard stop is found at it; the
+    /// position is caught within one control tick of travel (creep / 20 000 microsteps).
+    HomingCreepSpeed @ 0x2165: U32, Rw, Rom, Span(1, 200_000), default 800, Pps, "homing creep speed";
+    /// Homing acceleration and deceleration (our object).
+    HomingAccel @ 0x2167: U32, Rw, Rom, Span(151, i32::MAX), default 32_000, Pps2, "homing acceleration";
+    /// Homing offset (our object): the position the home gets.
+    HomingOffset @ 0x2169: S32, Rw, Rom, S32_ANY, default 0, Steps, "homing offset";
+    /// Homing timeout (our object): the homing gives up after this long (0: never).
+    HomingTimeout @ 0x216B: U16, Rw, Rom, Any, default 600, DeciSeconds, "homing timeout";
+    /// Homing inputs (our object): bits 0-3 the home switch, 4-7 the negative limit switch, 8-11
+    /// the positive limit switch: 0 none, 1-3 EXT1-3, 4-10 GPIO1-7, 11 GPIO8. An EXT input's
+    /// external stop is suspended while a homing searches its switch.
+    HomingInputs @ 0x216C: U16, Rw, Rom, Bits(0x0FFF), default 0x0001, None, "homing inputs";
+    /// Homing input polarity (our object): bit 0 the home switch, 1 the negative limit, 2 the
+    /// positive limit, is actuated at a high level (1) or a low one (0).
+    HomingPolarity @ 0x216D: U8, Rw, Rom, Bits(0x07), default 0, None, "homing polarity";
+    /// Analog speed (our object; §3.9's analog speed control): 1 makes the analog input set the
+    /// speed in the velocity mode (0x6007 = 1): 0 at the start code 0x6078 and below, 0x2171 at
+    /// code 4095, averaged over 0x6079 (see `drive_core::state::analog`).
+    AnalogSpeedEnable @ 0x2170: U8, Rw, Rom, Span(0, 1), default 0, None, "analog speed enable";
+    /// Analog speed at code 4095 (our object); its sign is the direction.
+    AnalogSpeedFull @ 0x2171: S32, Rw, Rom, Span(-200_000, 200_000), default 3200, Pps, "analog full-scale speed";
+    /// Analog speed dead band (our object): a new speed is taken only when it differs from the
+    /// one in force by more than this.
+    AnalogSpeedDeadband @ 0x2173: U16, Rw, Rom, Any, default 50, Pps, "analog speed dead band";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake
@@ -412,13 +456,18 @@ objects! {
     PpRunSpeed @ 0x6072: S32, Rw, Ram, Magnitude(150, 300_000), default 32000, Pps, "PP run speed";
     /// PP target position.
     PpTarget @ 0x6074: S32, Rw, Ram, S32_ANY, default 0, Steps, "PP target position";
-    /// Analog positioning: 1 on.
+    /// Analog positioning (§5.13): 1 makes the analog input set the target position in the PP
+    /// mode (0x6007 = 4, the mode the manual names for it), with the PP mode's speed and ramps:
+    /// readings averaged over 0x6079, a move planned when the position differs from the target
+    /// in force by more than 0x607A (see `drive_core::state::analog`).
     AnalogPosEnable @ 0x6077: U8, Rw, Rom, Span(0, 1), default 0, None, "analog positioning enable";
     /// Analog positioning: ADC code of the minimum position.
     AnalogStartCode @ 0x6078: U16, Rw, Rom, Span(0, 4096), default 0, None, "analog start code";
-    /// Analog positioning: sampling interval.
+    /// Analog positioning: adjustment interval (at least 10 ms): the readings of each interval
+    /// are averaged.
     AnalogInterval @ 0x6079: U16, Rw, Rom, Any, default 100, Millis, "analog interval";
-    /// Analog positioning: position change that triggers a move.
+    /// Analog positioning: the dead band: a move is planned when the input's position differs
+    /// from the target in force by more than this.
     AnalogTrigger @ 0x607A: U16, Rw, Rom, Any, default 30, Steps, "analog trigger";
     /// Analog positioning: position at the start code.
     AnalogMinPos @ 0x607B: S32, Rw, Rom, S32_ANY, default 0, Steps, "analog minimum position";

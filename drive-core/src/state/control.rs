@@ -58,17 +58,17 @@ pub const SW_SETPOINT_ACK: u16 = 1 << 12;
 /// A profile-position set-point, with the parameters it was given with.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct SetPoint {
-    target: i64,
-    limits: Limits,
-    depart: f64,
-    arrive: f64,
+    pub(crate) target: i64,
+    pub(crate) limits: Limits,
+    pub(crate) depart: f64,
+    pub(crate) arrive: f64,
 }
 
 /// The state of the profile position and velocity modes (§5.11-5.12).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(crate) struct Pp {
     /// The set-point being executed.
-    active: Option<SetPoint>,
+    pub(crate) active: Option<SetPoint>,
     /// The one-deep buffer: the set-point that starts when the active one ends.
     buffered: Option<SetPoint>,
     /// Statusword bit 12.
@@ -254,6 +254,9 @@ impl<P: Borrow<Table>> DriveState<P> {
         if crate::od::is_pvt_command(obj) {
             return self.check_pvt(obj, value);
         }
+        if obj == Obj::HomingControl {
+            return self.check_homing(value);
+        }
         self.check_planned(obj, value)
     }
 
@@ -342,6 +345,26 @@ impl<P: Borrow<Table>> DriveState<P> {
         }
         if events.has(Events::ZERO_OFFSET) {
             self.set_param(Obj::ZeroOffset, self.ctl.settings.zero_offset as u32);
+        }
+        self.homing_events(events);
+        self.homing_service();
+    }
+
+    /// What the bus side does in time, without a request: a homing's checks, the analog
+    /// input's readings and targets. Due at
+    /// [`DriveState::service_due`].
+    pub fn service(&mut self, now: Instant) {
+        self.now = now;
+        self.homing_service();
+        self.analog_service();
+    }
+
+    /// When [`DriveState::service`] has something to do: a homing's checks, the analog input's
+    /// next reading.
+    pub fn service_due(&self) -> Option<Instant> {
+        match (self.homing_due(), self.analog_due()) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
         }
     }
 
@@ -453,7 +476,7 @@ impl Planner<'_> {
     }
 
     /// The trapezoid limits of the PP and PV modes at `speed`, and their start and stop speeds.
-    fn pp_setpoint(&self, target: i64, speed: f64) -> SetPoint {
+    pub(crate) fn pp_setpoint(&self, target: i64, speed: f64) -> SetPoint {
         let limits = Limits {
             v_max: libm::fabs(speed),
             a_max: f64::from(self.param(Obj::PpAccel)),

@@ -2,7 +2,9 @@
 //! the PVT points, and the controller the control tick runs (see [`crate::controller`]). What a
 //! write to an object does is here and in [`control`] (the motion modes) and [`pvt`].
 
+pub mod analog;
 pub mod control;
+pub mod homing;
 pub mod pvt;
 
 use crate::controller::handoff::{Base, Orders};
@@ -163,6 +165,10 @@ pub struct DriveState<P = Table> {
     base: Base,
     /// Orders for the tick's controller since the last sync.
     orders: Orders,
+    /// The built-in homing.
+    pub(crate) homing: homing::Homing,
+    /// The analog input's follower.
+    pub(crate) analog: analog::Analog,
     /// How long after a request its motion starts, µs: 0 where `ctl` is ticked itself; where the
     /// tick owns a controller of its own, longer than planning and handing over take.
     margin: u64,
@@ -171,7 +177,10 @@ pub struct DriveState<P = Table> {
 /// Whether writing `obj` plans a motion (`state::control`): the commands but a declared
 /// position and the PVT objects.
 fn plans_motion(obj: Obj) -> bool {
-    is_command(obj) && has_effect(obj) && !crate::od::is_pvt_command(obj) && obj != Obj::Position
+    is_command(obj)
+        && has_effect(obj)
+        && !crate::od::is_pvt_command(obj)
+        && !matches!(obj, Obj::Position | Obj::HomingControl)
 }
 
 /// Everything of a [`DriveState`] but the PVT point table: what a multi-object write restores
@@ -189,12 +198,15 @@ pub struct Checkpoint {
     pvt: Pvt,
     run: Option<crate::controller::run::Run>,
     orders: Orders,
+    homing: homing::Homing,
+    watch: Option<crate::controller::Watch>,
+    suspend: u16,
 }
 
 impl DriveState {
     /// Factory state.
     pub fn new(identity: Identity, can_save: bool) -> Self {
-        Self::booted(identity, can_save, Params::factory().values, 0, FaultLog::default(), Table::new())
+        Self::booted(identity, can_save, &Params::factory().values, 0, FaultLog::default(), Table::new())
     }
 }
 
@@ -210,7 +222,7 @@ impl<P: Borrow<Table>> DriveState<P> {
     pub(crate) fn booted(
         identity: Identity,
         can_save: bool,
-        params: [u32; Obj::COUNT],
+        params: &[u32; Obj::COUNT],
         storage: u8,
         faults: FaultLog,
         table: P,
@@ -219,8 +231,8 @@ impl<P: Borrow<Table>> DriveState<P> {
         let feedback = Feedback::from_objects(get(Obj::Feedback), get(Obj::EncoderCpr));
         Self {
             faults_saved: faults.count,
-            ctl: Controller::restored(settings_of(&params), feedback, faults),
-            params,
+            ctl: Controller::restored(settings_of(params), feedback, faults),
+            params: *params,
             storage,
             identity,
             can_save,
@@ -231,6 +243,8 @@ impl<P: Borrow<Table>> DriveState<P> {
             table,
             base: Base::default(),
             orders: Orders::default(),
+            homing: homing::Homing::default(),
+            analog: analog::Analog::default(),
             margin: 0,
         }
     }
@@ -252,6 +266,8 @@ impl<P: Borrow<Table>> DriveState<P> {
             faults_saved: _,
             base: _,
             orders,
+            homing,
+            analog: _,
             margin: _,
         } = self;
         Checkpoint {
@@ -265,6 +281,9 @@ impl<P: Borrow<Table>> DriveState<P> {
             pvt: *pvt,
             run: ctl.run,
             orders: *orders,
+            homing: *homing,
+            watch: ctl.watch,
+            suspend: ctl.suspend,
         }
     }
 
@@ -292,9 +311,11 @@ impl<P: Borrow<Table>> DriveState<P> {
 
     /// Goes back to `c`.
     pub fn restore(&mut self, c: Checkpoint) {
-        let Checkpoint { params, storage, status, request, now, axis, pp, pvt, run, orders } = c;
+        let Checkpoint { params, storage, status, request, now, axis, pp, pvt, run, orders, homing, watch, suspend } =
+            c;
         (self.params, self.storage, self.request, self.now, self.orders) = (params, storage, request, now, orders);
         (self.ctl.status, self.ctl.axis, self.ctl.run, self.pp, self.pvt) = (status, axis, run, pp, pvt);
+        (self.homing, self.ctl.watch, self.ctl.suspend) = (homing, watch, suspend);
         self.refresh_settings();
     }
 
@@ -434,6 +455,7 @@ impl<P: Borrow<Table>> DriveState<P> {
             Obj::NotifyStatus => u32::from(s.notify),
             Obj::GpioValue => u32::from(s.gpio),
             Obj::AnalogIn => u32::from(s.analog_in),
+            Obj::HomingResult => self.homing_outcome(),
             Obj::StatusWord => u32::from(self.statusword()),
             Obj::PvtPointer => u32::from(s.pvt_pointer),
             Obj::RealSpeed => self.ctl.real_speed() as u32,
@@ -615,6 +637,7 @@ impl<P: Borrow<Table>> DriveState<P> {
                     self.set_param(Obj::ZeroOffset, position.wrapping_sub(self.ctl.servo.encoder) as u32);
                 }
             }
+            Obj::HomingControl => self.homing_command(value),
             obj if has_effect(obj) => self.apply_motion(obj, value),
             _ => {
                 self.set_param(obj, value);

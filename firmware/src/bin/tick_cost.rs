@@ -63,6 +63,7 @@ const MEASURED: Inputs = Inputs {
     encoder: None,
     levels: 0,
     analog: None,
+    index: false,
 };
 
 /// The cases, in the order printed.
@@ -301,11 +302,9 @@ impl<'a> Rig<'a> {
     }
 }
 
-/// Builds the drive in `slot`, lending it the table as the firmware does; out of line, so the
-/// one copy `Drive::boot_with_table` makes (3 KB) goes through this frame only.
-#[inline(never)]
+/// Builds the drive in `slot`, lending it the table as the firmware does.
 fn boot_into<'a>(slot: &'a mut MaybeUninit<Drive>, params: &Params) -> &'a mut Drive {
-    slot.write(Drive::boot_with_table(DriveConfig::default(), NativeMap::new(), params, 0, &TABLE))
+    Drive::boot_in(slot, DriveConfig::default(), NativeMap::new(), params, 0, &TABLE)
 }
 
 /// Cost of the measured ticks of `case`: (mean, most) SysTick counts, whether the drive was in

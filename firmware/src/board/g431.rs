@@ -10,6 +10,7 @@
 //! | ENABLE          | PB2         | GPIO out, push-pull         | active low on the usual drivers: high = off|
 //! | current ref     | PB6         | TIM4_CH1 (AF2), 100 kHz PWM | RC-filtered to the driver's VREF           |
 //! | encoder A / B   | PA0 / PA1   | TIM2_CH1 / CH2 (AF1)        | quadrature, ×4                             |
+//! | encoder Z       | PA2         | TIM2_CH3 (AF1), capture     | the index pulse, for homing                |
 //! | bus voltage     | PB12        | ADC1_IN11                   | 100 kΩ / 4.7 kΩ divider from the supply    |
 //! | analog in       | PB14        | ADC1_IN5                    | 0..3.3 V, 0x605F                           |
 //! | temperature     | (internal)  | ADC1 temperature sensor     | the die's, for the power stage's           |
@@ -208,6 +209,7 @@ static MEASURED: Mutex<Cell<Measured>> = Mutex::new(Cell::new(Measured {
     encoder: None,
     levels: 0,
     analog: None,
+    index: false,
 }));
 
 /// The encoder's 16-bit quadrature counter, owned by the control tick, with the count extended to
@@ -234,7 +236,11 @@ fn measure(cs: critical_section::CriticalSection<'_>) -> Measured {
     // after 0x6042, so a tick's sample is what it needs.
     let idr = pac::GPIOA.idr().read().0;
     let levels = ((idr >> 4) & 0b111) as u16 * drive_core::controller::io::PIN_EXT1;
-    Measured { encoder, levels, ..MEASURED.borrow(cs).get() }
+    let index = pac::TIM2.sr().read().ccif(2);
+    if index {
+        pac::TIM2.sr().modify(|w| w.set_ccif(2, false));
+    }
+    Measured { encoder, levels, index, ..MEASURED.borrow(cs).get() }
 }
 
 /// STEP (TIM1 pulses), DIR and ENABLE to an external step/direction driver, and its current
@@ -451,6 +457,13 @@ pub fn init() -> Board {
     let adc = Adc::new(p.ADC1, AdcConfig::default());
     let temperature = adc.enable_temperature();
     let encoder = Qei::new(p.TIM2, p.PA0, p.PA1, QeiConfig::default());
+    // The encoder's index (Z) on PA2, TIM2 channel 3: a rising edge sets CC3IF, which the tick
+    // reads and clears (`measure`), so that a pulse shorter than a tick is not missed.
+    let _ = p.PA2;
+    pac::TIM2.ccmr_input(1).modify(|w| w.set_ccs(0, pac::timer::vals::CcmrInputCcs::TI4));
+    pac::TIM2.ccer().modify(|w| w.set_cce(2, true));
+    pac::GPIOA.afr(0).modify(|w| w.set_afr(2, 1));
+    pac::GPIOA.moder().modify(|w| w.set_moder(2, pac::gpio::vals::Moder::ALTERNATE));
     let sense = Sense { adc, bus_voltage: p.PB12, analog_in: p.PB14, temperature };
     let watchdog = IndependentWatchdog::new(p.IWDG, 500_000);
     Board { flash: Flash::new_blocking(p.FLASH), uart, stage, inputs, encoder, sense, watchdog }
