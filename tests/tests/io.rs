@@ -93,6 +93,36 @@ impl Rig {
     }
 }
 
+/// Every input, edge and sensor type through the master: a switch 40 full steps ahead on the
+/// input, the stop enabled as (0x6013 bit, rising, 0x6015); the move stops and the input's bit
+/// (0x6001) latches, moves are refused until it is cleared.
+#[tokio::test(flavor = "current_thread")]
+async fn each_ext_input_edge_and_sensor_type_stops_a_move_and_latches() {
+    let cases = [
+        ("ext1:npn:40", 1u16, 0u16, 0u16, 1u16),
+        ("ext2:pnp:40", 2, 2, 0, 2),
+        ("ext3:pnp:40:nc", 16, 0, 1, 16),
+        ("ext1:npn:40:nc", 1, 1, 1, 1),
+    ];
+    for (switch, enable, rising, kind, bit) in cases {
+        let mut r = rig(&[switch], None, 24.0).await;
+        r.set(0x6042, 5).await;
+        r.set(0x6013, enable).await;
+        r.set(0x6014, rising).await;
+        r.set(0x6015, kind).await;
+        r.set32(0x6005, 3200).await;
+        r.wait_still(3).await;
+        assert_eq!(r.reg(0x6001).await, bit, "{switch}: its bit alone");
+        let at = r.rotor();
+        assert!((40.0..100.0).contains(&at), "{switch}: stopped past the switch at 40: {at}");
+        assert_eq!(r.try_set32(0x6005, -800).await, Err(ExceptionCode::ServerDeviceFailure), "{switch}");
+        r.set(0x6001, bit).await;
+        r.set32(0x6005, -800).await;
+        r.wait_still(3).await;
+        assert!((r.rotor() - (at - 50.0)).abs() < 0.5, "{switch}: moves again");
+    }
+}
+
 #[tokio::test(flavor = "current_thread")]
 async fn an_ext_stop_latches_refuses_moves_until_cleared_and_a_negative_move_goes_back() {
     // A home switch 40 full steps back, an NPN output with a bouncing contact: EXT1 on the
