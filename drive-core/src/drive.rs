@@ -230,9 +230,6 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
         if self.framer.ended(now) {
             self.end_frame();
         }
-        if self.state.service_due().is_some_and(|due| now >= due) {
-            self.state.service(now);
-        }
     }
 
     /// One control tick at `now` (every [`TICK_MICROS`](crate::units::TICK_MICROS)): runs the
@@ -279,10 +276,7 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
 
     /// When [`Drive::on_timer`] next has something to do.
     pub fn deadline(&self) -> Option<Instant> {
-        match (self.framer.deadline(), self.state.service_due()) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
-        }
+        self.framer.deadline()
     }
 
     /// The reply frame to send, once.

@@ -254,7 +254,12 @@ pub async fn modbus(drive: &'static mut Drive, mut serial: Serial, store: &'stat
     // Bytes come one or a few at a time: the task reads them as they arrive.
     let mut buf = [0u8; 16];
     loop {
-        let deadline = drive.deadline();
+        // The end of a frame, or the bus side's own work in time (a homing's checks, the analog
+        // input), whichever comes first.
+        let deadline = match (drive.deadline(), drive.state().service_due()) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        };
         let timeout = async {
             match deadline {
                 Some(at) => Timer::at(embassy_time::Instant::from_micros(at.as_micros())).await,
@@ -273,11 +278,15 @@ pub async fn modbus(drive: &'static mut Drive, mut serial: Serial, store: &'stat
             }
             Either3::First(Err(_)) => warn!("uart: receive error"),
             Either3::Second(()) => {
-                // A request that ended, or the bus side's own work in time (a homing's checks):
-                // either reads the tick's state.
+                // A request that ended, or the bus side's own work in time: either reads the
+                // tick's state.
                 let now = now();
                 before_request(drive).await;
                 drive.on_timer(now);
+                let state = drive.state_mut();
+                if state.service_due().is_some_and(|due| now >= due) {
+                    state.service(now);
+                }
             }
             Either3::Third(()) => sync(drive).await,
         }
@@ -318,7 +327,16 @@ pub async fn modbus(drive: &'static mut Drive, mut serial: Serial, store: &'stat
             }
             Either3::First(Err(_)) => {}
             Either3::Second(()) if !frame.is_empty() => deliver(drive, &mut frame, &mut serial, store).await,
-            Either3::Second(()) => {}
+            // The bus side's own work in time (a homing's checks, the analog input), at the
+            // silence's pace.
+            Either3::Second(()) => {
+                let now = now();
+                if drive.state().service_due().is_some_and(|due| now >= due) {
+                    sync(drive).await;
+                    drive.state_mut().service(now);
+                    after_request(drive, &mut serial, store).await;
+                }
+            }
             Either3::Third(()) => {
                 sync(drive).await;
                 after_request(drive, &mut serial, store).await;
