@@ -129,10 +129,10 @@ fn index_methods_home_on_the_index_within_a_microstep() {
 
 #[test]
 fn hard_stop_methods_home_within_a_full_step() {
-    for (method, stop) in [(-1, -130.0), (-2, 130.0)] {
+    for (method, stop) in [(-2, -130.0), (-1, 130.0)] {
         // Measured after leaving the stop by 10 full steps: the field stood ahead of the blocked
         // rotor when the stall was felt, and the rotor takes its place again only off the stop.
-        let away = if method == -1 { 10 } else { -10 };
+        let away = if method == -2 { 10 } else { -10 };
         let homes: Vec<f64> = (0..20)
             .map(|seed| {
                 let mut p = plant(true, seed);

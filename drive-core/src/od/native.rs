@@ -238,8 +238,9 @@ objects! {
     /// Homing method (our object; CiA 402's numbers as a signed 16-bit value): 17/18 on the
     /// negative/positive limit switch, 19/20 a home switch actuated above home, 21/22 one
     /// actuated below, 1-6 the same then the first index pulse, 33/34 the index alone, 35/37
-    /// the present position, -1/-2 a hard stop found by the stall detection (negative,
-    /// positive). See `drive_core::state::homing` for each one's moves; 7-14 and 23-30 are refused.
+    /// the present position, -1/-2 a hard stop found by the stall detection (positive,
+    /// negative, as Maxon numbers its vendor methods). See `drive_core::state::homing` for
+    /// each one's moves; 7-14 and 23-30 are refused.
     HomingMethod @ 0x2160: U16, Rw, Rom, Set(&HOMING_METHODS), default 35, None, "homing method";
     /// Homing command (our object): 1 starts (refused, 04, while moving or when the method's
     /// switch has no input in 0x216C, or when a hard stop cannot be felt: the stall detection

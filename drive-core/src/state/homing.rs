@@ -18,7 +18,7 @@
 //! | 1-6 | as 17, 18, 19, 20, 21, 22 | the first index pulse beyond the edge | the same |
 //! | 33 / 34 | the index pulse | the first one | negative / positive |
 //! | 35, 37 | none | the position now | no motion |
-//! | -1 / -2 | a hard stop, found by the stall detection | where the stall is detected | negative / positive |
+//! | -1 / -2 | a hard stop, found by the stall detection | where the stall is detected | positive / negative |
 //!
 //! Searches run at the search speed 0x2163 and every edge is found at the creep speed 0x2165:
 //! the tick sees a switch's level once a tick, so the position is caught within one tick of
@@ -109,8 +109,8 @@ impl Method {
             33 => Some(Method::Index { up: false }),
             34 => Some(Method::Index { up: true }),
             35 | 37 => Some(Method::Here),
-            -1 => Some(Method::HardStop { up: false }),
-            -2 => Some(Method::HardStop { up: true }),
+            -1 => Some(Method::HardStop { up: true }),
+            -2 => Some(Method::HardStop { up: false }),
             _ => None,
         }
     }
