@@ -137,6 +137,8 @@ fn hard_stop_methods_home_within_a_full_step() {
             .map(|seed| {
                 let mut p = plant(true, seed);
                 set(&mut p, Obj::HomingCreepSpeed, 1600);
+                // A stall stops the motor (0x6043): the homing takes it as what it searched for.
+                set(&mut p, Obj::StallStop, u32::from(seed % 2 == 0));
                 home(&mut p, method);
                 set(&mut p, Obj::AbsoluteMove, (OFFSET + away * 16) as u32);
                 p.run_for(1.0);

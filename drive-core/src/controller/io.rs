@@ -188,11 +188,26 @@ impl Controller {
             super::WatchOn::Stall => self.status.controller & super::STATUS_STALL != 0,
         };
         if met {
-            self.caught = Some(self.axis.setpoint().whole);
-            self.watch = None;
-            self.axis.stop_ramp(w.decel);
-            self.events.set(super::Events::CAUGHT);
+            self.catch(w.decel);
         }
+    }
+
+    /// The watch met: the setpoint's position noted, the axis stopped (a ramp at `decel`).
+    fn catch(&mut self, decel: u32) {
+        self.caught = Some(self.axis.setpoint().whole);
+        self.watch = None;
+        self.axis.stop_ramp(decel);
+        self.events.set(super::Events::CAUGHT);
+    }
+
+    /// A stall just detected: if the watch waits for one (a homing against a hard stop), it is
+    /// caught there and then, in place of the stall's own stop (which would end the homing).
+    pub(crate) fn stall_caught(&mut self) -> bool {
+        let armed = self.watch.is_some_and(|w| w.on == super::WatchOn::Stall && w.version == self.axis.version());
+        if armed {
+            self.catch(0);
+        }
+        armed
     }
 
     /// The enabled external stops: an edge confirmed stops the motor and latches its bit.

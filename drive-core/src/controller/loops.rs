@@ -89,7 +89,9 @@ impl Controller {
             // A following error beyond 0x605C: the position error alarm (25) and the stall bit.
             self.status.controller |= STATUS_STALL;
             self.latch(now, 0, FAULT_POSITION);
-            self.stop_motion();
+            if !self.stall_caught() {
+                self.stop_motion();
+            }
             self.servo.relax();
             return (at(rotor, 0.0), 0.0);
         }
@@ -122,7 +124,7 @@ impl Controller {
         };
         if self.servo.sensorless.update(now, &x) && self.status.controller & STATUS_STALL == 0 {
             self.status.controller |= STATUS_STALL;
-            if self.settings.stall_stop {
+            if !self.stall_caught() && self.settings.stall_stop {
                 self.stop_motion();
             }
         }

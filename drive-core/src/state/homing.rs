@@ -282,10 +282,18 @@ impl<P: Borrow<Table>> DriveState<P> {
             if step.is_some_and(|s| s.home) {
                 self.homing.home = Some(at);
             }
+            if step.is_some_and(|s| s.until == Until::Stall) {
+                // The stall at the hard stop is what was searched for, not a fault: cleared
+                // now, before the closed loop's position error keeps the power stage off.
+                self.ctl.status.controller &= !STATUS_STALL;
+                self.ctl.status.faults &= !FAULT_POSITION;
+            }
             self.homing.at += 1;
             return self.homing_step();
         }
-        if events.has(Events::STOPPED) {
+        // A stop the tick made on its own; after the last step the axis is only settling (the
+        // stall's latch may still stop it for a tick or two).
+        if events.has(Events::STOPPED) && !self.homing.finishing {
             self.end_homing(Outcome::Interrupted);
         }
     }
@@ -313,9 +321,6 @@ impl<P: Borrow<Table>> DriveState<P> {
             return;
         }
         let Some(home) = h.home else { return self.end_homing(Outcome::Interrupted) };
-        // The stall a hard-stop homing found is its result, not a fault to clear.
-        self.ctl.status.controller &= !STATUS_STALL;
-        self.ctl.status.faults &= !FAULT_POSITION;
         let here = self.ctl.axis.setpoint().whole;
         let offset = i64::from(self.param(Obj::HomingOffset) as i32);
         let position = offset.saturating_add(here.saturating_sub(home));
