@@ -203,6 +203,8 @@ impl<P: Borrow<Table>> DriveState<P> {
             Method::Here => self.homing.home = Some(self.ctl.axis.setpoint().whole),
             Method::Index { up } => self.homing.steps = one(Step { up, fast: false, until: Until::Index, home: true }),
             Method::HardStop { up } => {
+                // A stall bit left from before is not the stop this homing will feel.
+                self.ctl.status.controller &= !STATUS_STALL;
                 self.homing.steps = one(Step { up, fast: false, until: Until::Stall, home: true })
             }
             Method::Switch { input, above, up, index } => {
