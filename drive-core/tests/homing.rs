@@ -51,10 +51,7 @@ impl Axis {
         let levels = if actuated { 0 } else { 1 << 7 };
         let now = Instant::from_micros(self.now);
         self.physical += self.drive.tick_with(now, &Inputs { levels, ..Inputs::default() }).steps;
-        let state = self.drive.state_mut();
-        if state.service_due().is_some_and(|due| now >= due) {
-            state.service(now);
-        }
+        self.drive.state_mut().service(now);
         self.now += TICK;
     }
 

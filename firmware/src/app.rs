@@ -256,10 +256,7 @@ pub async fn modbus(drive: &'static mut Drive, mut serial: Serial, store: &'stat
     loop {
         // The end of a frame, or the bus side's own work in time (a homing's checks, the analog
         // input), whichever comes first.
-        let deadline = match (drive.deadline(), drive.state().service_due()) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
-        };
+        let deadline = drive.deadline().into_iter().chain(drive.state().service_due()).min();
         let timeout = async {
             match deadline {
                 Some(at) => Timer::at(embassy_time::Instant::from_micros(at.as_micros())).await,
@@ -283,10 +280,7 @@ pub async fn modbus(drive: &'static mut Drive, mut serial: Serial, store: &'stat
                 let now = now();
                 before_request(drive).await;
                 drive.on_timer(now);
-                let state = drive.state_mut();
-                if state.service_due().is_some_and(|due| now >= due) {
-                    state.service(now);
-                }
+                drive.state_mut().service(now);
             }
             Either3::Third(()) => sync(drive).await,
         }
@@ -331,7 +325,7 @@ pub async fn modbus(drive: &'static mut Drive, mut serial: Serial, store: &'stat
             // silence's pace.
             Either3::Second(()) => {
                 let now = now();
-                if drive.state().service_due().is_some_and(|due| now >= due) {
+                if drive.state().service_is_due(now) {
                     sync(drive).await;
                     drive.state_mut().service(now);
                     after_request(drive, &mut serial, store).await;

@@ -322,7 +322,8 @@ impl Plant {
         self.last_inputs = Some(inputs);
         let Some(tick) = &mut self.tick else {
             let out = self.drive.tick_with(now, &inputs);
-            self.service(now);
+            // The bus side's work in time, as a board's bus task does when its timer wakes it.
+            self.drive.state_mut().service(now);
             return out;
         };
         if self.drive.has_changes() {
@@ -330,17 +331,8 @@ impl Plant {
         }
         let out = tick.tick(now, &inputs, self.drive.state().table());
         self.drive.sync_here(tick, now.plus_micros(TICK_MICROS));
-        self.service(now);
+        self.drive.state_mut().service(now);
         out
-    }
-
-    /// The bus side's work in time (a homing's checks) when it is due, as a board's bus task
-    /// does when its timer wakes it.
-    fn service(&mut self, now: Instant) {
-        let state = self.drive.state_mut();
-        if state.service_due().is_some_and(|due| now >= due) {
-            state.service(now);
-        }
     }
 
     /// Starts the plant's clock at `t` instead of 0: a drive powered up while others on its bus

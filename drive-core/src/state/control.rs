@@ -350,10 +350,13 @@ impl<P: Borrow<Table>> DriveState<P> {
         self.homing_service();
     }
 
-    /// What the bus side does in time, without a request: a homing's checks, the analog
-    /// input's readings and targets. Due at
-    /// [`DriveState::service_due`].
+    /// What the bus side does in time, without a request, if it is due at `now` (see
+    /// [`DriveState::service_due`]): a homing's checks, the analog input's readings and
+    /// targets. A platform calls it whenever its timer wakes it.
     pub fn service(&mut self, now: Instant) {
+        if !self.service_is_due(now) {
+            return;
+        }
         self.now = now;
         self.homing_service();
         self.analog_service();
@@ -362,10 +365,13 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// When [`DriveState::service`] has something to do: a homing's checks, the analog input's
     /// next reading.
     pub fn service_due(&self) -> Option<Instant> {
-        match (self.homing_due(), self.analog_due()) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
-        }
+        self.homing_due().into_iter().chain(self.analog_due()).min()
+    }
+
+    /// Whether [`DriveState::service`] has something to do at `now`: for a platform that must
+    /// sync the model first, and so asks before.
+    pub fn service_is_due(&self, now: Instant) -> bool {
+        self.service_due().is_some_and(|due| now >= due)
     }
 
     /// Lends the model of the controller to a control tick that owns a controller of its own,
