@@ -160,6 +160,10 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
         if let Some(b) = config.baud {
             set(Obj::BaudRate, b.get());
         }
+        if map.starts_disabled() {
+            // CiA 402: switch on disabled at power-up, whatever the enable holds.
+            set(Obj::Enable, 0);
+        }
         let get = |obj: Obj| values.get(obj as usize).copied().unwrap_or(0);
         let faults = FaultLog::restored(&params.fault_history());
         // The serial settings in force are those of power-up; writes take effect at the next one.
@@ -183,6 +187,13 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
                 table,
             ),
         }
+    }
+
+    /// The same drive answering through the map `f` makes of its own (the native map into
+    /// [`Maps`](crate::maps::Maps), say).
+    pub fn map_into<N: RegisterMap>(self, f: impl FnOnce(M) -> N) -> Drive<N, P> {
+        let Self { framer, address, baud, listen_only, counters, tx, tx_len, map, state } = self;
+        Drive { framer, address, baud, listen_only, counters, tx, tx_len, map: f(map), state }
     }
 
     /// The address this drive answers to.
@@ -349,7 +360,7 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
             counters.no_responses = counters.no_responses.wrapping_add(1);
             return;
         }
-        let request = Request::parse(pdu);
+        let request = Request::parse(pdu).map_err(|e| map.request_exception(e));
         let mut server = Server { map, state, counters, listen_only };
         if broadcast || *server.listen_only {
             // Execute what may execute without an answer, and answer nothing.
@@ -457,7 +468,14 @@ impl<M: RegisterMap, P: Borrow<Table>> Server<'_, M, P> {
                 self.read(read_addr, read_qty, out)
             }
             Request::Diagnostics { sub, data } => self.diagnostics(sub, data, out),
-            Request::ReadDeviceId { code, object } => device_id(self.state.identity(), code, object, out),
+            Request::ReadDeviceId { code, object } => {
+                // The application name says which map answers.
+                let mut id = *self.state.identity();
+                if let Some(name) = self.map.application_name() {
+                    id.user_application_name = name;
+                }
+                device_id(&id, code, object, out)
+            }
         }
     }
 

@@ -30,6 +30,7 @@ pub mod modes;
 pub mod motion;
 pub mod od;
 pub mod pdu;
+pub mod power;
 pub mod rtu;
 pub mod servo;
 pub mod state;

@@ -21,14 +21,17 @@ pub enum WorkMode {
     ProfilePosition = 4,
     /// Profile velocity (5, CiA 402 PV).
     ProfileVelocity = 5,
+    /// Homing (6, CiA 402's homing mode, ours): the device controlword's bit 4 starts the homing
+    /// of 0x2160, bit 8 halts it.
+    Homing = 6,
 }
 
 impl WorkMode {
     /// Every mode.
-    pub const ALL: [Self; 5] =
-        [Self::Position, Self::Velocity, Self::Pvt, Self::ProfilePosition, Self::ProfileVelocity];
+    pub const ALL: [Self; 6] =
+        [Self::Position, Self::Velocity, Self::Pvt, Self::ProfilePosition, Self::ProfileVelocity, Self::Homing];
     /// Every mode's value, for the object's declared set.
-    pub const RAW: [u32; 5] = [0, 1, 2, 4, 5];
+    pub const RAW: [u32; 6] = [0, 1, 2, 4, 5, 6];
 
     /// The mode of a register value, if it is one.
     pub const fn from_raw(v: u32) -> Option<Self> {
@@ -38,6 +41,7 @@ impl WorkMode {
             2 => Some(Self::Pvt),
             4 => Some(Self::ProfilePosition),
             5 => Some(Self::ProfileVelocity),
+            6 => Some(Self::Homing),
             _ => None,
         }
     }

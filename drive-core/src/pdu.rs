@@ -18,6 +18,9 @@ pub enum Exception {
     IllegalDataValue,
     /// 04: the drive cannot carry out a valid request in its present state.
     ServerDeviceFailure,
+    /// 03 as well: a write's byte count is not twice its quantity (a map may answer it with a
+    /// code of its own).
+    ByteCount,
     /// A code of another vendor's map.
     Vendor(u8),
 }
@@ -28,7 +31,7 @@ impl Exception {
         match self {
             Exception::IllegalFunction => 1,
             Exception::IllegalDataAddress => 2,
-            Exception::IllegalDataValue => 3,
+            Exception::IllegalDataValue | Exception::ByteCount => 3,
             Exception::ServerDeviceFailure => 4,
             Exception::Vendor(c) => c,
         }
@@ -192,8 +195,11 @@ impl<'a> Request<'a> {
 fn counted(data: &[u8], at: usize, qty: u16, max: u16) -> Result<Words<'_>, Exception> {
     let count = *data.get(at).ok_or(Exception::IllegalDataValue)?;
     let values = data.get(at + 1..).unwrap_or_default();
-    if !(1..=max).contains(&qty) || usize::from(count) != 2 * usize::from(qty) || values.len() != usize::from(count) {
+    if !(1..=max).contains(&qty) {
         return Err(Exception::IllegalDataValue);
+    }
+    if usize::from(count) != 2 * usize::from(qty) || values.len() != usize::from(count) {
+        return Err(Exception::ByteCount);
     }
     Ok(Words::new(values))
 }

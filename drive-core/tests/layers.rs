@@ -38,8 +38,8 @@ fn assert_only(module: &str, allowed: &[&str]) {
 
 #[test]
 fn the_lower_layers_import_nothing_from_above() {
-    // Leaves: units, checksums, the PDU's types, identification, modes.
-    for leaf in ["units", "crc", "pdu", "ident", "modes"] {
+    // Leaves: units, checksums, the PDU's types, identification, modes, the power states.
+    for leaf in ["units", "crc", "pdu", "ident", "modes", "power"] {
         assert_only(leaf, &[]);
     }
     assert_only("rtu", &["crc", "units"]);
@@ -55,12 +55,13 @@ fn the_lower_layers_import_nothing_from_above() {
 }
 
 /// Every top-level module of drive-core.
-const MODULES: [&str; 16] = [
+const MODULES: [&str; 17] = [
     "units",
     "crc",
     "pdu",
     "ident",
     "modes",
+    "power",
     "rtu",
     "motion",
     "od",

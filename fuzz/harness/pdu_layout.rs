@@ -9,23 +9,23 @@
 //! layout's model of that register says (the object's value scaled, in the layout's word order).
 
 use super::oracle::{self, ADDR};
-use drive_core::maps::layout::{Entry, Exceptions, FULL_STEPS_PER_REV, Layout, LayoutMap, Scale, WordOrder};
+use drive_core::maps::layout::{Entry, Exceptions, FULL_STEPS_PER_REV, Layout, LayoutMap, Scale, Walk, WordOrder};
 use drive_core::od::{OBJECTS, Obj, Type};
 use drive_core::pdu::Exception;
 use drive_core::{Drive, DriveConfig, Instant};
 
 /// The layout's objects (shared with `drive-core/tests/layout_map.rs`).
 pub static ENTRIES: [Entry; 10] = [
-    Entry { addr: 0x0000, obj: Obj::Mode, scale: Scale::One },
-    Entry { addr: 0x0001, obj: Obj::MaxSpeed, scale: Scale::PerRev(1, 10) },
-    Entry { addr: 0x0003, obj: Obj::AbsoluteMove, scale: Scale::One },
-    Entry { addr: 0x0005, obj: Obj::RelativeMove, scale: Scale::One },
-    Entry { addr: 0x0007, obj: Obj::Position, scale: Scale::One },
-    Entry { addr: 0x0009, obj: Obj::Microsteps, scale: Scale::One },
-    Entry { addr: 0x000A, obj: Obj::Enable, scale: Scale::One },
-    Entry { addr: 0x000B, obj: Obj::PhaseCurrent, scale: Scale::Ratio(100, 1) },
-    Entry { addr: 0x000C, obj: Obj::EncoderPosition, scale: Scale::One },
-    Entry { addr: 0x000E, obj: Obj::ControllerStatus, scale: Scale::One },
+    Entry::new(0x0000, Obj::Mode, Scale::One),
+    Entry::new(0x0001, Obj::MaxSpeed, Scale::PerRev(1, 10)),
+    Entry::new(0x0003, Obj::AbsoluteMove, Scale::One),
+    Entry::new(0x0005, Obj::RelativeMove, Scale::One),
+    Entry::new(0x0007, Obj::Position, Scale::One),
+    Entry::new(0x0009, Obj::Microsteps, Scale::One),
+    Entry::new(0x000A, Obj::Enable, Scale::One),
+    Entry::new(0x000B, Obj::PhaseCurrent, Scale::Ratio(100, 1)),
+    Entry::new(0x000C, Obj::EncoderPosition, Scale::One),
+    Entry::new(0x000E, Obj::ControllerStatus, Scale::One),
 ];
 
 /// The layout: low word first, vendor codes for the refusals.
@@ -42,7 +42,12 @@ pub static LAYOUT: Layout = Layout {
         not_now: Exception::Vendor(0x0E),
         infeasible: Exception::Vendor(0x0F),
         unsupported: Exception::IllegalFunction,
+        write_only: Exception::IllegalDataAddress,
+        split: Exception::IllegalDataAddress,
+        byte_count: Exception::IllegalDataValue,
     },
+    walk: Walk::Address,
+    halves: true,
 };
 
 /// Every code the layout answers, and the request-level ones.
@@ -69,6 +74,8 @@ fn model(drive: &Drive<LayoutMap>, reg: u32) -> Option<u16> {
         Scale::One => v,
         Scale::Ratio(n, den) => round(v * den, n),
         Scale::PerRev(n, den) => round(v * den, n * per_rev),
+        // The layout has no enumeration.
+        Scale::Table(_) => v,
     } as u32;
     let k = reg - u32::from(e.addr);
     Some(if d.words() == 2 && k == 1 { (scaled >> 16) as u16 } else { scaled as u16 })

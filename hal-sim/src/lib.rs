@@ -54,9 +54,13 @@ use std::time::Duration;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
+use drive_core::maps::Maps;
 use drive_core::od::{Obj, Range};
 use drive_core::store::Store;
-use drive_core::{Baud, Drive, DriveConfig, Instant, SlaveAddr};
+use drive_core::{Baud, DriveConfig, Instant, SlaveAddr};
+
+/// The simulator's drive: whichever register map 0x2190 (or `--map`) chose.
+pub type Drive = drive_core::Drive<Maps>;
 use nix::errno::Errno;
 use nix::fcntl::{FcntlArg, OFlag, fcntl};
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
@@ -130,6 +134,10 @@ pub struct SimOptions {
     pub machine: machine::Machine,
     /// Hard stops at these rotor positions, full steps from the power-up position (`--hard-stop`).
     pub hard_stops: (Option<f64>, Option<f64>),
+    /// The register map's number (0x2190) for this run, instead of the saved one (`--map`).
+    pub map: Option<u8>,
+    /// Simulated seconds a wall-clock second (`--time-scale`; 0 or 1: real time).
+    pub time_scale: u32,
 }
 
 /// The trace or flash file of the drive at `address` when several share the bus: `-axisN`
@@ -193,6 +201,8 @@ pub struct Simulator {
     port: Port,
     endpoint: String,
     snapshots: Vec<Arc<Mutex<Snapshot>>>,
+    /// Simulated seconds a wall second.
+    time_scale: u32,
 }
 
 /// The open endpoint.
@@ -222,7 +232,7 @@ impl Simulator {
             }
         };
         let snapshots = plants.iter().map(|_| Arc::default()).collect();
-        Ok(Simulator { plants, stores, port, endpoint, snapshots })
+        Ok(Simulator { plants, stores, port, endpoint, snapshots, time_scale: opts.time_scale })
     }
 
     /// Where masters reach the drive: `/dev/pts/N`, or the bound `HOST:PORT`.
@@ -285,8 +295,8 @@ impl Simulator {
     /// [`Simulator::run`] until `off` is set (seen within a millisecond while a master is
     /// connected, at the next connection attempt while none is over TCP).
     fn run_until(self, off: &AtomicBool) -> io::Result<()> {
-        let Simulator { mut plants, mut stores, port, snapshots, .. } = self;
-        let clock = Clock::start();
+        let Simulator { mut plants, mut stores, port, snapshots, time_scale, .. } = self;
+        let clock = Clock::start(time_scale);
         let mut sim = Sim { plants: &mut plants, stores: &mut stores, snapshots: &snapshots, off };
         match port {
             Port::Pty { master, slave } => {
@@ -349,9 +359,10 @@ pub fn store(flash: SimFlash) -> io::Result<Store<SimFlash>> {
 
 /// Powers the drive up on `store` ([`Store::power_up`]): the saved parameters, or with
 /// `fset_low` the factory values, saved.
-pub fn boot(store: &mut Store<SimFlash>, config: DriveConfig, fset_low: bool) -> Drive {
+pub fn boot(store: &mut Store<SimFlash>, config: DriveConfig, fset_low: bool, map: Option<u8>) -> Drive {
     let loaded = block_on(store.power_up(fset_low));
-    Drive::boot(config, &loaded.params, loaded.status)
+    let map = Maps::by_id(map.map_or(loaded.params.get(Obj::RegisterMap), u32::from));
+    Drive::boot_with_map(config, map, &loaded.params, loaded.status)
 }
 
 /// Does what the drive asks of its platform ([`Store::serve`]); failures are logged (the drive
@@ -368,7 +379,11 @@ pub fn serve_request(drive: &mut Drive, store: &mut Store<SimFlash>) {
 /// The drives and motors `opts` ask for, traces open, without parameter stores (a save is
 /// refused with 04): for batch runs.
 pub fn plants(opts: &SimOptions) -> io::Result<Vec<Plant>> {
-    Ok(build(opts, |_, config| Ok((Drive::new(config), ())))?.into_iter().map(|(plant, ())| plant).collect())
+    let map = Maps::by_id(opts.map.map_or(0, u32::from));
+    Ok(build(opts, |_, config| Ok((Drive::with_map(config, map.clone()), ())))?
+        .into_iter()
+        .map(|(plant, ())| plant)
+        .collect())
 }
 
 /// The drives and motors `opts` ask for, traces open, each powered up from its own store: the
@@ -386,7 +401,7 @@ fn powered(opts: &SimOptions) -> io::Result<Vec<(Plant, Store<SimFlash>)>> {
             None => SimFlash::erased(PAGES),
         };
         let mut store = store(flash)?;
-        let drive = boot(&mut store, DriveConfig { can_save: true, ..config }, opts.fset_low);
+        let drive = boot(&mut store, DriveConfig { can_save: true, ..config }, opts.fset_low, opts.map);
         Ok((drive, store))
     })
 }
@@ -498,6 +513,8 @@ fn make_link(target: &Path, link: &Path) -> io::Result<()> {
 /// master connected passes in full.
 struct Clock {
     origin: std::time::Instant,
+    /// Simulated seconds a wall second.
+    scale: u64,
     /// Wall time not simulated.
     lost: Cell<Duration>,
     /// The simulated time of the serving loop's last step; `None` after it stopped serving.
@@ -508,14 +525,20 @@ struct Clock {
 const MAX_STEP: u64 = 100_000;
 
 impl Clock {
-    fn start() -> Self {
-        Self { origin: std::time::Instant::now(), lost: Cell::new(Duration::ZERO), last: Cell::new(None) }
+    fn start(scale: u32) -> Self {
+        let scale = u64::from(scale.max(1));
+        Self { origin: std::time::Instant::now(), scale, lost: Cell::new(Duration::ZERO), last: Cell::new(None) }
     }
 
-    /// Wall time since the start, less the time lost.
+    /// Wall time since the start, less the time lost, times the scale.
     fn now(&self) -> Instant {
         let t = self.origin.elapsed().saturating_sub(self.lost.get());
-        Instant::from_micros(u64::try_from(t.as_micros()).unwrap_or(u64::MAX))
+        Instant::from_micros(u64::try_from(t.as_micros()).unwrap_or(u64::MAX).saturating_mul(self.scale))
+    }
+
+    /// The wall time `sim_us` of simulated time takes.
+    fn wall(&self, sim_us: u64) -> Duration {
+        Duration::from_micros(sim_us.div_ceil(self.scale))
     }
 
     /// The time of the serving loop's next step: [`Clock::now`], or [`MAX_STEP`] after the last
@@ -523,8 +546,8 @@ impl Clock {
     fn step(&self) -> Instant {
         let mut now = self.now();
         if let Some(last) = self.last.get() {
-            let late = now.since(last).saturating_sub(MAX_STEP);
-            self.lost.set(self.lost.get() + Duration::from_micros(late));
+            let late = now.since(last).saturating_sub(MAX_STEP * self.scale);
+            self.lost.set(self.lost.get() + self.wall(late));
             now = Instant::from_micros(now.as_micros() - late);
         }
         self.last.set(Some(now));
@@ -657,7 +680,8 @@ fn serve_steps(sim: &mut Sim<'_>, clock: &Clock, line: &mut impl Line) -> io::Re
             let wake = deadline.map_or(pace, |d| d.min(pace));
             match poll(
                 &mut fds,
-                PollTimeout::try_from(poll_wait(wake, clock.now()).as_millis()).unwrap_or(PollTimeout::MAX),
+                PollTimeout::try_from(poll_wait(wake, clock.now()).as_millis().div_ceil(u128::from(clock.scale)))
+                    .unwrap_or(PollTimeout::MAX),
             ) {
                 Ok(0) | Err(Errno::EINTR) => false,
                 Ok(_) => true,
@@ -694,7 +718,7 @@ fn settle(sim: &mut Sim<'_>, clock: &Clock) {
                 let _ = sim.timer::<TcpLine>(now, None);
                 sim.serve_requests();
             }
-            wait => thread::sleep(Duration::from_micros(wait)),
+            wait => thread::sleep(clock.wall(wait)),
         }
     }
 }
@@ -810,7 +834,7 @@ mod tests {
 
     #[test]
     fn a_stall_beyond_one_step_is_not_simulated_and_idle_time_passes() {
-        let clock = Clock::start();
+        let clock = Clock::start(1);
         let first = clock.step();
         thread::sleep(Duration::from_millis(150));
         let second = clock.step();
@@ -825,10 +849,10 @@ mod tests {
     fn options_reach_the_drive() {
         let opts = SimOptions { address: Some(7), baud: Some(115_200), ..Default::default() };
         let config = drive_config(&opts).unwrap();
-        let drive = Drive::new(config);
+        let drive = drive_core::Drive::new(config);
         assert_eq!(drive.address().get(), 7);
         assert_eq!(drive.baud().get(), 115_200);
-        let factory = Drive::new(drive_config(&SimOptions::default()).unwrap());
+        let factory = drive_core::Drive::new(drive_config(&SimOptions::default()).unwrap());
         assert_eq!((factory.address().get(), factory.baud().get()), (1, 9600));
     }
 

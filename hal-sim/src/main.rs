@@ -93,6 +93,14 @@ struct Args {
     /// ±NOISE V), `ramp=FROM/TO/S` or `sine=MID/AMP/PERIOD_S`.
     #[arg(long, value_name = "SPEC", value_parser = hal_sim::machine::Analog::parse)]
     analog: Option<hal_sim::machine::Analog>,
+    /// The register map to answer with for this run, instead of the saved 0x2190: `native`
+    /// (seed 000) or `jmc` (seed 001).
+    #[arg(long, value_name = "NAME", value_parser = parse_map)]
+    map: Option<u8>,
+    /// Simulated seconds a wall-clock second while masters talk (1: real time): long moves of
+    /// a manual's routine in a test's time.
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    time_scale: u32,
     /// Record time, commanded and rotor position and velocity, and phase currents as CSV.
     #[arg(long, value_name = "FILE.csv")]
     trace: Option<PathBuf>,
@@ -116,6 +124,16 @@ fn parse_hard_stops(s: &str) -> Result<(Option<f64>, Option<f64>), String> {
         if t.trim().is_empty() { Ok(None) } else { t.trim().parse().map(Some).map_err(|e| format!("{t:?}: {e}")) }
     };
     Ok((side(low)?, side(high)?))
+}
+
+/// A map's number (0x2190) from its name.
+fn parse_map(name: &str) -> Result<u8, String> {
+    let names = drive_core::maps::NAMES;
+    names
+        .iter()
+        .position(|n| *n == name)
+        .map(|i| i as u8)
+        .ok_or_else(|| format!("{name:?}: one of {}", names.join(", ")))
 }
 
 /// The addresses of `--axes`.
@@ -165,6 +183,7 @@ fn main() -> ExitCode {
             encoder: args.encoder,
             machine,
             hard_stops,
+            map: args.map,
             ..Default::default()
         };
         return run_script(path, &opts);
@@ -185,6 +204,8 @@ fn main() -> ExitCode {
         encoder: args.encoder,
         machine,
         hard_stops,
+        map: args.map,
+        time_scale: args.time_scale,
     };
     let sim = match Simulator::bind(opts) {
         Ok(sim) => sim,

@@ -14,11 +14,12 @@ use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::path::Path;
 
+use crate::Drive;
+use drive_core::Instant;
 use drive_core::control::{Outputs, TICK_MICROS};
 use drive_core::controller::handoff::TickSide;
 use drive_core::faults::Inputs;
 use drive_core::od::{Obj, ObjError};
-use drive_core::{Drive, Instant};
 
 use crate::encoder::{Encoder, EncoderKind};
 use crate::inject::{Change, Injector, Scheduled, Supply};
@@ -85,6 +86,25 @@ pub fn driver_command(out: &Outputs) -> DriverCommand {
     }
 }
 
+/// A drive the plant can run: the simulator's, or one with the native map (which it answers
+/// through the same map).
+pub trait IntoDrive {
+    /// The simulator's drive.
+    fn into_drive(self) -> Drive;
+}
+
+impl IntoDrive for Drive {
+    fn into_drive(self) -> Drive {
+        self
+    }
+}
+
+impl IntoDrive for drive_core::Drive {
+    fn into_drive(self) -> Drive {
+        self.map_into(drive_core::maps::Maps::Native)
+    }
+}
+
 impl Plant {
     /// `drive` and `motor`, at time 0, with the default encoder (`inc:1000`) and the driver at
     /// [`AMBIENT_C`].
@@ -92,14 +112,16 @@ impl Plant {
     /// The control tick owns a controller of its own, synced with the drive's model before a
     /// tick that has something to take in and after every tick, as the firmware does at its
     /// syncs: what the master and the tests see goes through the handoff.
-    pub fn new(drive: Drive, motor: Motor) -> Self {
+    pub fn new(drive: impl IntoDrive, motor: Motor) -> Self {
+        let drive = drive.into_drive();
         let tick = Some(drive.state().tick_side());
         Self { tick, ..Self::combined(drive, motor) }
     }
 
     /// [`Plant::new`] with the drive's own controller ticked (no handoff): what the handoff is
     /// compared against.
-    pub fn combined(drive: Drive, motor: Motor) -> Self {
+    pub fn combined(drive: impl IntoDrive, motor: Motor) -> Self {
+        let drive = drive.into_drive();
         let supply = Supply::steady(motor.inputs().supply_v);
         let encoder = Encoder::new(EncoderKind::default(), &motor);
         Self {

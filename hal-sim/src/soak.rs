@@ -31,12 +31,13 @@ use std::collections::VecDeque;
 use std::fmt;
 use std::time::{Duration, Instant as WallClock};
 
+use crate::Drive;
 use drive_core::control::TICK_MICROS;
 use drive_core::crc::crc16;
 use drive_core::drive::{STATUS_BUSY, STORAGE_SAVE_FAILED, STORAGE_SAVING};
 use drive_core::od::{Access, OBJECTS, Obj, Storage};
 use drive_core::store::Store;
-use drive_core::{Baud, Drive, DriveConfig, Instant, Params, SlaveAddr};
+use drive_core::{Baud, DriveConfig, Instant, Params, SlaveAddr};
 
 use crate::flash::{PAGES, SimFlash, Tear, block_on};
 use crate::inject::Change;
@@ -339,7 +340,10 @@ impl Soak {
             let store = crate::store(SimFlash::erased(PAGES)).map_err(|e| e.to_string())?;
             let mut axis = Axis {
                 addr,
-                plant: Plant::new(Drive::factory(), Motor::new(soak.motor.clone(), MotorInputs::default())),
+                plant: Plant::new(
+                    Drive::with_map(DriveConfig::default(), drive_core::maps::Maps::by_id(0)),
+                    Motor::new(soak.motor.clone(), MotorInputs::default()),
+                ),
                 store,
                 ustep: 1,
                 rom: Params::factory(),
@@ -365,7 +369,7 @@ impl Soak {
     fn boot(&self, store: &mut Store<SimFlash>, addr: u8) -> Plant {
         let config =
             DriveConfig { address: SlaveAddr::new(addr), baud: Baud::new(BAUD), can_save: true, ..Default::default() };
-        let drive = crate::boot(store, config, false);
+        let drive = crate::boot(store, config, false, None);
         let mut plant = Plant::new(drive, Motor::new(self.motor.clone(), MotorInputs::default()));
         // The plant's clock starts at the bus's time.
         plant.start_at(Instant::from_micros(self.now));

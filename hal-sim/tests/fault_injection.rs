@@ -143,7 +143,7 @@ fn the_fault_history_survives_a_power_cycle() {
     let params = MotorCatalog::builtin().get(DEFAULT_MOTOR).cloned().expect("catalogue motor");
     let config = DriveConfig { can_save: true, ..Default::default() };
     let mut store = hal_sim::store(SimFlash::erased(PAGES)).expect("store");
-    let drive = hal_sim::boot(&mut store, config, false);
+    let drive = hal_sim::boot(&mut store, config, false, None);
     let mut p = Plant::new(drive, Motor::new(params.clone(), MotorInputs::default()));
     run(&mut p, 0.05);
     p.inject(Change::Phase(0, PhaseFault::Open));
@@ -164,7 +164,7 @@ fn the_fault_history_survives_a_power_cycle() {
     // Power cycle on the same flash.
     let bytes = store.into_flash().bytes().to_vec();
     let mut store = hal_sim::store(SimFlash::from_bytes(bytes)).expect("store");
-    let drive = hal_sim::boot(&mut store, config, false);
+    let drive = hal_sim::boot(&mut store, config, false, None);
     let mut p = Plant::new(drive, Motor::new(params, MotorInputs::default()));
     assert_eq!(history(&p), before);
     assert_eq!(read(&p, Obj::AlarmCount), 2);

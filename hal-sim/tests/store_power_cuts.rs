@@ -225,7 +225,7 @@ fn a_hundred_thousand_saves_spread_wear_over_the_pages() {
 fn a_failed_save_shows_in_the_status_and_keeps_the_old_set() {
     let mut store = store_on(SimFlash::erased(PAGES));
     block_on(store.save(&set(1))).expect("save");
-    let mut drive = hal_sim::boot(&mut store, DriveConfig { can_save: true, ..Default::default() }, false);
+    let mut drive = hal_sim::boot(&mut store, DriveConfig { can_save: true, ..Default::default() }, false, None);
     let st = drive.state_mut();
     st.check(Obj::PhaseCurrent, 2000).expect("in range");
     st.apply(Obj::PhaseCurrent, 2000);
@@ -241,7 +241,7 @@ fn a_failed_save_shows_in_the_status_and_keeps_the_old_set() {
 fn the_power_down_position_is_saved_when_enabled() {
     let mut store = store_on(SimFlash::erased(PAGES));
     block_on(store.save(&set(2))).expect("save");
-    let mut drive = hal_sim::boot(&mut store, DriveConfig { can_save: true, ..Default::default() }, false);
+    let mut drive = hal_sim::boot(&mut store, DriveConfig { can_save: true, ..Default::default() }, false, None);
     let st = drive.state_mut();
     assert!(st.set_position(98_765));
     assert!(!st.power_lost(), "0x605E is off");

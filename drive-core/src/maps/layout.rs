@@ -14,8 +14,8 @@
 //! use drive_core::maps::layout::{Entry, Exceptions, Layout, LayoutMap, Scale, WordOrder};
 //! use drive_core::od::Obj;
 //! use drive_core::{Drive, DriveConfig, Instant};
-//! static ENTRIES: [Entry; 1] = [Entry { addr: 0x0100, obj: Obj::PhaseCurrent, scale: Scale::Ratio(100, 1) }];
-//! static LAYOUT: Layout = Layout { entries: &ENTRIES, order: WordOrder::LowFirst, exceptions: Exceptions::MODBUS };
+//! static ENTRIES: [Entry; 1] = [Entry::new(0x0100, Obj::PhaseCurrent, Scale::Ratio(100, 1))];
+//! static LAYOUT: Layout = Layout::by_address(&ENTRIES, WordOrder::LowFirst, Exceptions::MODBUS);
 //! let mut drive = Drive::with_map(DriveConfig::default(), LayoutMap::new(&LAYOUT));
 //! // Write 12 (× 100 mA) to register 0x0100 of node 1.
 //! drive.on_rx(Instant::from_micros(0), &[0x01, 0x06, 0x01, 0x00, 0x00, 0x0C, 0x88, 0x33]);
@@ -24,7 +24,7 @@
 //! assert_eq!(drive.state().read(Obj::PhaseCurrent), 1200);
 //! ```
 
-use super::native::{Op, RegisterMap};
+use super::native::{Op, RegisterMap, STAGE_SLOT, STAGE_SLOTS};
 use crate::motion::cubic::Table;
 use crate::od::{Access, Obj, ObjError, ObjectDef, Type};
 use crate::pdu::{Exception, Words};
@@ -41,6 +41,42 @@ pub enum WordOrder {
     HighFirst,
     /// Low word at the lower address.
     LowFirst,
+    /// As the setting 0x2191 says (0 high word first): a map whose manual makes it a register.
+    Setting,
+}
+
+/// How a multi-register request walks a layout.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Walk {
+    /// By register address: the entries are in address order, a request covers the addresses
+    /// from its start.
+    Address,
+    /// By the layout's list: a request starts at an entry's address and goes on through the
+    /// entries that follow it in the list, whatever their addresses (JMC's §8).
+    List,
+}
+
+/// One value of a [`Scale::Table`]: the map's values `lo..=hi` mean the drive's `drive`, which
+/// reads back as `lo`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Choice {
+    /// The lowest map value.
+    pub lo: i32,
+    /// The highest map value.
+    pub hi: i32,
+    /// The drive's value.
+    pub drive: i32,
+}
+
+/// What a layout lets a master do with an entry, beyond what its object allows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum View {
+    /// As the object declares.
+    Declared,
+    /// Read only.
+    ReadOnly,
+    /// Write only: a read is refused.
+    WriteOnly,
 }
 
 /// How a map's value becomes the drive's: `drive = map × scale`, rounded to the nearest.
@@ -54,6 +90,9 @@ pub enum Scale {
     /// speed in 0.1 rev/s is `PerRev(1, 10)` of the drive's microsteps a second). The
     /// revolution follows the microstep resolution 0x600C.
     PerRev(i64, i64),
+    /// An enumeration: the map's values and the drive's, one by one (a value not listed is out
+    /// of range).
+    Table(&'static [Choice]),
 }
 
 /// `n / d` rounded to the nearest (halves away from zero); `None` for `d == 0` or overflow.
@@ -70,20 +109,29 @@ impl Scale {
     /// The factor as a fraction, given the microsteps a revolution.
     const fn fraction(self, per_rev: i64) -> (i128, i128) {
         match self {
-            Scale::One => (1, 1),
+            Scale::One | Scale::Table(_) => (1, 1),
             Scale::Ratio(n, d) => (n as i128, d as i128),
             Scale::PerRev(n, d) => (n as i128 * per_rev as i128, d as i128),
         }
     }
 
     /// The drive's value of the map's `v`.
-    fn to_drive(self, v: i64, per_rev: i64) -> Option<i64> {
+    pub fn to_drive(self, v: i64, per_rev: i64) -> Option<i64> {
+        if let Scale::Table(choices) = self {
+            return choices
+                .iter()
+                .find(|c| (i64::from(c.lo)..=i64::from(c.hi)).contains(&v))
+                .map(|c| i64::from(c.drive));
+        }
         let (n, d) = self.fraction(per_rev);
         i64::try_from(div_round(i128::from(v).checked_mul(n)?, d)?).ok()
     }
 
     /// The map's value of the drive's `v`.
-    fn to_map(self, v: i64, per_rev: i64) -> Option<i64> {
+    pub fn to_map(self, v: i64, per_rev: i64) -> Option<i64> {
+        if let Scale::Table(choices) = self {
+            return choices.iter().find(|c| i64::from(c.drive) == v).map(|c| i64::from(c.lo));
+        }
         let (n, d) = self.fraction(per_rev);
         i64::try_from(div_round(i128::from(v).checked_mul(d)?, n)?).ok()
     }
@@ -98,6 +146,38 @@ pub struct Entry {
     pub obj: Obj,
     /// The map's unit against the drive's.
     pub scale: Scale,
+    /// What the map lets a master do with it.
+    pub view: View,
+    /// One register for a 32-bit object whose values the map keeps within 16 bits (a value
+    /// beyond them reads as 0xFFFF).
+    pub narrow: bool,
+}
+
+impl Entry {
+    /// `obj` at `addr`, in the map's unit `scale`, with the object's own access.
+    pub const fn new(addr: u16, obj: Obj, scale: Scale) -> Self {
+        Self { addr, obj, scale, view: View::Declared, narrow: false }
+    }
+
+    /// The entry, one register wide.
+    pub const fn narrow(self) -> Self {
+        Self { narrow: true, ..self }
+    }
+
+    /// Its registers.
+    pub fn words(&self) -> u32 {
+        if self.narrow { 1 } else { u32::from(self.obj.def().words()) }
+    }
+
+    /// The entry, read only.
+    pub const fn read_only(self) -> Self {
+        Self { view: View::ReadOnly, ..self }
+    }
+
+    /// The entry, write only.
+    pub const fn write_only(self) -> Self {
+        Self { view: View::WriteOnly, ..self }
+    }
 }
 
 /// The exception code a layout answers to each reason a request is refused.
@@ -121,6 +201,12 @@ pub struct Exceptions {
     pub infeasible: Exception,
     /// The drive does not do this.
     pub unsupported: Exception,
+    /// A read of a write-only entry.
+    pub write_only: Exception,
+    /// One half of a 32-bit object written alone, where the layout takes whole ones only.
+    pub split: Exception,
+    /// A write whose byte count is not twice its quantity.
+    pub byte_count: Exception,
 }
 
 impl Exceptions {
@@ -135,6 +221,9 @@ impl Exceptions {
         not_now: Exception::ServerDeviceFailure,
         infeasible: Exception::ServerDeviceFailure,
         unsupported: Exception::ServerDeviceFailure,
+        write_only: Exception::IllegalDataAddress,
+        split: Exception::IllegalDataAddress,
+        byte_count: Exception::IllegalDataValue,
     };
 
     /// The code for `e`.
@@ -153,30 +242,68 @@ impl Exceptions {
     }
 }
 
-/// A register layout: its entries in address order, without overlaps.
+/// A register layout: its entries, how requests walk them, and the codes of its refusals.
 #[derive(Clone, Copy, Debug)]
 pub struct Layout {
-    /// The objects, by increasing address.
+    /// The objects: by increasing address for [`Walk::Address`], in the manual's list order for
+    /// [`Walk::List`]; without overlaps.
     pub entries: &'static [Entry],
     /// The order of every 32-bit object's registers.
     pub order: WordOrder,
     /// The codes of the refusals.
     pub exceptions: Exceptions,
+    /// How a multi-register request walks the entries.
+    pub walk: Walk,
+    /// Whether a 32-bit object may be written one half at a time (staged); if not, such a
+    /// write is refused with [`Exceptions::split`].
+    pub halves: bool,
 }
 
 impl Layout {
-    /// The entry holding register `reg`, and the register's place in it (0 or 1).
-    fn at(&self, reg: u32) -> Option<(&Entry, u32)> {
-        let i = self.entries.partition_point(|e| u32::from(e.addr) <= reg).checked_sub(1)?;
-        let e = self.entries.get(i)?;
-        let k = reg - u32::from(e.addr);
-        (k < u32::from(e.obj.def().words())).then_some((e, k))
+    /// A layout walked by address that stages halves.
+    pub const fn by_address(entries: &'static [Entry], order: WordOrder, exceptions: Exceptions) -> Self {
+        Self { entries, order, exceptions, walk: Walk::Address, halves: true }
     }
 
-    /// Whether register `k` (0 or 1) of a 32-bit object is its high half.
-    const fn is_high(&self, k: u32) -> bool {
-        matches!((self.order, k), (WordOrder::HighFirst, 0) | (WordOrder::LowFirst, 1))
+    /// The entries a request of `qty` registers from `addr` covers, each with the place of its
+    /// first covered register in it (0 or 1) and how many of its registers are covered; `None`
+    /// if a register has no entry.
+    fn covered(&self, addr: u16, qty: u32, mut each: impl FnMut(&'static Entry, u32, u32)) -> Option<()> {
+        let entries: &'static [Entry] = self.entries;
+        let (mut i, mut k) = match self.walk {
+            Walk::Address => {
+                let i = entries.partition_point(|e| e.addr <= addr).checked_sub(1)?;
+                (i, u32::from(addr) - u32::from(entries.get(i)?.addr))
+            }
+            Walk::List => (entries.iter().position(|e| e.addr == addr)?, 0),
+        };
+        let mut left = qty;
+        let mut reg = u32::from(addr);
+        while left > 0 {
+            let e = entries.get(i)?;
+            if self.walk == Walk::Address && u32::from(e.addr) + k != reg {
+                return None;
+            }
+            let words = e.words();
+            if k >= words {
+                return None;
+            }
+            let n = (words - k).min(left);
+            each(e, k, n);
+            (left, reg, i, k) = (left - n, reg + n, i + 1, 0);
+        }
+        Some(())
     }
+}
+
+/// Whether register `k` (0 or 1) of a 32-bit object is its high half in `order`.
+fn is_high<P: Borrow<Table>>(order: WordOrder, drive: &DriveState<P>, k: u32) -> bool {
+    let high_first = match order {
+        WordOrder::HighFirst => true,
+        WordOrder::LowFirst => false,
+        WordOrder::Setting => drive.read(Obj::MapWordOrder) == 0,
+    };
+    (k == 0) == high_first
 }
 
 /// Microsteps a revolution at the drive's resolution (0x600C; 0 is full steps).
@@ -207,8 +334,8 @@ fn raw_of(d: &ObjectDef, v: i64) -> Option<u32> {
 #[derive(Clone, Debug)]
 pub struct LayoutMap {
     layout: &'static Layout,
-    /// The staged high half of each object, by object index.
-    staged: [Option<u16>; Obj::COUNT],
+    /// The staged high half of each 32-bit object, by its place in the native map's slots.
+    staged: [Option<u16>; STAGE_SLOTS],
 }
 
 /// The most objects one write can reach (123 registers).
@@ -217,7 +344,23 @@ const MAX_OBJECTS: usize = 123;
 impl LayoutMap {
     /// A map over `layout` with nothing staged.
     pub fn new(layout: &'static Layout) -> Self {
-        Self { layout, staged: [None; Obj::COUNT] }
+        Self { layout, staged: [None; STAGE_SLOTS] }
+    }
+
+    /// The layout.
+    pub fn layout(&self) -> &'static Layout {
+        self.layout
+    }
+
+    fn staged(&self, obj: Obj) -> Option<u16> {
+        let slot = STAGE_SLOT.get(obj as usize)?;
+        self.staged.get(usize::from(*slot)).copied().flatten()
+    }
+
+    fn set_staged(&mut self, obj: Obj, v: Option<u16>) {
+        if let Some(s) = STAGE_SLOT.get(obj as usize).and_then(|&slot| self.staged.get_mut(usize::from(slot))) {
+            *s = v;
+        }
     }
 
     /// The map's value of `e` now, as register bits (32 at most).
@@ -231,6 +374,7 @@ impl LayoutMap {
     /// The drive's raw value of the map's register bits `bits` for `e`.
     fn drive_value<P: Borrow<Table>>(&self, drive: &DriveState<P>, e: &Entry, bits: u32) -> Result<u32, ObjError> {
         let d = e.obj.def();
+        // The map's register is as wide as the object: signed as the object is.
         let v = e.scale.to_drive(signed(d, bits), per_rev(drive)).ok_or(ObjError::OutOfRange)?;
         raw_of(d, v).ok_or(ObjError::OutOfRange)
     }
@@ -242,65 +386,102 @@ impl LayoutMap {
         addr: u16,
         values: &Words<'_>,
         plan: &mut heapless::Vec<(&'static Entry, Op), MAX_OBJECTS>,
-    ) -> Result<(), ObjError> {
-        let end = u32::from(addr) + values.len() as u32;
-        let mut reg = u32::from(addr);
-        let word = |r: u32| values.get((r - u32::from(addr)) as usize).map(u32::from).ok_or(ObjError::Unknown);
-        while reg < end {
-            let (e, k) = self.layout.at(reg).ok_or(ObjError::Unknown)?;
-            let d = e.obj.def();
-            if d.access == Access::Ro || matches!(d.ty, Type::Str(_)) {
-                return Err(ObjError::ReadOnly);
+    ) -> Result<(), Exception> {
+        let ex = self.layout.exceptions;
+        let order = self.layout.order;
+        let mut at = 0usize;
+        let mut refused = None;
+        let walked = self.layout.covered(addr, values.len() as u32, |e, k, n| {
+            if refused.is_some() {
+                return;
             }
-            let op = if d.words() == 1 {
-                reg += 1;
-                Op::Commit(word(reg - 1)?)
-            } else {
-                let first = u32::from(e.addr);
-                let both = k == 0 && first + 1 < end;
-                let (hi_reg, lo_reg) = if self.layout.is_high(0) { (first, first + 1) } else { (first + 1, first) };
-                if both {
-                    reg = first + 2;
-                    Op::Commit(word(hi_reg)? << 16 | word(lo_reg)?)
-                } else if self.layout.is_high(k) {
-                    reg += 1;
-                    Op::Stage(word(reg - 1)? as u16)
-                } else {
-                    reg += 1;
-                    // The low half completes the staged high half, or the present one.
-                    let hi = match self.staged.get(e.obj as usize).copied().flatten() {
-                        Some(hi) => u32::from(hi),
-                        None => self.map_value(drive, e) >> 16,
-                    };
-                    Op::Commit(hi << 16 | word(reg - 1)?)
-                }
+            let d = e.obj.def();
+            let mut word = || {
+                at += 1;
+                values.get(at - 1).map_or(0, u32::from)
             };
-            plan.push((e, op)).map_err(|_| ObjError::Unknown)?;
+            let op = if d.access == Access::Ro || e.view == View::ReadOnly || matches!(d.ty, Type::Str(_)) {
+                Err(ex.read_only)
+            } else if e.words() == 1 {
+                Ok(Op::Commit(word()))
+            } else if n == 2 {
+                let (first, second) = (word(), word());
+                Ok(Op::Commit(if is_high(order, drive, 0) { first << 16 | second } else { second << 16 | first }))
+            } else if !self.layout.halves {
+                Err(ex.split)
+            } else if is_high(order, drive, k) {
+                Ok(Op::Stage(word() as u16))
+            } else {
+                // The low half completes the staged high half, or the present one.
+                let hi = match self.staged(e.obj) {
+                    Some(hi) => u32::from(hi),
+                    None => self.map_value(drive, e) >> 16,
+                };
+                Ok(Op::Commit(hi << 16 | word()))
+            };
+            match op {
+                Ok(op) => {
+                    if plan.push((e, op)).is_err() {
+                        refused = Some(ex.unknown);
+                    }
+                }
+                Err(x) => refused = Some(x),
+            }
+        });
+        match (refused, walked) {
+            (Some(x), _) => Err(x),
+            (None, None) => Err(ex.unknown),
+            (None, Some(())) => Ok(()),
         }
-        Ok(())
     }
 }
 
 impl RegisterMap for LayoutMap {
     fn read<P: Borrow<Table>>(&self, drive: &DriveState<P>, addr: u16, out: &mut [u8]) -> Result<(), Exception> {
-        for (slot, reg) in out.chunks_exact_mut(2).zip(u32::from(addr)..) {
-            let (e, k) = self.layout.at(reg).ok_or(self.layout.exceptions.unknown)?;
+        let ex = self.layout.exceptions;
+        let order = self.layout.order;
+        let qty = (out.len() / 2) as u32;
+        let mut slots = out.chunks_exact_mut(2);
+        let mut refused = None;
+        let walked = self.layout.covered(addr, qty, |e, k, n| {
+            if e.view == View::WriteOnly {
+                refused = refused.or(Some(ex.write_only));
+            }
+            let d = e.obj.def();
             let v = self.map_value(drive, e);
-            let w = if e.obj.def().words() == 1 {
-                v as u16
-            } else if self.layout.is_high(k) {
-                (v >> 16) as u16
-            } else {
-                v as u16
-            };
-            slot.copy_from_slice(&w.to_be_bytes());
+            for j in k..k + n {
+                let w = match d.ty {
+                    Type::Str(_) => drive.text_word(e.obj, j as usize),
+                    _ if e.narrow => v.min(0xFFFF) as u16,
+                    _ if d.words() == 1 => v as u16,
+                    _ if is_high(order, drive, j) => (v >> 16) as u16,
+                    _ => v as u16,
+                };
+                if let Some(slot) = slots.next() {
+                    slot.copy_from_slice(&w.to_be_bytes());
+                }
+            }
+        });
+        match (refused, walked) {
+            (Some(x), _) => Err(x),
+            (None, None) => Err(ex.unknown),
+            (None, Some(())) => Ok(()),
         }
-        Ok(())
     }
 
     fn check_read(&self, addr: u16, qty: u16) -> Result<(), Exception> {
-        let all = (u32::from(addr)..u32::from(addr) + u32::from(qty)).all(|r| self.layout.at(r).is_some());
-        if all { Ok(()) } else { Err(self.layout.exceptions.unknown) }
+        let ex = self.layout.exceptions;
+        let mut refused = None;
+        let walked = self.layout.covered(addr, u32::from(qty), |e, _, _| {
+            if e.view == View::WriteOnly {
+                refused = refused.or(Some(ex.write_only));
+            }
+        });
+        match (refused, walked) {
+            (Some(x), _) => Err(x),
+            (None, None) => Err(ex.unknown),
+            (None, Some(())) => Ok(()),
+        }
     }
 
     fn write<P: Borrow<Table>>(
@@ -311,7 +492,7 @@ impl RegisterMap for LayoutMap {
     ) -> Result<(), Exception> {
         let ex = self.layout.exceptions;
         let mut plan = heapless::Vec::new();
-        self.plan(drive, addr, &values, &mut plan).map_err(|e| ex.of(e))?;
+        self.plan(drive, addr, &values, &mut plan)?;
         // Each value in the drive's unit as the writes before it left the drive (a scale may
         // depend on an object written earlier in the request).
         drive
@@ -321,10 +502,15 @@ impl RegisterMap for LayoutMap {
             })
             .map_err(|e| ex.of(e))?;
         for &(e, op) in &plan {
-            if let Some(s) = self.staged.get_mut(e.obj as usize) {
-                *s = if let Op::Stage(hi) = op { Some(hi) } else { None };
-            }
+            self.set_staged(e.obj, if let Op::Stage(hi) = op { Some(hi) } else { None });
         }
         Ok(())
+    }
+
+    fn request_exception(&self, e: Exception) -> Exception {
+        match e {
+            Exception::ByteCount => self.layout.exceptions.byte_count,
+            e => e,
+        }
     }
 }

@@ -3,7 +3,92 @@
 //! addresses, word orders, scales and exception codes over the same objects.
 
 pub mod index;
+pub mod jmc;
 pub mod layout;
 pub mod native;
 
+use crate::motion::cubic::Table;
+use crate::pdu::{Exception, Words};
+use crate::state::DriveState;
+use core::borrow::Borrow;
+use layout::LayoutMap;
 pub use native::{NativeMap, RegisterMap};
+
+/// The maps' names, by their number in the register map object 0x2190.
+pub const NAMES: [&str; 2] = ["native", "jmc"];
+
+/// The map the drive answers with: the native one or a layout, as 0x2190 chose at power-up.
+#[derive(Clone, Debug)]
+pub enum Maps {
+    /// The native map (seed 000).
+    Native(NativeMap),
+    /// A compatibility map, from its layout.
+    Layout(LayoutMap),
+}
+
+impl Maps {
+    /// The map of 0x2190's value `id` (an unknown one is the native map).
+    pub fn by_id(id: u32) -> Self {
+        match id {
+            1 => Self::jmc(),
+            _ => Self::Native(NativeMap::new()),
+        }
+    }
+
+    /// The map named `name` ([`NAMES`]), if there is one.
+    pub fn by_name(name: &str) -> Option<Self> {
+        NAMES.iter().position(|n| *n == name).map(|id| Self::by_id(id as u32))
+    }
+
+    /// The JMC map (seed 001).
+    pub fn jmc() -> Self {
+        Self::Layout(LayoutMap::new(&jmc::LAYOUT))
+    }
+}
+
+impl RegisterMap for Maps {
+    fn read<P: Borrow<Table>>(&self, drive: &DriveState<P>, addr: u16, out: &mut [u8]) -> Result<(), Exception> {
+        match self {
+            Self::Native(m) => m.read(drive, addr, out),
+            Self::Layout(m) => m.read(drive, addr, out),
+        }
+    }
+
+    fn check_read(&self, addr: u16, qty: u16) -> Result<(), Exception> {
+        match self {
+            Self::Native(m) => m.check_read(addr, qty),
+            Self::Layout(m) => m.check_read(addr, qty),
+        }
+    }
+
+    fn write<P: Borrow<Table>>(
+        &mut self,
+        drive: &mut DriveState<P>,
+        addr: u16,
+        values: Words<'_>,
+    ) -> Result<(), Exception> {
+        match self {
+            Self::Native(m) => m.write(drive, addr, values),
+            Self::Layout(m) => m.write(drive, addr, values),
+        }
+    }
+
+    fn request_exception(&self, e: Exception) -> Exception {
+        match self {
+            Self::Native(m) => m.request_exception(e),
+            Self::Layout(m) => m.request_exception(e),
+        }
+    }
+
+    fn starts_disabled(&self) -> bool {
+        matches!(self, Self::Layout(_))
+    }
+
+    fn application_name(&self) -> Option<&'static str> {
+        match self {
+            Self::Native(_) => None,
+            Self::Layout(m) if core::ptr::eq(m.layout(), &jmc::LAYOUT) => Some("drive-core, JMC map (seed 001)"),
+            Self::Layout(_) => Some("drive-core, layout map"),
+        }
+    }
+}

@@ -21,6 +21,19 @@ pub trait RegisterMap {
         addr: u16,
         values: Words<'_>,
     ) -> Result<(), Exception>;
+    /// The code this map answers to a request the PDU layer refused (`e`: the Modbus code).
+    fn request_exception(&self, e: Exception) -> Exception {
+        e
+    }
+    /// Whether the drive powers up switch on disabled whatever 0x6011 holds (a CiA 402 map).
+    fn starts_disabled(&self) -> bool {
+        false
+    }
+    /// The application name device identification (0x2B, object 6) reports, if the map has
+    /// its own.
+    fn application_name(&self) -> Option<&'static str> {
+        None
+    }
 }
 
 /// The drive's native map (seed 000): register numbers are object addresses, 32-bit objects are
@@ -51,7 +64,7 @@ impl Default for NativeMap {
 }
 
 /// The objects that can be staged: the 32-bit ones.
-const STAGE_SLOTS: usize = {
+pub(super) const STAGE_SLOTS: usize = {
     let (mut n, mut i) = (0, 0);
     while i < OBJECTS.len() {
         #[allow(clippy::indexing_slicing)] // const evaluation: out of bounds is a compile error
@@ -66,7 +79,7 @@ const STAGE_SLOTS: usize = {
 /// Each object's place in [`NativeMap::staged`], in the order of the objects; `u8::MAX` for
 /// an object of one register, which is never staged. (One place an object would take 500 bytes
 /// of RAM for 36 objects that can be staged.)
-const STAGE_SLOT: [u8; Obj::COUNT] = {
+pub(super) const STAGE_SLOT: [u8; Obj::COUNT] = {
     let mut slot = [u8::MAX; Obj::COUNT];
     let (mut n, mut i) = (0u8, 0);
     while i < OBJECTS.len() {

@@ -19,6 +19,7 @@ pub(crate) const fn has_effect(obj: Obj) -> bool {
             | Obj::PpRunSpeed
             | Obj::ZeroOffset
             | Obj::HomingControl
+            | Obj::DeviceControl
     ) || is_pvt_command(obj)
 }
 

@@ -278,6 +278,38 @@ objects! {
     /// Analog speed dead band (our object): a new speed is taken only when it differs from the
     /// one in force by more than this.
     AnalogSpeedDeadband @ 0x2173: U16, Rw, Rom, Any, default 50, Pps, "analog speed dead band";
+    /// Device controlword (our object; CiA 402's 0x6040, the compatibility maps' controlword):
+    /// bits 0-3 and 7 command the power state machine of `drive_core::power` (shutdown 0x06,
+    /// switch on 0x07, enable operation 0x0F, disable voltage, quick stop, fault reset on bit
+    /// 7's rising edge); in operation enabled bits 4-6, 8 and 9 act as 0x6070's in the profile
+    /// modes, and in the homing mode (0x6007 = 6) bit 4's rising edge starts the homing of
+    /// 0x2160 and bit 8 halts it.
+    DeviceControl @ 0x2180: U16, Rw, Ram, Any, default 0, None, "device controlword";
+    /// Device statusword (our object; CiA 402's 0x6041): bits 0-6 the power state (see
+    /// `drive_core::power`), 7 warning (the supply below the free-wheel voltage), 8 halted, 9
+    /// moving, 10 target reached (PP: at rest on the target; PV: at the speed; homing: ended),
+    /// 11 the home switch, 12 set-point acknowledge (PP), speed 0 (PV), homed (homing), 13
+    /// following error (PP, closed loop) or homing error, 14 the negative limit switch, 15 the
+    /// positive one (switches as 0x216C assigns them).
+    DeviceStatus @ 0x2181: U16, Ro, Live, Any, default 0, None, "device statusword";
+    /// Quick stop option (our object; CiA 402's 0x605A): 0 the power stage off at once, 1 stop
+    /// at the profile's deceleration (0x6069) and 2 at 0x2183, both then to switch on disabled;
+    /// 5 and 6 the same, staying in quick stop active; 0xFFFF (-1) stop at once and stay
+    /// energised, then to switch on disabled.
+    QuickStopOption @ 0x2182: U16, Rw, Rom, Set(&crate::power::QuickStopOption::RAW), default 2, None, "quick stop option";
+    /// Quick stop deceleration (our object; CiA 402's 0x6085).
+    QuickStopDecel @ 0x2183: U32, Rw, Rom, Span(151, i32::MAX), default 320_000, Pps2, "quick stop deceleration";
+    /// Error register (our object; CiA 301's 0x1001): bit 0 any fault, 1 current (over-current,
+    /// overload), 2 voltage (under- or over-voltage), 3 temperature, 4 communication (the
+    /// timeout of 0x2137), 5 position error (closed loop), 7 a coil open. Read only.
+    ErrorRegister @ 0x2185: U8, Ro, Live, Any, default 0, None, "error register";
+    /// Register map (our object): which vendor's registers the drive answers to, from the next
+    /// power-up once saved (0x200F = 2): 0 native (seed 000), 1 JMC (seed 001). Every map has
+    /// it at this address, so a master can always switch back.
+    RegisterMap @ 0x2190: U8, Rw, Rom, Span(0, 1), default 0, None, "register map";
+    /// Word order of the compatibility maps that make it a setting (our object; JMC's 0x6000):
+    /// 0 high word first, 1 low word first.
+    MapWordOrder @ 0x2191: U8, Rw, Rom, Span(0, 1), default 0, None, "map word order";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake
@@ -295,8 +327,9 @@ objects! {
     /// direction of 0x6002; a negative count moves the opposite way. Signed as appendix 1 types
     /// it (INT32; chapter 5 prints U32): a master that writes -3200 means 3200 steps back.
     RelativeMove @ 0x6005: S32, Cmd, Ram, S32_ANY, default 0, Steps, "relative move";
-    /// Work mode: 0 position, 1 velocity, 2 PVT, 4 profile position (PP), 5 profile velocity (PV).
-    /// 3 (encoder follower) needs a special firmware and is refused.
+    /// Work mode: 0 position, 1 velocity, 2 PVT, 4 profile position (PP), 5 profile velocity (PV),
+    /// 6 homing (ours: the device controlword 0x2180 starts the homing of 0x2160). 3 (encoder
+    /// follower) needs a special firmware and is refused.
     Mode @ 0x6007: U8, Rw, Ram, Set(MODES), default 0, None, "work mode";
     /// Start speed of the S-curve (chapter 5 prints 0x6006, which collides with 0x6005..6).
     StartSpeed @ 0x6008: U16, Rw, Rom, Any, default 600, Pps, "start speed";

@@ -211,6 +211,8 @@ impl<P: Borrow<Table>> DriveState<P> {
         // An external stop latched, or a stall that stopped the motor: the master clears it first.
         let stall = if self.ctl.settings.stall_stop { STATUS_STALL } else { 0 };
         refuse(s.controller & (STATUS_EXT | stall) == 0 && s.comm == 0, ObjError::Faulted)?;
+        // A quick stop holds the axis until the master enables the operation again.
+        refuse(self.device != crate::power::DeviceState::QuickStopActive, ObjError::NotNow)?;
         match self.ctl.power_state() {
             PowerState::On => Ok(()),
             PowerState::Faulted => Err(ObjError::Faulted),
@@ -311,6 +313,9 @@ impl<P: Borrow<Table>> DriveState<P> {
         if changed && matches!(obj, Obj::Stop | Obj::Enable) {
             self.ctl.run = None;
         }
+        if obj == Obj::Enable {
+            self.enable_written(value);
+        }
     }
 
     /// The PP/PV statusword: target reached and set-point acknowledge.
@@ -360,12 +365,13 @@ impl<P: Borrow<Table>> DriveState<P> {
         self.now = now;
         self.homing_service();
         self.analog_service();
+        self.quick_stop_settle();
     }
 
     /// When [`DriveState::service`] has something to do: a homing's checks, the analog input's
     /// next reading.
     pub fn service_due(&self) -> Option<Instant> {
-        self.homing_due().into_iter().chain(self.analog_due()).min()
+        self.homing_due().into_iter().chain(self.analog_due()).chain(self.device_due()).min()
     }
 
     /// Whether [`DriveState::service`] has something to do at `now`: for a platform that must

@@ -150,6 +150,22 @@ fn pin_of(k: u32) -> Option<u16> {
 }
 
 impl<P: Borrow<Table>> DriveState<P> {
+    /// Whether the home switch, the negative and the positive limit switch of 0x216C are
+    /// actuated now (one without an input is not).
+    pub(crate) fn switches(&self) -> [bool; 3] {
+        let inputs = self.param(Obj::HomingInputs);
+        let polarity = self.param(Obj::HomingPolarity);
+        let mut out = [false; 3];
+        for (input, actuated) in (0..).zip(out.iter_mut()) {
+            if let Some(pin) = pin_of((inputs >> (4 * input)) & 0xF) {
+                // 0x6031 holds an input's level inverted.
+                let high = self.ctl.status.gpio & pin == 0;
+                *actuated = high == (polarity & (1 << input) != 0);
+            }
+        }
+        out
+    }
+
     /// 0x2162.
     pub(crate) fn homing_outcome(&self) -> u32 {
         self.homing.outcome as u32

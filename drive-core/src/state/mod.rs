@@ -4,6 +4,7 @@
 
 pub mod analog;
 pub mod control;
+mod device;
 pub mod homing;
 pub mod pvt;
 
@@ -172,6 +173,10 @@ pub struct DriveState<P = Table> {
     /// How long after a request its motion starts, µs: 0 where `ctl` is ticked itself; where the
     /// tick owns a controller of its own, longer than planning and handing over take.
     margin: u64,
+    /// The power state machine's state (a latched fault shows over it: `device_state`).
+    device: crate::power::DeviceState,
+    /// When a quick stop is next checked for rest.
+    quick_check: Instant,
 }
 
 /// Whether writing `obj` plans a motion (`state::control`): the commands but a declared
@@ -201,6 +206,7 @@ pub struct Checkpoint {
     homing: homing::Homing,
     watch: Option<crate::controller::Watch>,
     suspend: u16,
+    device: crate::power::DeviceState,
 }
 
 impl DriveState {
@@ -246,6 +252,12 @@ impl<P: Borrow<Table>> DriveState<P> {
             homing: homing::Homing::default(),
             analog: analog::Analog::default(),
             margin: 0,
+            device: if get(Obj::Enable) == 1 {
+                crate::power::DeviceState::OperationEnabled
+            } else {
+                crate::power::DeviceState::SwitchOnDisabled
+            },
+            quick_check: Instant::from_micros(0),
         }
     }
 
@@ -269,6 +281,8 @@ impl<P: Borrow<Table>> DriveState<P> {
             homing,
             analog: _,
             margin: _,
+            device,
+            quick_check: _,
         } = self;
         Checkpoint {
             params: *params,
@@ -284,6 +298,7 @@ impl<P: Borrow<Table>> DriveState<P> {
             homing: *homing,
             watch: ctl.watch,
             suspend: ctl.suspend,
+            device: *device,
         }
     }
 
@@ -311,11 +326,25 @@ impl<P: Borrow<Table>> DriveState<P> {
 
     /// Goes back to `c`.
     pub fn restore(&mut self, c: Checkpoint) {
-        let Checkpoint { params, storage, status, request, now, axis, pp, pvt, run, orders, homing, watch, suspend } =
-            c;
+        let Checkpoint {
+            params,
+            storage,
+            status,
+            request,
+            now,
+            axis,
+            pp,
+            pvt,
+            run,
+            orders,
+            homing,
+            watch,
+            suspend,
+            device,
+        } = c;
         (self.params, self.storage, self.request, self.now, self.orders) = (params, storage, request, now, orders);
         (self.ctl.status, self.ctl.axis, self.ctl.run, self.pp, self.pvt) = (status, axis, run, pp, pvt);
-        (self.homing, self.ctl.watch, self.ctl.suspend) = (homing, watch, suspend);
+        (self.homing, self.ctl.watch, self.ctl.suspend, self.device) = (homing, watch, suspend, device);
         self.refresh_settings();
     }
 
@@ -457,6 +486,8 @@ impl<P: Borrow<Table>> DriveState<P> {
             Obj::AnalogIn => u32::from(s.analog_in),
             Obj::HomingResult => self.homing_outcome(),
             Obj::StatusWord => u32::from(self.statusword()),
+            Obj::DeviceStatus => u32::from(self.device_status()),
+            Obj::ErrorRegister => u32::from(self.error_register()),
             Obj::PvtPointer => u32::from(s.pvt_pointer),
             Obj::RealSpeed => self.ctl.real_speed() as u32,
             Obj::FollowingError => self.ctl.servo.following as i32 as u32,
@@ -549,6 +580,9 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// move possible), and so does applying it, and a plan costs a Cortex-M4 hundreds of
     /// thousands of instructions, during which the control tick waits for the bus task.
     pub fn write_def(&mut self, d: &ObjectDef, value: u32) -> Result<(), ObjError> {
+        if d.obj == Obj::DeviceControl {
+            return self.write_in_order(core::iter::once(value), |_, v| Ok(Some((Obj::DeviceControl.def(), v))));
+        }
         // The objects whose check is `check_motion` and whose write is `apply_motion`.
         if plans_motion(d.obj) {
             Self::check_writable(d, value)?;
@@ -563,6 +597,9 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// command is planned on the axis and set-points themselves, with no copy (a refused plan
     /// may leave them halted, and the checkpoint restores them).
     fn write_undoable(&mut self, d: &ObjectDef, value: u32) -> Result<(), ObjError> {
+        if d.obj == Obj::DeviceControl {
+            return self.device_control(value);
+        }
         if plans_motion(d.obj) {
             Self::check_writable(d, value)?;
             let changed = self.plan_motion_in_place(d.obj, value)?;

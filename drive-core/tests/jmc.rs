@@ -1,0 +1,417 @@
+//! The JMC map (seed 001) at the level of frames: every frame the manual prints with a valid
+//! CRC answered byte for byte, in the order its routines send them, with both word orders; the
+//! exception codes of §4 with nothing changed; the set-points of §6.1 landing where the routine
+//! says; and the power state machine of CiA 402 behind 0x6040/0x6041.
+
+mod common;
+
+use common::frame;
+use drive_core::faults::Inputs;
+use drive_core::maps::Maps;
+use drive_core::od::{OBJECTS, Obj};
+use drive_core::power::DeviceState;
+use drive_core::{Drive, DriveConfig, Instant};
+
+/// A JMC drive with a clock: control ticks every 50 µs, replies when the line is quiet.
+struct Rig {
+    drive: Drive<Maps>,
+    now: u64,
+    inputs: Inputs,
+}
+
+impl Rig {
+    fn new() -> Self {
+        let mut r =
+            Self { drive: Drive::with_map(DriveConfig::default(), Maps::jmc()), now: 0, inputs: Inputs::default() };
+        r.run(1_000);
+        r
+    }
+
+    /// Lets `us` pass: control ticks, and the timer at the framer's deadline; the reply, if any.
+    fn run(&mut self, us: u64) -> Option<Vec<u8>> {
+        let end = self.now + us;
+        let mut reply = None;
+        while self.now < end {
+            self.now += 50;
+            let now = Instant::from_micros(self.now);
+            self.drive.tick_with(now, &self.inputs);
+            self.drive.state_mut().service(now);
+            if self.drive.deadline().is_some_and(|d| d.as_micros() <= self.now) {
+                self.drive.on_timer(now);
+                if let Some(r) = self.drive.take_reply() {
+                    assert!(reply.is_none(), "two replies");
+                    reply = Some(r.to_vec());
+                }
+            }
+        }
+        reply
+    }
+
+    /// Sends the whole frame `bytes` (CRC included) and returns the reply.
+    fn exchange(&mut self, bytes: &[u8]) -> Option<Vec<u8>> {
+        self.drive.on_rx(Instant::from_micros(self.now), bytes);
+        self.run(10_000)
+    }
+
+    /// Sends `body` with its CRC; the reply's PDU, or the exception code.
+    fn request(&mut self, body: &[u8]) -> Result<Vec<u8>, u8> {
+        let r = self.exchange(&frame(body)).unwrap_or_else(|| panic!("no reply to {body:02X?}"));
+        let pdu = r.get(1..r.len() - 2).unwrap_or_default().to_vec();
+        match pdu.as_slice() {
+            [f, code] if f & 0x80 != 0 => Err(*code),
+            _ => Ok(pdu),
+        }
+    }
+
+    fn write(&mut self, addr: u16, v: u16) -> Result<(), u8> {
+        let [a, b] = addr.to_be_bytes();
+        let [c, d] = v.to_be_bytes();
+        self.request(&[1, 0x06, a, b, c, d]).map(|_| ())
+    }
+
+    fn write32(&mut self, addr: u16, v: i32) -> Result<(), u8> {
+        let [a, b] = addr.to_be_bytes();
+        let v = v as u32;
+        let words = if self.drive.state().read(Obj::MapWordOrder) == 0 { [v >> 16, v] } else { [v, v >> 16] };
+        let mut body = vec![1, 0x10, a, b, 0, 2, 4];
+        for w in words {
+            body.extend_from_slice(&(w as u16).to_be_bytes());
+        }
+        self.request(&body).map(|_| ())
+    }
+
+    fn read(&mut self, addr: u16, n: u16) -> Result<Vec<u16>, u8> {
+        let [a, b] = addr.to_be_bytes();
+        let [c, d] = n.to_be_bytes();
+        let pdu = self.request(&[1, 0x03, a, b, c, d])?;
+        Ok(pdu.get(2..).unwrap_or_default().chunks(2).map(|w| u16::from_be_bytes([w[0], w[1]])).collect())
+    }
+
+    fn statusword(&mut self) -> u16 {
+        self.read(0x6041, 1).expect("statusword")[0]
+    }
+
+    /// Runs until the axis stands, at most `s` seconds.
+    fn settle(&mut self, s: u64) {
+        for _ in 0..s * 10 {
+            if self.drive.state().controller().axis().is_still() {
+                return;
+            }
+            self.run(100_000);
+        }
+        panic!("still moving after {s} s");
+    }
+
+    fn snapshot(&self) -> (Vec<u32>, DeviceState, i64) {
+        let st = self.drive.state();
+        (OBJECTS.iter().map(|d| st.read_def(d)).collect(), st.device_state(), st.position())
+    }
+}
+
+fn hex(s: &str) -> Vec<u8> {
+    s.split_whitespace().map(|b| u8::from_str_radix(b, 16).expect("hex")).collect()
+}
+
+/// The echo a 0x06 request gets.
+fn echo(req: &str) -> Option<Vec<u8>> {
+    Some(hex(req))
+}
+
+/// §6.1's position routine as printed (seed 001 lines 608-640), then §6.2's and §6.3's
+/// frames: each request with a valid CRC, and the reply the manual prints (or, where it prints
+/// none, the echo of a 0x06 and the standard 0x10 reply).
+#[test]
+fn printed_frames_are_answered_as_printed() {
+    let mut r = Rig::new();
+    let cases: [(&str, &str); 12] = [
+        ("01 06 60 40 00 01 57 DE", "01 06 60 40 00 01 57 DE"),
+        ("01 06 60 40 00 03 D6 1F", "01 06 60 40 00 03 D6 1F"),
+        ("01 06 60 40 00 0F D6 1A", "01 06 60 40 00 0F D6 1A"),
+        ("01 06 60 60 00 01 56 14", "01 06 60 60 00 01 56 14"),
+        ("01 10 60 81 00 02 04 00 00 00 0A 12 06", "01 10 60 81 00 02 0F E0"),
+        ("01 06 60 83 00 64 67 C9", "01 06 60 83 00 64 67 C9"),
+        ("01 06 60 84 00 64 D6 08", "01 06 60 84 00 64 D6 08"),
+        ("01 10 60 81 00 04 08 00 00 00 0A 00 64 00 64 10 52", "01 10 60 81 00 04 8F E2"),
+        ("01 10 60 7A 00 02 04 00 03 0D 40 29 96", "01 10 60 7A 00 02 7E 11"),
+        ("01 03 60 7A 00 02 FB D2", "01 03 04 00 03 0D 40 0F 53"),
+        ("01 10 60 83 00 02 04 00 64 00 64 53 EC", "01 10 60 83 00 02 AE 20"),
+        ("01 10 60 40 00 09 12 00 0F 00 01 00 00 00 64 00 64 00 64 00 64 00 03 0D 40 40 1C", "01 10 60 40 00 09 1F DB"),
+    ];
+    for (req, reply) in cases {
+        assert_eq!(r.exchange(&hex(req)), Some(hex(reply)), "{req}");
+    }
+    assert_eq!(r.drive.state().device_state(), DeviceState::OperationEnabled);
+    // 0x6081 = 0x64: 10 rev/s at full steps (200 a revolution) is 2000 steps a second.
+    assert_eq!(r.drive.state().read_i32(Obj::PpRunSpeed), 2000);
+    assert_eq!(r.drive.state().read(Obj::PpAccel), 2000);
+    // The single point: bit 4 rises, the axis goes to 200 000 and the statusword says so.
+    assert_eq!(r.exchange(&hex("01 06 60 40 00 1F D7 D6")), echo("01 06 60 40 00 1F D7 D6"));
+    assert_eq!(r.exchange(&hex("01 06 60 40 00 0F D6 1A")), echo("01 06 60 40 00 0F D6 1A"));
+    assert_ne!(r.statusword() & (1 << 9), 0, "moving");
+    r.settle(200);
+    assert_eq!(r.drive.state().position(), 200_000);
+    let sw = r.statusword();
+    assert_eq!(sw & 0x6F, 0x27, "operation enabled: {sw:#06x}");
+    assert_ne!(sw & (1 << 10), 0, "target reached: {sw:#06x}");
+    // §6.2's start: velocity mode, halted, parameters, then bit 8 cleared runs at 0x6081.
+    for req in ["01 06 60 60 00 03 D7 D5", "01 06 60 40 01 0F D7 8A"] {
+        assert_eq!(r.exchange(&hex(req)), echo(req), "{req}");
+    }
+    assert_eq!(r.exchange(&hex("01 10 60 81 00 02 04 00 00 00 0A 12 06")), Some(hex("01 10 60 81 00 02 0F E0")));
+    assert_eq!(r.exchange(&hex("01 06 60 40 00 0F D6 1A")), echo("01 06 60 40 00 0F D6 1A"));
+    r.run(2_000_000);
+    assert_eq!(r.drive.state().controller().axis().setpoint().velocity, 200.0, "1 rev/s");
+    assert_eq!(r.exchange(&hex("01 10 60 81 00 02 04 00 00 00 64 93 EA")), Some(hex("01 10 60 81 00 02 0F E0")));
+    r.run(2_000_000);
+    assert_eq!(r.drive.state().controller().axis().setpoint().velocity, 2000.0, "10 rev/s");
+    assert_eq!(r.exchange(&hex("01 06 60 40 01 0F D7 8A")), echo("01 06 60 40 01 0F D7 8A"));
+    r.settle(10);
+    // §6.3's parameter frames, one by one and in one 0x10 that walks §8's list.
+    for req in ["01 06 60 60 00 06 17 D6", "01 06 60 98 00 01 D7 E5", "01 06 60 9A 03 E8 B7 5B"] {
+        assert_eq!(r.exchange(&hex(req)), echo(req), "{req}");
+    }
+    let writes = [
+        ("01 10 60 99 00 02 04 00 00 00 64 93 40", "01 10 60 99 00 02 8F E7"),
+        ("01 10 60 9B 00 02 04 00 00 00 64 12 99", "01 10 60 9B 00 02 2E 27"),
+        ("01 10 60 7C 00 02 04 00 00 03 E8 5C 62", "01 10 60 7C 00 02 9E 10"),
+        ("01 10 60 7C 00 08 10 00 00 03 E8 00 01 00 00 00 64 03 E8 00 00 00 64 09 42", "01 10 60 7C 00 08 1E 17"),
+    ];
+    for (req, reply) in writes {
+        assert_eq!(r.exchange(&hex(req)), Some(hex(reply)), "{req}");
+    }
+    assert_eq!(r.drive.state().read(Obj::HomingMethod), 17);
+    assert_eq!(r.drive.state().read(Obj::HomingSearchSpeed), 2000);
+    assert_eq!(r.drive.state().read(Obj::HomingAccel), 20_000);
+    assert_eq!(r.drive.state().read_i32(Obj::HomingOffset), -1000);
+    assert_eq!(r.read(0x6061, 1), Ok(vec![6]));
+}
+
+/// 0x6000 = 1: 32-bit registers low word first (lines 569-571, 591).
+#[test]
+fn word_order_one_swaps_the_halves() {
+    let mut r = Rig::new();
+    assert_eq!(r.write(0x6000, 1), Ok(()));
+    let req = "01 10 60 7A 00 02 04 0D 40 00 03 9F 8F";
+    assert_eq!(r.exchange(&hex(req)), Some(hex("01 10 60 7A 00 02 7E 11")));
+    assert_eq!(r.drive.state().read_i32(Obj::PpTarget), 200_000);
+    assert_eq!(r.exchange(&hex("01 03 60 7A 00 02 FB D2")), Some(hex("01 03 04 0D 40 00 03 B9 4A")));
+    assert_eq!(r.write(0x6000, 0), Ok(()));
+    assert_eq!(r.exchange(&hex("01 03 60 7A 00 02 FB D2")), Some(hex("01 03 04 00 03 0D 40 0F 53")));
+}
+
+/// §4's codes: each refusal answers its code and changes nothing.
+#[test]
+fn exceptions_change_nothing() {
+    let mut r = Rig::new();
+    r.write(0x6040, 0x0F).expect("enable");
+    let before = r.snapshot();
+    // §7.5: no such register.
+    assert_eq!(r.exchange(&hex("01 06 60 90 00 03 D7 E6")), Some(hex("01 86 0B 03 A7")));
+    let cases: [(&[u8], u8); 9] = [
+        // A read-only register written: 5.
+        (&[1, 0x06, 0x60, 0x41, 0, 1], 5),
+        (&[1, 0x10, 0x60, 0x64, 0, 2, 4, 0, 0, 0, 1], 5),
+        // A write-only register read: 7.
+        (&[1, 0x03, 0x60, 0x40, 0, 1], 7),
+        (&[1, 0x03, 0x60, 0x5A, 0, 3], 7),
+        // A byte count that is not twice the quantity: 8.
+        (&[1, 0x10, 0x60, 0x83, 0, 2, 3, 0, 0x64, 0], 8),
+        // A 32-bit register written one half at a time: 2.
+        (&[1, 0x06, 0x60, 0x7A, 0, 3], 2),
+        // Values out of range: 3 (torque mode 4, word order 2, homing method 9).
+        (&[1, 0x06, 0x60, 0x60, 0, 4], 3),
+        (&[1, 0x06, 0x60, 0x00, 0, 2], 3),
+        (&[1, 0x06, 0x60, 0x98, 0, 9], 3),
+    ];
+    for (body, code) in cases {
+        assert_eq!(r.request(body), Err(code), "{body:02X?}");
+        assert_eq!(r.snapshot(), before, "{body:02X?} changed the drive");
+    }
+    // A 0x10 whose last value is refused writes none of those before it (all or nothing).
+    let body = [1, 0x10, 0x60, 0x83, 0, 3, 6, 0, 0x32, 0, 0x32, 0, 0];
+    assert_eq!(r.request(&body), Err(3));
+    assert_eq!(r.snapshot(), before);
+}
+
+/// §6.1's multi-point examples (lines 644-714): stopping between points, going on without a
+/// stop, changing at once; the "no stop" and "at once" frames set bit 6 (relative), so their
+/// second target adds to the first.
+#[test]
+fn position_routines_land_where_the_controlword_says() {
+    let cases: [(u16, u16, i64); 3] = [(0x001F, 0x000F, 600_000), (0x025F, 0x024F, 800_000), (0x007F, 0x006F, 800_000)];
+    for (start, clear, end) in cases {
+        let mut r = Rig::new();
+        for cw in [0x01, 0x03, 0x0F] {
+            r.write(0x6040, cw).expect("power up");
+        }
+        r.write(0x6060, 1).expect("position mode");
+        r.write(0x6083, 100).expect("acceleration");
+        r.write(0x6084, 100).expect("deceleration");
+        r.write32(0x6081, 50).expect("5 rev/s");
+        r.write32(0x607A, 200_000).expect("first target");
+        r.write(0x6040, start).expect("new set-point");
+        r.write(0x6040, clear).expect("bit 4 cleared");
+        r.run(50_000);
+        r.write32(0x6081, 100).expect("10 rev/s");
+        r.write32(0x607A, 600_000).expect("second target");
+        let second = if start == 0x007F { 0x027F } else { start };
+        r.write(0x6040, second).expect("second set-point");
+        r.settle(2_000);
+        assert_eq!(r.drive.state().position(), end, "controlword {start:#06x}");
+        let sw = r.statusword();
+        assert_ne!(sw & (1 << 10), 0, "target reached: {sw:#06x}");
+    }
+}
+
+/// Every command in every state, as CiA 402's table has it, through the drive's own objects
+/// (0x2180-0x2182 of the native map): the state after, its statusword bits and whether the
+/// motor is energised. Commands the table does not have in a state change nothing.
+#[test]
+fn the_state_machine_follows_the_table() {
+    use DeviceState as S;
+    const SHUTDOWN: u16 = 0x06;
+    const SWITCH_ON: u16 = 0x07;
+    const ENABLE: u16 = 0x0F;
+    const DISABLE_VOLTAGE: u16 = 0x00;
+    const QUICK_STOP: u16 = 0x02;
+    const RESET: u16 = 0x80;
+    // The way to each state from power-up, and what each command leads to there.
+    let table: [(S, &[u16], [S; 6]); 6] = [
+        (
+            S::SwitchOnDisabled,
+            &[],
+            [
+                S::ReadyToSwitchOn,
+                S::SwitchOnDisabled,
+                S::OperationEnabled,
+                S::SwitchOnDisabled,
+                S::SwitchOnDisabled,
+                S::SwitchOnDisabled,
+            ],
+        ),
+        (
+            S::ReadyToSwitchOn,
+            &[SHUTDOWN],
+            [
+                S::ReadyToSwitchOn,
+                S::SwitchedOn,
+                S::OperationEnabled,
+                S::SwitchOnDisabled,
+                S::SwitchOnDisabled,
+                S::ReadyToSwitchOn,
+            ],
+        ),
+        (
+            S::SwitchedOn,
+            &[SHUTDOWN, SWITCH_ON],
+            [
+                S::ReadyToSwitchOn,
+                S::SwitchedOn,
+                S::OperationEnabled,
+                S::SwitchOnDisabled,
+                S::SwitchOnDisabled,
+                S::SwitchedOn,
+            ],
+        ),
+        (
+            S::OperationEnabled,
+            &[SHUTDOWN, SWITCH_ON, ENABLE],
+            [
+                S::ReadyToSwitchOn,
+                S::SwitchedOn,
+                S::OperationEnabled,
+                S::SwitchOnDisabled,
+                S::QuickStopActive,
+                S::OperationEnabled,
+            ],
+        ),
+        (
+            S::QuickStopActive,
+            &[SHUTDOWN, SWITCH_ON, ENABLE, QUICK_STOP],
+            [
+                S::QuickStopActive,
+                S::QuickStopActive,
+                S::OperationEnabled,
+                S::SwitchOnDisabled,
+                S::QuickStopActive,
+                S::QuickStopActive,
+            ],
+        ),
+        (
+            S::Fault,
+            &[SHUTDOWN, SWITCH_ON, ENABLE],
+            [S::Fault, S::Fault, S::Fault, S::Fault, S::Fault, S::SwitchOnDisabled],
+        ),
+    ];
+    let commands = [SHUTDOWN, SWITCH_ON, ENABLE, DISABLE_VOLTAGE, QUICK_STOP, RESET];
+    for (state, path, after) in table {
+        for (cmd, expected) in commands.into_iter().zip(after) {
+            let mut b = common::Bus::factory();
+            let write = |b: &mut common::Bus, addr: u16, v: u16| {
+                let [a, c] = addr.to_be_bytes();
+                let [d, e] = v.to_be_bytes();
+                let reply = b.request(&[1, 0x06, a, c, d, e]);
+                assert_eq!(reply, common::reply(&[1, 0x06, a, c, d, e]), "{addr:#06x} = {v:#06x}");
+            };
+            // Stay in quick stop active once stopped (option 6), and start from switch on
+            // disabled (the native map powers up enabled).
+            write(&mut b, 0x2182, 6);
+            write(&mut b, 0x2180, DISABLE_VOLTAGE);
+            for &cw in path {
+                write(&mut b, 0x2180, cw);
+            }
+            if state == S::Fault {
+                // An over-voltage latches: the fault state, the motor off.
+                let inputs = Inputs { supply_mv: Some(70_000), ..Inputs::default() };
+                b.drive.tick_with(Instant::from_micros(b.now), &inputs);
+                b.drive.tick_with(Instant::from_micros(b.now + 50), &Inputs::default());
+            }
+            assert_eq!(b.drive.state().device_state(), state, "reaching {state:?}");
+            write(&mut b, 0x2180, cmd);
+            let st = b.drive.state();
+            assert_eq!(st.device_state(), expected, "{state:?} on {cmd:#04x}");
+            assert_eq!(st.read(Obj::DeviceStatus) as u16 & 0x6F, expected.statusword() & 0x6F);
+            let out = b.drive.tick(Instant::from_micros(b.now + 100));
+            assert_eq!(out.enabled, expected.energised(), "{state:?} on {cmd:#04x}: power stage");
+        }
+    }
+}
+
+/// A quick stop ramps down at 0x6085 and, with JMC's option 2, ends switch on disabled; a
+/// fault (the over-voltage) shows as the fault state until bit 7 rises, which leaves the drive
+/// switch on disabled; a fault reset with the condition still present stays in fault.
+#[test]
+fn quick_stop_and_fault_reset() {
+    let mut r = Rig::new();
+    r.write(0x6040, 0x0F).expect("enable");
+    r.write(0x6060, 3).expect("velocity mode");
+    r.write(0x6085, 50).expect("quick-stop deceleration 5 rev/s²");
+    r.write(0x605A, 2).expect("quick stop at 0x6085");
+    r.write32(0x6081, 10).expect("1 rev/s");
+    r.write(0x6040, 0x010F).expect("halt");
+    r.write(0x6040, 0x000F).expect("run");
+    r.run(1_000_000);
+    assert_eq!(r.drive.state().controller().axis().setpoint().velocity, 200.0);
+    r.write(0x6040, 0x000B).expect("quick stop");
+    assert_eq!(r.statusword() & 0x6F, 0x07, "quick stop active");
+    // 200 steps/s at 1000 steps/s²: 0.2 s.
+    r.run(150_000);
+    assert!(!r.drive.state().controller().axis().is_still(), "still ramping");
+    r.run(200_000);
+    assert!(r.drive.state().controller().axis().is_still());
+    assert_eq!(r.statusword() & 0x6F, 0x40, "switch on disabled");
+    assert_eq!(r.write32(0x607A, 100), Ok(()));
+    // Faults.
+    r.write(0x6040, 0x0F).expect("enable again");
+    r.inputs.supply_mv = Some(70_000);
+    r.run(1_000);
+    assert_eq!(r.statusword() & 0x4F, 0x08, "fault");
+    assert_ne!(r.read(0x1001, 1).expect("error register")[0] & 0b101, 0, "voltage");
+    r.write(0x6040, 0x80).expect("fault reset");
+    assert_eq!(r.statusword() & 0x4F, 0x08, "the over-voltage is still there");
+    r.inputs.supply_mv = Some(24_000);
+    r.write(0x6040, 0x00).expect("bit 7 down");
+    r.write(0x6040, 0x80).expect("fault reset");
+    assert_eq!(r.statusword() & 0x6F, 0x40, "switch on disabled");
+    assert_eq!(r.read(0x1001, 1), Ok(vec![0]));
+}
