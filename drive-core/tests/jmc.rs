@@ -179,7 +179,9 @@ fn printed_frames_are_answered_as_printed() {
     for (req, reply) in writes {
         assert_eq!(r.exchange(&hex(req)), Some(hex(reply)), "{req}");
     }
-    assert_eq!(r.drive.state().read(Obj::HomingMethod), 17);
+    // JMC's method 1 is the engine's -3 (a 16-bit register).
+    assert_eq!(r.drive.state().read(Obj::HomingMethod), 0xFFFD);
+    assert_eq!(r.drive.state().read(Obj::HomingZeroSpeed), 2000);
     assert_eq!(r.drive.state().read(Obj::HomingSearchSpeed), 2000);
     assert_eq!(r.drive.state().read(Obj::HomingAccel), 20_000);
     assert_eq!(r.drive.state().read_i32(Obj::HomingOffset), -1000);

@@ -18,11 +18,15 @@ const OFFSET: i32 = 1000;
 /// on EXT1 actuated above (or below) `home_at` full steps, NPN switches (actuated low), all
 /// pulled up; hard stops beyond the limits. The axis starts at a random place in `from..to`
 /// full steps.
-fn machine(home_above: bool, home_at: i32, (from, to): (i32, i32), seed: u64) -> Plant {
+fn machine(home_above: bool, home_at: i32, starts: (i32, i32), seed: u64) -> Plant {
+    let home = format!("ext1:npn:{home_at}:{}:hyst=0.2", if home_above { "above" } else { "below" });
+    machine_with(&home, starts, seed)
+}
+
+/// [`machine`] with the home switch `home` (a `--switch` spec).
+fn machine_with(home: &str, (from, to): (i32, i32), seed: u64) -> Plant {
     let params = MotorCatalog::builtin().get(DEFAULT_MOTOR).cloned().expect("catalogue motor");
     let mut plant = Plant::new(Drive::factory(), Motor::new(params, MotorInputs::default()));
-    let home = format!("ext1:npn:{home_at}:{}:hyst=0.2", if home_above { "above" } else { "below" });
-    let home = home.as_str();
     let switches = [home, "ext2:npn:-120:below:hyst=0.2", "ext3:npn:120:hyst=0.2"];
     *plant.machine_mut() = Machine::new(switches.iter().map(|s| Switch::parse(s).expect("spec")).collect(), None);
     plant.motor_mut().set_hard_stops(Some(-130.0), Some(130.0));
@@ -102,6 +106,62 @@ fn switch_methods_home_within_a_microstep() {
         assert!(spread <= 1.0 / PER_STEP, "method {method}: spread {spread} full steps");
         assert!((at - near).abs() < 1.0, "method {method}: home at {at}");
     }
+}
+
+/// JMC's methods 1-8 (seed 001 §6.3; the engine's -3 to -10) on a machine with a narrow home
+/// cam from 40 to 44 full steps: 1/2 stop on reaching a limit, 3/4 on reaching the cam
+/// (reversing at the limit in the way: from below the cam its lower edge is met, from above its
+/// upper one), 5/6 and 7/8 leave the switch found and approach it again at the creep speed
+/// (left, negative, for 5 and 7; right for 6 and 8), so they home on the same edge from anywhere.
+#[test]
+fn jmc_methods_home_where_seed_001_says() {
+    let cases = [
+        (-3, (-100, 100), -120.0),
+        (-4, (-100, 100), 120.0),
+        (-5, (-100, 30), 40.0),
+        (-6, (50, 100), 44.0),
+        (-7, (-100, 100), -120.0),
+        (-8, (-100, 100), 120.0),
+        (-9, (-100, 100), 44.0),
+        (-10, (-100, 100), 40.0),
+    ];
+    for (method, starts, near) in cases {
+        let (at, spread) = spread(method, 12, |seed| machine_with("ext1:npn:40:to=44:hyst=0.2", starts, seed));
+        eprintln!("JMC method {}: home at {at:.4} full steps, spread {spread:.5}", -method - 2);
+        // 1-4 catch the switch at the search speed, where the rotor's lag behind the field
+        // varies by a few microsteps; 5-8 at the creep speed (7 and 8 right after turning
+        // back at it, the rotor still settling: two microsteps).
+        let within = match method {
+            -6..=-3 => 0.25,
+            -8 | -7 => 1.0 / PER_STEP,
+            _ => 2.0 / PER_STEP,
+        };
+        assert!(spread <= within, "method {method}: spread {spread} full steps");
+        assert!((at - near).abs() < 0.5, "method {method}: home at {at}, expected {near}");
+    }
+}
+
+/// With a zero speed (JMC's 0x609B) the axis moves on from the home to position 0, the offset
+/// away, and the homing ends there.
+#[test]
+fn the_zero_speed_moves_to_the_zero_after_the_home() {
+    let mut p = machine_with("ext1:npn:40:to=44:hyst=0.2", (-100, 100), 5);
+    set(&mut p, Obj::HomingZeroSpeed, 3200);
+    set(&mut p, Obj::HomingOffset, (-800i32) as u32);
+    set(&mut p, Obj::HomingMethod, u32::from((-10i16) as u16));
+    set(&mut p, Obj::HomingControl, 1);
+    for _ in 0..3000 {
+        p.run_for(0.01);
+        if read(&p, Obj::HomingResult) != 1 {
+            break;
+        }
+    }
+    assert_eq!(read(&p, Obj::HomingResult), 2);
+    assert_eq!(read(&p, Obj::Position), 0);
+    assert!(p.drive().state().controller().axis().is_still());
+    // The home at the cam's lower edge (40 full steps), the zero 50 full steps above it.
+    let rotor = p.rotor_microsteps() / PER_STEP;
+    assert!((rotor - 90.0).abs() < 0.15, "rotor at {rotor}");
 }
 
 #[test]

@@ -179,11 +179,12 @@ impl Controller {
     #[inline(never)]
     pub(crate) fn check_watch(&mut self, inputs: &crate::faults::Inputs) {
         let Some(w) = self.watch else { return };
-        if self.axis.version() != w.version {
+        let v = self.axis.setpoint().velocity;
+        if self.axis.version() != w.version || v == 0.0 || (v > 0.0) != w.up {
             return;
         }
         let met = match w.on {
-            super::WatchOn::Pin { pin, high } => (inputs.levels & pin != 0) == high,
+            super::WatchOn::Pins { pins, high } => !(inputs.levels ^ high) & pins != 0,
             super::WatchOn::Index => inputs.index,
             super::WatchOn::Stall => self.status.controller & super::STATUS_STALL != 0,
         };

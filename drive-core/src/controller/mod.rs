@@ -248,17 +248,20 @@ pub struct Watch {
     pub version: u32,
     /// The stop's deceleration, pps².
     pub decel: u32,
+    /// The direction the axis must move in (true positive) for the condition to count: a
+    /// switch passed while the axis still brakes from the step before is not the step's edge.
+    pub up: bool,
 }
 
 /// What a [`Watch`] waits for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum WatchOn {
-    /// A pin (bit of 0x6031) at a level (true high).
-    Pin {
-        /// The pin's bit.
-        pin: u16,
-        /// The level.
-        high: bool,
+    /// Any of some pins (bits of 0x6031) at its level.
+    Pins {
+        /// The pins' bits.
+        pins: u16,
+        /// Each pin's level (its bit set: high).
+        high: u16,
     },
     /// The encoder's index pulse.
     Index,

@@ -33,13 +33,23 @@ static QUICK_STOP: [Choice; 4] = [
     Choice { lo: 0, hi: 0, drive: 2 },
 ];
 
-/// 0x6098: the methods of §6.3 the homing engine runs: 1 the CW limit (moving left, the
-/// negative direction), 2 the CCW limit (right, positive), as CiA 402's 17 and 18.
-static HOMING_METHODS: [Choice; 2] = [Choice { lo: 1, hi: 1, drive: 17 }, Choice { lo: 2, hi: 2, drive: 18 }];
+/// 0x6098: §6.3's methods 1-8 are the homing engine's -3 to -10 (left, CW, is the negative
+/// direction; the CW limit is the negative limit switch, the CCW limit the positive one).
+/// (As 0x2160 holds them: a 16-bit register, -3 is 0xFFFD.)
+static HOMING_METHODS: [Choice; 8] = [
+    Choice { lo: 1, hi: 1, drive: 0xFFFD },
+    Choice { lo: 2, hi: 2, drive: 0xFFFC },
+    Choice { lo: 3, hi: 3, drive: 0xFFFB },
+    Choice { lo: 4, hi: 4, drive: 0xFFFA },
+    Choice { lo: 5, hi: 5, drive: 0xFFF9 },
+    Choice { lo: 6, hi: 6, drive: 0xFFF8 },
+    Choice { lo: 7, hi: 7, drive: 0xFFF7 },
+    Choice { lo: 8, hi: 8, drive: 0xFFF6 },
+];
 
 /// The registers, in §8's order, then ours (the map selection and the line's settings, at their
 /// native addresses, so that a master can switch back).
-pub static ENTRIES: [Entry; 27] = [
+pub static ENTRIES: [Entry; 31] = [
     Entry::new(0x1001, Obj::ErrorRegister, Scale::One),
     Entry::new(0x1008, Obj::DeviceName, Scale::One),
     Entry::new(0x1009, Obj::HardwareVersion, Scale::One),
@@ -57,7 +67,7 @@ pub static ENTRIES: [Entry; 27] = [
     Entry::new(0x6098, Obj::HomingMethod, Scale::Table(&HOMING_METHODS)),
     Entry::new(0x6099, Obj::HomingSearchSpeed, TENTH_REV),
     Entry::new(0x609A, Obj::HomingAccel, TENTH_REV).narrow(),
-    Entry::new(0x609B, Obj::HomingCreepSpeed, TENTH_REV),
+    Entry::new(0x609B, Obj::HomingZeroSpeed, TENTH_REV),
     Entry::new(0x6041, Obj::DeviceStatus, Scale::One),
     Entry::new(0x6061, Obj::Mode, Scale::Table(&MODES)).read_only(),
     Entry::new(0x6064, Obj::Position, Scale::One).read_only(),
@@ -66,6 +76,10 @@ pub static ENTRIES: [Entry; 27] = [
     Entry::new(0x2028, Obj::NodeId, Scale::One),
     Entry::new(0x202A, Obj::BaudRate, Scale::One),
     Entry::new(0x2100, Obj::Parity, Scale::One),
+    Entry::new(0x2165, Obj::HomingCreepSpeed, TENTH_REV),
+    Entry::new(0x216B, Obj::HomingTimeout, Scale::One),
+    Entry::new(0x216C, Obj::HomingInputs, Scale::One),
+    Entry::new(0x216D, Obj::HomingPolarity, Scale::One),
     Entry::new(0x2190, Obj::RegisterMap, Scale::One),
 ];
 

@@ -19,7 +19,10 @@ const ENCODER_CPR: &[u32] = &[12, 200, 400, 500, 600, 800, 1000, 1200, 1600];
 /// Modes of 0x6007 (3, encoder follower, needs a special firmware and is refused).
 const MODES: &[u32] = &crate::modes::WorkMode::RAW;
 /// The homing methods 0x2160 takes (as the register holds them: -1 is 0xFFFF).
-const HOMING_METHODS: [u32; 18] = [1, 2, 3, 4, 5, 6, 17, 18, 19, 20, 21, 22, 33, 34, 35, 37, 0xFFFF, 0xFFFE];
+const HOMING_METHODS: [u32; 26] = [
+    1, 2, 3, 4, 5, 6, 17, 18, 19, 20, 21, 22, 33, 34, 35, 37, 0xFFFF, 0xFFFE, 0xFFFD, 0xFFFC, 0xFFFB, 0xFFFA, 0xFFF9,
+    0xFFF8, 0xFFF7, 0xFFF6,
+];
 /// A PVT table index or count.
 const PVT_INDEX: Range = Span(0, 1000);
 /// Full signed 32-bit range.
@@ -239,8 +242,10 @@ objects! {
     /// negative/positive limit switch, 19/20 a home switch actuated above home, 21/22 one
     /// actuated below, 1-6 the same then the first index pulse, 33/34 the index alone, 35/37
     /// the present position, -1/-2 a hard stop found by the stall detection (positive,
-    /// negative, as Maxon numbers its vendor methods). See `drive_core::state::homing` for
-    /// each one's moves; 7-14 and 23-30 are refused.
+    /// negative, as Maxon numbers its vendor methods), -3 to -10 JMC's methods 1-8 (a limit
+    /// or the home switch reached, reversing at a limit, at one speed or approached again at
+    /// the creep speed). See `drive_core::state::homing` for each one's moves; 7-14 and 23-30
+    /// are refused.
     HomingMethod @ 0x2160: U16, Rw, Rom, Set(&HOMING_METHODS), default 35, None, "homing method";
     /// Homing command (our object): 1 starts (refused, 04, while moving or when the method's
     /// switch has no input in 0x216C, or when a hard stop cannot be felt: the stall detection
@@ -269,6 +274,10 @@ objects! {
     /// Homing input polarity (our object): bit 0 the home switch, 1 the negative limit, 2 the
     /// positive limit, is actuated at a high level (1) or a low one (0).
     HomingPolarity @ 0x216D: U8, Rw, Rom, Bits(0x07), default 0, None, "homing polarity";
+    /// Homing zero speed (our object; JMC's 0x609B): 0 the axis stays at the home; else, the
+    /// position declared, it moves to position 0 at this speed (0x2169 away from the home) and
+    /// the homing ends there.
+    HomingZeroSpeed @ 0x216E: U32, Rw, Rom, Span(0, 200_000), default 0, Pps, "homing zero speed";
     /// Analog speed (our object; §3.9's analog speed control): 1 makes the analog input set the
     /// speed in the velocity mode (0x6007 = 1): 0 at the start code 0x6078 and below, 0x2171 at
     /// code 4095, averaged over 0x6079 (see `drive_core::state::analog`).

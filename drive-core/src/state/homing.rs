@@ -19,6 +19,14 @@
 //! | 33 / 34 | the index pulse | the first one | negative / positive |
 //! | 35, 37 | none | the position now | no motion |
 //! | -1 / -2 | a hard stop, found by the stall detection | where the stall is detected | positive / negative |
+//! | -3 / -4 | negative / positive limit switch, at the search speed | where it actuates | negative / positive |
+//! | -5 / -6 | home switch, searched negative / positive, reversing at that side's limit | where it actuates | either |
+//! | -7 / -8 | as -3 / -4, then off the switch and back onto it at the creep speed | where it actuates | negative / positive |
+//! | -9 / -10 | as -5 / -6, then off the switch and back onto it at the creep speed | where it actuates | negative / positive |
+//!
+//! Methods -3 to -10 are JMC's 1-8 (seed 001 §6.3). With a zero speed 0x216E the axis then
+//! moves to position 0 at it (JMC's offset move: the zero is the offset 0x2169 away from the
+//! home), and the homing ends there.
 //!
 //! Searches run at the search speed 0x2163 and every edge is found at the creep speed 0x2165:
 //! the tick sees a switch's level once a tick, so the position is caught within one tick of
@@ -58,7 +66,7 @@ pub enum Outcome {
     Interrupted = 4,
 }
 
-/// What ends a step.
+/// What ends a step (the switches' are the reference switch's).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Until {
     /// The reference switch actuated.
@@ -79,6 +87,8 @@ struct Step {
     fast: bool,
     until: Until,
     home: bool,
+    /// The limit switch in the way reverses the search.
+    reverse: bool,
 }
 
 /// A method's reference and approach.
@@ -93,6 +103,10 @@ enum Method {
     HardStop { up: bool },
     /// The position now.
     Here,
+    /// A switch (0x216C's field) searched moving `up` at the search speed, reversing at the
+    /// limit switch `reverse` (a field) if that comes first; the home where it actuates, or with
+    /// `edge` where it actuates again, approached moving `up` at the creep speed after leaving it.
+    Search { target: u8, up: bool, reverse: Option<u8>, edge: bool },
 }
 
 impl Method {
@@ -111,6 +125,20 @@ impl Method {
             35 | 37 => Some(Method::Here),
             -1 => Some(Method::HardStop { up: true }),
             -2 => Some(Method::HardStop { up: false }),
+            m @ -10..=-3 => {
+                let n = (-3 - m) as u8; // 0..=7: JMC's method - 1
+                let up = n % 2 == 1;
+                let home = n % 4 >= 2;
+                let target = if home {
+                    0
+                } else if up {
+                    2
+                } else {
+                    1
+                };
+                let reverse = home.then_some(if up { 2 } else { 1 });
+                Some(Method::Search { target, up, reverse, edge: n >= 4 })
+            }
             _ => None,
         }
     }
@@ -129,6 +157,16 @@ pub(crate) struct Homing {
     /// The reference switch's pin (bit of 0x6031) and its active level (true high).
     pin: u16,
     active_high: bool,
+    /// The limit switch that reverses a search, and its active level.
+    limit: u16,
+    limit_high: bool,
+    /// The position declared; the offset move to come (the zero speed 0x216E).
+    declared: bool,
+    /// Moving to position 0 after the home was declared.
+    zeroing: bool,
+    /// An edge method's final direction (up): the search's stop may have overshot the switch
+    /// on that side, and then the axis passes back through it before approaching it again.
+    edge_up: Option<bool>,
     /// When it gives up.
     deadline: Option<Instant>,
     /// The axis version of the running step's plan.
@@ -193,6 +231,10 @@ impl<P: Borrow<Table>> DriveState<P> {
                 let sensorless = self.param(Obj::StallDetect) == 1 && creep_steps >= self.param(Obj::StallMinSpeed);
                 refuse(closed || sensorless, ObjError::NotNow)
             }
+            Method::Search { target, reverse, .. } => {
+                let has = |field: u8| pin_of((self.param(Obj::HomingInputs) >> (4 * field)) & 0xF).is_some();
+                refuse(has(target) && reverse.is_none_or(has), ObjError::NotNow)
+            }
             Method::Index { .. } | Method::Here => Ok(()),
         }
     }
@@ -215,13 +257,37 @@ impl<P: Borrow<Table>> DriveState<P> {
             ..Homing::default()
         };
         let one = |s: Step| [Some(s), None, None, None];
+        let (inputs, polarity) = (self.param(Obj::HomingInputs), self.param(Obj::HomingPolarity));
+        let field = move |f: u8| (pin_of((inputs >> (4 * f)) & 0xF).unwrap_or(0), polarity & (1 << f) != 0);
         match method {
+            Method::Search { target, up, reverse, edge } => {
+                let step = |up, fast, until, home, reverse| Some(Step { up, fast, until, home, reverse });
+                let search = step(up, true, Until::Active, !edge, reverse.is_some());
+                self.homing.steps = if edge {
+                    [
+                        search,
+                        step(!up, false, Until::Active, false, false),
+                        step(!up, false, Until::Inactive, false, false),
+                        step(up, false, Until::Active, true, false),
+                    ]
+                } else {
+                    [search, None, None, None]
+                };
+                self.homing.edge_up = edge.then_some(up);
+                (self.homing.pin, self.homing.active_high) = field(target);
+                if let Some(limit) = reverse {
+                    (self.homing.limit, self.homing.limit_high) = field(limit);
+                }
+                self.ctl.suspend = self.homing.pin | self.homing.limit;
+            }
             Method::Here => self.homing.home = Some(self.ctl.axis.setpoint().whole),
-            Method::Index { up } => self.homing.steps = one(Step { up, fast: false, until: Until::Index, home: true }),
+            Method::Index { up } => {
+                self.homing.steps = one(Step { up, fast: false, until: Until::Index, home: true, reverse: false })
+            }
             Method::HardStop { up } => {
                 // A stall bit left from before is not the stop this homing will feel.
                 self.ctl.status.controller &= !STATUS_STALL;
-                self.homing.steps = one(Step { up, fast: false, until: Until::Stall, home: true })
+                self.homing.steps = one(Step { up, fast: false, until: Until::Stall, home: true, reverse: false })
             }
             Method::Switch { input, above, up, index } => {
                 let inputs = self.param(Obj::HomingInputs);
@@ -230,7 +296,7 @@ impl<P: Borrow<Table>> DriveState<P> {
                 // 0x6031 holds an input's level inverted.
                 let high = self.ctl.status.gpio & pin == 0;
                 let active = high == active_high;
-                let step = |up, fast, until, home| Some(Step { up, fast, until, home });
+                let step = |up, fast, until, home| Some(Step { up, fast, until, home, reverse: false });
                 // The edge approached moving `up`: from the released side if the switch is
                 // actuated on the far side of it, else from the actuated side.
                 let into = up == above;
@@ -277,16 +343,21 @@ impl<P: Borrow<Table>> DriveState<P> {
             return self.end_homing(Outcome::Interrupted);
         }
         let h = &mut self.homing;
+        let level = |pin: u16, high: bool| if high { pin } else { 0 };
         let on = match step.until {
-            Until::Active => WatchOn::Pin { pin: h.pin, high: h.active_high },
-            Until::Inactive => WatchOn::Pin { pin: h.pin, high: !h.active_high },
+            Until::Active if step.reverse => WatchOn::Pins {
+                pins: h.pin | h.limit,
+                high: level(h.pin, h.active_high) | level(h.limit, h.limit_high),
+            },
+            Until::Active => WatchOn::Pins { pins: h.pin, high: level(h.pin, h.active_high) },
+            Until::Inactive => WatchOn::Pins { pins: h.pin, high: level(h.pin, !h.active_high) },
             Until::Index => WatchOn::Index,
             Until::Stall => WatchOn::Stall,
         };
         // At a hard stop the axis halts: it cannot ramp down into the stop.
         let decel = if step.until == Until::Stall { 0 } else { accel };
         h.version = self.ctl.axis.version();
-        self.ctl.watch = Some(Watch { on, version: h.version, decel });
+        self.ctl.watch = Some(Watch { on, version: h.version, decel, up: step.up });
     }
 
     /// What the tick reported, for a homing that runs: a caught position (the next step), a
@@ -297,6 +368,15 @@ impl<P: Borrow<Table>> DriveState<P> {
         }
         if let (true, Some(at)) = (events.has(Events::CAUGHT), self.ctl.caught.take()) {
             let step = self.homing.steps.get(self.homing.at).copied().flatten();
+            if let Some(s) = step.filter(|s| s.reverse)
+                && !self.actuated(self.homing.pin, self.homing.active_high)
+            {
+                // The limit came first: the same search the other way, past it.
+                if let Some(slot) = self.homing.steps.get_mut(self.homing.at) {
+                    *slot = Some(Step { up: !s.up, reverse: false, ..s });
+                }
+                return self.homing_step();
+            }
             if step.is_some_and(|s| s.home) {
                 self.homing.home = Some(at);
             }
@@ -306,7 +386,10 @@ impl<P: Borrow<Table>> DriveState<P> {
                 self.ctl.status.controller &= !STATUS_STALL;
                 self.ctl.status.faults &= !FAULT_POSITION;
             }
-            self.homing.at += 1;
+            // An edge method's search that was moving away from the final direction when it
+            // caught the switch stopped inside it or past it on that side: no passing back.
+            let away = step.is_some_and(|s| self.homing.at == 0 && self.homing.edge_up.is_some_and(|f| s.up != f));
+            self.homing.at += if away { 2 } else { 1 };
             return self.homing_step();
         }
         // A stop the tick made on its own; after the last step the axis is only settling (the
@@ -328,22 +411,49 @@ impl<P: Borrow<Table>> DriveState<P> {
             self.ctl.axis.stop_ramp(self.param(Obj::HomingAccel));
             return self.end_homing(Outcome::Timeout);
         }
-        if !h.finishing {
+        if !h.finishing || h.zeroing {
             if self.ctl.axis.version() != h.version {
                 // Another command changed course: the watch went with its plan.
                 self.end_homing(Outcome::Interrupted);
+            } else if h.zeroing && self.ctl.axis.is_still() {
+                self.end_homing(Outcome::Homed);
             }
             return;
         }
         if !self.ctl.axis.is_still() {
             return;
         }
+        if h.declared {
+            return self.zero_move();
+        }
         let Some(home) = h.home else { return self.end_homing(Outcome::Interrupted) };
         let here = self.ctl.axis.setpoint().whole;
         let offset = i64::from(self.param(Obj::HomingOffset) as i32);
         let position = offset.saturating_add(here.saturating_sub(home));
         self.apply(Obj::Position, position.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32 as u32);
-        self.end_homing(Outcome::Homed);
+        if self.param(Obj::HomingZeroSpeed) == 0 || position == 0 {
+            return self.end_homing(Outcome::Homed);
+        }
+        // JMC's offset move, at the next check: planned from where the tick's axis stands in
+        // the declared position's frame, once the two have met at a sync.
+        self.homing.declared = true;
+    }
+
+    /// JMC's offset move: to the zero, at the zero speed 0x216E.
+    fn zero_move(&mut self) {
+        let speed = f64::from(self.param(Obj::HomingZeroSpeed));
+        let accel = f64::from(self.param(Obj::HomingAccel));
+        let limits = Limits { v_max: speed, a_max: accel, d_max: accel, jerk: None };
+        self.ctl.watch = None;
+        if self.ctl.axis.move_to(self.plan_time(), 0, 0.0, 0.0, &limits).is_err() {
+            return self.end_homing(Outcome::Interrupted);
+        }
+        (self.homing.zeroing, self.homing.version) = (true, self.ctl.axis.version());
+    }
+
+    /// Whether the switch on `pin`, active at `high`, is actuated (0x6031 holds levels inverted).
+    fn actuated(&self, pin: u16, high: bool) -> bool {
+        (self.ctl.status.gpio & pin == 0) == high
     }
 
     /// Ends the homing with `outcome`: the watch and the suspended stops go.
