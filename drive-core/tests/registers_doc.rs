@@ -24,3 +24,20 @@ fn every_object_is_in_the_reference() {
     }
     assert!(drive_core::od::OBJECTS.len() >= 90, "seed 000 has about 100 objects");
 }
+
+/// `docs/registers-jmc.md`, the JMC map's reference, from its layout.
+#[test]
+fn jmc_reference_is_current() {
+    let mut text = String::new();
+    let layout = &drive_core::maps::jmc::LAYOUT;
+    drive_core::maps::doc::write_layout(&mut text, layout, &drive_core::maps::jmc::REFERENCE).expect("formatting");
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/registers-jmc.md");
+    if std::env::var_os("UPDATE_DOCS").is_some() {
+        std::fs::write(&path, &text).expect("write docs/registers-jmc.md");
+    }
+    let on_disk = std::fs::read_to_string(&path).unwrap_or_default();
+    assert!(on_disk == text, "docs/registers-jmc.md is stale: run `cargo xtask docs`");
+    for e in layout.entries {
+        assert!(text.contains(&format!("| 0x{:04X} |", e.addr)), "0x{:04X} missing", e.addr);
+    }
+}

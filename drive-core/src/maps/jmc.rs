@@ -103,3 +103,49 @@ pub const EXCEPTIONS: Exceptions = Exceptions {
 /// The JMC layout.
 pub static LAYOUT: Layout =
     Layout { entries: &ENTRIES, order: WordOrder::Setting, exceptions: EXCEPTIONS, walk: Walk::List, halves: false };
+
+/// What the reference says beside the table: the decisions where seed 001 is silent or
+/// contradicts itself.
+#[cfg(feature = "docs")]
+pub static REFERENCE: super::doc::Reference = super::doc::Reference {
+    title: "JMC map (seed 001, iHSS57-R)",
+    notes: &[
+        "Chosen with 0x2190 = 1, saved (0x200F = 2), from the next power-up; `hal-sim --map jmc` for one run. 0x2190 = 0 and a save switch back to the native map. The map powers up switch on disabled (§6.1: \"after power-up the drive is disabled\").",
+        "Serial line: the manual gives no baud rate, parity or node id, nor registers for them; the drive's own are here at their native addresses (0x2028 node id, factory 1; 0x202A baud rate, factory 9600; 0x2100 parity, factory none, 8N1), taking effect after a save and a restart.",
+        "Functions: 0x03, 0x06 and 0x10 as the manual lists them; 0x04, 0x08, 0x17 and 0x2B (device identification, whose application name says \"JMC map\") answer as in the native map. A read takes up to 125 registers (§7.1 says 63, §7.2 126).",
+        "Frames end at 3.5 characters of silence and a gap of more than 1.5 characters inside one drops it (the Modbus serial line), in place of the manual's 2 s receive timeout. A frame with a wrong CRC or parity is not answered (not codes 10 and 9): its address cannot be trusted.",
+        "0x03 walks the table as 0x10 does (the manual says so for 0x10 only). A walk that reaches a read-only register refuses the write with code 5 (§8's tip names three read-only registers as written together).",
+        "0x6000 (word order) is read-write as §8 has it (§5 says read only, and its own examples write it) and kept by a save.",
+        "Controlword 0x6040: the state machine is the drive's own (CiA 402, see `docs/maps.md`). Fault reset is bit 7's rising edge (the bit table; the command table's \"bit8\" is the halt bit); quick stop is bit 2 = 0 as the command table and every example have it. 0x0001 and 0x0003 from switch on disabled change nothing, and 0x000F enables the operation from there, so the routines' 0x0001, 0x0003, 0x000F power up as printed.",
+        "Statusword 0x6041: bits 0-6 as CiA 402 (bit 5 is 0 during a quick stop, as the state table has it), 7 warning (the supply below the free-wheel voltage), 8 halted, 9 moving, 10-13 per mode as §5 tabulates them (velocity mode's bit 13, maximum acceleration reached, stays 0), 11 the home switch, 14 the CW (negative) limit, 15 the CCW (positive) limit, as 0x216C assigns the inputs.",
+        "Position mode: bit 6 (relative) adds the new target to the running target (§6.1: the previous and the new position summed); §6.1's \"no stop\" and \"at once\" examples set it, so their second target 600000 ends at 800000. Statusword bit 12 is 1 while a new set-point can be taken (§5), and a rising bit 4 while it is 0 is not taken (§6.1, line 474).",
+        "Velocity mode runs at 0x6081 (its sign the direction) when bit 8 (halt) falls, and changes speed when 0x6081 is written; bit 8 stops it at 0x6084.",
+        "Homing: left (CW) is the negative direction. Methods 1-8 as §6.3 describes them (method 8 as method 7 mirrored: the manual prints it with only its first word changed); the single-speed methods 1-4 run at 0x6099, the two-speed 5-8 search at 0x6099 and find the edge again at the creep speed 0x2165 (the manual names no object for the low speed). The home offset 0x607C: the zero is that far from the home (positive: CCW), where the axis then moves at 0x609B (the manual's offset move) and the homing ends; 0x609B = 0 stays at the home with the position -0x607C. 0x2165, 0x216B (timeout), 0x216C (which input is which switch) and 0x216D (polarity) are the drive's own, at their native addresses.",
+        "0x605A: 1 stops at 0x6084, 2 at 0x6085, 3-32767 at once (energised); the manual's default 0 is undefined and reads as 2. Then switch on disabled.",
+        "0x606C reads in 0.1 rev/s, as 0x6081 (the manual prints \"rps/min\"); 0x6083, 0x6084, 0x6085 and 0x609A are single registers 0-65535 (§8 prints INTEGER16, §5 UNSIGNED16).",
+        "0x1008, 0x1009, 0x100A (the manual gives no length) are the drive's name in 8 registers, its hardware and its software version in 2 each.",
+    ],
+    remarks: &[
+        (
+            0x1001,
+            "Error register: bit 0 any fault, 1 current, 2 voltage, 3 temperature, 4 communication (timeout 0x2137), 5 position error (closed loop), 7 a coil open.",
+        ),
+        (
+            0x6040,
+            "Controlword (write only): the power state machine (bits 0-3, 7), and in operation enabled bit 4 new set-point (PP) or start homing (mode 6), 5 change at once, 6 relative, 8 halt, 9 no stop between set-points.",
+        ),
+        (
+            0x6060,
+            "Modes of operation (write only): 1 profile position, 3 profile velocity, 6 homing; 4 (torque) is refused as the manual has it \"not supported\".",
+        ),
+        (0x6061, "Modes of operation display."),
+        (0x6081, "Target velocity: the speed of a set-point (PP), the speed to run at (PV)."),
+        (0x607C, "Home offset: the zero is this far from the home found (see the notes)."),
+        (0x6098, "Homing method, §6.3's 1-8."),
+        (0x6099, "Homing speed: the search for the switch."),
+        (0x609A, "Homing acceleration and deceleration."),
+        (0x609B, "Zero offset speed: the move from the home to the zero."),
+        (0x6064, "Position actual value."),
+        (0x606C, "Velocity actual value."),
+    ],
+};

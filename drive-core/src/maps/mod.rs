@@ -2,6 +2,8 @@
 //! own map (seed 000), indexed at compile time; [`layout`] serves any other map from a table of
 //! addresses, word orders, scales and exception codes over the same objects.
 
+#[cfg(feature = "docs")]
+pub mod doc;
 pub mod index;
 pub mod jmc;
 pub mod layout;

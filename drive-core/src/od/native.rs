@@ -297,7 +297,8 @@ objects! {
     /// Device statusword (our object; CiA 402's 0x6041): bits 0-6 the power state (see
     /// `drive_core::power`), 7 warning (the supply below the free-wheel voltage), 8 halted, 9
     /// moving, 10 target reached (PP: at rest on the target; PV: at the speed; homing: ended),
-    /// 11 the home switch, 12 set-point acknowledge (PP), speed 0 (PV), homed (homing), 13
+    /// 11 the home switch, 12 a new set-point can be taken (PP: 0x6071's acknowledge
+    /// inverted, as seed 001 has it), speed 0 (PV), homed (homing), 13
     /// following error (PP, closed loop) or homing error, 14 the negative limit switch, 15 the
     /// positive one (switches as 0x216C assigns them).
     DeviceStatus @ 0x2181: U16, Ro, Live, Any, default 0, None, "device statusword";

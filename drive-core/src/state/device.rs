@@ -14,6 +14,7 @@ use crate::modes::{PowerState, WorkMode};
 use crate::motion::cubic::Table;
 use crate::od::{Obj, ObjError};
 use crate::power::{Command, DeviceState, QuickStopOption};
+use crate::state::control::{SW_SETPOINT_ACK, SW_TARGET_REACHED};
 use crate::units::Instant;
 use core::borrow::Borrow;
 
@@ -173,7 +174,14 @@ impl<P: Borrow<Table>> DriveState<P> {
         sw |= bit(home, 11) | bit(negative, 14) | bit(positive, 15);
         use crate::state::homing::Outcome;
         sw |= match self.mode() {
-            WorkMode::ProfilePosition => self.statusword() | bit(self.ctl.status.faults & FAULT_POSITION != 0, 13),
+            WorkMode::ProfilePosition => {
+                // Bit 12 as seed 001 has it: a new set-point can be taken (CiA 402's set-point
+                // acknowledge, 0x6071's, inverted).
+                let sw = self.statusword();
+                (sw & SW_TARGET_REACHED)
+                    | bit(sw & SW_SETPOINT_ACK == 0, 12)
+                    | bit(self.ctl.status.faults & FAULT_POSITION != 0, 13)
+            }
             WorkMode::ProfileVelocity => bit(self.ctl.axis.settled(), 10) | bit(still, 12),
             WorkMode::Homing => {
                 let outcome = self.homing_outcome();

@@ -1,0 +1,140 @@
+//! The Markdown register reference of a layout map, generated from its table and the objects'
+//! declarations (`docs/registers-NAME.md`).
+
+use super::layout::{Entry, Layout, Scale, View, Walk, WordOrder};
+use crate::od::{Access, Range, Type, Unit};
+use core::fmt::{self, Write};
+
+/// The microsteps a revolution at the factory resolution (0x600C = 0: full steps), for the
+/// defaults a map shows in its own units.
+const FACTORY_PER_REV: i64 = super::layout::FULL_STEPS_PER_REV;
+
+/// What a map's reference says beside its table: its title, the decisions where its manual is
+/// silent or contradicts itself, and a remark for some registers.
+pub struct Reference {
+    /// The title.
+    pub title: &'static str,
+    /// The decisions and protocol notes, one paragraph each.
+    pub notes: &'static [&'static str],
+    /// Remarks by register, in place of the object's own text.
+    pub remarks: &'static [(u16, &'static str)],
+}
+
+/// Writes the reference of `layout`.
+pub fn write_layout(out: &mut impl Write, layout: &Layout, r: &Reference) -> fmt::Result {
+    writeln!(out, "# Register reference: {}", r.title)?;
+    writeln!(out)?;
+    writeln!(
+        out,
+        "Generated from the map's layout table by `cargo xtask docs`; a test fails when this file is stale."
+    )?;
+    writeln!(out)?;
+    let order = match layout.order {
+        WordOrder::HighFirst => "high word first",
+        WordOrder::LowFirst => "low word first",
+        WordOrder::Setting => "high word first, or low word first as the word-order register says",
+    };
+    let walk = match layout.walk {
+        Walk::Address => "by address",
+        Walk::List => {
+            "in the order of this table (a request starts at an entry's register and goes on through the entries below it, whatever their addresses)"
+        }
+    };
+    writeln!(out, "- 32-bit values take two registers, {order}; multi-register requests walk the registers {walk}.")?;
+    if !layout.halves {
+        writeln!(out, "- A 32-bit value is written whole (0x10 with both registers); one half alone is refused.")?;
+    }
+    let e = &layout.exceptions;
+    writeln!(
+        out,
+        "- Exception codes: no such register {}, write to a read-only register {}, read of a write-only one {}, value out of range {}, byte count {}, one half of a 32-bit value {}, busy {}, power stage off {}, fault latched {}, not in this mode or state {}, no trajectory within the limits {}, not done by the drive {}. A refused request changes nothing; a multi-register write is all or nothing.",
+        e.unknown.code(),
+        e.read_only.code(),
+        e.write_only.code(),
+        e.out_of_range.code(),
+        e.byte_count.code(),
+        e.split.code(),
+        e.busy.code(),
+        e.disabled.code(),
+        e.faulted.code(),
+        e.not_now.code(),
+        e.infeasible.code(),
+        e.unsupported.code(),
+    )?;
+    for n in r.notes {
+        writeln!(out, "- {n}")?;
+    }
+    writeln!(out)?;
+    writeln!(out, "| Register | Words | Name | Access | Values | Default | Unit | Drive object | Description |")?;
+    writeln!(out, "|---|---|---|---|---|---|---|---|---|")?;
+    for entry in layout.entries {
+        row(out, entry, r)?;
+    }
+    Ok(())
+}
+
+fn row(out: &mut impl Write, e: &Entry, r: &Reference) -> fmt::Result {
+    let d = e.obj.def();
+    let access = match (e.view, d.access) {
+        (View::ReadOnly, _) | (_, Access::Ro) => "ro",
+        (View::WriteOnly, _) => "wo",
+        (View::Declared, a) => a.name(),
+    };
+    write!(out, "| 0x{:04X} | {} | {} | {access} | ", e.addr, e.words(), d.name)?;
+    values(out, e)?;
+    write!(out, " | ")?;
+    match d.ty {
+        Type::Str(_) => write!(out, "-")?,
+        _ => {
+            let v = if d.ty == Type::S32 { i64::from(d.default as i32) } else { i64::from(d.default) };
+            write!(out, "{}", e.scale.to_map(v, FACTORY_PER_REV).unwrap_or(v))?;
+        }
+    }
+    write!(out, " | {} | 0x{:04X} | ", unit(e), d.addr)?;
+    let text = r.remarks.iter().find(|(a, _)| *a == e.addr).map_or(d.doc, |(_, t)| t);
+    for (i, line) in text.lines().map(str::trim).filter(|l| !l.is_empty()).enumerate() {
+        write!(out, "{}{line}", if i > 0 { " " } else { "" })?;
+    }
+    writeln!(out, " |")
+}
+
+/// The values the map takes, in its own units where its scale is a fixed one.
+fn values(out: &mut impl Write, e: &Entry) -> fmt::Result {
+    let d = e.obj.def();
+    if let Scale::Table(choices) = e.scale {
+        for (i, c) in choices.iter().enumerate() {
+            let sep = if i > 0 { ", " } else { "" };
+            if c.lo == c.hi { write!(out, "{sep}{}", c.lo)? } else { write!(out, "{sep}{}..{}", c.lo, c.hi)? }
+        }
+        return Ok(());
+    }
+    let map = |v: i64| match e.scale {
+        Scale::One => v,
+        s => s.to_map(v, FACTORY_PER_REV).unwrap_or(v),
+    };
+    match (d.range, e.scale) {
+        (Range::Any, _) | (_, Scale::PerRev(..)) => write!(out, "as the drive object"),
+        (Range::Span(a, b), _) => {
+            let (a, b) = (map(i64::from(a)), map(i64::from(b)));
+            write!(out, "{}..{}", a.min(b), a.max(b))
+        }
+        (Range::Set(set), _) => {
+            for (i, v) in set.iter().enumerate() {
+                write!(out, "{}{}", if i > 0 { ", " } else { "" }, map(i64::from(*v)))?;
+            }
+            Ok(())
+        }
+        (Range::Bits(mask), _) => write!(out, "bits 0x{mask:X}"),
+        (Range::Magnitude(a, b), _) => write!(out, "±{}..±{}", map(i64::from(a)), map(i64::from(b))),
+    }
+}
+
+/// The map's unit of `e`.
+fn unit(e: &Entry) -> &'static str {
+    match (e.scale, e.obj.def().unit) {
+        (Scale::PerRev(1, 10), Unit::Pps) => "0.1 rev/s",
+        (Scale::PerRev(1, 10), Unit::Pps2) => "0.1 rev/s²",
+        (Scale::One | Scale::Ratio(-1, 1) | Scale::Table(_), u) => u.symbol(),
+        _ => "see the description",
+    }
+}
