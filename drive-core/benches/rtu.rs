@@ -276,9 +276,45 @@ fn rmodbus(case: RmodbusCase) -> usize {
     black_box(&response[..]).len()
 }
 
+// ---------------------------------------------------------------------------------------------
+// jmc: the same measurement as `drive` through the JMC map (seed 001), for its read 2 (0x607A,
+// the target position, one 32-bit value) and write 1 (0x6083, the acceleration).
+
+/// A JMC drive that has received all of a request but its last byte.
+struct JmcCase {
+    drive: Drive<drive_core::maps::Maps>,
+    last: u8,
+}
+
+fn setup_jmc(frame: &'static [u8]) -> JmcCase {
+    let mut frame = frame.to_vec();
+    let crc = crc16(&frame);
+    frame.extend_from_slice(&crc.to_le_bytes());
+    let (&last, head) = frame.split_last().expect("frame");
+    let mut drive = Drive::with_map(drive_core::DriveConfig::default(), drive_core::maps::Maps::jmc());
+    drive.on_rx(T0, head);
+    let mut probe = drive.clone();
+    probe.on_rx(T0, &[last]);
+    probe.on_timer(T0.plus_micros(T35_US));
+    let reply = probe.take_reply().expect("the drive answers").to_vec();
+    assert_eq!(reply.get(..2), Some(&[SLAVE, frame[1]][..]), "not a normal reply: {reply:02X?}");
+    JmcCase { drive, last }
+}
+
+#[library_benchmark]
+#[bench::read_2(args = (&[SLAVE, 0x03, 0x60, 0x7A, 0x00, 0x02]), setup = setup_jmc)]
+#[bench::write_1(args = (&[SLAVE, 0x06, 0x60, 0x83, 0x00, 0x64]), setup = setup_jmc)]
+fn jmc(mut case: JmcCase) -> usize {
+    let t0 = black_box(T0);
+    case.drive.on_rx(t0, &[black_box(case.last)]);
+    case.drive.on_timer(t0.plus_micros(T35_US));
+    let reply = black_box(case.drive.take_reply());
+    reply.map_or(0, <[u8]>::len)
+}
+
 library_benchmark_group!(
     name = rtu;
-    benchmarks = drive, drive_whole, crc_floor, rmodbus
+    benchmarks = drive, drive_whole, crc_floor, rmodbus, jmc
 );
 
 main!(library_benchmark_groups = rtu);

@@ -360,7 +360,7 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
             counters.no_responses = counters.no_responses.wrapping_add(1);
             return;
         }
-        let request = Request::parse(pdu).map_err(|e| map.request_exception(e));
+        let request = Request::parse(pdu);
         let mut server = Server { map, state, counters, listen_only };
         if broadcast || *server.listen_only {
             // Execute what may execute without an answer, and answer nothing.
@@ -387,10 +387,12 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
                 return;
             }
             Err(e) => {
+                let code = server.map.request_exception(e).code();
                 counters.exceptions = counters.exceptions.wrapping_add(1);
                 *head = [address.get(), function | 0x80];
                 if let Some(b) = body.first_mut() {
-                    *b = e.code();
+                    // The PDU layer's refusals in the map's codes (the map's own are already).
+                    *b = code;
                 }
                 1
             }

@@ -417,3 +417,36 @@ fn quick_stop_and_fault_reset() {
     assert_eq!(r.statusword() & 0x6F, 0x40, "switch on disabled");
     assert_eq!(r.read(0x1001, 1), Ok(vec![0]));
 }
+
+proptest::proptest! {
+    /// 0.1 rev/s and 0.1 rev/s² become microsteps exactly at every resolution and come back as
+    /// written: through the scale, and through the map's registers (a speed written reads back).
+    #[test]
+    fn tenth_revolution_units_round_trip(
+        v in 0i64..=100_000,
+        k in 0usize..9,
+        speed in 1i32..=1500,
+    ) {
+        use drive_core::maps::layout::{Scale, FULL_STEPS_PER_REV};
+        let microsteps = [0u32, 2, 4, 8, 16, 32, 64, 128, 256][k];
+        let per_rev = FULL_STEPS_PER_REV * i64::from(microsteps.max(1));
+        let scale = Scale::PerRev(1, 10);
+        let drive = scale.to_drive(v, per_rev).expect("in range");
+        // per_rev / 10 is a whole number of microsteps at every resolution: exact both ways.
+        proptest::prop_assert_eq!(drive * 10, v * per_rev);
+        proptest::prop_assert_eq!(scale.to_map(drive, per_rev), Some(v));
+        // Through the registers: the resolution set natively, the speed written and read back.
+        let mut r = Rig::new();
+        let d = r.drive.state_mut().write_def(Obj::Microsteps.def(), microsteps);
+        proptest::prop_assert_eq!(d, Ok(()));
+        let pps = i64::from(speed) * per_rev / 10;
+        if (150..=300_000).contains(&pps) {
+            proptest::prop_assert_eq!(r.write32(0x6081, speed), Ok(()));
+            proptest::prop_assert_eq!(i64::from(r.drive.state().read_i32(Obj::PpRunSpeed)), pps);
+            let w = r.read(0x6081, 2).expect("read");
+            proptest::prop_assert_eq!((i32::from(w[0]) << 16) | i32::from(w[1]), speed);
+        } else {
+            proptest::prop_assert_eq!(r.write32(0x6081, speed), Err(3));
+        }
+    }
+}

@@ -302,3 +302,78 @@ pub fn check_reply(req: &[u8], reply: &[u8]) -> bool {
     }
     false
 }
+
+/// Makes the quantities and byte counts of a request agree with its data.
+pub fn fix_lengths(pdu: &mut Vec<u8>) {
+    let regs = |bytes: usize| (bytes / 2).clamp(1, 123) as u16;
+    match pdu.first() {
+        Some(0x10) if pdu.len() >= 6 => {
+            let n = regs(pdu.len() - 6);
+            pdu.truncate(6 + 2 * usize::from(n));
+            pdu.resize(6 + 2 * usize::from(n), 0);
+            pdu[3..5].copy_from_slice(&n.to_be_bytes());
+            pdu[5] = (2 * n) as u8;
+        }
+        Some(0x03) if pdu.len() >= 5 => {
+            let q = (pdu[4] % 16).max(1);
+            pdu[3] = 0;
+            pdu[4] = q;
+            pdu.truncate(5);
+        }
+        _ => {}
+    }
+}
+
+/// Sends `pdu` to the drive at [`ADDR`] as one frame after a silence of `t35` at `*now`, lets
+/// t3.5 pass and returns the frame and the reply.
+pub fn exchange<M: drive_core::maps::RegisterMap>(
+    drive: &mut drive_core::Drive<M>,
+    now: &mut u64,
+    t35: u64,
+    pdu: &[u8],
+) -> (Vec<u8>, Option<Vec<u8>>) {
+    let mut frame = vec![ADDR];
+    frame.extend_from_slice(pdu);
+    let frame = seal(&frame);
+    *now += t35;
+    drive.on_rx(drive_core::Instant::from_micros(*now), &frame);
+    *now += t35 + 1;
+    drive.on_timer(drive_core::Instant::from_micros(*now));
+    let reply = drive.take_reply().map(<[u8]>::to_vec);
+    (frame, reply)
+}
+
+/// Whether `reply` is an exception; if so, checks it is one of `codes` to `frame`'s function.
+pub fn vendor_exception(frame: &[u8], reply: &[u8], codes: &[u8]) -> bool {
+    if reply.get(1).is_none_or(|f| f & 0x80 == 0) {
+        return false;
+    }
+    assert!(reply.len() == 5 && crc_ok(reply), "exception reply {reply:02X?} to {frame:02X?}");
+    assert_eq!(reply[1], frame[1] | 0x80, "{reply:02X?} answering {frame:02X?}");
+    assert!(codes.contains(&reply[2]), "code {:#04X} to {frame:02X?}", reply[2]);
+    true
+}
+
+/// The records `[ctl, len, pdu..]` of a PDU target's input: for each, the control ticks run
+/// first (`ctl` bits 3-5: 0, 1, 20, 200, 2000, each 50 µs after `*now`) and then the request
+/// PDU (bits 0-1 choose the function: 0x03, 0x06, 0x10, 0x17; the data follow it).
+pub fn requests<M: drive_core::maps::RegisterMap>(
+    data: &[u8],
+    drive: &mut drive_core::Drive<M>,
+    now: &mut u64,
+    mut each: impl FnMut(&mut drive_core::Drive<M>, &mut u64, u8, Vec<u8>),
+) {
+    let mut rest = data;
+    while let [ctl, len, tail @ ..] = rest {
+        let (body, next) = tail.split_at(usize::from(*len).min(tail.len()));
+        rest = next;
+        let ticks = [0u64, 1, 20, 200, 2000][usize::from((ctl >> 3) & 7) % 5];
+        for _ in 0..ticks {
+            *now += 50;
+            drive.tick(drive_core::Instant::from_micros(*now));
+        }
+        let mut pdu = vec![[0x03u8, 0x06, 0x10, 0x17][usize::from(ctl & 3)]];
+        pdu.extend_from_slice(body);
+        each(drive, now, *ctl, pdu);
+    }
+}

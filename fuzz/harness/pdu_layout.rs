@@ -8,11 +8,11 @@
 //! an exception changes nothing; a read returns its quantity of registers, each what the
 //! layout's model of that register says (the object's value scaled, in the layout's word order).
 
-use super::oracle::{self, ADDR};
+use super::oracle;
 use drive_core::maps::layout::{Entry, Exceptions, FULL_STEPS_PER_REV, Layout, LayoutMap, Scale, Walk, WordOrder};
 use drive_core::od::{OBJECTS, Obj, Type};
 use drive_core::pdu::Exception;
-use drive_core::{Drive, DriveConfig, Instant};
+use drive_core::{Drive, DriveConfig};
 
 /// The layout's objects (shared with `drive-core/tests/layout_map.rs`).
 pub static ENTRIES: [Entry; 10] = [
@@ -72,8 +72,8 @@ fn model(drive: &Drive<LayoutMap>, reg: u32) -> Option<u16> {
     let per_rev = FULL_STEPS_PER_REV * i64::from(drive.state().read(Obj::Microsteps).max(1));
     let scaled = match e.scale {
         Scale::One => v,
-        Scale::Ratio(n, den) => round(v * den, n),
-        Scale::PerRev(n, den) => round(v * den, n * per_rev),
+        Scale::Ratio(n, den) => round(v * i64::from(den), i64::from(n)),
+        Scale::PerRev(n, den) => round(v * i64::from(den), i64::from(n) * per_rev),
         // The layout has no enumeration.
         Scale::Table(_) => v,
     } as u32;
@@ -90,41 +90,20 @@ fn round(n: i64, d: i64) -> i64 {
 pub fn run(data: &[u8]) {
     let mut drive = Drive::with_map(DriveConfig::default(), LayoutMap::new(&LAYOUT));
     let mut now = 0u64;
-    let mut rest = data;
-    while let [ctl, len, tail @ ..] = rest {
-        let (body, next) = tail.split_at(usize::from(*len).min(tail.len()));
-        rest = next;
-        let ticks = [0u64, 1, 20, 200, 2000][usize::from((ctl >> 3) & 7) % 5];
-        for _ in 0..ticks {
-            now += 50;
-            drive.tick(Instant::from_micros(now));
-        }
-        let function = [0x03u8, 0x06, 0x10, 0x17][usize::from(ctl & 3)];
-        let mut pdu = vec![function];
-        pdu.extend_from_slice(body);
+    oracle::requests(data, &mut drive, &mut now, |drive, now, ctl, mut pdu| {
         if ctl & 4 != 0 {
-            fix_lengths(&mut pdu);
+            oracle::fix_lengths(&mut pdu);
         }
-        let before = snapshot(&drive);
-        let mut frame = vec![ADDR];
-        frame.extend_from_slice(&pdu);
-        let frame = oracle::seal(&frame);
-        now += T35;
-        drive.on_rx(Instant::from_micros(now), &frame);
-        now += T35 + 1;
-        drive.on_timer(Instant::from_micros(now));
-        let reply = drive.take_reply().map(<[u8]>::to_vec);
+        let before = snapshot(drive);
+        let (frame, reply) = oracle::exchange(drive, now, T35, &pdu);
         if frame.len() > oracle::MAX_FRAME {
-            continue;
+            return;
         }
         let Some(reply) = reply else { panic!("no reply to {frame:02X?}") };
-        if reply.get(1).is_some_and(|f| f & 0x80 != 0) {
-            // The layout's codes go beyond the Modbus four that `check_reply` knows.
-            assert!(reply.len() == 5 && oracle::crc_ok(&reply), "exception reply {reply:02X?} to {frame:02X?}");
-            assert_eq!(reply[1], function | 0x80, "{reply:02X?} answering {frame:02X?}");
-            assert!(CODES.contains(&reply[2]), "code {:#04X} to {frame:02X?}", reply[2]);
-            assert_eq!(snapshot(&drive), before, "exception {:#04X} to {frame:02X?} changed the drive", reply[2]);
-            continue;
+        // The map's codes go beyond the Modbus four that `check_reply` knows.
+        if oracle::vendor_exception(&frame, &reply, &CODES) {
+            assert_eq!(snapshot(drive), before, "exception {:#04X} to {frame:02X?} changed the drive", reply[2]);
+            return;
         }
         assert!(!oracle::check_reply(&frame, &reply), "{reply:02X?} to {frame:02X?}");
         if let [0x03, n, regs @ ..] = reply.get(1..reply.len() - 2).unwrap_or_default() {
@@ -132,29 +111,8 @@ pub fn run(data: &[u8]) {
             assert_eq!(usize::from(*n), 2 * qty, "byte count of {frame:02X?}");
             for (i, w) in regs.chunks(2).enumerate() {
                 let got = u16::from_be_bytes([w[0], w[1]]);
-                assert_eq!(Some(got), model(&drive, addr + i as u32), "register {:#06X}", addr + i as u32);
+                assert_eq!(Some(got), model(drive, addr + i as u32), "register {:#06X}", addr + i as u32);
             }
         }
-    }
-}
-
-/// Makes the quantities and byte counts of a request agree with its data.
-fn fix_lengths(pdu: &mut Vec<u8>) {
-    let regs = |bytes: usize| (bytes / 2).clamp(1, 123) as u16;
-    match pdu.first() {
-        Some(0x10) if pdu.len() >= 6 => {
-            let n = regs(pdu.len() - 6);
-            pdu.truncate(6 + 2 * usize::from(n));
-            pdu.resize(6 + 2 * usize::from(n), 0);
-            pdu[3..5].copy_from_slice(&n.to_be_bytes());
-            pdu[5] = (2 * n) as u8;
-        }
-        Some(0x03) if pdu.len() >= 5 => {
-            let q = (pdu[4] % 16).max(1);
-            pdu[3] = 0;
-            pdu[4] = q;
-            pdu.truncate(5);
-        }
-        _ => {}
-    }
+    });
 }

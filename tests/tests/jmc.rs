@@ -133,6 +133,34 @@ impl Jmc {
         panic!("still moving after {secs} s");
     }
 
+    /// Waits until the velocity actual value 0x606C reads `v` (0.1 rev/s), within 2 s of wall time.
+    async fn wait_speed(&mut self, v: i32) {
+        for _ in 0..100 {
+            if self.get32(0x606C).await == v {
+                return;
+            }
+            sleep(Duration::from_millis(20)).await;
+        }
+        panic!("0x606C never read {v}");
+    }
+
+    /// The rotor's speed, microsteps a second, over at least half a simulated second.
+    async fn measured_speed(&mut self) -> f64 {
+        let at = || {
+            let s = self.snapshot.lock().expect("snapshot");
+            (s.rotor_microsteps, s.time_us)
+        };
+        let (a, t) = at();
+        for _ in 0..200 {
+            sleep(Duration::from_millis(5)).await;
+            let (b, u) = at();
+            if u >= t + 500_000 {
+                return (b - a) / ((u - t) as f64 * 1e-6);
+            }
+        }
+        panic!("the simulation does not advance");
+    }
+
     /// §6.1's power-up: 0x0001, 0x0003, 0x000F.
     async fn enable(&mut self) {
         for cw in [0x0001, 0x0003, 0x000F] {
@@ -210,28 +238,26 @@ async fn the_position_routines_end_where_they_say_in_both_word_orders() {
 async fn the_velocity_routine_runs_changes_speed_and_stops() {
     let mut d = jmc().await;
     d.enable().await;
-    // §6.2 (lines 764-792).
+    // §6.2 (lines 764-792), in each word order.
     d.set(0x6060, 3).await;
-    d.set(0x6040, 0x010F).await;
-    d.set32(0x6081, 10).await;
-    d.set(0x6083, 100).await;
-    d.set(0x6084, 100).await;
-    d.set(0x6040, 0x000F).await;
-    sleep(Duration::from_millis(30)).await;
-    let (a, t) = (d.rotor(), d.snapshot.lock().expect("snapshot").time_us);
-    sleep(Duration::from_millis(20)).await;
-    let (b, u) = (d.rotor(), d.snapshot.lock().expect("snapshot").time_us);
-    let speed = (b - a) / ((u - t) as f64 * 1e-6);
-    assert!((speed - 3200.0).abs() < 100.0, "1 rev/s: {speed} microsteps a second");
-    assert_eq!(d.get32(0x606C).await, 10, "velocity actual, 0.1 rev/s");
-    d.set32(0x6081, 100).await;
-    sleep(Duration::from_millis(30)).await;
-    assert_eq!(d.get32(0x606C).await, 100, "10 rev/s");
-    d.set(0x6040, 0x010F).await;
-    d.wait_still(5).await;
-    let sw = d.get(0x6041).await;
-    assert_ne!(sw & (1 << 8), 0, "halted: {sw:#06x}");
-    assert_ne!(sw & (1 << 12), 0, "speed 0: {sw:#06x}");
+    for low_first in [false, true] {
+        d.word_order(low_first).await;
+        d.set(0x6040, 0x010F).await;
+        d.set32(0x6081, 10).await;
+        d.set(0x6083, 100).await;
+        d.set(0x6084, 100).await;
+        d.set(0x6040, 0x000F).await;
+        d.wait_speed(10).await;
+        let speed = d.measured_speed().await;
+        assert!((speed - 3200.0).abs() < 100.0, "1 rev/s: {speed} microsteps a second");
+        d.set32(0x6081, 100).await;
+        d.wait_speed(100).await;
+        d.set(0x6040, 0x010F).await;
+        d.wait_still(5).await;
+        let sw = d.get(0x6041).await;
+        assert_ne!(sw & (1 << 8), 0, "halted: {sw:#06x}");
+        assert_ne!(sw & (1 << 12), 0, "speed 0: {sw:#06x}");
+    }
 }
 
 #[tokio::test(flavor = "current_thread")]
@@ -269,6 +295,18 @@ async fn the_homing_routine_and_methods_home_on_the_switches() {
     }
     // Bits 11, 14, 15: the home switch, the CW and CCW limits.
     assert_ne!(d.get(0x6041).await & (1 << 11), 0, "standing on the cam's edge");
+    // The routine's one 0x10 again, low word first: offset 1000, method 2 (the CCW limit).
+    d.word_order(true).await;
+    let words = [0x03E8, 0x0000, 0x0002, 0x0064, 0x0000, 0x03E8, 0x0064, 0x0000];
+    assert_eq!(write_many(&mut d.ctx, 0x607C, &words).await, Ok(()));
+    d.set(0x6040, 0x000F).await;
+    d.set(0x6040, 0x001F).await;
+    d.wait_still(10).await;
+    sleep(Duration::from_millis(20)).await;
+    assert_eq!(d.get(0x6041).await & 0x3400, 0x1400, "homed");
+    assert_eq!(d.get32(0x6064).await, 0);
+    let zero = d.rotor() / 16.0;
+    assert!((zero - (120.0 + 62.5)).abs() < 0.5, "the CCW limit's edge plus 1000 microsteps: {zero}");
 }
 
 /// The exception code of a refused request.

@@ -85,18 +85,19 @@ pub enum Scale {
     /// The same unit.
     One,
     /// `drive = map × num / den`.
-    Ratio(i64, i64),
+    Ratio(i32, i32),
     /// Per revolution of the motor: `drive = map × microsteps a revolution × num / den` (a
     /// speed in 0.1 rev/s is `PerRev(1, 10)` of the drive's microsteps a second). The
     /// revolution follows the microstep resolution 0x600C.
-    PerRev(i64, i64),
+    PerRev(i32, i32),
     /// An enumeration: the map's values and the drive's, one by one (a value not listed is out
     /// of range).
     Table(&'static [Choice]),
 }
 
 /// `n / d` rounded to the nearest (halves away from zero); `None` for `d == 0` or overflow.
-fn div_round(n: i128, d: i128) -> Option<i128> {
+/// (64 bits hold every product: a 32-bit value times a factor below 2^31.)
+fn div_round(n: i64, d: i64) -> Option<i64> {
     if d == 0 {
         return None;
     }
@@ -107,11 +108,11 @@ fn div_round(n: i128, d: i128) -> Option<i128> {
 
 impl Scale {
     /// The factor as a fraction, given the microsteps a revolution.
-    const fn fraction(self, per_rev: i64) -> (i128, i128) {
+    const fn fraction(self, per_rev: i64) -> (i64, i64) {
         match self {
             Scale::One | Scale::Table(_) => (1, 1),
-            Scale::Ratio(n, d) => (n as i128, d as i128),
-            Scale::PerRev(n, d) => (n as i128 * per_rev as i128, d as i128),
+            Scale::Ratio(n, d) => (n as i64, d as i64),
+            Scale::PerRev(n, d) => (n as i64 * per_rev, d as i64),
         }
     }
 
@@ -124,7 +125,7 @@ impl Scale {
                 .map(|c| i64::from(c.drive));
         }
         let (n, d) = self.fraction(per_rev);
-        i64::try_from(div_round(i128::from(v).checked_mul(n)?, d)?).ok()
+        div_round(v.checked_mul(n)?, d)
     }
 
     /// The map's value of the drive's `v`.
@@ -133,7 +134,7 @@ impl Scale {
             return choices.iter().find(|c| i64::from(c.drive) == v).map(|c| i64::from(c.lo));
         }
         let (n, d) = self.fraction(per_rev);
-        i64::try_from(div_round(i128::from(v).checked_mul(d)?, n)?).ok()
+        div_round(v.checked_mul(d)?, n)
     }
 }
 
@@ -493,6 +494,13 @@ impl RegisterMap for LayoutMap {
         let ex = self.layout.exceptions;
         let mut plan = heapless::Vec::new();
         self.plan(drive, addr, &values, &mut plan)?;
+        if let [(e, Op::Commit(bits))] = plan.as_slice() {
+            // One object: its own write is all or nothing, no checkpoint needed.
+            let v = self.drive_value(drive, e, *bits).map_err(|x| ex.of(x))?;
+            drive.write_def(e.obj.def(), v).map_err(|x| ex.of(x))?;
+            self.set_staged(e.obj, None);
+            return Ok(());
+        }
         // Each value in the drive's unit as the writes before it left the drive (a scale may
         // depend on an object written earlier in the request).
         drive

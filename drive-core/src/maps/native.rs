@@ -158,7 +158,7 @@ impl NativeMap {
             // command, its value checked against an interval.
             if let Some(&(lo, hi)) = PLAIN.get(d.obj as usize).filter(|&&b| b != NOT_PLAIN) {
                 let v = words.next().ok_or(ObjError::Unknown)?;
-                if refused.is_none() && !(lo..=hi).contains(&v) {
+                if refused.is_none() && !(u32::from(lo)..=u32::from(hi)).contains(&v) {
                     *refused = Some(ObjError::OutOfRange);
                 }
                 plan.push(Step::new(d, Op::Commit(v))).map_err(|_| ObjError::Unknown)?;
@@ -266,7 +266,7 @@ impl NativeMap {
 /// the same as its [`Range::accepts`](super::Range::accepts) for its type, in two comparisons
 /// instead of two matches on its type and range. Empty ([`NOT_PLAIN`]) for other objects, and
 /// where the values are not one interval (sets, bit masks, magnitudes).
-static PLAIN: [(u32, u32); Obj::COUNT] = {
+static PLAIN: [(u16, u16); Obj::COUNT] = {
     let mut table = [NOT_PLAIN; Obj::COUNT];
     let mut i = 0;
     while i < Obj::COUNT {
@@ -285,23 +285,23 @@ static PLAIN: [(u32, u32); Obj::COUNT] = {
 };
 
 /// The interval of an object that is not plain: empty.
-const NOT_PLAIN: (u32, u32) = (1, 0);
+const NOT_PLAIN: (u16, u16) = (1, 0);
 
 /// The raw values `range` accepts for a one-register `ty` as one interval, if they are one.
-const fn interval(ty: Type, range: Range) -> Option<(u32, u32)> {
+const fn interval(ty: Type, range: Range) -> Option<(u16, u16)> {
     let max = match ty {
         Type::U8 => u8::MAX as i64,
         Type::U16 => u16::MAX as i64,
         _ => return None,
     };
     match range {
-        Range::Any => Some((0, max as u32)),
+        Range::Any => Some((0, max as u16)),
         // Within the type; an empty span stays empty.
         Range::Span(lo, hi) => {
             let (lo, hi) = (lo as i64, hi as i64);
             let lo = if lo < 0 { 0 } else { lo };
             let hi = if hi > max { max } else { hi };
-            if lo > hi { Some((1, 0)) } else { Some((lo as u32, hi as u32)) }
+            if lo > hi { Some((1, 0)) } else { Some((lo as u16, hi as u16)) }
         }
         _ => None,
     }
@@ -404,7 +404,7 @@ impl RegisterMap for NativeMap {
         let mut plain = true;
         for (&e, &v) in regs.iter().zip(values.pairs()) {
             let (lo, hi) = PLAIN.get(usize::from(e >> 8)).copied().unwrap_or(NOT_PLAIN);
-            let v = u32::from(u16::from_be_bytes(v));
+            let v = u16::from_be_bytes(v);
             plain &= (e & 0xFF == 0) & (lo <= v) & (v <= hi);
         }
         if !plain {
@@ -467,7 +467,7 @@ mod tests {
             if *bounds == NOT_PLAIN {
                 continue;
             }
-            let (lo, hi) = *bounds;
+            let (lo, hi) = (u32::from(bounds.0), u32::from(bounds.1));
             plain += 1;
             let probes =
                 [0, 1, 2, 3, 100, 255, 256, 1000, 6000, 6001, 0xFFFF, 0x1_0000, 0x7FFF_FFFF, 0x8000_0000, u32::MAX];

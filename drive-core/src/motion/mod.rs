@@ -5,3 +5,4 @@ pub mod axis;
 pub mod cubic;
 pub mod scurve;
 pub mod track;
+pub mod whole;

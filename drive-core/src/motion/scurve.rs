@@ -78,7 +78,8 @@
 //! assert_eq!(prof.at(10.0), State { p: 20_000.0, v: 0.0, a: 0.0 });
 //! ```
 
-use libm::{fabs, floor, sqrt};
+use super::whole::floor;
+use libm::{fabs, sqrt};
 
 /// The kinematic limits of a move. All values are in microsteps and seconds.
 ///

@@ -126,7 +126,7 @@ impl Track {
     fn sample_after(&mut self, profile: &Profile, anchor: i64, cruise: bool) -> bool {
         let (rate, h) = (f64::from(TICK_HZ), 1.0 / f64::from(TICK_HZ));
         let duration = profile.duration();
-        let last = libm::ceil(duration * rate);
+        let last = super::whole::ceil(duration * rate);
         if last.is_nan() || last > LONGEST as f64 {
             return false;
         }
@@ -137,7 +137,7 @@ impl Track {
         let mut k0 = 0.0;
         while let Some((t0, s, jerk)) = phases.next() {
             let t1 = phases.peek().map_or(duration, |&(t, _, _)| t);
-            let k1 = libm::ceil(t1 * rate).min(last);
+            let k1 = super::whole::ceil(t1 * rate).min(last);
             if k1 > k0 {
                 let tau = k0 * h - t0;
                 let p = s.p + tau * (s.v + tau * (0.5 * s.a + tau * SIXTH * jerk));
@@ -154,7 +154,7 @@ impl Track {
                 End::Cruise
             }
             (true, false) => {
-                let floor = libm::floor(end.p);
+                let floor = super::whole::floor(end.p);
                 End::Rest(anchor.saturating_add(floor as i64), ((end.p - floor) * 4_294_967_296.0) as u32)
             }
             (false, _) => End::Target(anchor.saturating_add(libm::round(end.p) as i64)),
@@ -216,7 +216,7 @@ impl Track {
         const H: f64 = 1.0 / TICK_HZ as f64;
         // The Taylor coefficients in ticks, then the forward differences at the first tick.
         let (c1, c2, c3) = (v * H, a * (0.5 * H * H), j * (SIXTH * H * H * H));
-        let floor = libm::floor(p);
+        let floor = super::whole::floor(p);
         let piece = Piece {
             ticks,
             frac: ((p - floor) * 4_294_967_296.0) as u32,

@@ -497,16 +497,10 @@ impl<P: Borrow<Table>> DriveState<P> {
             Obj::DriveFaults => u32::from(s.faults),
             Obj::CommStatus => u32::from(s.comm),
             Obj::AlarmCount => u32::from(self.ctl.faults.count),
-            Obj::FaultHistory0 => self.ctl.history(0),
-            Obj::FaultHistory1 => self.ctl.history(1),
-            Obj::FaultHistory2 => self.ctl.history(2),
-            Obj::FaultHistory3 => self.ctl.history(3),
-            Obj::FaultHistory4 => self.ctl.history(4),
-            Obj::FaultHistory5 => self.ctl.history(5),
-            Obj::FaultHistory6 => self.ctl.history(6),
-            Obj::FaultHistory7 => self.ctl.history(7),
-            Obj::FaultHistory8 => self.ctl.history(8),
-            Obj::FaultHistory9 => self.ctl.history(9),
+            // The ten entries are consecutive objects.
+            h if (Obj::FaultHistory0 as usize..=Obj::FaultHistory9 as usize).contains(&(h as usize)) => {
+                self.ctl.history(h as usize - Obj::FaultHistory0 as usize)
+            }
             _ => self.params.get(obj as usize).copied().unwrap_or(0),
         }
     }
