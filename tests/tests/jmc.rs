@@ -30,12 +30,13 @@ fn machine() -> Machine {
     Machine::new(switches.iter().map(|s| Switch::parse(s).expect("switch spec")).collect(), None)
 }
 
-fn power_on(flash: &Path) -> (PowerSwitch, Arc<Mutex<Snapshot>>) {
+fn power_on(flash: &Path, faults: &[&str]) -> (PowerSwitch, Arc<Mutex<Snapshot>>) {
     let opts = SimOptions {
         endpoint: Endpoint::Tcp("127.0.0.1:0".into()),
         flash: Some(flash.to_owned()),
         machine: machine(),
         time_scale: SCALE,
+        faults: faults.iter().map(|f| f.parse().expect("fault spec")).collect(),
         ..Default::default()
     };
     let sim = Simulator::bind(opts).expect("bind simulator");
@@ -60,16 +61,17 @@ struct Jmc {
 }
 
 async fn jmc() -> Jmc {
-    jmc_with(&[]).await
+    jmc_with(&[], &[]).await
 }
 
-/// [`jmc`] with the native map's `settings` written before the switch.
+/// [`jmc`] with the native map's `settings` written before the switch, and the simulator's
+/// `faults` (`--fault` specs) after the restart.
 #[allow(clippy::await_holding_lock)] // one runtime a test, one simulator at a time
-async fn jmc_with(settings: &[(u16, &[u16])]) -> Jmc {
+async fn jmc_with(settings: &[(u16, &[u16])], faults: &[&str]) -> Jmc {
     let turn = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().expect("tempdir");
     let flash = dir.path().join("flash.bin");
-    let (sim, _) = power_on(&flash);
+    let (sim, _) = power_on(&flash, &[]);
     let mut ctx = master(&sim).await;
     // In the native map: 1/16 microsteps, pull-ups on EXT1-3, the switches' inputs (home EXT1,
     // negative EXT2, positive EXT3), a creep speed of 100 full steps a second, then the JMC
@@ -85,7 +87,7 @@ async fn jmc_with(settings: &[(u16, &[u16])]) -> Jmc {
     assert_eq!(read_values(&mut ctx, 0x2120, 1).await[0] & 0x18, 0, "saved");
     drop(ctx);
     sim.off().expect("off");
-    let (sim, snapshot) = power_on(&flash);
+    let (sim, snapshot) = power_on(&flash, faults);
     let ctx = master(&sim).await;
     Jmc { _turn: turn, _dir: dir, _sim: sim, ctx, snapshot, low_first: false }
 }
@@ -317,7 +319,7 @@ fn code<T>(r: Result<T, ExceptionCode>) -> Option<u8> {
 #[tokio::test(flavor = "current_thread")]
 async fn refusals_change_nothing_and_an_ext_stop_is_a_fault_until_reset() {
     // The CCW limit (EXT3, NPN: its falling edge) is also an external stop.
-    let mut d = jmc_with(&[(0x6013, &[0x10]), (0x6014, &[0]), (0x6015, &[0])]).await;
+    let mut d = jmc_with(&[(0x6013, &[0x10]), (0x6014, &[0]), (0x6015, &[0])], &[]).await;
     d.enable().await;
     d.set(0x6060, 1).await;
     let setpoint = |d: &Jmc| d.snapshot.lock().expect("snapshot").setpoint;
@@ -358,4 +360,46 @@ async fn refusals_change_nothing_and_an_ext_stop_is_a_fault_until_reset() {
         sleep(Duration::from_millis(20)).await;
     }
     panic!("not moving back: {}", d.rotor() / 16.0);
+}
+
+/// An over-voltage from the simulator's fault injection (70 V from 60 s to 120 s of simulated
+/// time) while the motor runs: the fault state, the power stage off; a fault reset while the
+/// supply is still high leaves it there; once the supply is back, a fault reset, and the drive
+/// runs again.
+#[tokio::test(flavor = "current_thread")]
+async fn an_injected_over_voltage_is_a_fault_until_reset() {
+    let mut d = jmc_with(&[], &["60000:supply=70", "120000:supply=24"]).await;
+    d.enable().await;
+    d.set(0x6060, 3).await;
+    d.set(0x6040, 0x010F).await;
+    d.set32(0x6081, 10).await;
+    d.set(0x6040, 0x000F).await;
+    let time = |d: &Jmc| d.snapshot.lock().expect("snapshot").time_us;
+    assert!(time(&d) < 60_000_000, "running before the fault");
+    let mut sw = 0;
+    for _ in 0..200 {
+        sw = d.get(0x6041).await;
+        if sw & 0x08 != 0 {
+            break;
+        }
+        sleep(Duration::from_millis(10)).await;
+    }
+    assert_eq!(sw & 0x4F, 0x08, "fault: {sw:#06x}");
+    assert_ne!(d.get(0x1001).await & 0b101, 0, "error register: a voltage fault");
+    assert!(!d.snapshot.lock().expect("snapshot").enabled, "the power stage is off");
+    d.set(0x6040, 0x0080).await;
+    if time(&d) < 119_000_000 {
+        assert_eq!(d.get(0x6041).await & 0x4F, 0x08, "still over-voltage: still the fault state");
+    }
+    while time(&d) < 121_000_000 {
+        sleep(Duration::from_millis(10)).await;
+    }
+    d.set(0x6040, 0x0000).await;
+    d.set(0x6040, 0x0080).await;
+    assert_eq!(d.get(0x6041).await & 0x6F, 0x40, "switch on disabled after the reset");
+    assert_eq!(d.get(0x1001).await, 0);
+    d.enable().await;
+    d.set(0x6040, 0x010F).await;
+    d.set(0x6040, 0x000F).await;
+    d.wait_speed(10).await;
 }
