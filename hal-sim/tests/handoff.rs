@@ -240,3 +240,26 @@ fn the_watchdog_stops_a_move_when_the_master_falls_silent() {
     );
     assert_eq!(out.setpoint.velocity, 0.0);
 }
+
+/// A position declared and a move planned in one action of the bus side, before a sync (a
+/// homing's offset move does so): the tick takes the plan in the declared position's frame, so
+/// the stage emits the move's steps and no burst of the shift between the two frames.
+#[test]
+fn a_declared_position_and_a_move_before_a_sync_emit_the_move_only() {
+    use drive_core::od::Obj;
+    for split in [true, false] {
+        let mut p =
+            if split { Plant::new(Drive::factory(), motor()) } else { Plant::combined(Drive::factory(), motor()) };
+        for (obj, v) in [(Obj::Microsteps, 16), (Obj::MaxSpeed, 3200)] {
+            assert_eq!(p.write(obj, v), Ok(()));
+        }
+        p.run_for(0.02);
+        let r0 = p.rotor_microsteps();
+        assert_eq!(p.write(Obj::Position, 10_000), Ok(()));
+        assert_eq!(p.write(Obj::AbsoluteMove, 11_600), Ok(()));
+        p.run_for(2.0);
+        let moved = p.rotor_microsteps() - r0;
+        assert!((moved - 1600.0).abs() < 0.5, "split {split}: the rotor moved {moved}, not 1600");
+        assert_eq!(p.drive().state().read(Obj::Position), 11_600);
+    }
+}

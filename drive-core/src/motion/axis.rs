@@ -65,6 +65,10 @@ pub struct Axis {
     /// Counts the changes of course: every plan, stop, halt, PVT segment and declared position
     /// (not the walk). Two owners of copies of one axis tell by it which of them changed it.
     version: u32,
+    /// The frame of the positions: what the declared positions ([`Axis::set_position`]) have
+    /// shifted them by since the start, so that an owner that takes a plan made in another
+    /// frame moves its last setpoint into it (no step burst).
+    frame: i64,
 }
 
 /// 2^-32: the weight of a fraction's lowest bit.
@@ -97,6 +101,7 @@ impl Axis {
             joint: None,
             joined: false,
             version: 0,
+            frame: 0,
         }
     }
 
@@ -139,7 +144,10 @@ impl Axis {
             None if !self.is_still() => self.halt(),
             None => *self = *plan,
             Some(_) => {
-                let (last, grid) = (self.last, self.grid);
+                let (mut last, grid) = (self.last, self.grid);
+                // The last setpoint in the plan's frame: a position declared before the plan
+                // shifted it there.
+                last.whole = last.whole.wrapping_add(plan.frame.wrapping_sub(self.frame));
                 *self = *plan;
                 (self.last, self.grid) = (last, grid);
             }
@@ -150,9 +158,9 @@ impl Axis {
     /// other's axis when both hold the same track (the tick never writes one). Cheaper than a
     /// copy by the track's 700 bytes.
     pub fn follow_walk_of(&mut self, other: &Self) {
-        let Self { anchor, rest, segment, track: _, last, grid, joint, joined, version } = *other;
+        let Self { anchor, rest, segment, track: _, last, grid, joint, joined, version, frame } = *other;
         (self.anchor, self.rest, self.segment, self.last, self.grid) = (anchor, rest, segment, last, grid);
-        (self.joint, self.joined, self.version) = (joint, joined, version);
+        (self.joint, self.joined, self.version, self.frame) = (joint, joined, version, frame);
     }
 
     /// Whether the axis is standing still with nothing to do.
@@ -427,6 +435,7 @@ impl Axis {
             return false;
         }
         self.changed();
+        self.frame = self.frame.wrapping_add(position.wrapping_sub(self.last.whole));
         // The track is the planner's: standing, the axis does not read it.
         (self.anchor, self.rest, self.joint, self.joined) = (position, 0, None, false);
         self.last = Setpoint { whole: position, fraction: U0F32::ZERO, velocity: 0.0, acceleration: 0.0 };

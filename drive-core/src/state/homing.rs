@@ -160,8 +160,6 @@ pub(crate) struct Homing {
     /// The limit switch that reverses a search, and its active level.
     limit: u16,
     limit_high: bool,
-    /// The position declared; the offset move to come (the zero speed 0x216E).
-    declared: bool,
     /// Moving to position 0 after the home was declared.
     zeroing: bool,
     /// An edge method's final direction (up): the search's stop may have overshot the switch
@@ -423,9 +421,6 @@ impl<P: Borrow<Table>> DriveState<P> {
         if !self.ctl.axis.is_still() {
             return;
         }
-        if h.declared {
-            return self.zero_move();
-        }
         let Some(home) = h.home else { return self.end_homing(Outcome::Interrupted) };
         let here = self.ctl.axis.setpoint().whole;
         let offset = i64::from(self.param(Obj::HomingOffset) as i32);
@@ -434,9 +429,7 @@ impl<P: Borrow<Table>> DriveState<P> {
         if self.param(Obj::HomingZeroSpeed) == 0 || position == 0 {
             return self.end_homing(Outcome::Homed);
         }
-        // JMC's offset move, at the next check: planned from where the tick's axis stands in
-        // the declared position's frame, once the two have met at a sync.
-        self.homing.declared = true;
+        self.zero_move();
     }
 
     /// JMC's offset move: to the zero, at the zero speed 0x216E.
