@@ -578,3 +578,17 @@ proptest::proptest! {
         }
     }
 }
+
+/// 0x2190 takes the maps the platform carries, and refuses the others (04) with nothing
+/// changed: the firmware carries the native map alone for now.
+#[test]
+fn the_register_map_takes_only_a_map_the_platform_carries() {
+    let mut b = common::Bus::factory();
+    assert_eq!(b.request(&[1, 0x06, 0x21, 0x90, 0, 1]), common::reply(&[1, 0x06, 0x21, 0x90, 0, 1]));
+    assert_eq!(b.drive.state().read(Obj::RegisterMap), 1);
+    assert_eq!(b.request(&[1, 0x06, 0x21, 0x90, 0, 2]), common::reply(&[1, 0x86, 0x03]));
+    b.drive.state_mut().set_maps(1);
+    assert_eq!(b.request(&[1, 0x06, 0x21, 0x90, 0, 0]), common::reply(&[1, 0x06, 0x21, 0x90, 0, 0]));
+    assert_eq!(b.request(&[1, 0x06, 0x21, 0x90, 0, 1]), common::reply(&[1, 0x86, 0x04]));
+    assert_eq!(b.drive.state().read(Obj::RegisterMap), 0);
+}

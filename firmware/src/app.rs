@@ -85,6 +85,8 @@ pub fn start(hardware: &'static str, params: &Params, status: u8, can_save: bool
     };
     let drive = boot_into(slot, config, params, status);
     drive.state_mut().set_plan_margin(crate::board::PLAN_MARGIN_US);
+    // The native map only: the JMC map does not fit the flash ceiling beside it yet.
+    drive.state_mut().set_maps(1);
     let tick = tick_side_into(tick, drive);
     critical_section::with(|cs| TICK.borrow_ref_mut(cs).replace(tick));
     let (baud, parity) = (drive.baud(), drive.state().read(drive_core::od::Obj::Parity));

@@ -315,7 +315,8 @@ objects! {
     ErrorRegister @ 0x2185: U8, Ro, Live, Any, default 0, None, "error register";
     /// Register map (our object): which vendor's registers the drive answers to, from the next
     /// power-up once saved (0x200F = 2): 0 native (seed 000), 1 JMC (seed 001). Every map has
-    /// it at this address, so a master can always switch back.
+    /// it at this address, so a master can always switch back. A map the platform does not
+    /// carry is refused (04): the firmware carries the native map only for now (flash).
     RegisterMap @ 0x2190: U8, Rw, Rom, Span(0, 1), default 0, None, "register map";
     /// Word order of the compatibility maps that make it a setting (our object; JMC's 0x6000):
     /// 0 high word first, 1 low word first.

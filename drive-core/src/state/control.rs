@@ -425,6 +425,12 @@ impl<P: Borrow<Table>> DriveState<P> {
         self.margin = margin_us;
     }
 
+    /// The register maps this platform carries (bit n: 0x2190 = n; all of them unless said):
+    /// 0x2190 refuses the others (04).
+    pub fn set_maps(&mut self, maps: u8) {
+        self.maps = maps;
+    }
+
     /// The time the motion a request commands starts at (the plan's first tick is the first
     /// at or after it): the request's time, and the margin where the tick runs apart.
     pub(crate) fn plan_time(&self) -> Instant {

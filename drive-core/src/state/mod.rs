@@ -177,6 +177,8 @@ pub struct DriveState<P = Table> {
     device: crate::power::DeviceState,
     /// When a quick stop is next checked for rest.
     quick_check: Instant,
+    /// The register maps the platform carries (bit n: 0x2190 = n).
+    maps: u8,
 }
 
 /// Whether writing `obj` plans a motion (`state::control`): the commands but a declared
@@ -258,6 +260,7 @@ impl<P: Borrow<Table>> DriveState<P> {
                 crate::power::DeviceState::SwitchOnDisabled
             },
             quick_check: Instant::from_micros(0),
+            maps: u8::MAX,
         }
     }
 
@@ -283,6 +286,7 @@ impl<P: Borrow<Table>> DriveState<P> {
             margin: _,
             device,
             quick_check: _,
+            maps: _,
         } = self;
         Checkpoint {
             params: *params,
@@ -537,7 +541,7 @@ impl<P: Borrow<Table>> DriveState<P> {
             && matches!(d.storage, Storage::Ram | Storage::Rom)
             && !has_effect(d.obj)
             && !runs_on(d.obj)
-            && !matches!(d.obj, Obj::SystemControl)
+            && !matches!(d.obj, Obj::SystemControl | Obj::RegisterMap)
     }
 
     /// Whether the object `d` declares takes writes, and `value` is within its range.
@@ -559,6 +563,8 @@ impl<P: Borrow<Table>> DriveState<P> {
             // No boot loader to jump to yet (see 0x200F's documentation).
             (Obj::SystemControl, 1) => Err(ObjError::Unsupported),
             (Obj::SystemControl, 2) if !self.can_save => Err(ObjError::Unsupported),
+            // A map this platform does not carry would not answer after the restart.
+            (Obj::RegisterMap, v) if self.maps & (1 << (v & 7)) == 0 => Err(ObjError::Unsupported),
             // A flash erase stalls the STM32G431's single bank for ~22 ms: never while moving. A
             // second save waits for the first to end.
             (Obj::SystemControl, 2 | 3) if !self.ctl.axis.is_still() || self.storage & STORAGE_SAVING != 0 => {
