@@ -288,10 +288,7 @@ impl Plant {
     /// Writes `value` to `obj` as a request would: checked, then applied; refused as the drive
     /// refuses it.
     pub fn write(&mut self, obj: Obj, value: u32) -> Result<(), ObjError> {
-        let state = self.drive.state_mut();
-        state.check(obj, value)?;
-        state.apply(obj, value);
-        Ok(())
+        self.drive.state_mut().write_def(obj.def(), value)
     }
 
     /// Runs the control ticks of the next `secs` of simulated time.

@@ -675,6 +675,11 @@ impl<P: Borrow<Table>> DriveState<P> {
                 }
             }
             Obj::HomingControl => self.homing_command(value),
+            // A set-point or a homing it starts may be refused: all of it, or nothing (the
+            // checkpoint out of line, in `write_in_order`).
+            Obj::DeviceControl => {
+                let _ = self.write_in_order(core::iter::once(value), |_, v| Ok(Some((Obj::DeviceControl.def(), v))));
+            }
             obj if has_effect(obj) => self.apply_motion(obj, value),
             _ => {
                 self.set_param(obj, value);
