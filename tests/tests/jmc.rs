@@ -135,6 +135,19 @@ impl Jmc {
         panic!("still moving after {secs} s");
     }
 
+    /// Waits until a homing has ended (statusword bit 12 homed or 13 error) and the axis stands,
+    /// within `secs` simulated seconds; the statusword then.
+    async fn wait_homed(&mut self, secs: u64) -> u16 {
+        for _ in 0..secs * 10 / u64::from(SCALE) + 50 {
+            sleep(Duration::from_millis(100)).await;
+            let sw = self.get(0x6041).await;
+            if sw & 0x3000 != 0 && sw & (1 << 9) == 0 {
+                return sw;
+            }
+        }
+        panic!("no homing end after {secs} s");
+    }
+
     /// Waits until the velocity actual value 0x606C reads `v` (0.1 rev/s), within 2 s of wall time.
     async fn wait_speed(&mut self, v: i32) {
         for _ in 0..100 {
@@ -273,15 +286,13 @@ async fn the_homing_routine_and_methods_home_on_the_switches() {
     assert_eq!(write_many(&mut d.ctx, 0x607C, &words).await, Ok(()));
     // Method 1 at 2000 full steps a second towards the CW limit, then the offset move.
     d.set(0x6040, 0x001F).await;
-    d.wait_still(5).await;
-    sleep(Duration::from_millis(20)).await;
-    let sw = d.get(0x6041).await;
+    let sw = d.wait_homed(10).await;
     assert_eq!(sw & 0x3400, 0x1400, "homing attained, no error: {sw:#06x}");
     assert_eq!(d.get32(0x6064).await, 0);
     let zero = d.rotor() / 16.0;
     assert!((zero - (-120.0 + 62.5)).abs() < 0.5, "the CW limit's edge plus 1000 microsteps: {zero}");
-    // Methods 5 and 8 (the origin cam's lower edge approached from below at the creep speed),
-    // without the offset move.
+    // Methods 5 (the CW limit's edge, approached again moving left at the creep speed) and 8
+    // (the origin cam's lower edge, approached again from below), without the offset move.
     d.set32(0x609B, 0).await;
     d.set32(0x607C, 0).await;
     d.set32(0x6099, 20).await;
@@ -289,9 +300,7 @@ async fn the_homing_routine_and_methods_home_on_the_switches() {
         d.set(0x6040, 0x000F).await;
         d.set(0x6098, method).await;
         d.set(0x6040, 0x001F).await;
-        d.wait_still(60).await;
-        sleep(Duration::from_millis(20)).await;
-        assert_eq!(d.get(0x6041).await & 0x3000, 0x1000, "method {method}: homed");
+        assert_eq!(d.wait_homed(60).await & 0x3000, 0x1000, "method {method}: homed");
         let at = (d.rotor() - f64::from(d.get32(0x6064).await)) / 16.0;
         assert!((at - home).abs() < 0.2, "method {method}: home at {at} full steps, expected {home}");
     }
@@ -303,9 +312,7 @@ async fn the_homing_routine_and_methods_home_on_the_switches() {
     assert_eq!(write_many(&mut d.ctx, 0x607C, &words).await, Ok(()));
     d.set(0x6040, 0x000F).await;
     d.set(0x6040, 0x001F).await;
-    d.wait_still(10).await;
-    sleep(Duration::from_millis(20)).await;
-    assert_eq!(d.get(0x6041).await & 0x3400, 0x1400, "homed");
+    assert_eq!(d.wait_homed(10).await & 0x3400, 0x1400, "homed");
     assert_eq!(d.get32(0x6064).await, 0);
     let zero = d.rotor() / 16.0;
     assert!((zero - (120.0 + 62.5)).abs() < 0.5, "the CCW limit's edge plus 1000 microsteps: {zero}");
