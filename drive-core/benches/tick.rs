@@ -544,7 +544,7 @@ fn write(mut case: WriteCase) -> usize {
 #[derive(Clone, Copy, Debug)]
 struct PlanCase {
     start: State,
-    target: f64,
+    target: f32,
     limits: Limits,
 }
 
@@ -573,7 +573,7 @@ fn setup_plan(which: &str) -> PlanCase {
 #[bench::rest(args = ("rest"), setup = setup_plan)]
 #[bench::moving(args = ("moving"), setup = setup_plan)]
 #[bench::accelerating(args = ("accelerating"), setup = setup_plan)]
-fn plan(case: PlanCase) -> f64 {
+fn plan(case: PlanCase) -> f32 {
     let c = black_box(case);
     Profile::to_position(c.start, c.target, 0.0, &c.limits).map_or(0.0, |p| p.duration())
 }
@@ -602,13 +602,13 @@ fn setup_ruckig(which: &str) -> RuckigCase {
     const SCALE: f64 = 6400.0;
     let c = setup_plan(which);
     let mut input = InputParameter::new(None);
-    input.current_position[0] = c.start.p / SCALE;
-    input.current_velocity[0] = c.start.v / SCALE;
-    input.current_acceleration[0] = c.start.a / SCALE;
-    input.target_position[0] = c.target / SCALE;
-    input.max_velocity[0] = c.limits.v_max / SCALE;
-    input.max_acceleration[0] = c.limits.a_max / SCALE;
-    input.max_jerk[0] = c.limits.jerk.unwrap_or(f64::INFINITY) / SCALE;
+    input.current_position[0] = f64::from(c.start.p) / SCALE;
+    input.current_velocity[0] = f64::from(c.start.v) / SCALE;
+    input.current_acceleration[0] = f64::from(c.start.a) / SCALE;
+    input.target_position[0] = f64::from(c.target) / SCALE;
+    input.max_velocity[0] = f64::from(c.limits.v_max) / SCALE;
+    input.max_acceleration[0] = f64::from(c.limits.a_max) / SCALE;
+    input.max_jerk[0] = f64::from(c.limits.jerk.unwrap_or(f32::INFINITY)) / SCALE;
     RuckigCase { otg: Ruckig::new(None, 0.001), input }
 }
 

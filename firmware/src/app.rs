@@ -23,7 +23,7 @@ use core::task::Poll;
 use defmt::warn;
 use drive_core::controller::handoff::{Handover, Lent, TickSide};
 use drive_core::ident::Identity;
-use drive_core::maps::NativeMap;
+use drive_core::maps::Maps;
 use drive_core::motion::cubic::Table;
 use drive_core::{Baud, DriveConfig, Instant, Params};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
@@ -34,8 +34,9 @@ use embedded_io_async::Write;
 use crate::board::Serial;
 use crate::power::PowerStage;
 
-/// The drive of the firmware: the native map, and the PVT point table in a static of its own.
-pub type Drive = drive_core::Drive<NativeMap, &'static Table>;
+/// The drive of the firmware: every register map (0x2190 chooses one at power-up), and the PVT
+/// point table in a static of its own.
+pub type Drive = drive_core::Drive<Maps, &'static Table>;
 
 /// The PVT points (9 KB), shared by the task (stores) and the tick (reads).
 static TABLE: Table = Table::new();
@@ -85,8 +86,6 @@ pub fn start(hardware: &'static str, params: &Params, status: u8, can_save: bool
     };
     let drive = boot_into(slot, config, params, status);
     drive.state_mut().set_plan_margin(crate::board::PLAN_MARGIN_US);
-    // The native map only: the JMC map does not fit the flash ceiling beside it yet.
-    drive.state_mut().set_maps(1);
     let tick = tick_side_into(tick, drive);
     critical_section::with(|cs| TICK.borrow_ref_mut(cs).replace(tick));
     let (baud, parity) = (drive.baud(), drive.state().read(drive_core::od::Obj::Parity));
@@ -100,7 +99,8 @@ fn boot_into(
     params: &Params,
     status: u8,
 ) -> &'static mut Drive {
-    Drive::boot_in(slot, config, NativeMap::new(), params, status, &TABLE)
+    let map = Maps::by_id(params.get(drive_core::od::Obj::RegisterMap));
+    Drive::boot_in(slot, config, map, params, status, &TABLE)
 }
 
 /// The tick's side of `drive` in `slot`; out of line as [`boot_into`].

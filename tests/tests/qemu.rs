@@ -119,6 +119,13 @@ async fn tokio_modbus_drives_the_firmware_under_qemu() {
     rtts.sort();
     println!("QEMU read round trip: median {:?}, max {:?} (20 reads)", rtts[10], rtts[19]);
 
+    // The firmware carries every map: 0x2190 takes the JMC map (for the next power-up) and
+    // refuses a map there is none of.
+    write(&mut ctx, 0x2190, 1).await.expect("the JMC map is carried");
+    assert_eq!(read(&mut ctx, 0x2190, 1).await, vec![1]);
+    assert_eq!(write(&mut ctx, 0x2190, 2).await, Err(ExceptionCode::IllegalDataValue));
+    write(&mut ctx, 0x2190, 0).await.expect("back to the native map");
+
     // A write that is out of range changes nothing.
     assert_eq!(write(&mut ctx, 0x6011, 7).await, Err(ExceptionCode::IllegalDataValue));
     assert_eq!(read(&mut ctx, 0x6011, 1).await, vec![1], "still enabled");

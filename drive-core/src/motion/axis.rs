@@ -1,13 +1,13 @@
 //! The axis: executes one planned segment at a time, a sample at every control tick.
 //!
 //! Positions are whole microsteps (`i64`) with a fixed-point fraction. A move or speed change is
-//! planned in `f64` from the state at the tick it starts on, relative to the whole part of that
+//! planned in `f32` from the state at the tick it starts on, relative to the whole part of that
 //! position, then sampled into a [`Track`] that the tick walks in integers: nothing drifts
 //! however far the axis travels, and a move ends exactly on its integer target.
 
 use super::cubic::{Ahead, Cubic, Rates, Walk};
 use super::scurve::{Limits, PlanError, Profile, State};
-use super::track::{Track, Walker};
+use super::track::{Finish, Track, Walker};
 use crate::units::Instant;
 use crate::units::TICK_MICROS;
 use fixed::types::U0F32;
@@ -72,7 +72,7 @@ pub struct Axis {
 }
 
 /// 2^-32: the weight of a fraction's lowest bit.
-const TWO_POW_M32: f64 = 1.0 / 4_294_967_296.0;
+const TWO_POW_M32: f32 = 1.0 / 4_294_967_296.0;
 
 /// One tick of a stop ramp with `left` ticks left: its last tick stands where the one before
 /// left the walk (as a track's last piece does).
@@ -198,7 +198,7 @@ impl Axis {
     /// them: what a plan that starts on that tick starts from.
     fn rebased(&self, at: Instant) -> (i64, State) {
         match &self.segment {
-            Segment::Still => (self.anchor, State { p: f64::from(self.rest) * TWO_POW_M32, ..State::default() }),
+            Segment::Still => (self.anchor, State { p: self.rest as f32 * TWO_POW_M32, ..State::default() }),
             Segment::Track { walker, at: now } => {
                 let track = &self.track;
                 let mut w = *walker;
@@ -224,8 +224,8 @@ impl Axis {
                 let k = cubic_tick(*start, at);
                 let o = cubic.at(k);
                 let whole = cubic.p0.saturating_add(o.whole);
-                let p = f64::from(o.fraction) * TWO_POW_M32;
-                (whole, State { p, v: f64::from(rates.velocity(k)), a: f64::from(rates.acceleration(k)) })
+                let p = o.fraction as f32 * TWO_POW_M32;
+                (whole, State { p, v: rates.velocity(k), a: rates.acceleration(k) })
             }
         }
     }
@@ -269,8 +269,8 @@ impl Axis {
         &mut self,
         now: Instant,
         target: i64,
-        depart_v: f64,
-        arrive_v: f64,
+        depart_v: f32,
+        arrive_v: f32,
         limits: &Limits,
     ) -> Result<(), PlanError> {
         self.plan_to(now, target, depart_v, arrive_v, false, limits)
@@ -283,8 +283,8 @@ impl Axis {
         &mut self,
         now: Instant,
         target: i64,
-        depart_v: f64,
-        pass_v: f64,
+        depart_v: f32,
+        pass_v: f32,
         limits: &Limits,
     ) -> Result<(), PlanError> {
         self.plan_to(now, target, depart_v, pass_v, true, limits)
@@ -294,21 +294,22 @@ impl Axis {
         &mut self,
         now: Instant,
         target: i64,
-        depart_v: f64,
-        arrive_v: f64,
+        depart_v: f32,
+        arrive_v: f32,
         cruise: bool,
         limits: &Limits,
     ) -> Result<(), PlanError> {
         let at = self.next_tick(now);
         let (anchor, mut start) = self.rebased(at);
-        let goal = target.saturating_sub(anchor) as f64;
+        let goal = target.saturating_sub(anchor) as f32;
         let direction = if goal >= start.p { 1.0 } else { -1.0 };
         if self.is_still() && start.p != goal {
             start.v = direction * depart_v.min(limits.v_max);
         }
         // The planner takes the arrival speed as a magnitude, in the direction of the move.
         let arrive_v = arrive_v.min(limits.v_max);
-        self.plan_in_place(anchor, at, cruise, |profile| {
+        let finish = if cruise { Finish::Cruise } else { Finish::Stand(target) };
+        self.plan_in_place(anchor, at, finish, |profile| {
             Profile::to_position_into(profile, start, goal, arrive_v, limits)
         })
     }
@@ -325,13 +326,13 @@ impl Axis {
     /// Changes speed to `v` (signed) from whatever the axis is doing on the first tick at or
     /// after `now`, then keeps it. From rest it may jump to `depart_v` first. Planned in place,
     /// as [`Axis::move_to`]: the axis halts if the plan fails.
-    pub fn run_at(&mut self, now: Instant, v: f64, depart_v: f64, limits: &Limits) -> Result<(), PlanError> {
+    pub fn run_at(&mut self, now: Instant, v: f32, depart_v: f32, limits: &Limits) -> Result<(), PlanError> {
         let at = self.next_tick(now);
         let (anchor, mut start) = self.rebased(at);
         if self.is_still() && v != 0.0 {
-            start.v = libm::copysign(depart_v.min(libm::fabs(v)), v);
+            start.v = libm::copysignf(depart_v.min(libm::fabsf(v)), v);
         }
-        self.plan_in_place(anchor, at, true, |profile| Profile::to_velocity_into(profile, start, v, limits))
+        self.plan_in_place(anchor, at, Finish::Cruise, |profile| Profile::to_velocity_into(profile, start, v, limits))
     }
 
     /// Plans a profile (positions relative to `anchor`) and samples it into the axis' own
@@ -340,14 +341,14 @@ impl Axis {
         &mut self,
         anchor: i64,
         at: Instant,
-        cruise: bool,
+        finish: Finish,
         plan: impl FnOnce(&mut Profile) -> Result<(), PlanError>,
     ) -> Result<(), PlanError> {
         let mut profile = Profile::EMPTY;
         self.joint = None;
         self.changed();
         let planned = plan(&mut profile).and_then(|()| {
-            if self.track.sample(&profile, anchor, cruise) {
+            if self.track.sample(&profile, anchor, finish) {
                 self.segment = Segment::Track { walker: Walker::new(&self.track), at };
                 Ok(())
             } else {
@@ -368,8 +369,8 @@ impl Axis {
     pub fn then_move_to(
         &mut self,
         target: i64,
-        depart_v: f64,
-        arrive_v: f64,
+        depart_v: f32,
+        arrive_v: f32,
         limits: &Limits,
     ) -> Result<(), PlanError> {
         let Segment::Track { walker, .. } = &self.segment else { return Err(PlanError::NoSolution) };
@@ -378,13 +379,13 @@ impl Axis {
         if walker.cruising(&self.track) {
             return Err(PlanError::NoSolution);
         }
-        let goal = target.saturating_sub(anchor) as f64;
+        let goal = target.saturating_sub(anchor) as f32;
         if start.v == 0.0 && start.p != goal {
             start.v = if goal >= start.p { depart_v.min(limits.v_max) } else { -depart_v.min(limits.v_max) };
         }
         let mut profile = Profile::EMPTY;
         Profile::to_position_into(&mut profile, start, goal, arrive_v.min(limits.v_max), limits)?;
-        self.joint = Some(self.track.append(&profile, anchor).ok_or(PlanError::NoSolution)?);
+        self.joint = Some(self.track.append(&profile, anchor, target).ok_or(PlanError::NoSolution)?);
         self.changed();
         Ok(())
     }

@@ -23,7 +23,7 @@ use core::sync::atomic::{AtomicU8, Ordering};
 /// Points the table holds (seed 000 0x6019: up to 1000).
 pub const TABLE_SIZE: usize = 1000;
 /// The fastest a segment may move anywhere along it, in pps: the manual's top speed (0x6003).
-pub const V_MAX: f64 = 200_000.0;
+pub const V_MAX: f32 = 200_000.0;
 /// Control ticks per millisecond of PVT time.
 const TICKS_PER_MS: u64 = TICK_HZ as u64 / 1000;
 /// Largest |Δ| the evaluation takes (see the module documentation).
@@ -232,19 +232,19 @@ impl Cubic {
 
     /// The largest speed anywhere on the segment, pps. The velocity is the quadratic
     /// `a s² + b s + c` in `s`, so it is the larger of the ends and the vertex.
-    pub fn peak_speed(&self) -> f64 {
-        let (v0, v1) = (self.v0 as f64, self.v1 as f64);
-        let ends = libm::fabs(v0).max(libm::fabs(v1));
+    pub fn peak_speed(&self) -> f32 {
+        let (v0, v1) = (self.v0 as f32, self.v1 as f32);
+        let ends = libm::fabsf(v0).max(libm::fabsf(v1));
         if self.n == 0 {
             return ends;
         }
-        let d = self.delta as f64 * f64::from(TICK_HZ) / self.n as f64;
+        let d = self.delta as f32 * TICK_HZ as f32 / self.n as f32;
         let (a, b) = (3.0 * v0 + 3.0 * v1 - 6.0 * d, 6.0 * d - 4.0 * v0 - 2.0 * v1);
         if a == 0.0 {
             return ends;
         }
         let s = -b / (2.0 * a);
-        if s > 0.0 && s < 1.0 { ends.max(libm::fabs(a * s * s + b * s + v0)) } else { ends }
+        if s > 0.0 && s < 1.0 { ends.max(libm::fabsf(a * s * s + b * s + v0)) } else { ends }
     }
 
     /// Whether the motor can follow the segment: no jump (a segment of no time must stay where it
@@ -614,11 +614,11 @@ mod tests {
         let r = c.rates();
         assert_eq!((r.velocity(0), r.velocity(c.ticks()), r.velocity(u64::MAX)), (300.0, -700.0, -700.0));
         // The acceleration is the velocity's derivative: a central difference over two ticks.
-        let dt = 1.0 / f64::from(TICK_HZ);
+        let dt = 1.0 / TICK_HZ as f32;
         for k in [1, 100, 739] {
-            let slope = f64::from(r.velocity(k + 1) - r.velocity(k - 1)) / (2.0 * dt);
+            let slope = (r.velocity(k + 1) - r.velocity(k - 1)) / (2.0 * dt);
             // The rates are `f32`: a difference of two of them is good to about 1e-4.
-            assert!((slope - f64::from(r.acceleration(k))).abs() < 1e-3 * slope.abs().max(1.0), "tick {k}");
+            assert!((slope - r.acceleration(k)).abs() < 1e-3 * slope.abs().max(1.0), "tick {k}");
         }
         let none = Cubic::new(3, 5, Point { position: 3, velocity: 5, time_ms: 0 }).rates();
         assert_eq!((none.velocity(0), none.acceleration(0)), (5.0, 0.0));

@@ -44,27 +44,35 @@
 //! than braked at full deceleration down to `v_max` and then undershot, as Ruckig's brake does, so
 //! from such starts it is often faster than Ruckig.
 //!
-//! # Cost
+//! # Precision and cost
+//!
+//! The planner computes in `f32`, which the Cortex-M4F's FPU does in one instruction (`f64`
+//! would be software there: several times the code and the time). Positions are relative to the
+//! drive's anchor (the whole microsteps where the move starts), so they are the move's own
+//! distances: a profile lands on its target to the rounding of the terms it sums (2^-18 of
+//! their magnitudes, about the speed times the duration), and the track the tick walks stands
+//! on the integer target exactly ([`super::track::Finish`]). The limits are those the drive
+//! sets: S-curves at the manual's accelerations (5 210 to 77 440 pps²) with a jerk of the larger
+//! one over a jerk time of 1 ms to 1 s, so that a jerk phase changes the speed by more than the
+//! speed's own rounding (2^-24 of it); trapezoids at 100 pps² and more. A start acceleration
+//! whose ramp to zero would change the speed by less than that is taken as zero. The property
+//! suite (`drive-core/tests/profile_scurve.rs`) covers that domain.
 //!
 //! [`Profile::position`] finds the phase (binary search over at most [`MAX_PHASES`] start times) and
-//! evaluates one cubic in Horner form. Compiled for `thumbv7em-none-eabihf` (the M4F's FPU is
-//! single precision, so `f64` is software) it makes 3 `__aeabi_dmul`, 4 `__aeabi_dadd`/`dsub` and
-//! about 7 double comparisons: roughly 0.8 k cycles, 5 µs at 168 MHz, per tick. [`Profile::at`]
-//! adds the velocity and acceleration (8 multiplications, 8 additions in all: about 1.3 k cycles).
+//! evaluates one cubic in Horner form; [`Profile::at`] adds the velocity and acceleration.
 //! [`Profile::position_q32`] adds a floor and two conversions to return whole microsteps and a
-//! 32-bit fraction for a step generator. On a host (x86-64) `position` takes about 11 ns.
+//! 32-bit fraction for a step generator.
 //!
 //! The control tick does not evaluate a profile: it walks a track sampled from it
 //! ([`super::track`]).
 //!
 //! Planning builds a pulse a few dozen times (median about 35, at most about 110 in the tests;
-//! each a few dozen `f64` operations, a sort of at most 48 numbers and a few square roots): 2–6 µs
-//! on a host, and on the Cortex-M4 up to about a million instructions. Two common cases skip the
+//! each a few dozen `f32` operations, a sort of at most 48 numbers and a few square roots). Two common cases skip the
 //! search: from no acceleration towards a target with room to cruise, the cruise at `v_max`
 //! (its two pulses built once); without room, the turn below it, whose speed solves the
-//! closed-form distance of two time-symmetric pulses. A whole move request then costs 90 000-
-//! 152 000 instructions on the M4 (`cargo xtask tick-cost`). Planning belongs outside the 20 kHz
-//! tick. A [`Profile`] is 680 bytes.
+//! closed-form distance of two time-symmetric pulses. `cargo xtask tick-cost` measures a whole
+//! move request on the M4 (docs/performance.md). Planning belongs outside the 20 kHz tick. A
+//! [`Profile`] is 340 bytes on the Cortex-M4.
 //!
 //! ```
 //! use drive_core::motion::scurve::{Limits, Profile, State};
@@ -79,7 +87,7 @@
 //! ```
 
 use super::whole::floor;
-use libm::{fabs, sqrt};
+use libm::{fabsf as fabs, sqrtf as sqrt};
 
 /// The kinematic limits of a move. All values are in microsteps and seconds.
 ///
@@ -92,13 +100,15 @@ use libm::{fabs, sqrt};
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Limits {
     /// Largest speed |v| (microsteps/s), > 0.
-    pub v_max: f64,
+    pub v_max: f32,
     /// Largest |a| while the speed |v| is increasing (microsteps/s²), > 0.
-    pub a_max: f64,
+    pub a_max: f32,
     /// Largest |a| while the speed |v| is decreasing (microsteps/s²), > 0.
-    pub d_max: f64,
+    pub d_max: f32,
     /// Largest |da/dt| (microsteps/s³), > 0; `None` for an infinite jerk (trapezoidal profile).
-    pub jerk: Option<f64>,
+    /// At most 1000 times the larger acceleration (a jerk time of 1 ms, the drive's shortest):
+    /// sharper, a jerk phase would change the speed by less than `f32` resolves.
+    pub jerk: Option<f32>,
 }
 
 /// The kinematic state of the axis: position (microsteps, relative to the drive's anchor),
@@ -113,11 +123,11 @@ pub struct Limits {
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
 pub struct State {
     /// Position (microsteps).
-    pub p: f64,
+    pub p: f32,
     /// Velocity (microsteps/s).
-    pub v: f64,
+    pub v: f32,
     /// Acceleration (microsteps/s²).
-    pub a: f64,
+    pub a: f32,
 }
 
 /// Why a profile could not be planned.
@@ -147,15 +157,15 @@ pub const MAX_PHASES: usize = 16;
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
 struct Phase {
     /// Start time (s) from the beginning of the profile.
-    t0: f64,
+    t0: f32,
     /// Position at `t0`.
-    p: f64,
+    p: f32,
     /// Velocity at `t0`.
-    v: f64,
+    v: f32,
     /// Half the acceleration at `t0`.
-    a2: f64,
+    a2: f32,
     /// A sixth of the jerk.
-    j6: f64,
+    j6: f32,
 }
 
 /// A planned motion: at most [`MAX_PHASES`] phases of constant jerk, evaluated in closed form.
@@ -176,7 +186,7 @@ struct Phase {
 pub struct Profile {
     phases: [Phase; MAX_PHASES],
     n: usize,
-    duration: f64,
+    duration: f32,
     end: State,
 }
 
@@ -196,21 +206,28 @@ impl Profile {
 /// Validated limits; `j` is infinite for a trapezoid.
 #[derive(Clone, Copy, Debug)]
 struct Lim {
-    v: f64,
-    acc: f64,
-    dec: f64,
-    j: f64,
+    v: f32,
+    acc: f32,
+    dec: f32,
+    j: f32,
 }
 
 impl Lim {
     fn new(l: &Limits) -> Result<Lim, PlanError> {
-        let ok = |x: f64| x.is_finite() && x > 0.0;
+        let ok = |x: f32| x.is_finite() && x > 0.0;
         let j = match l.jerk {
             Some(j) if ok(j) => j,
             Some(_) => return Err(PlanError::InvalidLimits),
-            None => f64::INFINITY,
+            None => f32::INFINITY,
         };
         if ok(l.v_max) && ok(l.a_max) && ok(l.d_max) {
+            // Two levels whose jerk-smoothed switch at zero speed (|a_max² − d_max²|/2j of
+            // speed) is narrower than `f32` resolves at the top speed are one, the lower: a
+            // pulse could not place the switch.
+            let (lo, hi) = (l.a_max.min(l.d_max), l.a_max.max(l.d_max));
+            if j.is_finite() && (hi - lo) * (hi + lo) < 16.0 * f32::EPSILON * l.v_max * j {
+                return Ok(Lim { v: l.v_max, acc: lo, dec: lo, j });
+            }
             Ok(Lim { v: l.v_max, acc: l.a_max, dec: l.d_max, j })
         } else {
             Err(PlanError::InvalidLimits)
@@ -222,7 +239,7 @@ impl Lim {
     }
 
     /// The velocity reached by bringing the acceleration to zero at full jerk.
-    fn v_nat(&self, v: f64, a: f64) -> f64 {
+    fn v_nat(&self, v: f32, a: f32) -> f32 {
         if self.smooth() { v + a * fabs(a) / (2.0 * self.j) } else { v }
     }
 }
@@ -230,9 +247,9 @@ impl Lim {
 /// A segment of constant jerk: duration, start acceleration, jerk.
 #[derive(Clone, Copy, Debug, Default)]
 struct Seg {
-    t: f64,
-    a: f64,
-    j: f64,
+    t: f32,
+    a: f32,
+    j: f32,
 }
 
 const PULSE_SEGS: usize = 10;
@@ -247,7 +264,7 @@ struct Pulse {
 impl Pulse {
     const EMPTY: Pulse = Pulse { segs: [Seg { t: 0.0, a: 0.0, j: 0.0 }; PULSE_SEGS], n: 0 };
 
-    fn push(&mut self, t: f64, a: f64, j: f64) -> Result<(), PlanError> {
+    fn push(&mut self, t: f32, a: f32, j: f32) -> Result<(), PlanError> {
         if t.is_nan() {
             return Err(PlanError::NoSolution);
         }
@@ -266,7 +283,7 @@ impl Pulse {
 
     /// Duration, distance and scale of the rounding (the terms' magnitudes summed) of the pulse
     /// when it starts at velocity `v`.
-    fn time_dist(&self, mut v: f64) -> Eval {
+    fn time_dist(&self, mut v: f32) -> Eval {
         let mut e = Eval { t: 0.0, d: 0.0, mag: 0.0 };
         for s in self.iter() {
             let dp = s.t * (v + s.t * (0.5 * s.a + s.t * s.j / 6.0));
@@ -280,37 +297,41 @@ impl Pulse {
     }
 }
 
+/// The relative rounding accepted in a candidate's sums: 32 `f32` ulps of the terms' magnitude
+/// (a pulse sums a few dozen rounded terms).
+const ROUNDING: f32 = 32.0 * f32::EPSILON;
+
 /// Duration, distance and scale of the rounding (at least the path length) of a candidate.
 #[derive(Clone, Copy, Debug)]
 struct Eval {
-    t: f64,
-    d: f64,
-    mag: f64,
+    t: f32,
+    d: f32,
+    mag: f32,
 }
 
 impl Eval {
     /// The distance error accepted for this candidate: the rounding of its positions.
-    fn tol(&self) -> f64 {
-        1e-12 * self.mag + 1e-9
+    fn tol(&self) -> f32 {
+        ROUNDING * self.mag + 1e-5
     }
 }
 
 /// A velocity `base + off`: a turn or a dip close to a known velocity (start, natural or final)
 /// is a small offset from it, which keeps its own precision. Moving a pulse's end by `δ` moves
-/// its end position by about `v·δ/a`, or `2v·√(δ/j)` from `a = 0`: one ulp of a high speed can
-/// move it by 10⁻⁸..10⁻² microstep, beyond the rounding the planner accepts.
+/// its end position by about `v·δ/a`, or `2v·√(δ/j)` from `a = 0`: one ulp of a high speed
+/// (2^-24 of it) can move it by far more than the rounding the planner accepts.
 #[derive(Clone, Copy, Debug)]
 struct Vel {
-    base: f64,
-    off: f64,
+    base: f32,
+    off: f32,
 }
 
 impl Vel {
-    const fn of(v: f64) -> Vel {
+    const fn of(v: f32) -> Vel {
         Vel { base: v, off: 0.0 }
     }
 
-    fn val(self) -> f64 {
+    fn val(self) -> f32 {
         self.base + self.off
     }
 }
@@ -320,23 +341,23 @@ impl Vel {
 #[derive(Clone, Copy, Debug)]
 struct Dip {
     v: Vel,
-    a: f64,
+    a: f32,
 }
 
 /// The envelope of `E = a²/2` over the shifted, normalised velocity `x` (acceleration ≥ 0,
 /// velocity increasing from `x = 0` to `x = w`).
 struct Walk {
-    j: f64,
-    e0: f64,
-    w: f64,
+    j: f32,
+    e0: f32,
+    w: f32,
     /// `a_max²/2` (speed increasing: normalised velocity > 0).
-    ca: f64,
+    ca: f32,
     /// `d_max²/2` (speed decreasing: normalised velocity < 0).
-    cd: f64,
+    cd: f32,
     /// `x` at which the velocity is zero.
-    xz: f64,
+    xz: f32,
     brk: bool,
-    dip: Option<(f64, f64)>,
+    dip: Option<(f32, f32)>,
 }
 
 const WALK_LINES: usize = 9;
@@ -345,7 +366,7 @@ const WALK_PIECES: usize = 12;
 
 impl Walk {
     /// The acceleration limit, smoothed by the jerk: value and slope.
-    fn g(&self, x: f64) -> (f64, f64) {
+    fn g(&self, x: f32) -> (f32, f32) {
         let (ca, cd, j, xz) = (self.ca, self.cd, self.j, self.xz);
         if cd >= ca {
             if x >= xz {
@@ -363,7 +384,7 @@ impl Walk {
     }
 
     /// The envelope at `x`: value and slope of the active bound.
-    fn env(&self, x: f64) -> (f64, f64) {
+    fn env(&self, x: f32) -> (f32, f32) {
         let j = self.j;
         let (mut e, mut k) = (self.e0 + j * x, j);
         let b = j * (self.w - x);
@@ -394,15 +415,15 @@ impl Walk {
     }
 
     /// The segments of the envelope, appended to `out` with the sign `s` (denormalisation).
-    fn segments(&self, a_start: f64, s: f64, out: &mut Pulse) -> Result<(), PlanError> {
+    fn segments(&self, a_start: f32, s: f32, out: &mut Pulse) -> Result<(), PlanError> {
         if self.w <= 0.0 {
             return Ok(());
         }
         let j = self.j;
         // Lines E = c + k x of every bound, to find all the kinks of the envelope.
-        let mut lines = [(0.0f64, 0.0f64); WALK_LINES];
+        let mut lines = [(0.0f32, 0.0f32); WALK_LINES];
         let mut nl = 0usize;
-        let mut add_line = |c: f64, k: f64| {
+        let mut add_line = |c: f32, k: f32| {
             if let Some(l) = lines.get_mut(nl) {
                 *l = (c, k);
                 nl += 1;
@@ -426,10 +447,10 @@ impl Walk {
             add_line(ed - j * xd, j);
             add_line(ed + j * xd, -j);
         }
-        let mut pts = [0.0f64; WALK_POINTS];
+        let mut pts = [0.0f32; WALK_POINTS];
         let mut np = 0usize;
         let w = self.w;
-        let mut add_pt = |x: f64| {
+        let mut add_pt = |x: f32| {
             if x > 0.0
                 && x < w
                 && let Some(p) = pts.get_mut(np)
@@ -460,7 +481,7 @@ impl Walk {
         sort_few(pts);
 
         // Merge the intervals into pieces of equal slope: (x0, x1, slope).
-        let mut pieces = [(0.0f64, 0.0f64, 0.0f64); WALK_PIECES];
+        let mut pieces = [(0.0f32, 0.0f32, 0.0f32); WALK_PIECES];
         let mut nq = 0usize;
         let mut x_prev = 0.0;
         for &x in pts.iter().chain(core::iter::once(&w)) {
@@ -485,7 +506,7 @@ impl Walk {
         let pieces = pieces.get(..nq).unwrap_or(&[]);
 
         // Acceleration of each constant piece (its level), then the segments.
-        let level = |i: usize, p: &(f64, f64, f64)| -> f64 {
+        let level = |i: usize, p: &(f32, f32, f32)| -> f32 {
             if i == 0 { a_start } else { sqrt(2.0 * self.env(0.5 * (p.0 + p.1)).0.max(0.0)) }
         };
         let mut a_prev = a_start;
@@ -516,7 +537,7 @@ impl Walk {
 /// The fastest change from `(vs, a_s)` to `(ve, 0)`, optionally with a dip at `dip.v`, into
 /// `out` (the caller's: returned by value, every call site would keep a pulse of its own on the
 /// stack).
-fn pulse(vs: Vel, a_s: f64, ve: Vel, lim: &Lim, dip: Option<Dip>, out: &mut Pulse) -> Result<(), PlanError> {
+fn pulse(vs: Vel, a_s: f32, ve: Vel, lim: &Lim, dip: Option<Dip>, out: &mut Pulse) -> Result<(), PlanError> {
     *out = Pulse::EMPTY;
     if !lim.smooth() {
         // The change with the offsets apart (see `Vel`): at a low acceleration, a large speed's
@@ -544,12 +565,12 @@ fn pulse(vs: Vel, a_s: f64, ve: Vel, lim: &Lim, dip: Option<Dip>, out: &mut Puls
 /// Returns the envelope, the start acceleration (normalised, ≥ 0) and the sign.
 fn walk_for(
     vs: Vel,
-    a_s: f64,
+    a_s: f32,
     ve: Vel,
     lim: &Lim,
     dip: Option<Dip>,
     out: &mut Pulse,
-) -> Result<(Walk, f64, f64), PlanError> {
+) -> Result<(Walk, f32, f32), PlanError> {
     let j = lim.j;
     // Bases and offsets are subtracted apart: a small offset stays exact (see `Vel`).
     let vn = lim.v_nat(vs.base, a_s);
@@ -579,7 +600,7 @@ fn walk_for(
 /// The range of dip accelerations `[a_lo, a_hi]` for a dip at velocity `v` in the fastest pulse
 /// `(vs, a_s) → (ve, 0)`: `a_hi` is the pulse's own acceleration there (no dip), `a_lo` the
 /// deepest dip the jerk allows coming from the start. `None` if the pulse does not pass `v`.
-fn dip_bounds(vs: f64, a_s: f64, ve: f64, lim: &Lim, v: f64) -> Result<Option<(f64, f64)>, PlanError> {
+fn dip_bounds(vs: f32, a_s: f32, ve: f32, lim: &Lim, v: f32) -> Result<Option<(f32, f32)>, PlanError> {
     let mut scratch = Pulse::EMPTY;
     let (walk, _, s) = walk_for(Vel::of(vs), a_s, Vel::of(ve), lim, None, &mut scratch)?;
     // x = s·v − us, and xz = −us.
@@ -605,13 +626,13 @@ const ROOT_ITERS: usize = 200;
 /// `f` is a trait object: one copy of the search serves every family (generic, each would inline
 /// its pulses into a copy of its own: 1.4 KB of flash on the Cortex-M4).
 fn solve(
-    f: &mut dyn FnMut(f64) -> Result<f64, PlanError>,
-    mut xa: f64,
-    mut fa: f64,
-    mut xb: f64,
-    mut fb: f64,
-    ftol: f64,
-) -> Result<f64, PlanError> {
+    f: &mut dyn FnMut(f32) -> Result<f32, PlanError>,
+    mut xa: f32,
+    mut fa: f32,
+    mut xb: f32,
+    mut fb: f32,
+    ftol: f32,
+) -> Result<f32, PlanError> {
     let (mut best, mut fbest) = if fabs(fa) < fabs(fb) { (xa, fabs(fa)) } else { (xb, fabs(fb)) };
     if fbest <= ftol || (fa > 0.0) == (fb > 0.0) {
         return Ok(best);
@@ -669,13 +690,13 @@ fn solve(
 #[derive(Clone, Copy, Debug)]
 enum Cand {
     /// Pulse to `vp`, cruise for `cruise` s, pulse to the target velocity.
-    Turn { vp: Vel, cruise: f64 },
+    Turn { vp: Vel, cruise: f32 },
     /// One braking pulse with a dip to `a` at `v`.
-    Dip { v: Vel, a: f64 },
+    Dip { v: Vel, a: f32 },
 }
 
 /// Duration and distance of "pulse to vp, pulse to vf".
-fn turn_td(v0: f64, a0: f64, vp: Vel, vf: f64, lim: &Lim) -> Result<Eval, PlanError> {
+fn turn_td(v0: f32, a0: f32, vp: Vel, vf: f32, lim: &Lim) -> Result<Eval, PlanError> {
     let mut p = Pulse::EMPTY;
     pulse(Vel::of(v0), a0, vp, lim, None, &mut p)?;
     let e1 = p.time_dist(v0);
@@ -684,7 +705,7 @@ fn turn_td(v0: f64, a0: f64, vp: Vel, vf: f64, lim: &Lim) -> Result<Eval, PlanEr
     Ok(Eval { t: e1.t + e2.t, d: e1.d + e2.d, mag: e1.mag + e2.mag })
 }
 
-fn dip_td(v0: f64, a0: f64, vf: f64, lim: &Lim, dip: Dip) -> Result<Eval, PlanError> {
+fn dip_td(v0: f32, a0: f32, vf: f32, lim: &Lim, dip: Dip) -> Result<Eval, PlanError> {
     let mut p = Pulse::EMPTY;
     pulse(Vel::of(v0), a0, Vel::of(vf), lim, Some(dip), &mut p)?;
     Ok(p.time_dist(v0))
@@ -694,7 +715,7 @@ fn dip_td(v0: f64, a0: f64, vf: f64, lim: &Lim, dip: Dip) -> Result<Eval, PlanEr
 /// its evaluation. Out of line, as [`assemble_position`]: the two run one after the other,
 /// and their frames are not on the stack together (a microcontroller's stack is short).
 #[inline(never)]
-fn fastest_position(v0: f64, a0: f64, vf: f64, d: f64, lim: &Lim) -> Result<(Cand, Eval), PlanError> {
+fn fastest_position(v0: f32, a0: f32, vf: f32, d: f32, lim: &Lim) -> Result<(Cand, Eval), PlanError> {
     search_position(v0, a0, vf, d, lim)
 }
 
@@ -706,10 +727,10 @@ fn fastest_position(v0: f64, a0: f64, vf: f64, d: f64, lim: &Lim) -> Result<(Can
 /// further on or behind while cruising). The two pulses are left in `p1` and `p2`, the
 /// candidate and its evaluation returned; `None` if the shortcut does not apply.
 fn cruise_pulses(
-    v0: f64,
-    a0: f64,
-    vf: f64,
-    d: f64,
+    v0: f32,
+    a0: f32,
+    vf: f32,
+    d: f32,
     lim: &Lim,
     p1: &mut Pulse,
     p2: &mut Pulse,
@@ -737,7 +758,7 @@ fn cruise_pulses(
 }
 
 /// [`turn_td`] from no acceleration, keeping the two pulses in `p1` and `p2` for the profile.
-fn two_pulses(v0: f64, vp: Vel, vf: f64, lim: &Lim, p1: &mut Pulse, p2: &mut Pulse) -> Result<Eval, PlanError> {
+fn two_pulses(v0: f32, vp: Vel, vf: f32, lim: &Lim, p1: &mut Pulse, p2: &mut Pulse) -> Result<Eval, PlanError> {
     pulse(Vel::of(v0), 0.0, vp, lim, None, p1)?;
     pulse(vp, 0.0, Vel::of(vf), lim, None, p2)?;
     let (e1, e2) = (p1.time_dist(v0), p2.time_dist(vp.val()));
@@ -746,7 +767,7 @@ fn two_pulses(v0: f64, vp: Vel, vf: f64, lim: &Lim, p1: &mut Pulse, p2: &mut Pul
 
 /// The time of a pulse that changes the speed by `dv ≥ 0` from and to zero acceleration, at the
 /// acceleration limit `l` and the jerk `j` (infinite: a trapezoid's ramp).
-fn pulse_time(dv: f64, l: f64, j: f64) -> f64 {
+fn pulse_time(dv: f32, l: f32, j: f32) -> f32 {
     if !j.is_finite() {
         dv / l
     } else if dv >= l * l / j {
@@ -760,7 +781,7 @@ fn pulse_time(dv: f64, l: f64, j: f64) -> f64 {
 /// magnitude) and down to `(vf, 0)`, the speeds all of the move's direction: a jerk-limited
 /// pulse between zero accelerations is symmetric in time, so it covers its mean speed times its
 /// duration.
-fn covered(v0: f64, vf: f64, d: f64, lim: &Lim, w: f64) -> f64 {
+fn covered(v0: f32, vf: f32, d: f32, lim: &Lim, w: f32) -> f32 {
     let s = if d > 0.0 { 1.0 } else { -1.0 };
     let (u0, uf) = (s * v0, s * vf);
     0.5 * (u0 + w) * pulse_time(w - u0, lim.acc, lim.j) + 0.5 * (w + uf) * pulse_time(w - uf, lim.dec, lim.j)
@@ -775,9 +796,9 @@ fn covered(v0: f64, vf: f64, d: f64, lim: &Lim, w: f64) -> f64 {
 /// checked; `None` if the move is not of this kind (it would overshoot even turning at once) or
 /// the check fails (the general search then decides).
 fn turn_below(
-    v0: f64,
-    vf: f64,
-    d: f64,
+    v0: f32,
+    vf: f32,
+    d: f32,
     lim: &Lim,
     p1: &mut Pulse,
     p2: &mut Pulse,
@@ -794,7 +815,8 @@ fn turn_below(
     }
     // The planner's own root search on the closed form: a few dozen evaluations of a few
     // operations each, well inside the tolerance the built pulses are checked against.
-    let w = solve(&mut |w| Ok(covered(v0, vf, d, lim, w) - dist), lo, f_lo, hi, f_hi, 1e-13 * dist + 1e-10)?;
+    let w =
+        solve(&mut |w| Ok(covered(v0, vf, d, lim, w) - dist), lo, f_lo, hi, f_hi, 4.0 * f32::EPSILON * dist + 1e-6)?;
     let vp = Vel::of(s * w);
     let e = two_pulses(v0, vp, vf, lim, p1, p2)?;
     Ok((fabs(e.d - d) <= e.tol()).then_some((Cand::Turn { vp, cruise: 0.0 }, e)))
@@ -802,7 +824,7 @@ fn turn_below(
 
 /// [`cruise_pulses`] without keeping the pulses (for the tests).
 #[cfg(test)]
-fn cruise_shortcut(v0: f64, a0: f64, vf: f64, d: f64, lim: &Lim) -> Result<Option<(Cand, Eval)>, PlanError> {
+fn cruise_shortcut(v0: f32, a0: f32, vf: f32, d: f32, lim: &Lim) -> Result<Option<(Cand, Eval)>, PlanError> {
     let (mut p1, mut p2) = (Pulse::EMPTY, Pulse::EMPTY);
     cruise_pulses(v0, a0, vf, d, lim, &mut p1, &mut p2)
 }
@@ -813,8 +835,8 @@ fn cruise_shortcut(v0: f64, a0: f64, vf: f64, d: f64, lim: &Lim) -> Result<Optio
 fn shortcut_position(
     out: &mut Profile,
     start: State,
-    a0: f64,
-    d: f64,
+    a0: f32,
+    d: f32,
     lim: &Lim,
     end: State,
 ) -> Result<bool, PlanError> {
@@ -843,20 +865,20 @@ fn shortcut_position(
 }
 
 /// [`fastest_position`] by searching every family of profiles.
-fn search_position(v0: f64, a0: f64, vf: f64, d: f64, lim: &Lim) -> Result<(Cand, Eval), PlanError> {
+fn search_position(v0: f32, a0: f32, vf: f32, d: f32, lim: &Lim) -> Result<(Cand, Eval), PlanError> {
     let vmax = lim.v;
     // Root searches stop at this residual; candidates are accepted within their own rounding.
-    let ftol = 1e-14 * fabs(d).max(1.0);
-    let mut best: Option<(f64, Cand, Eval)> = None;
-    let consider = |best: &mut Option<(f64, Cand, Eval)>, c: Cand, e: Eval, residual: f64| {
+    let ftol = 2.0 * f32::EPSILON * fabs(d).max(1.0);
+    let mut best: Option<(f32, Cand, Eval)> = None;
+    let consider = |best: &mut Option<(f32, Cand, Eval)>, c: Cand, e: Eval, residual: f32| {
         if e.t.is_finite() && fabs(residual) <= e.tol() && best.is_none_or(|(bt, _, _)| e.t < bt) {
             *best = Some((e.t, c, e));
         }
     };
     // A family whose shortest possible duration is no better than the best so far is skipped.
-    let beaten = |best: &Option<(f64, Cand, Eval)>, t_min: f64| best.is_some_and(|(bt, _, _)| t_min >= bt);
+    let beaten = |best: &Option<(f32, Cand, Eval)>, t_min: f32| best.is_some_and(|(bt, _, _)| t_min >= bt);
     // A bracket [fa, fb] around zero, up to the rounding of each end.
-    let brackets = |fa: f64, ea: &Eval, fb: f64, eb: &Eval| {
+    let brackets = |fa: f32, ea: &Eval, fb: f32, eb: &Eval| {
         (fa <= ea.tol() && fb >= -eb.tol()) || (fa >= -ea.tol() && fb <= eb.tol())
     };
 
@@ -882,11 +904,11 @@ fn search_position(v0: f64, a0: f64, vf: f64, d: f64, lim: &Lim) -> Result<(Cand
             continue;
         }
         let u_far = sqrt(vmax - sg * vi);
-        let vp_at = |u: f64| if u < u_far { Vel { base: vi, off: sg * u * u } } else { Vel::of(sg * vmax) };
+        let vp_at = |u: f32| if u < u_far { Vel { base: vi, off: sg * u * u } } else { Vel::of(sg * vmax) };
         let e_in = turn_td(v0, a0, Vel::of(vi), vf, lim)?;
         // The duration grows away from the direct profile: the inner end is the shortest.
         if brackets(e_in.d - d, &e_in, e_far.d - d, &e_far) && !beaten(&best, e_in.t.min(e_far.t)) {
-            let mut dist = |u: f64| turn_td(v0, a0, vp_at(u), vf, lim).map(|e| e.d - d);
+            let mut dist = |u: f32| turn_td(v0, a0, vp_at(u), vf, lim).map(|e| e.d - d);
             let u = solve(&mut dist, 0.0, e_in.d - d, u_far, e_far.d - d, ftol)?;
             let vp = vp_at(u);
             let e = turn_td(v0, a0, vp, vf, lim)?;
@@ -901,7 +923,7 @@ fn search_position(v0: f64, a0: f64, vf: f64, d: f64, lim: &Lim) -> Result<(Cand
     if lim.smooth() && s_direct * a0 > 0.0 && fabs(vn) <= vmax {
         let an = fabs(a0);
         // An offset from v0: a shallow dip's apex is closer to it than v0's rounding.
-        let apex = |a: f64| Vel { base: v0, off: s_direct * ((an - a) * (an + a)) / (2.0 * lim.j) };
+        let apex = |a: f32| Vel { base: v0, off: s_direct * ((an - a) * (an + a)) / (2.0 * lim.j) };
         // The largest dip acceleration whose apex is within the speed limit.
         let a_top = if fabs(v0) <= vmax {
             an
@@ -909,7 +931,7 @@ fn search_position(v0: f64, a0: f64, vf: f64, d: f64, lim: &Lim) -> Result<(Cand
             let vd = if v0 > 0.0 { vmax } else { -vmax };
             sqrt((an * an - 2.0 * lim.j * fabs(v0 - vd)).max(0.0))
         };
-        let eval = |a: f64| dip_td(v0, a0, vf, lim, Dip { v: apex(a), a });
+        let eval = |a: f32| dip_td(v0, a0, vf, lim, Dip { v: apex(a), a });
         let (e0, e1) = (eval(0.0)?, eval(a_top)?);
         if brackets(e0.d - d, &e0, e1.d - d, &e1) && !beaten(&best, e0.t.min(e1.t)) {
             let a = solve(&mut |a| eval(a).map(|e| e.d - d), 0.0, e0.d - d, a_top, e1.d - d, ftol)?;
@@ -927,7 +949,7 @@ fn search_position(v0: f64, a0: f64, vf: f64, d: f64, lim: &Lim) -> Result<(Cand
         let sigma = if fabs(vn) > vmax { vn } else { v0 };
         let vd = if sigma > 0.0 { vmax } else { -vmax };
         if let Some((a_lo, a_hi)) = dip_bounds(v0, a0, vf, lim, vd)? {
-            let eval = |a: f64| dip_td(v0, a0, vf, lim, Dip { v: Vel::of(vd), a });
+            let eval = |a: f32| dip_td(v0, a0, vf, lim, Dip { v: Vel::of(vd), a });
             let (e0, e1) = (eval(a_lo)?, eval(a_hi)?);
             if brackets(e0.d - d, &e0, e1.d - d, &e1) && !beaten(&best, e0.t.min(e1.t)) {
                 let a = solve(&mut |a| eval(a).map(|e| e.d - d), a_lo, e0.d - d, a_hi, e1.d - d, ftol)?;
@@ -947,7 +969,7 @@ fn search_position(v0: f64, a0: f64, vf: f64, d: f64, lim: &Lim) -> Result<(Cand
 fn assemble_position(
     out: &mut Profile,
     start: State,
-    a0: f64,
+    a0: f32,
     cand: Cand,
     eval: Eval,
     lim: &Lim,
@@ -995,16 +1017,16 @@ fn build_checked(
     out: &mut Profile,
     start: State,
     segs: &[Seg],
-    cruise_at: Option<(usize, f64)>,
+    cruise_at: Option<(usize, f32)>,
     end: State,
     eval: Eval,
     lim: &Lim,
 ) -> Result<(), PlanError> {
     out.build_into(start, segs, cruise_at, end)?;
     let last = out.eval_end();
-    let tol = eval.tol() + 1e-13 * fabs(start.p);
+    let tol = eval.tol() + 4.0 * f32::EPSILON * fabs(start.p);
     // (The end time of a long profile is rounded: up to a few ulp of the duration at full a.)
-    let tol_v = 1e-9 * lim.v + 8.0 * f64::EPSILON * out.duration * lim.acc.max(lim.dec);
+    let tol_v = ROUNDING * lim.v + 8.0 * f32::EPSILON * out.duration * lim.acc.max(lim.dec);
     if fabs(last.p - end.p) > tol || fabs(last.v - end.v) > tol_v {
         return Err(PlanError::NoSolution);
     }
@@ -1039,20 +1061,20 @@ impl Profile {
     /// [`PlanError::InvalidLimits`], [`PlanError::InvalidState`] or [`PlanError::InvalidTarget`]
     /// for invalid inputs (see [`PlanError`]); [`PlanError::NoSolution`] if the numerical search
     /// fails, which is not expected for inputs of sane magnitude.
-    pub fn to_position(start: State, target_p: f64, target_v: f64, lim: &Limits) -> Result<Profile, PlanError> {
+    pub fn to_position(start: State, target_p: f32, target_v: f32, lim: &Limits) -> Result<Profile, PlanError> {
         let mut prof = Profile::EMPTY;
         Profile::to_position_into(&mut prof, start, target_p, target_v, lim)?;
         Ok(prof)
     }
 
     /// [`Profile::to_position`] into `out`, which holds the profile if it succeeds (and is of no
-    /// use if it fails): a profile is 680 bytes, and returned by value it would be on a
+    /// use if it fails): a profile is 340 bytes, and returned by value it would be on a
     /// microcontroller's stack once more in every frame it passes through.
     pub fn to_position_into(
         out: &mut Profile,
         start: State,
-        target_p: f64,
-        target_v: f64,
+        target_p: f32,
+        target_v: f32,
         lim: &Limits,
     ) -> Result<(), PlanError> {
         let lim = Lim::new(lim)?;
@@ -1080,7 +1102,9 @@ impl Profile {
             return out.build_into(start, &[], None, end);
         }
 
-        if shortcut_position(out, start, a0, d, &lim, end)? {
+        // The shortcut lands within the rounding its root search accepts; built, it may land
+        // just beyond: the search then plans it.
+        if shortcut_position(out, start, a0, d, &lim, end) == Ok(true) {
             return Ok(());
         }
         let (cand, eval) = fastest_position(v0, a0, vf, d, &lim)?;
@@ -1102,14 +1126,14 @@ impl Profile {
     ///
     /// # Errors
     /// As [`Profile::to_position`]; the target is invalid if it is not finite or |target_v| > `v_max`.
-    pub fn to_velocity(start: State, target_v: f64, lim: &Limits) -> Result<Profile, PlanError> {
+    pub fn to_velocity(start: State, target_v: f32, lim: &Limits) -> Result<Profile, PlanError> {
         let mut prof = Profile::EMPTY;
         Profile::to_velocity_into(&mut prof, start, target_v, lim)?;
         Ok(prof)
     }
 
     /// [`Profile::to_velocity`] into `out`, as [`Profile::to_position_into`].
-    pub fn to_velocity_into(out: &mut Profile, start: State, target_v: f64, lim: &Limits) -> Result<(), PlanError> {
+    pub fn to_velocity_into(out: &mut Profile, start: State, target_v: f32, lim: &Limits) -> Result<(), PlanError> {
         let lim = Lim::new(lim)?;
         if !finite(&start) {
             return Err(PlanError::InvalidState);
@@ -1133,7 +1157,7 @@ impl Profile {
         &mut self,
         start: State,
         segs: &[Seg],
-        cruise: Option<(usize, f64)>,
+        cruise: Option<(usize, f32)>,
         end: State,
     ) -> Result<(), PlanError> {
         // Every phase beyond the profile's stays zero, as in a new one.
@@ -1175,7 +1199,7 @@ impl Profile {
     }
 
     /// The duration of the profile (s); 0 for a move that has nothing to do.
-    pub fn duration(&self) -> f64 {
+    pub fn duration(&self) -> f32 {
         self.duration
     }
 
@@ -1186,15 +1210,15 @@ impl Profile {
     /// use drive_core::motion::scurve::{Limits, Profile, State};
     /// let lim = Limits { v_max: 1_000.0, a_max: 1_000.0, d_max: 1_000.0, jerk: None };
     /// let prof = Profile::to_position(State::default(), 3_000.0, 0.0, &lim).unwrap();
-    /// let starts: Vec<f64> = prof.phases().map(|(t0, _, _)| t0).collect();
+    /// let starts: Vec<f32> = prof.phases().map(|(t0, _, _)| t0).collect();
     /// assert_eq!(starts, [0.0, 1.0, 3.0]);
     /// ```
-    pub fn phases(&self) -> impl Iterator<Item = (f64, State, f64)> + '_ {
+    pub fn phases(&self) -> impl Iterator<Item = (f32, State, f32)> + '_ {
         let phases = self.phases.get(..self.n).unwrap_or(&[]);
         phases.iter().map(|ph| (ph.t0, State { p: ph.p, v: ph.v, a: 2.0 * ph.a2 }, 6.0 * ph.j6))
     }
 
-    fn phase(&self, t: f64) -> Option<&Phase> {
+    fn phase(&self, t: f32) -> Option<&Phase> {
         let phases = self.phases.get(..self.n.max(1)).unwrap_or(&[]);
         let i = phases.partition_point(|ph| ph.t0 <= t);
         phases.get(i.saturating_sub(1))
@@ -1212,7 +1236,7 @@ impl Profile {
     /// assert_eq!(prof.at(0.5), State { p: 125.0, v: 500.0, a: 1_000.0 });
     /// assert_eq!(prof.at(4.0), State { p: 3_000.0, v: 0.0, a: 0.0 });
     /// ```
-    pub fn at(&self, t: f64) -> State {
+    pub fn at(&self, t: f32) -> State {
         if t.is_nan() || t >= self.duration {
             return self.end;
         }
@@ -1232,7 +1256,7 @@ impl Profile {
     /// let prof = Profile::to_position(State::default(), 3_000.0, 0.0, &lim).unwrap();
     /// assert_eq!(prof.position(2.0), 1_500.0);
     /// ```
-    pub fn position(&self, t: f64) -> f64 {
+    pub fn position(&self, t: f32) -> f32 {
         if t.is_nan() || t >= self.duration {
             return self.end.p;
         }
@@ -1257,7 +1281,7 @@ impl Profile {
     /// let prof = Profile::to_position(start, 2_990.0, 0.0, &lim).unwrap();
     /// assert_eq!(prof.position_q32(0.05), (-9, 1 << 30)); // -10 + 1.25 = -8.75
     /// ```
-    pub fn position_q32(&self, t: f64) -> (i64, u32) {
+    pub fn position_q32(&self, t: f32) -> (i64, u32) {
         let p = self.position(t);
         let whole = floor(p);
         let frac = (p - whole) * 4_294_967_296.0;
@@ -1265,9 +1289,9 @@ impl Profile {
     }
 }
 
-/// Sorts a few numbers (by `f64::total_cmp`, as `sort_unstable_by` would): an insertion sort,
+/// Sorts a few numbers (by `f32::total_cmp`, as `sort_unstable_by` would): an insertion sort,
 /// for the planner sorts a few dozen at most and the library's sort costs 2 KB of flash.
-fn sort_few(xs: &mut [f64]) {
+fn sort_few(xs: &mut [f32]) {
     for i in 1..xs.len() {
         let mut j = i;
         while let Some(pair) = j.checked_sub(1).and_then(|h| xs.get_mut(h..=j)) {
@@ -1281,10 +1305,10 @@ fn sort_few(xs: &mut [f64]) {
 }
 
 /// Evaluates a phase `dt` after its start.
-fn eval(ph: &Phase, dt: f64) -> State {
+fn eval(ph: &Phase, dt: f32) -> State {
     if ph.a2 == 0.0 && ph.j6 == 0.0 {
         // Constant speed, the long part of most moves: the same numbers as below with the zero
-        // terms left out (a Cortex-M4F does f64 in software, tens of instructions an operation).
+        // terms left out (a Cortex-M4F does f32 in software, tens of instructions an operation).
         return State { p: ph.p + dt * ph.v, v: ph.v, a: 0.0 };
     }
     let a = 2.0 * ph.a2 + 6.0 * ph.j6 * dt;
@@ -1306,13 +1330,13 @@ mod tests {
         /// finds a profile of the same duration: the shortcut never gives a slower move.
         #[test]
         fn the_cruise_shortcut_is_the_fastest_profile(
-            d in proptest::prop_oneof![-1e6f64..1e6, -2e3f64..2e3],
-            v0 in -1.0f64..1.0,
-            vf in 0.0f64..1.0,
-            v_max in 100.0f64..200_000.0,
-            a_max in 1_000.0f64..200_000.0,
-            d_max in 1_000.0f64..200_000.0,
-            jerk in proptest::option::of(1e5f64..1e9),
+            d in proptest::prop_oneof![-1e6f32..1e6, -2e3f32..2e3],
+            v0 in -1.0f32..1.0,
+            vf in 0.0f32..1.0,
+            v_max in 100.0f32..200_000.0,
+            a_max in 1_000.0f32..200_000.0,
+            d_max in 1_000.0f32..200_000.0,
+            jerk in proptest::option::of(1e5f32..1e9),
         ) {
             let Ok(lim) = Lim::new(&Limits { v_max, a_max, d_max, jerk }) else { return Ok(()) };
             // Any start speed within the limit, an end speed of the move's direction.
@@ -1320,18 +1344,18 @@ mod tests {
             if let Ok(Some((_, fast))) = cruise_shortcut(v0, 0.0, vf, d, &lim) {
                 let (_, full) = search_position(v0, 0.0, vf, d, &lim).unwrap_or((super::Cand::Turn { vp: super::Vel::of(0.0), cruise: 0.0 }, fast));
                 // The search considers the same cruise: equal, up to rounding.
-                proptest::prop_assert!((fast.t - full.t).abs() <= 1e-12 * full.t + 1e-12, "{} vs {}", fast.t, full.t);
+                proptest::prop_assert!((fast.t - full.t).abs() <= super::ROUNDING * full.t, "{} vs {}", fast.t, full.t);
             }
         }
 
         /// The planner's small sort orders as the library's does, signed zeros and all.
         #[test]
         fn sort_few_is_the_library_sort(mut xs in proptest::collection::vec(
-            proptest::prop_oneof![proptest::num::f64::ANY, proptest::prelude::Just(0.0), proptest::prelude::Just(-0.0)],
+            proptest::prop_oneof![proptest::num::f32::ANY, proptest::prelude::Just(0.0), proptest::prelude::Just(-0.0)],
             0..40,
         )) {
             let mut expected = xs.clone();
-            expected.sort_unstable_by(f64::total_cmp);
+            expected.sort_unstable_by(f32::total_cmp);
             sort_few(&mut xs);
             proptest::prop_assert_eq!(xs.iter().map(|x| x.to_bits()).collect::<Vec<_>>(), expected.iter().map(|x| x.to_bits()).collect::<Vec<_>>());
         }

@@ -1,7 +1,7 @@
 //! Trajectories as the control tick runs them: pieces of constant jerk sampled on the tick grid
 //! and walked by forward differences in integers.
 //!
-//! The planner ([`super::scurve`]) works in `f64`, once, outside the tick. [`Track::from_profile`]
+//! The planner ([`super::scurve`]) works in `f32`, once, outside the tick. [`Track::from_profile`]
 //! samples its phases at the control ticks into at most [`MAX_PIECES`] pieces, each a start
 //! position (whole microsteps and a 32-bit fraction) and three forward differences in fixed
 //! point. Walking a piece ([`Walker::step`]) is then three 128-bit additions a tick whatever the
@@ -15,11 +15,11 @@
 //!
 //! ```
 //! use drive_core::motion::scurve::{Limits, Profile, State};
-//! use drive_core::motion::track::{Track, Walker};
+//! use drive_core::motion::track::{Finish, Track, Walker};
 //! // 1000 microsteps, 1000 pps², 1000 pps: 1 s up, 1 s down (20 000 ticks each).
 //! let lim = Limits { v_max: 1_000.0, a_max: 1_000.0, d_max: 1_000.0, jerk: None };
 //! let prof = Profile::to_position(State::default(), 1_000.0, 0.0, &lim).unwrap();
-//! let track = Track::from_profile(&prof, 5, false).unwrap();
+//! let track = Track::from_profile(&prof, 5, Finish::Stand(1_005)).unwrap();
 //! let mut w = Walker::new(&track);
 //! for _ in 0..20_000 {
 //!     w.step(&track);
@@ -69,6 +69,16 @@ enum End {
     Cruise,
 }
 
+/// How a sampled profile ends.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Finish {
+    /// A move: the track stands on this target (whole microsteps) after its last piece. The
+    /// profile ends on it up to the rounding of its `f32` positions (2^-24 of the distance).
+    Stand(i64),
+    /// A speed change: the end speed is kept for ever, or the track stands where it stopped.
+    Cruise,
+}
+
 /// A trajectory sampled on the control ticks: sample 0 is the tick it is activated on.
 #[derive(Clone, Copy, Debug)]
 pub struct Track {
@@ -87,17 +97,28 @@ impl PartialEq for Track {
 impl Eq for Track {}
 
 /// 1/6, a multiplication where a division would be a library call on the Cortex-M4.
-const SIXTH: f64 = 1.0 / 6.0;
+const SIXTH: f32 = 1.0 / 6.0;
 
 /// `x` in fixed point: times `scale` (a power of two), truncated, saturating.
-fn fixed(x: f64, scale: f64) -> i64 {
+fn fixed(x: f32, scale: f32) -> i64 {
     (x * scale) as i64
 }
 
+/// `v / TICK_HZ` in Q24.40 (a speed's step a tick) to the last bit: the speed times a power
+/// of two is exact in `f32`, the odd part of the tick rate divides it in integers. The `f32`
+/// product alone would be off by 2^-24 of the speed (a cruise at 4000 pps walking at
+/// 3999.9998). Beyond 2^27 pps, as a product.
+fn step_q40(v: f32) -> i64 {
+    const SHIFT: u32 = TICK_HZ.trailing_zeros();
+    const ODD: i64 = (TICK_HZ >> SHIFT) as i64;
+    let scaled = v * const { (1u64 << (40 - SHIFT)) as f32 };
+    if libm::fabsf(v) < const { (1u64 << 27) as f32 } { (scaled as i64) / ODD } else { fixed(v / TICK_HZ as f32, Q40) }
+}
+
 /// 2^40, 2^48, 2^56: the scales of a piece's differences.
-const Q40: f64 = 1_099_511_627_776.0;
-const Q48: f64 = Q40 * 256.0;
-const Q56: f64 = Q48 * 256.0;
+const Q40: f32 = 1_099_511_627_776.0;
+const Q48: f32 = Q40 * 256.0;
+const Q56: f32 = Q48 * 256.0;
 
 impl Track {
     /// A track that stands on `position` from its first tick.
@@ -107,27 +128,25 @@ impl Track {
     }
 
     /// Samples `profile` (positions relative to `anchor`) at the control ticks, its start on
-    /// sample 0. A move (`cruise` false) stands on its end position rounded to the microstep; a
-    /// speed change (`cruise`) keeps its end speed for ever, or stands where it stopped. `None`
-    /// if a phase lasts longer than 2.5 days of ticks.
-    pub fn from_profile(profile: &Profile, anchor: i64, cruise: bool) -> Option<Self> {
+    /// sample 0, to end as `finish` says. `None` if a phase lasts longer than 2.5 days of ticks.
+    pub fn from_profile(profile: &Profile, anchor: i64, finish: Finish) -> Option<Self> {
         let mut track = Self::standing(anchor);
-        track.sample(profile, anchor, cruise).then_some(track)
+        track.sample(profile, anchor, finish).then_some(track)
     }
 
     /// [`Track::from_profile`] into `self`; whether it fits.
-    pub fn sample(&mut self, profile: &Profile, anchor: i64, cruise: bool) -> bool {
+    pub fn sample(&mut self, profile: &Profile, anchor: i64, finish: Finish) -> bool {
         self.n = 0;
-        self.sample_after(profile, anchor, cruise)
+        self.sample_after(profile, anchor, finish)
     }
 
     /// Samples `profile` into the pieces after the present ones (its sample 0 is the tick after
     /// their last); whether it fits (if not, nothing changes).
-    fn sample_after(&mut self, profile: &Profile, anchor: i64, cruise: bool) -> bool {
-        let (rate, h) = (f64::from(TICK_HZ), 1.0 / f64::from(TICK_HZ));
+    fn sample_after(&mut self, profile: &Profile, anchor: i64, finish: Finish) -> bool {
+        let (rate, h) = (TICK_HZ as f32, 1.0 / TICK_HZ as f32);
         let duration = profile.duration();
         let last = super::whole::ceil(duration * rate);
-        if last.is_nan() || last > LONGEST as f64 {
+        if last.is_nan() || last > LONGEST as f32 {
             return false;
         }
         let (kept, end) = (self.n, profile.at(duration));
@@ -147,17 +166,17 @@ impl Track {
                 k0 = k1;
             }
         }
-        let end = match (cruise, end.v != 0.0) {
-            (true, true) => {
+        let end = match (finish, end.v != 0.0) {
+            (Finish::Cruise, true) => {
                 let tau = last * h - duration;
                 fits &= self.push(FOREVER, anchor, end.p + end.v * tau, end.v, 0.0, 0.0);
                 End::Cruise
             }
-            (true, false) => {
+            (Finish::Cruise, false) => {
                 let floor = super::whole::floor(end.p);
                 End::Rest(anchor.saturating_add(floor as i64), ((end.p - floor) * 4_294_967_296.0) as u32)
             }
-            (false, _) => End::Target(anchor.saturating_add(libm::round(end.p) as i64)),
+            (Finish::Stand(target), _) => End::Target(target),
         };
         if fits {
             self.end = end;
@@ -176,17 +195,17 @@ impl Track {
             End::Target(p) => Some((p, State::default())),
             End::Cruise => {
                 let last = self.piece(self.n.checked_sub(1)?)?;
-                let v = last.d1 as f64 / Q40 * f64::from(TICK_HZ);
-                Some((last.whole, State { p: f64::from(last.frac) / 4_294_967_296.0, v, a: 0.0 }))
+                let v = last.d1 as f32 / Q40 * TICK_HZ as f32;
+                Some((last.whole, State { p: last.frac as f32 / 4_294_967_296.0, v, a: 0.0 }))
             }
             End::Rest(..) => None,
         }
     }
 
-    /// Appends `profile` (a move from [`Track::end_state`], positions relative to `anchor`),
-    /// replacing a final cruise, or one tick after a move's end at rest; the index of its first
-    /// piece, or `None` if it does not fit (and nothing changes).
-    pub fn append(&mut self, profile: &Profile, anchor: i64) -> Option<u8> {
+    /// Appends `profile` (a move to `target` from [`Track::end_state`], positions relative to
+    /// `anchor`), replacing a final cruise, or one tick after a move's end at rest; the index of
+    /// its first piece, or `None` if it does not fit (and nothing changes).
+    pub fn append(&mut self, profile: &Profile, anchor: i64, target: i64) -> Option<u8> {
         let kept = self.n;
         match self.end {
             End::Cruise => self.n = self.n.saturating_sub(1),
@@ -197,7 +216,7 @@ impl Track {
             End::Rest(..) => {}
         }
         let joint = self.n;
-        if self.sample_after(profile, anchor, false) {
+        if self.sample_after(profile, anchor, Finish::Stand(target)) {
             Some(joint)
         } else {
             self.n = kept;
@@ -212,16 +231,16 @@ impl Track {
 
     /// Appends a piece of `ticks` that starts at `p` (relative to `anchor`) with velocity `v`,
     /// acceleration `a` and jerk `j` (per second); whether there was room for it.
-    fn push(&mut self, ticks: u32, anchor: i64, p: f64, v: f64, a: f64, j: f64) -> bool {
-        const H: f64 = 1.0 / TICK_HZ as f64;
+    fn push(&mut self, ticks: u32, anchor: i64, p: f32, v: f32, a: f32, j: f32) -> bool {
+        const H: f32 = 1.0 / TICK_HZ as f32;
         // The Taylor coefficients in ticks, then the forward differences at the first tick.
-        let (c1, c2, c3) = (v * H, a * (0.5 * H * H), j * (SIXTH * H * H * H));
+        let (c2, c3) = (a * (0.5 * H * H), j * (SIXTH * H * H * H));
         let floor = super::whole::floor(p);
         let piece = Piece {
             ticks,
             frac: ((p - floor) * 4_294_967_296.0) as u32,
             whole: anchor.saturating_add(floor as i64),
-            d1: fixed(c1 + c2 + c3, Q40),
+            d1: step_q40(v).saturating_add(fixed(c2 + c3, Q40)),
             d2: fixed(2.0 * c2 + 6.0 * c3, Q48),
             d3: fixed(6.0 * c3, Q56),
         };
@@ -269,8 +288,8 @@ pub struct Walker {
     d3: i128,
 }
 
-/// One microstep in Q64.64, as `f64`.
-const Q64_ONE: f64 = 18_446_744_073_709_551_616.0;
+/// One microstep in Q64.64, as `f32`.
+const Q64_ONE: f32 = 18_446_744_073_709_551_616.0;
 
 /// 1 pps² in Q64.64 microsteps a tick squared: 2^64 / 20 kHz².
 const PER_TICK_SQUARED: i128 = ((1u128 << 64) / (TICK_HZ as u128 * TICK_HZ as u128)) as i128;
@@ -336,10 +355,10 @@ impl Walker {
     ///
     /// ```
     /// use drive_core::motion::scurve::{Limits, Profile, State};
-    /// use drive_core::motion::track::{Track, Walker};
+    /// use drive_core::motion::track::{Finish, Track, Walker};
     /// let lim = Limits { v_max: 4_000.0, a_max: 1e5, d_max: 1e5, jerk: None };
     /// let prof = Profile::to_velocity(State::default(), 4_000.0, &lim).unwrap();
-    /// let track = Track::from_profile(&prof, 0, true).unwrap();
+    /// let track = Track::from_profile(&prof, 0, Finish::Cruise).unwrap();
     /// let mut w = Walker::new(&track);
     /// for _ in 0..20_000 {
     ///     w.step(&track);
@@ -427,21 +446,17 @@ impl Walker {
         to_f32::<32>(self.d2 - self.d3) * rate * rate
     }
 
-    /// The state here in `f64`, the position relative to `anchor` (for the planner).
+    /// The state here in `f32`, the position relative to `anchor` (for the planner).
     pub fn state(&self, anchor: i64) -> State {
-        let per = f64::from(TICK_HZ) / Q64_ONE;
-        let (d1, d2, d3) = (self.d1 as f64, self.d2 as f64, self.d3 as f64);
-        State {
-            v: (d1 - d2 / 2.0 + d3 / 3.0) * per,
-            a: (d2 - d3) * per * f64::from(TICK_HZ),
-            ..self.rest_state(anchor)
-        }
+        let per = TICK_HZ as f32 / Q64_ONE;
+        let (d1, d2, d3) = (self.d1 as f32, self.d2 as f32, self.d3 as f32);
+        State { v: (d1 - d2 / 2.0 + d3 / 3.0) * per, a: (d2 - d3) * per * TICK_HZ as f32, ..self.rest_state(anchor) }
     }
 
     /// [`Walker::state`] standing: the position, no speed (a stop ramp that has ended).
     pub fn rest_state(&self, anchor: i64) -> State {
         let rel = self.p - (i128::from(anchor) << 64);
-        State { p: rel as f64 / Q64_ONE, ..State::default() }
+        State { p: rel as f32 / Q64_ONE, ..State::default() }
     }
 }
 
@@ -450,16 +465,22 @@ mod tests {
     use super::*;
     use crate::motion::scurve::Limits;
 
-    fn walk(prof: &Profile, cruise: bool, ticks: usize) -> (Track, Walker, f64) {
-        let track = Track::from_profile(prof, 0, cruise).unwrap_or(Track::standing(0));
+    fn walk(prof: &Profile, cruise: bool, ticks: usize) -> (Track, Walker, f32) {
+        let finish =
+            if cruise { Finish::Cruise } else { Finish::Stand(libm::roundf(prof.at(prof.duration()).p) as i64) };
+        let track = Track::from_profile(prof, 0, finish).unwrap_or(Track::standing(0));
         let mut w = Walker::new(&track);
-        let mut worst = 0.0f64;
+        let (mut worst, mut reach) = (0.0f32, 1.0f32);
         for k in 0..ticks {
-            let t = k as f64 / f64::from(TICK_HZ);
+            let t = k as f32 / TICK_HZ as f32;
             if t < prof.duration() {
                 let (whole, frac) = w.position();
+                // Beyond the rounding of the profile's own `f32` positions, as far as they reach.
                 let p = whole as f64 + f64::from(frac) / 4_294_967_296.0;
-                worst = worst.max((p - prof.position(t)).abs());
+                let q = prof.position(t);
+                reach = reach.max(q.abs());
+                let off = (p - f64::from(q)).abs() - 8.0 * f64::from(f32::EPSILON * reach);
+                worst = worst.max(off as f32);
             }
             w.step(&track);
         }
@@ -486,21 +507,22 @@ mod tests {
         assert!(w.cruising(&track));
         assert!((w.velocity() + 20_000.0).abs() < 1e-2);
         // 10 s at -20 kpps from the ramp's end: the position follows the line exactly.
-        let t = 200_000.0 / f64::from(TICK_HZ) - prof.duration();
+        let t = 200_000.0 / TICK_HZ as f32 - prof.duration();
         let expected = prof.at(prof.duration()).p - 20_000.0 * t;
         let (whole, frac) = w.position();
-        assert!((whole as f64 + f64::from(frac) / 4_294_967_296.0 - expected).abs() < 1e-3);
+        let off = whole as f64 + f64::from(frac) / 4_294_967_296.0 - f64::from(expected);
+        assert!(off.abs() < 1e-3 + 4.0 * f64::from(f32::EPSILON * expected.abs()), "{off}");
     }
 
     #[test]
     fn an_appended_move_starts_a_tick_after_the_first_stands_on_its_target() {
         let lim = Limits { v_max: 10_000.0, a_max: 100_000.0, d_max: 100_000.0, jerk: None };
         let first = Profile::to_position(State::default(), 2_000.0, 0.0, &lim).unwrap_or(Profile::EMPTY);
-        let mut track = Track::from_profile(&first, 0, false).unwrap_or(Track::standing(0));
+        let mut track = Track::from_profile(&first, 0, Finish::Stand(2_000)).unwrap_or(Track::standing(0));
         let (anchor, start) = track.end_state().unwrap_or_default();
         assert_eq!((anchor, start), (2_000, State::default()));
         let second = Profile::to_position(start, -500.0, 0.0, &lim).unwrap_or(Profile::EMPTY);
-        let joint = track.append(&second, anchor);
+        let joint = track.append(&second, anchor, 1_500);
         assert_eq!(joint, Some(4), "three pieces of the first move, its tick at rest");
         let mut w = Walker::new(&track);
         let mut at_rest_on_target = 0;
@@ -518,8 +540,8 @@ mod tests {
         for target in [9_000.0, 0.0, 9_000.0] {
             let before = track;
             let (anchor, start) = track.end_state().unwrap_or_default();
-            let p = Profile::to_position(start, target - anchor as f64, 0.0, &many).unwrap_or(Profile::EMPTY);
-            if track.append(&p, anchor).is_none() {
+            let p = Profile::to_position(start, target - anchor as f32, 0.0, &many).unwrap_or(Profile::EMPTY);
+            if track.append(&p, anchor, target as i64).is_none() {
                 assert_eq!(track, before);
                 refused = true;
                 break;
@@ -535,21 +557,21 @@ mod tests {
         /// ends exactly on the (rounded) target.
         #[test]
         fn the_walk_follows_any_profile(
-            p0 in 0.0f64..1.0,
-            v0 in -20_000.0f64..20_000.0,
-            a0 in -50_000.0f64..50_000.0,
+            p0 in 0.0f32..1.0,
+            v0 in -20_000.0f32..20_000.0,
+            a0 in -50_000.0f32..50_000.0,
             target in -30_000i64..30_000,
-            v_max in 1_000.0f64..40_000.0,
-            a_max in 20_000.0f64..200_000.0,
-            d_max in 20_000.0f64..200_000.0,
-            jerk in proptest::option::of(1e6f64..1e8),
+            v_max in 1_000.0f32..40_000.0,
+            a_max in 20_000.0f32..200_000.0,
+            d_max in 20_000.0f32..200_000.0,
+            jerk in proptest::option::of(1e6f32..1e8),
         ) {
             let lim = Limits { v_max, a_max, d_max, jerk };
             let start = State { p: p0, v: v0, a: if jerk.is_some() { a0 } else { 0.0 } };
-            let Ok(prof) = Profile::to_position(start, target as f64, 0.0, &lim) else {
+            let Ok(prof) = Profile::to_position(start, target as f32, 0.0, &lim) else {
                 return Ok(());
             };
-            let ticks = (prof.duration() * f64::from(TICK_HZ)) as usize + 2;
+            let ticks = (prof.duration() * TICK_HZ as f32) as usize + 2;
             proptest::prop_assume!(ticks < 400_000);
             let (track, w, worst) = walk(&prof, false, ticks);
             proptest::prop_assert!(worst < 1e-3, "{}", worst);

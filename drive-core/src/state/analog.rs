@@ -125,7 +125,7 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// Plans a PP move to `target` with the PP set-point's limits (from wherever the axis is).
     fn follow_position(&mut self, target: i64) {
         let planner = self.planner();
-        let speed = f64::from(self.param(Obj::PpRunSpeed) as i32).abs();
+        let speed = ((self.param(Obj::PpRunSpeed) as i32) as f32).abs();
         let sp = planner.pp_setpoint(target, speed);
         let at = self.plan_time();
         if self.ctl.axis.move_to(at, sp.target, sp.depart, sp.arrive, &sp.limits).is_ok() {
@@ -137,7 +137,7 @@ impl<P: Borrow<Table>> DriveState<P> {
 
     /// Plans the velocity mode's run at `speed` (its S-curve, as 0x6003 writes it).
     fn follow_speed(&mut self, speed: i64) {
-        let v = speed as f64;
+        let v = speed as f32;
         let planner = self.planner();
         let limits = planner.scurve_limits(v);
         let (depart, _) = planner.jumps(v);

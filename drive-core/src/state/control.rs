@@ -60,8 +60,8 @@ pub const SW_SETPOINT_ACK: u16 = 1 << 12;
 pub(crate) struct SetPoint {
     pub(crate) target: i64,
     pub(crate) limits: Limits,
-    pub(crate) depart: f64,
-    pub(crate) arrive: f64,
+    pub(crate) depart: f32,
+    pub(crate) arrive: f32,
 }
 
 /// The state of the profile position and velocity modes (§5.11-5.12).
@@ -479,29 +479,29 @@ impl Planner<'_> {
     }
 
     /// The S-curve limits of the native position and velocity modes, for a speed of `speed`.
-    pub(crate) fn scurve_limits(&self, speed: f64) -> Limits {
-        let level = |obj| LEVELS.get((self.param(obj) as usize).wrapping_sub(1)).map(|&a| f64::from(a));
+    pub(crate) fn scurve_limits(&self, speed: f32) -> Limits {
+        let level = |obj| LEVELS.get((self.param(obj) as usize).wrapping_sub(1)).map(|&a| a as f32);
         // Level 0 disables the ramp: the motor jumps to speed and stops from it.
         let (a, d) = (level(Obj::AccelLevel).unwrap_or(1e12), level(Obj::DecelLevel).unwrap_or(1e12));
-        let jerk_s = f64::from(self.param(Obj::JerkTime).max(1)) * 1e-3;
-        Limits { v_max: libm::fabs(speed), a_max: a, d_max: d, jerk: Some(a.max(d) / jerk_s) }
+        let jerk_s = (self.param(Obj::JerkTime).max(1) as f32) * 1e-3;
+        Limits { v_max: libm::fabsf(speed), a_max: a, d_max: d, jerk: Some(a.max(d) / jerk_s) }
     }
 
     /// Start and stop speeds: the jumps from and to rest (all of the speed without a ramp).
-    pub(crate) fn jumps(&self, speed: f64) -> (f64, f64) {
-        let ramp = |obj, speed_obj| if self.param(obj) == 0 { speed } else { f64::from(self.param(speed_obj)) };
+    pub(crate) fn jumps(&self, speed: f32) -> (f32, f32) {
+        let ramp = |obj, speed_obj| if self.param(obj) == 0 { speed } else { self.param(speed_obj) as f32 };
         (ramp(Obj::AccelLevel, Obj::StartSpeed), ramp(Obj::DecelLevel, Obj::StopSpeed))
     }
 
     /// The trapezoid limits of the PP and PV modes at `speed`, and their start and stop speeds.
-    pub(crate) fn pp_setpoint(&self, target: i64, speed: f64) -> SetPoint {
+    pub(crate) fn pp_setpoint(&self, target: i64, speed: f32) -> SetPoint {
         let limits = Limits {
-            v_max: libm::fabs(speed),
-            a_max: f64::from(self.param(Obj::PpAccel)),
-            d_max: f64::from(self.param(Obj::PpDecel)),
+            v_max: libm::fabsf(speed),
+            a_max: self.param(Obj::PpAccel) as f32,
+            d_max: self.param(Obj::PpDecel) as f32,
             jerk: None,
         };
-        let (depart, arrive) = (f64::from(self.param(Obj::PpStartSpeed)), f64::from(self.param(Obj::PpStopSpeed)));
+        let (depart, arrive) = (self.param(Obj::PpStartSpeed) as f32, self.param(Obj::PpStopSpeed) as f32);
         SetPoint { target, limits, depart, arrive }
     }
 
@@ -514,13 +514,13 @@ impl Planner<'_> {
         let rise = |bit: u16| new & bit != 0 && old & bit == 0;
         let fall = |bit: u16| new & bit == 0 && old & bit != 0;
         let now = self.now;
-        let run_speed = f64::from(self.param(Obj::PpRunSpeed) as i32);
+        let run_speed = (self.param(Obj::PpRunSpeed) as i32) as f32;
         let failed = |_| ObjError::Infeasible;
         let mode = self.mode();
         if rise(CW_HALT) {
             pp.halted = true;
             if !axis.is_still() {
-                let sp = self.pp_setpoint(0, f64::from(libm::fabsf(axis.setpoint().velocity)).max(1.0));
+                let sp = self.pp_setpoint(0, libm::fabsf(axis.setpoint().velocity).max(1.0));
                 axis.run_at(now, 0.0, 0.0, &sp.limits).map_err(failed)?;
             }
         } else if fall(CW_HALT) {
@@ -590,10 +590,10 @@ impl Planner<'_> {
         let now = self.now;
         let busy = !axis.is_still();
         let mode = self.mode();
-        let speed = f64::from(self.param(Obj::MaxSpeed) as i32);
+        let speed = (self.param(Obj::MaxSpeed) as i32) as f32;
         let position = axis.setpoint().whole;
-        let go_to = |axis: &mut Axis, target: i64, speed: f64| {
-            let (depart, arrive) = self.jumps(libm::fabs(speed));
+        let go_to = |axis: &mut Axis, target: i64, speed: f32| {
+            let (depart, arrive) = self.jumps(libm::fabsf(speed));
             axis.move_to(now, target, depart, arrive, &self.scurve_limits(speed)).map_err(|_| ObjError::Infeasible)
         };
         match obj {
@@ -612,16 +612,15 @@ impl Planner<'_> {
                 go_to(axis, target, speed)?;
             }
             Obj::MaxSpeed => {
-                let v = f64::from(value as i32);
+                let v = (value as i32) as f32;
                 match (mode, axis.target()) {
                     (WorkMode::Velocity, _) => {
                         if v != 0.0 {
                             self.may_move?;
                         }
-                        let (depart, _) = self.jumps(libm::fabs(v));
+                        let (depart, _) = self.jumps(libm::fabsf(v));
                         // Speed 0 stops: the ramp's limits are those of the speed it stops from.
-                        let limit =
-                            if v == 0.0 { f64::from(libm::fabsf(axis.setpoint().velocity)).max(1.0) } else { v };
+                        let limit = if v == 0.0 { libm::fabsf(axis.setpoint().velocity).max(1.0) } else { v };
                         axis.run_at(now, v, depart, &self.scurve_limits(limit)).map_err(|_| ObjError::Infeasible)?;
                     }
                     (WorkMode::Position, Some(target)) if busy => {
@@ -646,7 +645,7 @@ impl Planner<'_> {
             }
             Obj::ControlWord if mode.is_profile() => self.plan_controlword(axis, pp, value as u16)?,
             Obj::PpRunSpeed if mode == WorkMode::ProfileVelocity && busy && !pp.halted => {
-                let v = f64::from(value as i32);
+                let v = (value as i32) as f32;
                 let sp = self.pp_setpoint(0, v);
                 axis.run_at(now, v, sp.depart, &sp.limits).map_err(|_| ObjError::Infeasible)?;
             }

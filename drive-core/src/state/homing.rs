@@ -332,9 +332,9 @@ impl<P: Borrow<Table>> DriveState<P> {
             self.homing.finishing = true;
             return self.homing_service();
         };
-        let speed = f64::from(self.param(if step.fast { Obj::HomingSearchSpeed } else { Obj::HomingCreepSpeed }));
+        let speed = self.param(if step.fast { Obj::HomingSearchSpeed } else { Obj::HomingCreepSpeed }) as f32;
         let accel = self.param(Obj::HomingAccel);
-        let limits = Limits { v_max: speed, a_max: f64::from(accel), d_max: f64::from(accel), jerk: None };
+        let limits = Limits { v_max: speed, a_max: accel as f32, d_max: accel as f32, jerk: None };
         let v = if step.up { speed } else { -speed };
         let at = self.plan_time();
         if self.ctl.axis.run_at(at, v, 0.0, &limits).is_err() {
@@ -434,8 +434,8 @@ impl<P: Borrow<Table>> DriveState<P> {
 
     /// JMC's offset move: to the zero, at the zero speed 0x216E.
     fn zero_move(&mut self) {
-        let speed = f64::from(self.param(Obj::HomingZeroSpeed));
-        let accel = f64::from(self.param(Obj::HomingAccel));
+        let speed = self.param(Obj::HomingZeroSpeed) as f32;
+        let accel = self.param(Obj::HomingAccel) as f32;
         let limits = Limits { v_max: speed, a_max: accel, d_max: accel, jerk: None };
         self.ctl.watch = None;
         if self.ctl.axis.move_to(self.plan_time(), 0, 0.0, 0.0, &limits).is_err() {

@@ -126,7 +126,7 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// Whether `p` may be pushed now.
     fn check_push(&self, p: Point) -> Result<(), ObjError> {
         refuse(self.pvt.len < self.capacity(), ObjError::NotNow)?;
-        refuse(f64::from(p.velocity).abs() <= V_MAX, ObjError::Infeasible)?;
+        refuse((p.velocity as f32).abs() <= V_MAX, ObjError::Infeasible)?;
         match self.pvt.last {
             // Only a first point may take no time (a run's start where the axis stands).
             Some(prev) => refuse(p.time_ms > 0 && Cubic::between(prev, p).feasible(), ObjError::Infeasible),
@@ -192,7 +192,7 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// now, or says why not (and `axis` is to be dropped).
     fn plan_sync(&self, now: Instant, axis: &mut Axis) -> Result<(), ObjError> {
         let planner = self.planner();
-        let speed = f64::from(self.param(Obj::SyncSpeed) as i32);
+        let speed = (self.param(Obj::SyncSpeed) as i32) as f32;
         refuse(self.mode() == WorkMode::Position && speed != 0.0, ObjError::NotNow)?;
         planner.may_move?;
         refuse(self.ctl.axis.is_still(), ObjError::Busy)?;
