@@ -345,7 +345,7 @@ const PARTS: &[(&str, &[&str])] = &[
     ("PVT segments", &["drive_core::motion::cubic", "drive_core::state::pvt", "drive_core::controller::run"]),
     ("axis and tracks", &["drive_core::motion::axis", "drive_core::motion::track"]),
     (
-        "software f64 and 64/128-bit arithmetic",
+        "software float, libm and 64/128-bit arithmetic",
         &[
             "compiler_builtins::float",
             "compiler_builtins::int",
