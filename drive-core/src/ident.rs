@@ -54,3 +54,20 @@ impl Identity {
         })
     }
 }
+
+/// The crate's version as major × 100 + minor (`0.1.x` is 1).
+pub const SOFTWARE_REVISION: u16 = {
+    #[allow(clippy::indexing_slicing)] // const evaluation: out of bounds is a compile error
+    const fn number(s: &str) -> u16 {
+        let b = s.as_bytes();
+        let (mut n, mut i) = (0u16, 0);
+        while i < b.len() {
+            if let Some(d) = (b[i] as char).to_digit(10) {
+                n = n * 10 + d as u16;
+            }
+            i += 1;
+        }
+        n
+    }
+    number(env!("CARGO_PKG_VERSION_MAJOR")) * 100 + number(env!("CARGO_PKG_VERSION_MINOR"))
+};

@@ -112,3 +112,97 @@ mod tests {
         }
     }
 }
+
+/// A motion command (our object 0x21A0; the numbers are seed 002's control command 0323).
+///
+/// ```
+/// use drive_core::modes::Command;
+/// assert_eq!(Command::from_raw(4), Some(Command::JogPositive));
+/// assert_eq!(Command::from_raw(9), None);
+/// assert_eq!(Command::Home.raw(), 12);
+/// ```
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Command {
+    /// Nothing (0).
+    #[default]
+    None = 0,
+    /// Run to the command target (1).
+    Absolute = 1,
+    /// Run by the command target (2).
+    Relative = 2,
+    /// Run at the run velocity (3).
+    Velocity = 3,
+    /// Jog in the positive direction (4).
+    JogPositive = 4,
+    /// Jog in the negative direction (5).
+    JogNegative = 5,
+    /// Decelerate to a stop (6).
+    Stop = 6,
+    /// Stop at the quick-stop deceleration (7).
+    EmergencyStop = 7,
+    /// Set the position to the preset (8).
+    SetPosition = 8,
+    /// Home (12).
+    Home = 12,
+    /// Clear the alarms (13).
+    AlarmClear = 13,
+}
+
+impl Command {
+    /// Every command's value, for the object's declared set.
+    pub const RAW: [u32; 11] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 13];
+
+    /// The command of a register value, if it is one.
+    pub const fn from_raw(v: u32) -> Option<Self> {
+        Some(match v {
+            0 => Self::None,
+            1 => Self::Absolute,
+            2 => Self::Relative,
+            3 => Self::Velocity,
+            4 => Self::JogPositive,
+            5 => Self::JogNegative,
+            6 => Self::Stop,
+            7 => Self::EmergencyStop,
+            8 => Self::SetPosition,
+            12 => Self::Home,
+            13 => Self::AlarmClear,
+            _ => return None,
+        })
+    }
+
+    /// The register value.
+    pub const fn raw(self) -> u32 {
+        self as u32
+    }
+
+    /// Whether the command plans a motion (a run or a stop) on the axis.
+    pub const fn plans(self) -> bool {
+        matches!(
+            self,
+            Self::Absolute
+                | Self::Relative
+                | Self::Velocity
+                | Self::JogPositive
+                | Self::JogNegative
+                | Self::Stop
+                | Self::EmergencyStop
+        )
+    }
+}
+
+/// What the running motion command is, for the writes that change it on line (seed 002: a new
+/// target re-targets an absolute run, a new velocity changes a run's speed).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Running {
+    /// No motion command runs (or another motion replaced it).
+    #[default]
+    Nothing,
+    /// An absolute run.
+    Absolute,
+    /// A relative run.
+    Relative,
+    /// A run at the run velocity.
+    Velocity,
+    /// A jog.
+    Jog,
+}

@@ -12,63 +12,14 @@ use drive_core::od::{OBJECTS, Obj};
 use drive_core::power::DeviceState;
 use drive_core::{Drive, DriveConfig, Instant};
 
-/// A JMC drive with a clock: control ticks every 50 µs, replies when the line is quiet.
-struct Rig {
-    drive: Drive<Maps>,
-    now: u64,
-    inputs: Inputs,
+/// A JMC drive with a clock.
+type Rig = common::MapRig;
+
+fn jmc_rig() -> Rig {
+    Rig::new(Maps::jmc())
 }
 
 impl Rig {
-    fn new() -> Self {
-        let mut r =
-            Self { drive: Drive::with_map(DriveConfig::default(), Maps::jmc()), now: 0, inputs: Inputs::default() };
-        r.run(1_000);
-        r
-    }
-
-    /// Lets `us` pass: control ticks, and the timer at the framer's deadline; the reply, if any.
-    fn run(&mut self, us: u64) -> Option<Vec<u8>> {
-        let end = self.now + us;
-        let mut reply = None;
-        while self.now < end {
-            self.now += 50;
-            let now = Instant::from_micros(self.now);
-            self.drive.tick_with(now, &self.inputs);
-            self.drive.state_mut().service(now);
-            if self.drive.deadline().is_some_and(|d| d.as_micros() <= self.now) {
-                self.drive.on_timer(now);
-                if let Some(r) = self.drive.take_reply() {
-                    assert!(reply.is_none(), "two replies");
-                    reply = Some(r.to_vec());
-                }
-            }
-        }
-        reply
-    }
-
-    /// Sends the whole frame `bytes` (CRC included) and returns the reply.
-    fn exchange(&mut self, bytes: &[u8]) -> Option<Vec<u8>> {
-        self.drive.on_rx(Instant::from_micros(self.now), bytes);
-        self.run(10_000)
-    }
-
-    /// Sends `body` with its CRC; the reply's PDU, or the exception code.
-    fn request(&mut self, body: &[u8]) -> Result<Vec<u8>, u8> {
-        let r = self.exchange(&frame(body)).unwrap_or_else(|| panic!("no reply to {body:02X?}"));
-        let pdu = r.get(1..r.len() - 2).unwrap_or_default().to_vec();
-        match pdu.as_slice() {
-            [f, code] if f & 0x80 != 0 => Err(*code),
-            _ => Ok(pdu),
-        }
-    }
-
-    fn write(&mut self, addr: u16, v: u16) -> Result<(), u8> {
-        let [a, b] = addr.to_be_bytes();
-        let [c, d] = v.to_be_bytes();
-        self.request(&[1, 0x06, a, b, c, d]).map(|_| ())
-    }
-
     fn write32(&mut self, addr: u16, v: i32) -> Result<(), u8> {
         let [a, b] = addr.to_be_bytes();
         let v = v as u32;
@@ -78,13 +29,6 @@ impl Rig {
             body.extend_from_slice(&(w as u16).to_be_bytes());
         }
         self.request(&body).map(|_| ())
-    }
-
-    fn read(&mut self, addr: u16, n: u16) -> Result<Vec<u16>, u8> {
-        let [a, b] = addr.to_be_bytes();
-        let [c, d] = n.to_be_bytes();
-        let pdu = self.request(&[1, 0x03, a, b, c, d])?;
-        Ok(pdu.get(2..).unwrap_or_default().chunks(2).map(|w| u16::from_be_bytes([w[0], w[1]])).collect())
     }
 
     fn statusword(&mut self) -> u16 {
@@ -238,7 +182,7 @@ const PRINTED: [(&str, Routine); 7] = [
 /// A JMC drive at 1/16 microsteps (set natively: the manual has no register for it), so that
 /// the routines' 200 000 and 600 000 steps run in about a minute of simulated time each.
 fn sixteenth() -> Rig {
-    let mut r = Rig::new();
+    let mut r = jmc_rig();
     assert_eq!(r.drive.state_mut().write_def(Obj::Microsteps.def(), 16), Ok(()));
     r
 }
@@ -319,7 +263,7 @@ fn the_routines_act_as_printed() {
 /// 0x6000 = 1: 32-bit registers low word first (lines 569-571, 591).
 #[test]
 fn word_order_one_swaps_the_halves() {
-    let mut r = Rig::new();
+    let mut r = jmc_rig();
     assert_eq!(r.write(0x6000, 1), Ok(()));
     let req = "01 10 60 7A 00 02 04 0D 40 00 03 9F 8F";
     assert_eq!(r.exchange(&hex(req)), Some(hex("01 10 60 7A 00 02 7E 11")));
@@ -332,7 +276,7 @@ fn word_order_one_swaps_the_halves() {
 /// §4's codes: each refusal answers its code and changes nothing.
 #[test]
 fn exceptions_change_nothing() {
-    let mut r = Rig::new();
+    let mut r = jmc_rig();
     r.write(0x6040, 0x0F).expect("enable");
     let before = r.snapshot();
     // §7.5: no such register.
@@ -370,7 +314,7 @@ fn exceptions_change_nothing() {
 fn position_routines_land_where_the_controlword_says() {
     let cases: [(u16, u16, i64); 3] = [(0x001F, 0x000F, 600_000), (0x025F, 0x024F, 800_000), (0x007F, 0x006F, 800_000)];
     for (start, clear, end) in cases {
-        let mut r = Rig::new();
+        let mut r = jmc_rig();
         for cw in [0x01, 0x03, 0x0F] {
             r.write(0x6040, cw).expect("power up");
         }
@@ -512,7 +456,7 @@ fn the_state_machine_follows_the_table() {
 /// switch on disabled; a fault reset with the condition still present stays in fault.
 #[test]
 fn quick_stop_and_fault_reset() {
-    let mut r = Rig::new();
+    let mut r = jmc_rig();
     r.write(0x6040, 0x0F).expect("enable");
     r.write(0x6060, 3).expect("velocity mode");
     r.write(0x6085, 50).expect("quick-stop deceleration 5 rev/s²");
@@ -564,7 +508,7 @@ proptest::proptest! {
         proptest::prop_assert_eq!(drive * 10, v * per_rev);
         proptest::prop_assert_eq!(scale.to_map(drive, per_rev), Some(v));
         // Through the registers: the resolution set natively, the speed written and read back.
-        let mut r = Rig::new();
+        let mut r = jmc_rig();
         let d = r.drive.state_mut().write_def(Obj::Microsteps.def(), microsteps);
         proptest::prop_assert_eq!(d, Ok(()));
         let pps = i64::from(speed) * per_rev / 10;
@@ -579,14 +523,14 @@ proptest::proptest! {
     }
 }
 
-/// 0x2190 takes the maps the platform carries, and refuses the others (04) with nothing
-/// changed: the firmware carries the native map alone for now.
+/// 0x2190 takes the maps the platform carries, refuses the others (04) with nothing changed,
+/// and a number that is no map (03).
 #[test]
 fn the_register_map_takes_only_a_map_the_platform_carries() {
     let mut b = common::Bus::factory();
     assert_eq!(b.request(&[1, 0x06, 0x21, 0x90, 0, 1]), common::reply(&[1, 0x06, 0x21, 0x90, 0, 1]));
     assert_eq!(b.drive.state().read(Obj::RegisterMap), 1);
-    assert_eq!(b.request(&[1, 0x06, 0x21, 0x90, 0, 2]), common::reply(&[1, 0x86, 0x03]));
+    assert_eq!(b.request(&[1, 0x06, 0x21, 0x90, 0, 3]), common::reply(&[1, 0x86, 0x03]));
     b.drive.state_mut().set_maps(1);
     assert_eq!(b.request(&[1, 0x06, 0x21, 0x90, 0, 0]), common::reply(&[1, 0x06, 0x21, 0x90, 0, 0]));
     assert_eq!(b.request(&[1, 0x06, 0x21, 0x90, 0, 1]), common::reply(&[1, 0x86, 0x04]));

@@ -41,3 +41,21 @@ fn jmc_reference_is_current() {
         assert!(text.contains(&format!("| 0x{:04X} |", e.addr)), "0x{:04X} missing", e.addr);
     }
 }
+
+/// `docs/registers-cls9.md`, the DS-CLS9 map's reference, from its layout.
+#[test]
+fn cls9_reference_is_current() {
+    let mut text = String::new();
+    let layout = &drive_core::maps::cls9::LAYOUT;
+    drive_core::maps::doc::write_layout(&mut text, layout, &drive_core::maps::cls9::REFERENCE).expect("formatting");
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/registers-cls9.md");
+    if std::env::var_os("UPDATE_DOCS").is_some() {
+        std::fs::write(&path, &text).expect("write docs/registers-cls9.md");
+    }
+    let on_disk = std::fs::read_to_string(&path).unwrap_or_default();
+    assert!(on_disk == text, "docs/registers-cls9.md is stale: run `cargo xtask docs`");
+    for e in layout.entries {
+        let number = if e.addr < 0x2000 { format!("| {:04} |", e.addr) } else { format!("| 0x{:04X} |", e.addr) };
+        assert!(text.contains(&number), "{} missing", e.addr);
+    }
+}

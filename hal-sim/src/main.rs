@@ -94,7 +94,7 @@ struct Args {
     #[arg(long, value_name = "SPEC", value_parser = hal_sim::machine::Analog::parse)]
     analog: Option<hal_sim::machine::Analog>,
     /// The register map to answer with for this run, instead of the saved 0x2190: `native`
-    /// (seed 000) or `jmc` (seed 001).
+    /// (seed 000), `jmc` (seed 001) or `cls9` (seed 002).
     #[arg(long, value_name = "NAME", value_parser = parse_map)]
     map: Option<u8>,
     /// Simulated seconds a wall-clock second while masters talk (1: real time): long moves of

@@ -89,6 +89,10 @@ pub struct Status {
     pub faults: u8,
     /// Communication status bits (0x2138): `faults::COMM_TIMEOUT`.
     pub comm: u8,
+    /// The supply voltage last measured, mV (0x21AF).
+    pub supply_mv: u16,
+    /// The larger phase current last measured, mA (0x21B0).
+    pub current_ma: u16,
 }
 
 /// The settings the controller runs, checked and converted from the dictionary's values.

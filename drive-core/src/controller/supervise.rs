@@ -23,6 +23,12 @@ impl Controller {
     /// Checks the measurements at `now`: latches faults, records them, and applies the fault and
     /// power-loss reactions to the motion.
     pub(crate) fn supervise(&mut self, now: Instant, inputs: &Inputs) {
+        if let Some(mv) = inputs.supply_mv {
+            self.status.supply_mv = mv.min(u32::from(u16::MAX)) as u16;
+        }
+        if let Some([a, b]) = inputs.phase_ma {
+            self.status.current_ma = a.unsigned_abs().max(b.unsigned_abs()).min(u32::from(u16::MAX)) as u16;
+        }
         let (error, faults) = self.detect(now, inputs);
         self.latch(now, error, faults);
         self.power_loss(inputs);

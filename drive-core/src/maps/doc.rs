@@ -18,6 +18,9 @@ pub struct Reference {
     pub notes: &'static [&'static str],
     /// Remarks by register, in place of the object's own text.
     pub remarks: &'static [(u16, &'static str)],
+    /// Whether the manual numbers its registers in decimal (below 0x2000: the drive's own
+    /// registers keep their hexadecimal numbers).
+    pub decimal: bool,
 }
 
 /// Writes the reference of `layout`.
@@ -80,7 +83,12 @@ fn row(out: &mut impl Write, e: &Entry, r: &Reference) -> fmt::Result {
         (View::WriteOnly, _) => "wo",
         (View::Declared, a) => a.name(),
     };
-    write!(out, "| 0x{:04X} | {} | {} | {access} | ", e.addr, e.words(), d.name)?;
+    if r.decimal && e.addr < 0x2000 {
+        write!(out, "| {:04} ", e.addr)?;
+    } else {
+        write!(out, "| 0x{:04X} ", e.addr)?;
+    }
+    write!(out, "| {} | {} | {access} | ", e.words(), d.name)?;
     values(out, e)?;
     write!(out, " | ")?;
     match d.ty {
@@ -134,6 +142,10 @@ fn unit(e: &Entry) -> &'static str {
     match (e.scale, e.obj.def().unit) {
         (Scale::PerRev(1, 10), Unit::Pps) => "0.1 rev/s",
         (Scale::PerRev(1, 10), Unit::Pps2) => "0.1 rev/s²",
+        (Scale::PerRev(1, 100), Unit::Pps) => "0.01 rev/s",
+        (Scale::PerRev(1, 1), Unit::Pps2) => "rev/s²",
+        (Scale::Ratio(100, 1), Unit::MilliAmps) => "0.1 A",
+        (Scale::Ratio(1000, 1), Unit::MilliVolts) => "V",
         (Scale::One | Scale::Ratio(-1, 1) | Scale::Table(_), u) => u.symbol(),
         _ => "see the description",
     }

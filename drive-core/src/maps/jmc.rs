@@ -148,4 +148,5 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         (0x6064, "Position actual value."),
         (0x606C, "Velocity actual value."),
     ],
+    decimal: false,
 };

@@ -150,14 +150,17 @@ pub struct Entry {
     /// What the map lets a master do with it.
     pub view: View,
     /// One register for a 32-bit object whose values the map keeps within 16 bits (a value
-    /// beyond them reads as 0xFFFF).
+    /// beyond them reads as the nearest 16-bit one: 0xFFFF, or for a signed object -32768 or
+    /// 32767; a signed object's register is signed).
     pub narrow: bool,
+    /// Two registers for a 16-bit object (a map that gives it 32 bits).
+    pub wide: bool,
 }
 
 impl Entry {
     /// `obj` at `addr`, in the map's unit `scale`, with the object's own access.
     pub const fn new(addr: u16, obj: Obj, scale: Scale) -> Self {
-        Self { addr, obj, scale, view: View::Declared, narrow: false }
+        Self { addr, obj, scale, view: View::Declared, narrow: false, wide: false }
     }
 
     /// The entry, one register wide.
@@ -165,9 +168,28 @@ impl Entry {
         Self { narrow: true, ..self }
     }
 
+    /// The entry, two registers wide.
+    pub const fn wide(self) -> Self {
+        Self { wide: true, ..self }
+    }
+
     /// Its registers.
     pub fn words(&self) -> u32 {
-        if self.narrow { 1 } else { u32::from(self.obj.def().words()) }
+        if self.narrow {
+            1
+        } else if self.wide {
+            2
+        } else {
+            u32::from(self.obj.def().words())
+        }
+    }
+
+    /// The register of a narrow entry whose map value is `v`.
+    fn narrow_word(&self, v: u32) -> u16 {
+        match self.obj.def().ty {
+            Type::S32 => (v as i32).clamp(i32::from(i16::MIN), i32::from(i16::MAX)) as i16 as u16,
+            _ => v.min(0xFFFF) as u16,
+        }
     }
 
     /// The entry, read only.
@@ -375,8 +397,12 @@ impl LayoutMap {
     /// The drive's raw value of the map's register bits `bits` for `e`.
     fn drive_value<P: Borrow<Table>>(&self, drive: &DriveState<P>, e: &Entry, bits: u32) -> Result<u32, ObjError> {
         let d = e.obj.def();
-        // The map's register is as wide as the object: signed as the object is.
-        let v = e.scale.to_drive(signed(d, bits), per_rev(drive)).ok_or(ObjError::OutOfRange)?;
+        // The map's register is signed as the object is.
+        let v = match d.ty {
+            Type::S32 if e.narrow => i64::from(bits as u16 as i16),
+            _ => signed(d, bits),
+        };
+        let v = e.scale.to_drive(v, per_rev(drive)).ok_or(ObjError::OutOfRange)?;
         raw_of(d, v).ok_or(ObjError::OutOfRange)
     }
 
@@ -453,8 +479,8 @@ impl RegisterMap for LayoutMap {
             for j in k..k + n {
                 let w = match d.ty {
                     Type::Str(_) => drive.text_word(e.obj, j as usize),
-                    _ if e.narrow => v.min(0xFFFF) as u16,
-                    _ if d.words() == 1 => v as u16,
+                    _ if e.narrow => e.narrow_word(v),
+                    _ if d.words() == 1 && !e.wide => v as u16,
                     _ if is_high(order, drive, j) => (v >> 16) as u16,
                     _ => v as u16,
                 };
@@ -485,6 +511,9 @@ impl RegisterMap for LayoutMap {
         }
     }
 
+    // Out of line: its plan (123 objects at most) is on the stack for a layout's writes only,
+    // not under every write of the maps it is a variant of.
+    #[inline(never)]
     fn write<P: Borrow<Table>>(
         &mut self,
         drive: &mut DriveState<P>,

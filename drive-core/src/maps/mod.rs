@@ -2,6 +2,7 @@
 //! own map (seed 000), indexed at compile time; [`layout`] serves any other map from a table of
 //! addresses, word orders, scales and exception codes over the same objects.
 
+pub mod cls9;
 #[cfg(feature = "docs")]
 pub mod doc;
 pub mod index;
@@ -17,7 +18,7 @@ use layout::LayoutMap;
 pub use native::{NativeMap, RegisterMap};
 
 /// The maps' names, by their number in the register map object 0x2190.
-pub const NAMES: [&str; 2] = ["native", "jmc"];
+pub const NAMES: [&str; 3] = ["native", "jmc", "cls9"];
 
 /// The map the drive answers with: the native one or a layout, as 0x2190 chose at power-up.
 #[derive(Clone, Debug)]
@@ -33,6 +34,7 @@ impl Maps {
     pub fn by_id(id: u32) -> Self {
         match id {
             1 => Self::jmc(),
+            2 => Self::cls9(),
             _ => Self::Native(NativeMap::new()),
         }
     }
@@ -45,6 +47,11 @@ impl Maps {
     /// The JMC map (seed 001).
     pub fn jmc() -> Self {
         Self::Layout(LayoutMap::new(&jmc::LAYOUT))
+    }
+
+    /// The DS-CLS9 map (seed 002).
+    pub fn cls9() -> Self {
+        Self::Layout(LayoutMap::new(&cls9::LAYOUT))
     }
 }
 
@@ -83,13 +90,16 @@ impl RegisterMap for Maps {
     }
 
     fn starts_disabled(&self) -> bool {
-        matches!(self, Self::Layout(_))
+        // CiA 402's state machine powers up switch on disabled; the others energise as the
+        // native map does.
+        matches!(self, Self::Layout(m) if core::ptr::eq(m.layout(), &jmc::LAYOUT))
     }
 
     fn application_name(&self) -> Option<&'static str> {
         match self {
             Self::Native(_) => None,
             Self::Layout(m) if core::ptr::eq(m.layout(), &jmc::LAYOUT) => Some("drive-core, JMC map (seed 001)"),
+            Self::Layout(m) if core::ptr::eq(m.layout(), &cls9::LAYOUT) => Some("drive-core, DS-CLS9 map (seed 002)"),
             Self::Layout(_) => Some("drive-core, layout map"),
         }
     }

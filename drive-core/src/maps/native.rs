@@ -511,6 +511,8 @@ mod tests {
             encoder: -5,
             faults: 0x03,
             comm: 0x01,
+            supply_mv: 24_000,
+            current_ma: 1_500,
         };
         let map = NativeMap::new();
         for d in OBJECTS.iter() {

@@ -20,6 +20,9 @@ pub(crate) const fn has_effect(obj: Obj) -> bool {
             | Obj::ZeroOffset
             | Obj::HomingControl
             | Obj::DeviceControl
+            | Obj::MotionCommand
+            | Obj::CommandTarget
+            | Obj::CommandVelocity
     ) || is_pvt_command(obj)
 }
 

@@ -103,9 +103,10 @@ objects! {
     /// while the axis moves (an erase stalls the flash for ~22 ms) or a save is in progress, and 2
     /// on a platform without storage. The reply means the save started: 0x2120 bit 3 shows it
     /// running, bit 4 a failure. 1 (jump to the boot loader) is refused (04): the simulator has
-    /// none, and the firmware does not jump yet. The manual prints it read-only; its own examples
+    /// none, and the firmware does not jump. 4 (ours, seed 002's alarm clear) clears the latched
+    /// alarms as the motion command 13 does. The manual prints it read-only; its own examples
     /// write it.
-    SystemControl @ 0x200F: U8, Cmd, Ram, Set(&[1, 2, 3]), default 0, None, "system control";
+    SystemControl @ 0x200F: U8, Cmd, Ram, Set(&[1, 2, 3, 4]), default 0, None, "system control";
     /// Node id (slave address). A write takes effect at the next power-up once saved (0x200F = 2),
     /// so a typo cannot lose the drive; until then the drive answers at the old id. The object
     /// table prints a default of 5; §5.3 and every example use 1.
@@ -314,13 +315,60 @@ objects! {
     /// timeout of 0x2137), 5 position error (closed loop), 7 a coil open. Read only.
     ErrorRegister @ 0x2185: U8, Ro, Live, Any, default 0, None, "error register";
     /// Register map (our object): which vendor's registers the drive answers to, from the next
-    /// power-up once saved (0x200F = 2): 0 native (seed 000), 1 JMC (seed 001). Every map has
-    /// it at this address, so a master can always switch back. A map the platform does not
-    /// carry is refused (04): the firmware carries the native map only for now (flash).
-    RegisterMap @ 0x2190: U8, Rw, Rom, Span(0, 1), default 0, None, "register map";
+    /// power-up once saved (0x200F = 2): 0 native (seed 000), 1 JMC (seed 001), 2 DS-CLS9
+    /// (seed 002). Every map has it at this address, so a master can always switch back. A map
+    /// the platform does not carry is refused (04).
+    RegisterMap @ 0x2190: U8, Rw, Rom, Span(0, 2), default 0, None, "register map";
     /// Word order of the compatibility maps that make it a setting (our object; JMC's 0x6000):
     /// 0 high word first, 1 low word first.
     MapWordOrder @ 0x2191: U8, Rw, Rom, Span(0, 1), default 0, None, "map word order";
+    /// Motion command (our object; seed 002's control command 0323), acting on its write in any
+    /// work mode but PVT: 0 nothing; 1 absolute run to 0x21A1 at 0x6072's speed (re-targets a
+    /// running absolute run); 2 relative run by 0x21A1 (the sign the direction; refused (04)
+    /// while moving); 3 run at 0x21A3 (its sign the direction; a write to 0x21A3 during the run
+    /// changes the speed); 4 / 5 jog positive / negative at 0x21A5 until a stop; 6 stop at the
+    /// deceleration 0x6069; 7 emergency stop at 0x2183; 8 set the position to 0x21A7 (refused
+    /// (04) while moving); 12 the homing of 0x2160 (as 0x2161 = 1); 13 clear the alarms (0x6000,
+    /// 0x2135, 0x2138, 0x6001's external stop and stall), leaving the enable as it is. Runs and
+    /// jogs ramp with 0x6067, 0x6069, 0x606B and 0x606D, and stop at an enabled soft limit
+    /// (0x21AD). A value the drive does not do is refused (03).
+    MotionCommand @ 0x21A0: U16, Cmd, Ram, Set(&crate::modes::Command::RAW), default 0, None, "motion command";
+    /// Command target (our object; seed 002's 0313): the position of an absolute run, the
+    /// distance of a relative one (0x21A0).
+    CommandTarget @ 0x21A1: S32, Rw, Ram, S32_ANY, default 0, Steps, "command target";
+    /// Run velocity (our object; seed 002's 0307): the speed of the motion command's run (3),
+    /// its sign the direction.
+    CommandVelocity @ 0x21A3: S32, Rw, Rom, Magnitude(150, 300_000), default 2000, Pps, "run velocity";
+    /// Jog speed (our object; seed 002's 0308): the speed of the motion command's jogs (4, 5).
+    JogSpeed @ 0x21A5: U32, Rw, Rom, Span(150, 300_000), default 2000, Pps, "jog speed";
+    /// Position preset (our object; seed 002's 0321): the position the motion command 8 sets.
+    PositionPreset @ 0x21A7: S32, Rw, Ram, S32_ANY, default 0, Steps, "position preset";
+    /// Positive soft limit (our object; seed 002's 0317): with 0x21AD bit 0, no move the drive
+    /// plans goes beyond it (a target beyond it stops on it; a run or jog towards it becomes a
+    /// move to it), except a homing's.
+    SoftLimitPositive @ 0x21A9: S32, Rw, Rom, Span(-2_000_000_000, 2_000_000_000), default 2_000_000_000, Steps, "positive soft limit";
+    /// Negative soft limit (our object; seed 002's 0319): as 0x21A9, with 0x21AD bit 1.
+    SoftLimitNegative @ 0x21AB: S32, Rw, Rom, Span(-2_000_000_000, 2_000_000_000), default -2_000_000_000, Steps, "negative soft limit";
+    /// Soft limits (our object; seed 002's 0324): bit 0 the positive limit 0x21A9 on, bit 1 the
+    /// negative one 0x21AB.
+    SoftLimits @ 0x21AD: U8, Rw, Rom, Bits(0x03), default 0, None, "soft limits";
+    /// Run state (our object; seed 002's 0109): 1 the power stage off (disabled, freed or a
+    /// fault), 2 energised and standing, 3 moving.
+    RunState @ 0x21AE: U8, Ro, Live, Span(1, 3), default 1, None, "run state";
+    /// Supply voltage (our object; seed 002's 0101), as last measured; 0 where the platform
+    /// does not measure it.
+    SupplyVoltage @ 0x21AF: U16, Ro, Live, Any, default 0, MilliVolts, "supply voltage";
+    /// Motor current (our object; seed 002's 0100): the larger phase current's magnitude, as
+    /// last measured; 0 where the platform does not measure it.
+    MotorCurrent @ 0x21B0: U16, Ro, Live, Any, default 0, MilliAmps, "motor current";
+    /// Target position (our object; seed 002's 0117): where the running motion heads, or the
+    /// position when the axis stands or runs at a speed.
+    TargetPosition @ 0x21B1: S32, Ro, Live, S32_ANY, default 0, Steps, "target position";
+    /// Hardware revision (our object; seed 002's 0110), major × 100 + minor.
+    HardwareRevision @ 0x21B3: U16, Ro, Const, Any, default 100, None, "hardware revision";
+    /// Software revision (our object; seed 002's 0111): the firmware's version, major × 100 +
+    /// minor.
+    SoftwareRevision @ 0x21B4: U16, Ro, Const, Any, default crate::ident::SOFTWARE_REVISION, None, "software revision";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake

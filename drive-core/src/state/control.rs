@@ -24,7 +24,7 @@ use crate::controller::handoff::{Lent, Orders, TickSide};
 use crate::controller::io::{NotifyOutput, PinConfig};
 use crate::controller::{DECAY, Events, STATUS_EXT, STATUS_STALL, Settings};
 use crate::faults::Inputs;
-use crate::modes::{PowerState, WorkMode};
+use crate::modes::{PowerState, Running, WorkMode};
 use crate::motion::axis::Axis;
 use crate::motion::cubic::Table;
 use crate::motion::scurve::Limits;
@@ -64,6 +64,13 @@ pub(crate) struct SetPoint {
     pub(crate) arrive: f32,
 }
 
+impl Pp {
+    /// No set-point, and the motion command `running` running.
+    pub(super) fn commanded(running: Running) -> Self {
+        Self { running, ..Self::default() }
+    }
+}
+
 /// The state of the profile position and velocity modes (§5.11-5.12).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(crate) struct Pp {
@@ -75,6 +82,8 @@ pub(crate) struct Pp {
     ack: bool,
     /// Stopped by the halt bit.
     halted: bool,
+    /// The motion command (0x21A0) whose motion runs.
+    pub(crate) running: Running,
 }
 
 /// Whether the controller runs `obj`'s value: a write to it builds the [`Settings`] again.
@@ -258,6 +267,11 @@ impl<P: Borrow<Table>> DriveState<P> {
         }
         if obj == Obj::HomingControl {
             return self.check_homing(value);
+        }
+        if obj == Obj::MotionCommand
+            && !crate::modes::Command::from_raw(value).is_some_and(crate::modes::Command::plans)
+        {
+            return self.check_other_command(value);
         }
         self.check_planned(obj, value)
     }
@@ -462,7 +476,7 @@ impl<P: Borrow<Table>> DriveState<P> {
 /// whole if refused) or a copy.
 pub(crate) struct Planner<'a> {
     params: &'a [u32; Obj::COUNT],
-    now: Instant,
+    pub(super) now: Instant,
     /// Whether a motion may start ([`DriveState::may_move`]).
     pub(crate) may_move: Result<(), ObjError>,
     /// The encoder position, counts, in closed loop.
@@ -470,11 +484,11 @@ pub(crate) struct Planner<'a> {
 }
 
 impl Planner<'_> {
-    fn param(&self, obj: Obj) -> u32 {
+    pub(super) fn param(&self, obj: Obj) -> u32 {
         self.params.get(obj as usize).copied().unwrap_or(0)
     }
 
-    fn mode(&self) -> WorkMode {
+    pub(super) fn mode(&self) -> WorkMode {
         WorkMode::from_raw(self.param(Obj::Mode)).unwrap_or_default()
     }
 
@@ -586,7 +600,7 @@ impl Planner<'_> {
     /// Plans writing `value` to the motion object `obj` at the plan time on `axis` and `pp`:
     /// `Ok(true)` if the write changes them, `Ok(false)` if it leaves them as they are, or why it
     /// is refused (and they are to be dropped, or restored).
-    fn plan_motion(&self, obj: Obj, value: u32, axis: &mut Axis, pp: &mut Pp) -> Result<bool, ObjError> {
+    pub(super) fn plan_motion(&self, obj: Obj, value: u32, axis: &mut Axis, pp: &mut Pp) -> Result<bool, ObjError> {
         let now = self.now;
         let busy = !axis.is_still();
         let mode = self.mode();
@@ -596,7 +610,13 @@ impl Planner<'_> {
             let (depart, arrive) = self.jumps(libm::fabsf(speed));
             axis.move_to(now, target, depart, arrive, &self.scurve_limits(speed)).map_err(|_| ObjError::Infeasible)
         };
+        if !matches!(obj, Obj::MotionCommand | Obj::CommandTarget | Obj::CommandVelocity) {
+            // Any other motion write replaces a motion command's run.
+            pp.running = Running::Nothing;
+        }
         match obj {
+            Obj::MotionCommand => return self.plan_command(axis, pp, value),
+            Obj::CommandTarget | Obj::CommandVelocity => return self.plan_command_change(axis, pp, obj, value),
             Obj::RelativeMove | Obj::AbsoluteMove => {
                 refuse(mode == WorkMode::Position && speed != 0.0, ObjError::NotNow)?;
                 self.may_move?;

@@ -3,6 +3,7 @@
 //! write to an object does is here and in [`control`] (the motion modes) and [`pvt`].
 
 pub mod analog;
+mod command;
 pub mod control;
 mod device;
 pub mod homing;
@@ -183,6 +184,11 @@ pub struct DriveState<P = Table> {
 
 /// Whether writing `obj` plans a motion (`state::control`): the commands but a declared
 /// position and the PVT objects.
+/// Whether the motion command `value` (0x21A0) plans a motion; the others act at once.
+fn plans_motion_command(value: u32) -> bool {
+    crate::modes::Command::from_raw(value).is_some_and(crate::modes::Command::plans)
+}
+
 fn plans_motion(obj: Obj) -> bool {
     is_command(obj)
         && has_effect(obj)
@@ -501,6 +507,10 @@ impl<P: Borrow<Table>> DriveState<P> {
             Obj::DriveFaults => u32::from(s.faults),
             Obj::CommStatus => u32::from(s.comm),
             Obj::AlarmCount => u32::from(self.ctl.faults.count),
+            Obj::RunState => u32::from(self.run_state()),
+            Obj::TargetPosition => self.ctl.axis.target().unwrap_or(self.ctl.axis.setpoint().whole) as u32,
+            Obj::SupplyVoltage => u32::from(s.supply_mv),
+            Obj::MotorCurrent => u32::from(s.current_ma),
             // The ten entries are consecutive objects.
             h if (Obj::FaultHistory0 as usize..=Obj::FaultHistory9 as usize).contains(&(h as usize)) => {
                 self.ctl.history(h as usize - Obj::FaultHistory0 as usize)
@@ -580,6 +590,10 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// move possible), and so does applying it, and a plan costs a Cortex-M4 hundreds of
     /// thousands of instructions, during which the control tick waits for the bus task.
     pub fn write_def(&mut self, d: &ObjectDef, value: u32) -> Result<(), ObjError> {
+        if d.obj == Obj::MotionCommand && !plans_motion_command(value) {
+            Self::check_writable(d, value)?;
+            return self.other_command(value);
+        }
         if d.obj == Obj::DeviceControl {
             return self.write_in_order(core::iter::once(value), |_, v| Ok(Some((Obj::DeviceControl.def(), v))));
         }
@@ -597,6 +611,10 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// command is planned on the axis and set-points themselves, with no copy (a refused plan
     /// may leave them halted, and the checkpoint restores them).
     fn write_undoable(&mut self, d: &ObjectDef, value: u32) -> Result<(), ObjError> {
+        if d.obj == Obj::MotionCommand && !plans_motion_command(value) {
+            Self::check_writable(d, value)?;
+            return self.other_command(value);
+        }
         if d.obj == Obj::DeviceControl {
             return self.device_control(value);
         }
@@ -680,10 +698,16 @@ impl<P: Borrow<Table>> DriveState<P> {
             Obj::DeviceControl => {
                 let _ = self.write_in_order(core::iter::once(value), |_, v| Ok(Some((Obj::DeviceControl.def(), v))));
             }
+            Obj::MotionCommand if !plans_motion_command(value) => {
+                let _ = self.other_command(value);
+            }
             obj if has_effect(obj) => self.apply_motion(obj, value),
             _ => {
                 self.set_param(obj, value);
                 if obj == Obj::SystemControl {
+                    if value == 4 {
+                        self.clear_alarms();
+                    }
                     if value == 3 {
                         self.restore_factory();
                     }

@@ -1,0 +1,177 @@
+//! The DS-CLS9-FRS4 map (seed 002): decimal register numbers (§九), speeds in 0.01 rev/s and
+//! accelerations in rev/s², the resolution in pulses a revolution, 32-bit values high word first
+//! and written whole, and the control command 0323 as the drive's motion command 0x21A0.
+//!
+//! ```
+//! use drive_core::maps::Maps;
+//! use drive_core::od::Obj;
+//! use drive_core::{Drive, DriveConfig, Instant};
+//! let mut drive = Drive::with_map(DriveConfig::default(), Maps::cls9());
+//! // 0306 (fixed-length speed) = 500, 5 rev/s: 1 000 full steps a second.
+//! drive.on_rx(Instant::from_micros(0), &[0x01, 0x06, 0x01, 0x32, 0x01, 0xF4, 0x29, 0xEE]);
+//! drive.on_timer(Instant::from_micros(4_011));
+//! assert!(drive.take_reply().is_some());
+//! assert_eq!(drive.state().read(Obj::PpRunSpeed), 1_000);
+//! ```
+
+use super::layout::{Choice, Entry, Exceptions, Layout, Scale, Walk, WordOrder};
+use crate::od::Obj;
+
+/// 0.01 rev/s in the drive's microsteps a second.
+const CENTI_REV: Scale = Scale::PerRev(1, 100);
+/// rev/s² in the drive's microsteps a second squared.
+const REV: Scale = Scale::PerRev(1, 1);
+
+/// 0104 / 0242: pulses a revolution, the drive's microstep resolutions (1.8° motors).
+static RESOLUTIONS: [Choice; 9] = [
+    Choice { lo: 200, hi: 200, drive: 0 },
+    Choice { lo: 400, hi: 400, drive: 2 },
+    Choice { lo: 800, hi: 800, drive: 4 },
+    Choice { lo: 1600, hi: 1600, drive: 8 },
+    Choice { lo: 3200, hi: 3200, drive: 16 },
+    Choice { lo: 6400, hi: 6400, drive: 32 },
+    Choice { lo: 12_800, hi: 12_800, drive: 64 },
+    Choice { lo: 25_600, hi: 25_600, drive: 128 },
+    Choice { lo: 51_200, hi: 51_200, drive: 256 },
+];
+
+/// 0246: the encoder's counts a revolution (lines × 4), the drive's line counts.
+static ENCODER: [Choice; 8] = [
+    Choice { lo: 800, hi: 800, drive: 200 },
+    Choice { lo: 1600, hi: 1600, drive: 400 },
+    Choice { lo: 2000, hi: 2000, drive: 500 },
+    Choice { lo: 2400, hi: 2400, drive: 600 },
+    Choice { lo: 3200, hi: 3200, drive: 800 },
+    Choice { lo: 4000, hi: 4000, drive: 1000 },
+    Choice { lo: 4800, hi: 4800, drive: 1200 },
+    Choice { lo: 6400, hi: 6400, drive: 1600 },
+];
+
+/// 0217: 0 open loop, 1 closed loop on the incremental encoder.
+static LOOP: [Choice; 2] = [Choice { lo: 0, hi: 0, drive: 0 }, Choice { lo: 1, hi: 1, drive: 1 }];
+
+/// 0206: 1 parameter reset (0x200F = 3), 2 alarm clear (0x200F = 4), 3 restart (0x200F = 1,
+/// refused: the drive does not restart itself).
+static USER_COMMAND: [Choice; 3] =
+    [Choice { lo: 1, hi: 1, drive: 3 }, Choice { lo: 2, hi: 2, drive: 4 }, Choice { lo: 3, hi: 3, drive: 1 }];
+
+/// 0305: 0 clockwise (negative), 1 counter-clockwise (positive): the home switch searched that
+/// way, reversing at that side's limit, then found again at the creep speed (0x2160 -9, -10).
+static HOMING: [Choice; 2] = [Choice { lo: 0, hi: 0, drive: 0xFFF7 }, Choice { lo: 1, hi: 1, drive: 0xFFF6 }];
+
+/// The registers, by address (decimal, as the manual's `adr` column), then ours: the save
+/// (0x200F), the map selection (0x2190) and the line's parity (0x2100), at their native
+/// addresses.
+pub static ENTRIES: [Entry; 39] = [
+    Entry::new(100, Obj::MotorCurrent, Scale::Ratio(100, 1)),
+    Entry::new(101, Obj::SupplyVoltage, Scale::Ratio(1000, 1)),
+    Entry::new(104, Obj::Microsteps, Scale::Table(&RESOLUTIONS)).wide().read_only(),
+    Entry::new(108, Obj::AlarmCode, Scale::One),
+    Entry::new(109, Obj::RunState, Scale::One),
+    Entry::new(110, Obj::HardwareRevision, Scale::One),
+    Entry::new(111, Obj::SoftwareRevision, Scale::One),
+    Entry::new(117, Obj::TargetPosition, Scale::One),
+    Entry::new(119, Obj::RealSpeed, CENTI_REV).narrow(),
+    Entry::new(126, Obj::Position, Scale::One).read_only(),
+    Entry::new(206, Obj::SystemControl, Scale::Table(&USER_COMMAND)),
+    Entry::new(213, Obj::IdleCurrent, Scale::One),
+    Entry::new(217, Obj::Feedback, Scale::Table(&LOOP)),
+    Entry::new(241, Obj::PhaseCurrent, Scale::One),
+    Entry::new(242, Obj::Microsteps, Scale::Table(&RESOLUTIONS)).wide(),
+    Entry::new(245, Obj::IdleDelay, Scale::One),
+    Entry::new(246, Obj::EncoderCpr, Scale::Table(&ENCODER)),
+    Entry::new(298, Obj::NodeId, Scale::One),
+    Entry::new(299, Obj::BaudRate, Scale::One),
+    Entry::new(301, Obj::PpStartSpeed, CENTI_REV).narrow(),
+    Entry::new(302, Obj::PpStopSpeed, CENTI_REV).narrow(),
+    Entry::new(303, Obj::PpAccel, REV).narrow(),
+    Entry::new(304, Obj::PpDecel, REV).narrow(),
+    Entry::new(305, Obj::HomingMethod, Scale::Table(&HOMING)),
+    Entry::new(306, Obj::PpRunSpeed, CENTI_REV).narrow(),
+    Entry::new(307, Obj::CommandVelocity, CENTI_REV).narrow(),
+    Entry::new(308, Obj::JogSpeed, CENTI_REV).narrow(),
+    Entry::new(309, Obj::HomingSearchSpeed, CENTI_REV).narrow(),
+    Entry::new(310, Obj::HomingCreepSpeed, CENTI_REV).narrow(),
+    Entry::new(311, Obj::HomingOffset, Scale::One),
+    Entry::new(313, Obj::CommandTarget, Scale::One),
+    Entry::new(317, Obj::SoftLimitPositive, Scale::One),
+    Entry::new(319, Obj::SoftLimitNegative, Scale::One),
+    Entry::new(321, Obj::PositionPreset, Scale::One),
+    Entry::new(323, Obj::MotionCommand, Scale::One),
+    Entry::new(324, Obj::SoftLimits, Scale::One),
+    Entry::new(0x200F, Obj::SystemControl, Scale::One),
+    Entry::new(0x2100, Obj::Parity, Scale::One),
+    Entry::new(0x2190, Obj::RegisterMap, Scale::One),
+];
+
+/// The manual's codes (§十三): 02 no such register, 03 a value out of range, 04 any refusal of
+/// the drive's (busy, disabled, faulted, not now).
+pub const EXCEPTIONS: Exceptions = Exceptions::MODBUS;
+
+/// The DS-CLS9 layout.
+pub static LAYOUT: Layout = Layout {
+    entries: &ENTRIES,
+    order: WordOrder::HighFirst,
+    exceptions: EXCEPTIONS,
+    walk: Walk::Address,
+    halves: false,
+};
+
+/// What the reference says beside the table: the decisions where seed 002 is silent or
+/// contradicts itself.
+#[cfg(feature = "docs")]
+pub static REFERENCE: super::doc::Reference = super::doc::Reference {
+    title: "DS-CLS9-FRS4 map (seed 002)",
+    notes: &[
+        "Chosen with 0x2190 = 2, saved (0x200F = 2), from the next power-up; `hal-sim --map cls9` for one run. 0x2190 = 0 and a save switch back to the native map. Register numbers are decimal (0299 has two words and the next entry is 0301), and the drive's own registers keep their native (hexadecimal) numbers: 0x200F (8207) saves, 0x2100 (8448) the parity, 0x2190 (8592) the map.",
+        "Parameters are kept by a save (0x200F = 2, as in the native map); the manual does not say when its drive stores them.",
+        "Functions 0x03, 0x06 and 0x10 (§十三), and the native map's 0x04, 0x08, 0x17 and 0x2B. A read takes up to 125 registers, a write up to 123. A request that covers a register number the table does not have (0102, 0105, ...) is refused with 02.",
+        "32-bit values (two words) are high word first (§十二, big-endian) and written whole with 0x10: one half alone is refused with 02.",
+        "Speeds are in 0.01 rev/s and accelerations in rev/s² of the resolution in force (0242: a revolution is 0242 pulses), converted exactly to the drive's microsteps (a revolution is 200 × the microsteps, so 0.01 rev/s is a whole number of microsteps a second); a drive value that is not a whole number of the map's units (one a native master wrote) reads rounded to the nearest. The drive runs 150 to 300 000 microsteps a second: a speed below that is refused (03). Start and stop speeds (0301, 0302) take 151 microsteps a second at least.",
+        "0242 and 0104 (pulses a revolution) take the drive's resolutions 200, 400, 800, 1600, 3200, 6400, 12800, 25600 and 51200; others are refused (03). 0246 (encoder counts a revolution, lines × 4) takes 800, 1600, 2000, 2400, 3200, 4000, 4800 and 6400.",
+        "0100 (motor current) reads in 0.1 A and 0101 (supply) in volts, as last measured; 0241 (current setting) in mA as the manual's range 100-4500 says.",
+        "0108 is the drive's alarm code, which uses the manual's table 1-2: 10 over-current, 11 phase loss, 13 under-voltage, 14 over-voltage, 25 position error, 26 overload; 15 (over-temperature) and 27 (encoder lost) are the drive's own among \"other\". 0109 is table 1-1's run state: 1 enable off (or a fault), 2 standing, 3 running.",
+        "0206 user command: 1 restores the factory parameters and saves them (0x200F = 3), 2 clears the alarms, 3 (restart) is refused (04): the drive does not restart itself; switch the power.",
+        "0323 control command (the drive's 0x21A0): 1 absolute run to 0313 at 0306's speed, re-targeted when 0313 is written during the run; 2 relative run by 0313, refused (04) while moving (a write of 0313 during it changes nothing of the run); 3 run at 0307 (its sign the direction; a write of 0307 during it changes the speed); 4 and 5 jog at 0308 until 6 or 7; 6 stop at 0304; 7 stop at the quick-stop deceleration (0x2183, 320 000 microsteps/s² from the factory); 8 set the position to 0321, refused (04) while moving; 12 homing; 13 alarm clear. Runs ramp at 0303/0304 from 0301 and down to 0302. A run is refused (04) with the power stage off or an alarm latched, and while a PVT run goes. Reading 0323 gives the last command written.",
+        "Soft limits 0317 / 0319 with 0324 bit 0 (positive) and bit 1 (negative): no motion command goes beyond an enabled limit; a target beyond it stops on it, a run or a jog towards it ends on it. Homing ignores them. 0324's other bits are refused (03).",
+        "Homing (0323 = 12): 0305 0 searches the home switch clockwise (negative), 1 counter-clockwise, at 0309, reversing at the limit switch of that side, then finds the switch's edge again at the creep speed 0310; the home then reads as 0311. Until 0305 is written it reads the drive's own method number (0x2160, factory 35: the home is where the axis stands). The inputs for the home switch and the limits are the drive's 0x216C (native map); 0x216B is the timeout.",
+        "Not in this map yet, answered 02: the pulse-input registers 0106, 0224, 0234, 0244 and 0296; the direction switch 0201; the loop gains 0251-0258 and the in-position window 0247; the multi-segment program (0174-0178, 0327, 0328, 1024-1536, commands 14-18, refused with 03); the input and output functions 0400-0430; the timing exceptions 0x0C and 0x0D.",
+    ],
+    remarks: &[
+        (100, "Motor current: the larger phase current, 0.1 A."),
+        (101, "Supply voltage, V."),
+        (104, "Resolution in force, pulses a revolution (two words)."),
+        (108, "Alarm code (table 1-2), 0 without an alarm."),
+        (109, "Run state (table 1-1): 1 enable off, 2 standing, 3 running."),
+        (117, "Target position: where the running motion heads (pulses)."),
+        (119, "Actual speed, 0.01 rev/s, signed."),
+        (126, "Actual position, pulses."),
+        (206, "User command: 1 parameter reset and save, 2 alarm clear, 3 restart (refused)."),
+        (213, "Standstill current, percent of 0241, after 0245."),
+        (217, "0 open loop, 1 closed loop; from the next power-up (save first)."),
+        (241, "Phase current, mA."),
+        (242, "Resolution, pulses a revolution (two words)."),
+        (245, "Standstill delay, ms."),
+        (246, "Encoder counts a revolution (lines × 4); from the next power-up."),
+        (298, "Node id, from the next power-up (save first)."),
+        (299, "Baud rate, from the next power-up (save first)."),
+        (301, "Start speed, 0.01 rev/s."),
+        (302, "Stop speed, 0.01 rev/s."),
+        (303, "Acceleration, rev/s²."),
+        (304, "Deceleration (also command 6's), rev/s²."),
+        (305, "Homing direction: 0 clockwise (negative), 1 counter-clockwise."),
+        (306, "Speed of the absolute and relative runs, 0.01 rev/s."),
+        (307, "Speed of the velocity run (3), 0.01 rev/s, its sign the direction."),
+        (308, "Jog speed, 0.01 rev/s."),
+        (309, "Homing search speed, 0.01 rev/s."),
+        (310, "Homing creep speed (after the switch is found), 0.01 rev/s."),
+        (311, "Homing offset: the position the home reads, pulses."),
+        (313, "Target of the absolute run, distance of the relative one, pulses."),
+        (317, "Positive soft limit, pulses (0324 bit 0)."),
+        (319, "Negative soft limit, pulses (0324 bit 1)."),
+        (321, "The position command 8 sets, pulses."),
+        (323, "Control command (see the notes)."),
+        (324, "Bit 0 the positive soft limit on, bit 1 the negative one."),
+    ],
+    decimal: true,
+};

@@ -1,0 +1,185 @@
+//! The motion command 0x21A0 (seed 002's control command 0323) and the soft limits 0x21A9-0x21AD:
+//! runs, jogs and stops by one register, planned on the bus side as every other motion is.
+//!
+//! A run to a position or by a distance and a run at a speed ramp as the profile modes do
+//! (0x6067, 0x6069, 0x606B, 0x606D) at 0x6072, 0x21A3 or 0x21A5. With a soft limit enabled no
+//! motion command goes beyond it: a target beyond it stops on it, and a run or a jog towards it
+//! is a move to it at the run's speed. An axis already beyond a limit moves back freely and no
+//! further out.
+
+use super::DriveState;
+use super::control::{Planner, Pp};
+use crate::controller::{STATUS_EXT, STATUS_STALL};
+use crate::modes::{Command, PowerState, Running, WorkMode};
+use crate::motion::axis::Axis;
+use crate::motion::cubic::Table;
+use crate::od::{Obj, ObjError, refuse};
+use core::borrow::Borrow;
+
+/// 0x21AD: the positive soft limit on.
+const LIMIT_POSITIVE: u32 = 1 << 0;
+/// 0x21AD: the negative soft limit on.
+const LIMIT_NEGATIVE: u32 = 1 << 1;
+
+impl<P: Borrow<Table>> DriveState<P> {
+    /// Checks a motion command that does not plan (set position, home, clear the alarms).
+    pub(crate) fn check_other_command(&self, value: u32) -> Result<(), ObjError> {
+        match Command::from_raw(value).ok_or(ObjError::OutOfRange)? {
+            Command::SetPosition => {
+                refuse(self.ctl.axis.is_still(), ObjError::Busy)?;
+                self.check(Obj::Position, self.param(Obj::PositionPreset))
+            }
+            Command::Home => self.check_homing(1),
+            _ => Ok(()),
+        }
+    }
+
+    /// Writes a motion command that does not plan, once [`DriveState::check_other_command`]
+    /// accepts it.
+    pub(crate) fn other_command(&mut self, value: u32) -> Result<(), ObjError> {
+        self.check_other_command(value)?;
+        match Command::from_raw(value) {
+            Some(Command::SetPosition) => self.apply(Obj::Position, self.param(Obj::PositionPreset)),
+            Some(Command::Home) => self.homing_command(1),
+            Some(Command::AlarmClear) => self.clear_alarms(),
+            _ => {}
+        }
+        self.set_param(Obj::MotionCommand, value);
+        Ok(())
+    }
+
+    /// Clears every latched alarm (seed 002's alarm clear): the fault bits, the communication
+    /// timeout, the external stops and the stall; the enable stays as it is, so a drive whose
+    /// fault is gone is energised again. A condition still present latches again.
+    pub(crate) fn clear_alarms(&mut self) {
+        for obj in [Obj::ErrorStatus, Obj::DriveFaults, Obj::CommStatus] {
+            self.apply(obj, 0xFF);
+        }
+        self.apply(Obj::ControllerStatus, u32::from(STATUS_EXT | STATUS_STALL));
+    }
+
+    /// 0x21AE: 1 the power stage off, 2 energised and standing, 3 moving.
+    pub(crate) fn run_state(&self) -> u8 {
+        if self.ctl.power_state() != PowerState::On {
+            1
+        } else if self.ctl.axis.is_still() {
+            2
+        } else {
+            3
+        }
+    }
+}
+
+impl Planner<'_> {
+    /// Plans the motion command `value` on `axis` and `pp`: `Ok(true)` if it changes them.
+    pub(super) fn plan_command(&self, axis: &mut Axis, pp: &mut Pp, value: u32) -> Result<bool, ObjError> {
+        let command = Command::from_raw(value).ok_or(ObjError::OutOfRange)?;
+        if !command.plans() {
+            return Ok(false);
+        }
+        // A PVT run owns the axis; its own commands stop it.
+        refuse(self.mode() != WorkMode::Pvt, ObjError::NotNow)?;
+        let here = axis.setpoint().whole;
+        let running = match command {
+            Command::Absolute => {
+                self.may_move?;
+                self.run_to(axis, here, i64::from(self.param(Obj::CommandTarget) as i32))?;
+                Running::Absolute
+            }
+            Command::Relative => {
+                refuse(axis.is_still(), ObjError::Busy)?;
+                self.may_move?;
+                let target = here.saturating_add(i64::from(self.param(Obj::CommandTarget) as i32));
+                self.run_to(axis, here, target)?;
+                Running::Relative
+            }
+            Command::Velocity => {
+                self.may_move?;
+                self.run(axis, (self.param(Obj::CommandVelocity) as i32) as f32)?;
+                Running::Velocity
+            }
+            Command::JogPositive | Command::JogNegative => {
+                self.may_move?;
+                let speed = self.param(Obj::JogSpeed) as f32;
+                self.run(axis, if command == Command::JogPositive { speed } else { -speed })?;
+                Running::Jog
+            }
+            Command::Stop => {
+                axis.stop_ramp(self.param(Obj::PpDecel));
+                Running::Nothing
+            }
+            Command::EmergencyStop => {
+                axis.stop_ramp(self.param(Obj::QuickStopDecel));
+                Running::Nothing
+            }
+            _ => return Ok(false),
+        };
+        *pp = Pp::commanded(running);
+        Ok(true)
+    }
+
+    /// Plans a write of the target or the run velocity: an absolute run re-targets, a run
+    /// changes its speed; otherwise the value is stored for the next command.
+    pub(super) fn plan_command_change(&self, axis: &mut Axis, pp: &Pp, obj: Obj, value: u32) -> Result<bool, ObjError> {
+        if axis.is_still() {
+            return Ok(false);
+        }
+        let here = axis.setpoint().whole;
+        match (obj, pp.running) {
+            (Obj::CommandTarget, Running::Absolute) => {
+                self.may_move?;
+                self.run_to(axis, here, i64::from(value as i32))?;
+            }
+            (Obj::CommandVelocity, Running::Velocity) => {
+                self.may_move?;
+                self.run(axis, (value as i32) as f32)?;
+            }
+            _ => return Ok(false),
+        }
+        Ok(true)
+    }
+
+    /// The enabled soft limits: the lowest and the highest position a motion command may reach.
+    fn soft_limits(&self) -> (i64, i64) {
+        let on = self.param(Obj::SoftLimits);
+        let hi = if on & LIMIT_POSITIVE != 0 { i64::from(self.param(Obj::SoftLimitPositive) as i32) } else { i64::MAX };
+        let lo = if on & LIMIT_NEGATIVE != 0 { i64::from(self.param(Obj::SoftLimitNegative) as i32) } else { i64::MIN };
+        (lo, hi)
+    }
+
+    /// `target` as the soft limits let an axis at `here` go: no further out than a limit, or
+    /// than `here` where the axis is beyond it already.
+    fn soft_limited(&self, here: i64, target: i64) -> i64 {
+        let (lo, hi) = self.soft_limits();
+        if target > hi {
+            hi.max(here.min(target))
+        } else if target < lo {
+            lo.min(here.max(target))
+        } else {
+            target
+        }
+    }
+
+    /// A run from `here` to `target` (within the soft limits) at 0x6072's speed.
+    fn run_to(&self, axis: &mut Axis, here: i64, target: i64) -> Result<(), ObjError> {
+        let speed = libm::fabsf((self.param(Obj::PpRunSpeed) as i32) as f32);
+        self.run_to_at(axis, self.soft_limited(here, target), speed)
+    }
+
+    fn run_to_at(&self, axis: &mut Axis, target: i64, speed: f32) -> Result<(), ObjError> {
+        let sp = self.pp_setpoint(target, speed);
+        axis.move_to(self.now, sp.target, sp.depart, sp.arrive, &sp.limits).map_err(|_| ObjError::Infeasible)
+    }
+
+    /// A run at `v` (its sign the direction), or a move to the soft limit it heads for.
+    fn run(&self, axis: &mut Axis, v: f32) -> Result<(), ObjError> {
+        let (lo, hi) = self.soft_limits();
+        let here = axis.setpoint().whole;
+        let (limit, far) = if v > 0.0 { (hi, i64::MAX) } else { (lo, i64::MIN) };
+        if limit != far {
+            return self.run_to_at(axis, self.soft_limited(here, far), libm::fabsf(v));
+        }
+        let sp = self.pp_setpoint(0, v);
+        axis.run_at(self.now, v, sp.depart, &sp.limits).map_err(|_| ObjError::Infeasible)
+    }
+}
