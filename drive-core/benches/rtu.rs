@@ -277,34 +277,41 @@ fn rmodbus(case: RmodbusCase) -> usize {
 }
 
 // ---------------------------------------------------------------------------------------------
-// jmc: the same measurement as `drive` through the JMC map (seed 001), for its read 2 (0x607A,
-// the target position, one 32-bit value) and write 1 (0x6083, the acceleration).
+// jmc, cls9: the same measurement as `drive` through the JMC map (seed 001) and the DS-CLS9 map
+// (seed 002), for their read 2 (one 32-bit value: JMC's 0x607A, the target position; CLS9's
+// 0313, the command target) and write 1 (an acceleration: JMC's 0x6083, CLS9's 0303).
 
-/// A JMC drive that has received all of a request but its last byte.
-struct JmcCase {
+/// A drive on a compatibility map that has received all of a request but its last byte.
+struct MapCase {
     drive: Drive<drive_core::maps::Maps>,
     last: u8,
 }
 
-fn setup_jmc(frame: &'static [u8]) -> JmcCase {
+fn setup_map(map: drive_core::maps::Maps, frame: &'static [u8]) -> MapCase {
     let mut frame = frame.to_vec();
     let crc = crc16(&frame);
     frame.extend_from_slice(&crc.to_le_bytes());
     let (&last, head) = frame.split_last().expect("frame");
-    let mut drive = Drive::with_map(drive_core::DriveConfig::default(), drive_core::maps::Maps::jmc());
+    let mut drive = Drive::with_map(drive_core::DriveConfig::default(), map);
     drive.on_rx(T0, head);
     let mut probe = drive.clone();
     probe.on_rx(T0, &[last]);
     probe.on_timer(T0.plus_micros(T35_US));
     let reply = probe.take_reply().expect("the drive answers").to_vec();
     assert_eq!(reply.get(..2), Some(&[SLAVE, frame[1]][..]), "not a normal reply: {reply:02X?}");
-    JmcCase { drive, last }
+    MapCase { drive, last }
 }
 
-#[library_benchmark]
-#[bench::read_2(args = (&[SLAVE, 0x03, 0x60, 0x7A, 0x00, 0x02]), setup = setup_jmc)]
-#[bench::write_1(args = (&[SLAVE, 0x06, 0x60, 0x83, 0x00, 0x64]), setup = setup_jmc)]
-fn jmc(mut case: JmcCase) -> usize {
+fn setup_jmc(frame: &'static [u8]) -> MapCase {
+    setup_map(drive_core::maps::Maps::jmc(), frame)
+}
+
+fn setup_cls9(frame: &'static [u8]) -> MapCase {
+    setup_map(drive_core::maps::Maps::cls9(), frame)
+}
+
+/// The last byte, then the reply at t3.5.
+fn map_reply(mut case: MapCase) -> usize {
     let t0 = black_box(T0);
     case.drive.on_rx(t0, &[black_box(case.last)]);
     case.drive.on_timer(t0.plus_micros(T35_US));
@@ -312,9 +319,23 @@ fn jmc(mut case: JmcCase) -> usize {
     reply.map_or(0, <[u8]>::len)
 }
 
+#[library_benchmark]
+#[bench::read_2(args = (&[SLAVE, 0x03, 0x60, 0x7A, 0x00, 0x02]), setup = setup_jmc)]
+#[bench::write_1(args = (&[SLAVE, 0x06, 0x60, 0x83, 0x00, 0x64]), setup = setup_jmc)]
+fn jmc(case: MapCase) -> usize {
+    map_reply(case)
+}
+
+#[library_benchmark]
+#[bench::read_2(args = (&[SLAVE, 0x03, 0x01, 0x39, 0x00, 0x02]), setup = setup_cls9)]
+#[bench::write_1(args = (&[SLAVE, 0x06, 0x01, 0x2F, 0x00, 0x64]), setup = setup_cls9)]
+fn cls9(case: MapCase) -> usize {
+    map_reply(case)
+}
+
 library_benchmark_group!(
     name = rtu;
-    benchmarks = drive, drive_whole, crc_floor, rmodbus, jmc
+    benchmarks = drive, drive_whole, crc_floor, rmodbus, jmc, cls9
 );
 
 main!(library_benchmark_groups = rtu);

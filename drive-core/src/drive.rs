@@ -27,7 +27,7 @@ pub struct DriveConfig {
     /// Overrides the baud rate object (0x202A) for this run.
     pub baud: Option<Baud>,
     /// The identification strings.
-    pub identity: Identity,
+    pub identity: &'static Identity,
     /// Whether the platform can save parameters (0x200F = 2); without it a save is refused (04).
     /// With it, the platform serves [`SystemRequest::Save`] (a parameter store serves it).
     pub can_save: bool,
@@ -35,7 +35,7 @@ pub struct DriveConfig {
 
 impl Default for DriveConfig {
     fn default() -> Self {
-        Self { address: None, baud: None, identity: Identity::SIMULATOR, can_save: false }
+        Self { address: None, baud: None, identity: &Identity::SIMULATOR, can_save: false }
     }
 }
 

@@ -36,11 +36,14 @@
 //!   is the rotor's electrical angle plus 90°. The load angle δ between the current vector and
 //!   the rotor is atan2(e·i, −e×i) in the direction of motion: a hybrid stepper pulls out at 90°.
 //!   Both are averaged over about one full step of travel (a stepper rings inside each step at
-//!   low speed). The first 10 ms at or above our 0x210A full steps a second learn the back-EMF a
+//!   low speed). The first 30 ms at or above our 0x210A full steps a second learn the back-EMF a
 //!   freely running motor gives per speed (below that speed the back-EMF is too small to tell, as
-//!   §5.5.21 warns). Then a stall is, for four ticks in a row, a back-EMF below half the learned
-//!   one (the rotor held or slipping), or a |δ| beyond 110° − 4° × the signed threshold of 0x6039
-//!   bits 0-6 (clamped to 45°..175°: a positive threshold is more sensitive).
+//!   §5.5.21 warns; a rotor still ringing from a dead stop needs that long to calm down). Then a
+//!   stall is, for four ticks in a row, a back-EMF below half the learned one (the rotor held or
+//!   slipping) that has lasted 2 ms or half a full step of travel more than it has not (a ring
+//!   after a step in acceleration dips below it for a moment), or a |δ| beyond 110° − 4° × the
+//!   signed threshold of 0x6039 bits 0-6 (clamped to 45°..175°: a positive threshold is more
+//!   sensitive).
 //!   With 0x6043 = 1 the axis then stops at once.
 
 use crate::units::{Instant, TICK_MICROS};
@@ -50,7 +53,7 @@ pub const STEPS_PER_REV: i64 = 200;
 /// Ticks in a row a stall condition must hold.
 pub const STALL_TICKS: u8 = 4;
 /// How long the commanded speed must have been above the minimum before detection starts, µs.
-pub const STALL_SETTLE_MICROS: u64 = 10_000;
+pub const STALL_SETTLE_MICROS: u64 = 30_000;
 /// The control tick in seconds.
 const TICK_S: f32 = TICK_MICROS as f32 * 1e-6;
 
@@ -180,6 +183,8 @@ pub(crate) struct Sensorless {
     fast_since: Option<Instant>,
     /// Ticks in a row the stall condition has held.
     count: u8,
+    /// Seconds with a weak back-EMF, less those without (not below 0).
+    held: f32,
     /// The last estimated load angle, rad (for tests and traces).
     pub(crate) load_angle: f32,
 }
@@ -210,6 +215,13 @@ const EMF_ALPHA_MAX: f32 = 1.0 / 4.0;
 const PER_SPEED_ALPHA: f32 = 1.0 / 1024.0;
 /// The share of the learned back-EMF below which the rotor counts as held.
 pub const EMF_SHARE: f32 = 0.5;
+/// How long the back-EMF must be weak, s (net of the time it is not), or over how many full
+/// steps of travel at the speed, whichever comes first: a rotor ringing after a step in
+/// acceleration dips below the threshold for a moment, a held or slipping rotor stays there or
+/// keeps coming back.
+pub const STALL_WEAK_S: f32 = 0.002;
+/// See [`STALL_WEAK_S`].
+pub const STALL_WEAK_STEPS: f32 = 0.5;
 
 impl Sensorless {
     /// One tick; whether the rotor has stalled.
@@ -231,7 +243,7 @@ impl Sensorless {
         let s = if x.speed < 0.0 { -1.0 } else { 1.0 };
         self.load_angle = libm::atan2f(s * self.dot, -s * self.cross);
         if speed < x.min_speed || x.min_speed <= 0.0 {
-            (self.fast_since, self.count, self.per_speed) = (None, 0, 0.0);
+            (self.fast_since, self.count, self.held, self.per_speed) = (None, 0, 0.0, 0.0);
             return false;
         }
         let since = *self.fast_since.get_or_insert(now);
@@ -244,12 +256,17 @@ impl Sensorless {
         }
         // Too little back-EMF for the speed: the rotor is held or slipping; else the load angle.
         let weak = per_speed < self.per_speed * EMF_SHARE;
-        let stalled = weak || libm::fabsf(self.load_angle) > x.limit;
+        let pulled_out = libm::fabsf(self.load_angle) > x.limit;
+        let stalled = weak || pulled_out;
         if !stalled {
             self.per_speed += (per_speed - self.per_speed) * PER_SPEED_ALPHA;
         }
+        // A weak back-EMF counts over time: up while weak, back down while not. A held rotor
+        // stays weak, a slipping one is weak more than not; a ring after a step in acceleration
+        // dips for a moment and recovers.
+        self.held = if weak { self.held + TICK_S } else { (self.held - TICK_S).max(0.0) };
         self.count = if stalled { self.count.saturating_add(1) } else { 0 };
-        self.count >= STALL_TICKS
+        self.count >= STALL_TICKS && (pulled_out || self.held >= STALL_WEAK_S || self.held * speed >= STALL_WEAK_STEPS)
     }
 
     /// Forgets the motion: the next detection starts afresh.
@@ -344,6 +361,7 @@ impl Servo {
                 per_speed: 0.0,
                 fast_since: None,
                 count: 0,
+                held: 0.0,
                 load_angle: 0.0,
             },
             last_angle: 0,

@@ -111,8 +111,8 @@ fn absolute_runs_end_on_the_target_and_take_a_new_one_on_line() {
     r.settle(10);
     assert_eq!(r.position(), 16_000);
     assert_eq!(r.read32(126), 16_000);
-    // "The sign of the speed has no effect": the distance's sign gives the direction.
-    r.set(306, -500).expect("speed");
+    // The distance's sign gives the direction; the speed is a magnitude (1-5000).
+    assert_eq!(r.set(306, -500), Err(3));
     r.write32(313, 0).expect("target");
     r.command(1).expect("absolute run");
     r.settle(10);

@@ -61,22 +61,20 @@ pub static TICKS: AtomicU32 = AtomicU32::new(0);
 pub static HANDOVERS: [AtomicU32; 3] = [const { AtomicU32::new(0) }; 3];
 
 /// Who this firmware says it is (0x1022 hardware version from the board).
-fn identity(hardware: &'static str) -> Identity {
-    Identity {
-        model_name: "OSD-42",
-        user_application_name: "firmware",
-        hardware_version: hardware,
-        ..Identity::SIMULATOR
-    }
-}
+static IDENTITY: Identity = Identity {
+    model_name: "OSD-42",
+    user_application_name: "firmware",
+    hardware_version: crate::board::HARDWARE,
+    ..Identity::SIMULATOR
+};
 
 /// Builds the drive from the parameters power-up loaded (`params`, storage status bits
 /// `status`) and hands the tick its side; `can_save` if the board has a parameter store (else
 /// 0x200F = 2 is refused). Returns the drive, for the Modbus task, and the serial line settings
 /// in force: the baud rate and the parity (0x2100).
 #[allow(clippy::mut_from_ref, reason = "the drive is a singleton's memory, not borrowed from the inputs")]
-pub fn start(hardware: &'static str, params: &Params, status: u8, can_save: bool) -> (&'static mut Drive, Baud, u32) {
-    let config = DriveConfig { identity: identity(hardware), can_save, ..DriveConfig::default() };
+pub fn start(params: &Params, status: u8, can_save: bool) -> (&'static mut Drive, Baud, u32) {
+    let config = DriveConfig { identity: &IDENTITY, can_save, ..DriveConfig::default() };
     // singleton! yields its memory once; uninitialised, it is .bss with no flash image.
     let (Some(slot), Some(tick)) = (
         cortex_m::singleton!(: MaybeUninit<Drive> = MaybeUninit::uninit()),

@@ -103,7 +103,7 @@ mod run {
         // Power-up, before the drive answers anything: the FSET check and the parameters from
         // flash, then the drive, then the UART at their baud rate and parity.
         let (store, loaded) = power_up(flash, &mut inputs.fset);
-        let (drive, baud, parity) = app::start(board::HARDWARE, &loaded.params, loaded.status, true);
+        let (drive, baud, parity) = app::start(&loaded.params, loaded.status, true);
         board::set_serial(&mut uart, baud, parity);
         info!("drive up: {} baud, parity {}, storage status {:#x}", baud.get(), parity, loaded.status);
         board::start_tick(stage, encoder);
@@ -245,7 +245,7 @@ mod run {
     #[inline(never)]
     fn power_up(spawner: embassy_executor::Spawner) {
         let (store, loaded) = load();
-        let (drive, _, _) = app::start(board::HARDWARE, &loaded.params, loaded.status, true);
+        let (drive, _, _) = app::start(&loaded.params, loaded.status, true);
         let serial = board::init();
         spawner.spawn(unwrap!(app::modbus(drive, serial, store)));
     }

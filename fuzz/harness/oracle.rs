@@ -377,3 +377,74 @@ pub fn requests<M: drive_core::maps::RegisterMap>(
         each(drive, now, *ctl, pdu);
     }
 }
+
+/// `n / d` to the nearest, halves away from zero.
+pub fn round(n: i64, d: i64) -> i64 {
+    if n >= 0 { (n + d / 2) / d } else { (n - d / 2) / d }
+}
+
+/// The value of a layout entry `e` in the map's unit, as a model computes it from the drive's
+/// object (an enumeration value the table does not list reads as the drive's).
+pub fn map_value(state: &drive_core::DriveState, e: &drive_core::maps::layout::Entry) -> i64 {
+    use drive_core::maps::layout::{FULL_STEPS_PER_REV, Scale};
+    let d = e.obj.def();
+    let raw = state.read_def(d);
+    let v = if d.ty == drive_core::od::Type::S32 { i64::from(raw as i32) } else { i64::from(raw) };
+    let per_rev = FULL_STEPS_PER_REV * i64::from(state.read(drive_core::od::Obj::Microsteps).max(1));
+    match e.scale {
+        Scale::One => v,
+        Scale::Ratio(n, den) => round(v * i64::from(den), i64::from(n)),
+        Scale::PerRev(n, den) => round(v * i64::from(den), i64::from(n) * per_rev),
+        Scale::Table(choices) => choices.iter().find(|c| i64::from(c.drive) == v).map_or(v, |c| i64::from(c.lo)),
+    }
+}
+
+/// A compatibility map's run: the records of `data` as [`requests`] reads them, bit 6 of `ctl`
+/// taking the address from `entries` (the data's first byte picks one). Every frame is answered
+/// (a normal reply, or an exception of `codes` that changes nothing `snapshot` sees); a read of
+/// 1-125 registers returns what `model` says, and one `model` can read is not refused.
+pub fn map_requests<S: PartialEq + core::fmt::Debug>(
+    data: &[u8],
+    drive: &mut drive_core::Drive<drive_core::maps::Maps>,
+    entries: &[drive_core::maps::layout::Entry],
+    codes: &[u8],
+    t35: u64,
+    snapshot: fn(&drive_core::Drive<drive_core::maps::Maps>) -> S,
+    model: fn(&drive_core::Drive<drive_core::maps::Maps>, u16, usize) -> Option<Vec<u16>>,
+) {
+    let mut now = 0u64;
+    requests(data, drive, &mut now, |drive, now, ctl, mut pdu| {
+        if ctl & 0x40 != 0 && pdu.len() >= 3 && !entries.is_empty() {
+            let e = &entries[usize::from(pdu[1]) % entries.len()];
+            pdu[1..3].copy_from_slice(&e.addr.to_be_bytes());
+        }
+        if ctl & 4 != 0 {
+            fix_lengths(&mut pdu);
+        }
+        let before = snapshot(drive);
+        let expected = match pdu.as_slice() {
+            [0x03, a, b, c, d] => {
+                let qty = usize::from(u16::from_be_bytes([*c, *d]));
+                (1..=125).contains(&qty).then(|| model(drive, u16::from_be_bytes([*a, *b]), qty))
+            }
+            _ => None,
+        };
+        let (frame, reply) = exchange(drive, now, t35, &pdu);
+        if frame.len() > MAX_FRAME {
+            return;
+        }
+        let Some(reply) = reply else { panic!("no reply to {frame:02X?}") };
+        // A map's codes may go beyond the Modbus four that `check_reply` knows.
+        if vendor_exception(&frame, &reply, codes) {
+            assert_eq!(snapshot(drive), before, "exception {:#04X} to {frame:02X?} changed the drive", reply[2]);
+            assert!(!matches!(expected, Some(Some(_))), "a readable request refused: {frame:02X?}");
+            return;
+        }
+        assert!(!check_reply(&frame, &reply), "{reply:02X?} to {frame:02X?}");
+        if let [0x03, n, regs @ ..] = reply.get(1..reply.len() - 2).unwrap_or_default() {
+            let got: Vec<u16> = regs.chunks(2).map(|w| u16::from_be_bytes([w[0], w[1]])).collect();
+            assert_eq!(usize::from(*n), 2 * got.len(), "byte count of {frame:02X?}");
+            assert_eq!(Some(Some(got)), expected, "read {frame:02X?}");
+        }
+    });
+}

@@ -13,7 +13,7 @@
 use super::oracle;
 use drive_core::maps::Maps;
 use drive_core::maps::jmc::ENTRIES;
-use drive_core::maps::layout::{FULL_STEPS_PER_REV, Scale, View};
+use drive_core::maps::layout::View;
 use drive_core::od::{OBJECTS, Obj, Type};
 use drive_core::{Drive, DriveConfig};
 
@@ -33,7 +33,6 @@ fn snapshot(drive: &Drive<Maps>) -> (Vec<u32>, i64, drive_core::power::DeviceSta
 fn model(drive: &Drive<Maps>, addr: u16, qty: usize) -> Option<Vec<u16>> {
     let first = ENTRIES.iter().position(|e| e.addr == addr)?;
     let low_first = drive.state().read(Obj::MapWordOrder) == 1;
-    let per_rev = FULL_STEPS_PER_REV * i64::from(drive.state().read(Obj::Microsteps).max(1));
     let mut out = Vec::new();
     for e in ENTRIES.get(first..)? {
         if out.len() >= qty {
@@ -47,14 +46,7 @@ fn model(drive: &Drive<Maps>, addr: u16, qty: usize) -> Option<Vec<u16>> {
             out.extend((0..usize::from(n).div_ceil(2)).map(|k| drive.state().text_word(e.obj, k)));
             continue;
         }
-        let raw = drive.state().read_def(d);
-        let v = if d.ty == Type::S32 { i64::from(raw as i32) } else { i64::from(raw) };
-        let m = match e.scale {
-            Scale::One => v,
-            Scale::Ratio(n, den) => round(v * i64::from(den), i64::from(n)),
-            Scale::PerRev(n, den) => round(v * i64::from(den), i64::from(n) * per_rev),
-            Scale::Table(choices) => choices.iter().find(|c| i64::from(c.drive) == v).map_or(v, |c| i64::from(c.lo)),
-        } as u32;
+        let m = oracle::map_value(drive.state(), e) as u32;
         if e.narrow {
             out.push(m.min(0xFFFF) as u16);
         } else if d.words() == 1 {
@@ -68,47 +60,8 @@ fn model(drive: &Drive<Maps>, addr: u16, qty: usize) -> Option<Vec<u16>> {
     (out.len() >= qty).then(|| out[..qty].to_vec())
 }
 
-/// `n / d` to the nearest, halves away from zero.
-fn round(n: i64, d: i64) -> i64 {
-    if n >= 0 { (n + d / 2) / d } else { (n - d / 2) / d }
-}
-
 /// One execution.
 pub fn run(data: &[u8]) {
     let mut drive = Drive::with_map(DriveConfig::default(), Maps::jmc());
-    let mut now = 0u64;
-    oracle::requests(data, &mut drive, &mut now, |drive, now, ctl, mut pdu| {
-        if ctl & 0x40 != 0 && pdu.len() >= 3 {
-            let e = &ENTRIES[usize::from(pdu[1]) % ENTRIES.len()];
-            pdu[1..3].copy_from_slice(&e.addr.to_be_bytes());
-        }
-        if ctl & 4 != 0 {
-            oracle::fix_lengths(&mut pdu);
-        }
-        let before = snapshot(drive);
-        let expected = match pdu.as_slice() {
-            [0x03, a, b, c, d] => {
-                let qty = usize::from(u16::from_be_bytes([*c, *d]));
-                (1..=125).contains(&qty).then(|| model(drive, u16::from_be_bytes([*a, *b]), qty))
-            }
-            _ => None,
-        };
-        let (frame, reply) = oracle::exchange(drive, now, T35, &pdu);
-        if frame.len() > oracle::MAX_FRAME {
-            return;
-        }
-        let Some(reply) = reply else { panic!("no reply to {frame:02X?}") };
-        // The map's codes go beyond the Modbus four that `check_reply` knows.
-        if oracle::vendor_exception(&frame, &reply, &CODES) {
-            assert_eq!(snapshot(drive), before, "exception {:#04X} to {frame:02X?} changed the drive", reply[2]);
-            assert!(!matches!(expected, Some(Some(_))), "a readable walk refused: {frame:02X?}");
-            return;
-        }
-        assert!(!oracle::check_reply(&frame, &reply), "{reply:02X?} to {frame:02X?}");
-        if let [0x03, n, regs @ ..] = reply.get(1..reply.len() - 2).unwrap_or_default() {
-            let got: Vec<u16> = regs.chunks(2).map(|w| u16::from_be_bytes([w[0], w[1]])).collect();
-            assert_eq!(usize::from(*n), 2 * got.len(), "byte count of {frame:02X?}");
-            assert_eq!(Some(Some(got)), expected, "read {frame:02X?}");
-        }
-    });
+    oracle::map_requests(data, &mut drive, &ENTRIES, &CODES, T35, snapshot, model);
 }

@@ -9,8 +9,8 @@
 //! layout's model of that register says (the object's value scaled, in the layout's word order).
 
 use super::oracle;
-use drive_core::maps::layout::{Entry, Exceptions, FULL_STEPS_PER_REV, Layout, LayoutMap, Scale, Walk, WordOrder};
-use drive_core::od::{OBJECTS, Obj, Type};
+use drive_core::maps::layout::{Entry, Exceptions, Layout, LayoutMap, Scale, Walk, WordOrder};
+use drive_core::od::{OBJECTS, Obj};
 use drive_core::pdu::Exception;
 use drive_core::{Drive, DriveConfig};
 
@@ -67,23 +67,10 @@ fn model(drive: &Drive<LayoutMap>, reg: u32) -> Option<u16> {
         .iter()
         .find(|e| (u32::from(e.addr)..u32::from(e.addr) + u32::from(e.obj.def().words())).contains(&reg))?;
     let d = e.obj.def();
-    let raw = drive.state().read_def(d);
-    let v = if d.ty == Type::S32 { i64::from(raw as i32) } else { i64::from(raw) };
-    let per_rev = FULL_STEPS_PER_REV * i64::from(drive.state().read(Obj::Microsteps).max(1));
-    let scaled = match e.scale {
-        Scale::One => v,
-        Scale::Ratio(n, den) => round(v * i64::from(den), i64::from(n)),
-        Scale::PerRev(n, den) => round(v * i64::from(den), i64::from(n) * per_rev),
-        // The layout has no enumeration.
-        Scale::Table(_) => v,
-    } as u32;
+    // The layout has no enumeration: its values are the drive's, scaled.
+    let scaled = oracle::map_value(drive.state(), e) as u32;
     let k = reg - u32::from(e.addr);
     Some(if d.words() == 2 && k == 1 { (scaled >> 16) as u16 } else { scaled as u16 })
-}
-
-/// `n / d` to the nearest, halves away from zero.
-fn round(n: i64, d: i64) -> i64 {
-    if n >= 0 { (n + d / 2) / d } else { (n - d / 2) / d }
 }
 
 /// One execution.

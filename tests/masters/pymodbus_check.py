@@ -7,31 +7,17 @@ exits non-zero on any failure.
 
 import sys
 
-from pymodbus import FramerType
-from pymodbus.client import ModbusSerialClient, ModbusTcpClient
+from master import check, connect, finish
 
 ENDPOINT = sys.argv[1]
 DEV = 1
-results = []
-
-
-def check(name, ok, detail=""):
-    results.append(ok)
-    print(f"{'ok  ' if ok else 'FAIL'} {name} {detail}")
 
 
 def regs(rr):
     return None if rr.isError() else list(rr.registers)
 
 
-if ":" in ENDPOINT and not ENDPOINT.startswith("/"):
-    host, port = ENDPOINT.rsplit(":", 1)
-    client = ModbusTcpClient(host, port=int(port), framer=FramerType.RTU, timeout=2)
-else:
-    client = ModbusSerialClient(ENDPOINT, framer=FramerType.RTU, baudrate=9600, timeout=2)
-if not client.connect():
-    print(f"cannot connect to {ENDPOINT}")
-    sys.exit(2)
+client = connect(ENDPOINT)
 
 # Factory state: resolution 0, phase current 658 mA.
 r = regs(client.read_holding_registers(0x600C, count=2, device_id=DEV))
@@ -73,7 +59,4 @@ rd = client.read_device_information(read_code=1, object_id=0, device_id=DEV)
 info = {} if rd.isError() else rd.information
 check("device identification", info.get(0) == b"OpenStep Motion", info)
 
-client.close()
-passed, failed = results.count(True), results.count(False)
-print(f"pymodbus: {passed} passed, {failed} failed")
-sys.exit(1 if failed else 0)
+finish(client, "pymodbus")

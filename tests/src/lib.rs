@@ -1,5 +1,6 @@
 //! Workspace-level tests of the drive: see `tests/`. Here, what every test's master does: the
-//! requests of a real Modbus master (tokio-modbus), each bounded in time.
+//! requests of a real Modbus master (tokio-modbus), each bounded in time, and a simulator to
+//! talk to.
 
 use std::time::Duration;
 
@@ -53,4 +54,38 @@ pub async fn vendor_name(ctx: &mut Context) -> Option<Vec<u8>> {
         .expect("transport")
         .expect("identification");
     id.device_id_objects.iter().find(|o| o.id == 0).map(|o| o.value.to_vec())
+}
+
+/// A simulated drive on a TCP endpoint with its parameter flash in `flash`, running `scale`
+/// times faster than wall time, with the switches of `machine` and the simulator's `faults`
+/// (`--fault` specs); and its state's snapshot.
+///
+/// # Panics
+/// If the simulator cannot bind or a fault spec does not parse.
+pub fn power_on(
+    flash: &std::path::Path,
+    machine: hal_sim::machine::Machine,
+    scale: u32,
+    faults: &[&str],
+) -> (hal_sim::PowerSwitch, std::sync::Arc<std::sync::Mutex<hal_sim::Snapshot>>) {
+    let opts = hal_sim::SimOptions {
+        endpoint: hal_sim::Endpoint::Tcp("127.0.0.1:0".into()),
+        flash: Some(flash.to_owned()),
+        machine,
+        time_scale: scale,
+        faults: faults.iter().map(|f| f.parse().expect("fault spec")).collect(),
+        ..Default::default()
+    };
+    let sim = hal_sim::Simulator::bind(opts).expect("bind simulator");
+    let snapshot = sim.snapshot();
+    (sim.power_on(), snapshot)
+}
+
+/// A tokio-modbus RTU master over the simulator's TCP endpoint, to node 1.
+///
+/// # Panics
+/// If the endpoint does not accept the connection.
+pub async fn master(sim: &hal_sim::PowerSwitch) -> Context {
+    let stream = tokio::net::TcpStream::connect(sim.endpoint()).await.expect("connect");
+    tokio_modbus::client::rtu::attach_slave(stream, tokio_modbus::prelude::Slave(1))
 }

@@ -9,13 +9,12 @@ use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use drive_tests::{LIMIT, read, read_values, write, write_many};
+use drive_tests::{LIMIT, master, read, read_values, write, write_many};
 use hal_sim::machine::{Machine, Switch};
-use hal_sim::{Endpoint, PowerSwitch, SimOptions, Simulator, Snapshot};
-use tokio::net::TcpStream;
+use hal_sim::{PowerSwitch, Snapshot};
 use tokio::time::{sleep, timeout};
-use tokio_modbus::client::{Context, Reader, rtu};
-use tokio_modbus::prelude::{ExceptionCode, ReadCode, Slave};
+use tokio_modbus::client::{Context, Reader};
+use tokio_modbus::prelude::{ExceptionCode, ReadCode};
 
 /// Simulated seconds a wall second.
 const SCALE: u32 = 100;
@@ -31,22 +30,7 @@ fn machine() -> Machine {
 }
 
 fn power_on(flash: &Path, faults: &[&str]) -> (PowerSwitch, Arc<Mutex<Snapshot>>) {
-    let opts = SimOptions {
-        endpoint: Endpoint::Tcp("127.0.0.1:0".into()),
-        flash: Some(flash.to_owned()),
-        machine: machine(),
-        time_scale: SCALE,
-        faults: faults.iter().map(|f| f.parse().expect("fault spec")).collect(),
-        ..Default::default()
-    };
-    let sim = Simulator::bind(opts).expect("bind simulator");
-    let snapshot = sim.snapshot();
-    (sim.power_on(), snapshot)
-}
-
-async fn master(sim: &PowerSwitch) -> Context {
-    let stream = TcpStream::connect(sim.endpoint()).await.expect("connect");
-    rtu::attach_slave(stream, Slave(1))
+    drive_tests::power_on(flash, machine(), SCALE, faults)
 }
 
 /// A drive commissioned in the native map and restarted in the JMC map, and its master.

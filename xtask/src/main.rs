@@ -3,7 +3,7 @@
 //!
 //! - `ci`: everything CI runs (format, lints, host tests, firmware build and size, real masters).
 //! - `docs`: regenerate `docs/registers.md` from the object declarations.
-//! - `masters`: run pymodbus and mbpoll against the simulator.
+//! - `masters`: run pymodbus and mbpoll against the simulator (native and DS-CLS9 maps).
 //! - `firmware`: cross-build the firmware, print its size and its stack by the call graph against
 //!   the budgets, fail if it does not fit the chip or if the tick reaches software floating
 //!   point.
@@ -874,5 +874,10 @@ fn masters() -> Result<(), String> {
     run(Command::new(&python).arg(script.join("pymodbus_check.py")).arg(&sim.1))?;
     drop(sim);
     let sim = start_sim(&[])?;
-    run(Command::new("bash").arg(script.join("mbpoll_check.sh")).arg(&sim.1))
+    run(Command::new("bash").arg(script.join("mbpoll_check.sh")).arg(&sim.1))?;
+    drop(sim);
+    // The DS-CLS9 map, with a home cam and two limit switches for its homing.
+    let switches = ["--switch", "ext1:pnp:40:to=44", "--switch", "ext2:pnp:-120:below", "--switch", "ext3:pnp:120"];
+    let sim = start_sim(&[&["--map", "cls9"][..], &switches[..]].concat())?;
+    run(Command::new(&python).arg(script.join("pymodbus_cls9.py")).arg(&sim.1))
 }

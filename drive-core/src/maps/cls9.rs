@@ -11,7 +11,7 @@
 //! drive.on_rx(Instant::from_micros(0), &[0x01, 0x06, 0x01, 0x32, 0x01, 0xF4, 0x29, 0xEE]);
 //! drive.on_timer(Instant::from_micros(4_011));
 //! assert!(drive.take_reply().is_some());
-//! assert_eq!(drive.state().read(Obj::PpRunSpeed), 1_000);
+//! assert_eq!(drive.state().read(Obj::CommandSpeed), 1_000);
 //! ```
 
 use super::layout::{Choice, Entry, Exceptions, Layout, Scale, Walk, WordOrder};
@@ -59,10 +59,10 @@ static USER_COMMAND: [Choice; 3] =
 /// way, reversing at that side's limit, then found again at the creep speed (0x2160 -9, -10).
 static HOMING: [Choice; 2] = [Choice { lo: 0, hi: 0, drive: 0xFFF7 }, Choice { lo: 1, hi: 1, drive: 0xFFF6 }];
 
-/// The registers, by address (decimal, as the manual's `adr` column), then ours: the save
-/// (0x200F), the map selection (0x2190) and the line's parity (0x2100), at their native
-/// addresses.
-pub static ENTRIES: [Entry; 39] = [
+/// The registers, by address (decimal, as the manual's `adr` column), then ours at their
+/// native addresses: the save (0x200F), the line's parity (0x2100), the homing's timeout and
+/// switches (0x216B-0x216D) and the map selection (0x2190).
+pub static ENTRIES: [Entry; 42] = [
     Entry::new(100, Obj::MotorCurrent, Scale::Ratio(100, 1)),
     Entry::new(101, Obj::SupplyVoltage, Scale::Ratio(1000, 1)),
     Entry::new(104, Obj::Microsteps, Scale::Table(&RESOLUTIONS)).wide().read_only(),
@@ -87,7 +87,7 @@ pub static ENTRIES: [Entry; 39] = [
     Entry::new(303, Obj::PpAccel, REV).narrow(),
     Entry::new(304, Obj::PpDecel, REV).narrow(),
     Entry::new(305, Obj::HomingMethod, Scale::Table(&HOMING)),
-    Entry::new(306, Obj::PpRunSpeed, CENTI_REV).narrow(),
+    Entry::new(306, Obj::CommandSpeed, CENTI_REV).narrow(),
     Entry::new(307, Obj::CommandVelocity, CENTI_REV).narrow(),
     Entry::new(308, Obj::JogSpeed, CENTI_REV).narrow(),
     Entry::new(309, Obj::HomingSearchSpeed, CENTI_REV).narrow(),
@@ -101,6 +101,9 @@ pub static ENTRIES: [Entry; 39] = [
     Entry::new(324, Obj::SoftLimits, Scale::One),
     Entry::new(0x200F, Obj::SystemControl, Scale::One),
     Entry::new(0x2100, Obj::Parity, Scale::One),
+    Entry::new(0x216B, Obj::HomingTimeout, Scale::One),
+    Entry::new(0x216C, Obj::HomingInputs, Scale::One),
+    Entry::new(0x216D, Obj::HomingPolarity, Scale::One),
     Entry::new(0x2190, Obj::RegisterMap, Scale::One),
 ];
 
@@ -123,7 +126,7 @@ pub static LAYOUT: Layout = Layout {
 pub static REFERENCE: super::doc::Reference = super::doc::Reference {
     title: "DS-CLS9-FRS4 map (seed 002)",
     notes: &[
-        "Chosen with 0x2190 = 2, saved (0x200F = 2), from the next power-up; `hal-sim --map cls9` for one run. 0x2190 = 0 and a save switch back to the native map. Register numbers are decimal (0299 has two words and the next entry is 0301), and the drive's own registers keep their native (hexadecimal) numbers: 0x200F (8207) saves, 0x2100 (8448) the parity, 0x2190 (8592) the map.",
+        "Chosen with 0x2190 = 2, saved (0x200F = 2), from the next power-up; `hal-sim --map cls9` for one run. 0x2190 = 0 and a save switch back to the native map. Register numbers are decimal (0299 has two words and the next entry is 0301), and the drive's own registers keep their native (hexadecimal) numbers: 0x200F (8207) saves, 0x2100 (8448) the parity, 0x216B-0x216D (8555-8557) the homing's timeout and switches, 0x2190 (8592) the map.",
         "Parameters are kept by a save (0x200F = 2, as in the native map); the manual does not say when its drive stores them.",
         "Functions 0x03, 0x06 and 0x10 (§十三), and the native map's 0x04, 0x08, 0x17 and 0x2B. A read takes up to 125 registers, a write up to 123. A request that covers a register number the table does not have (0102, 0105, ...) is refused with 02.",
         "32-bit values (two words) are high word first (§十二, big-endian) and written whole with 0x10: one half alone is refused with 02.",
@@ -134,7 +137,7 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         "0206 user command: 1 restores the factory parameters and saves them (0x200F = 3), 2 clears the alarms, 3 (restart) is refused (04): the drive does not restart itself; switch the power.",
         "0323 control command (the drive's 0x21A0): 1 absolute run to 0313 at 0306's speed, re-targeted when 0313 is written during the run; 2 relative run by 0313, refused (04) while moving (a write of 0313 during it changes nothing of the run); 3 run at 0307 (its sign the direction; a write of 0307 during it changes the speed); 4 and 5 jog at 0308 until 6 or 7; 6 stop at 0304; 7 stop at the quick-stop deceleration (0x2183, 320 000 microsteps/s² from the factory); 8 set the position to 0321, refused (04) while moving; 12 homing; 13 alarm clear. Runs ramp at 0303/0304 from 0301 and down to 0302. A run is refused (04) with the power stage off or an alarm latched, and while a PVT run goes. Reading 0323 gives the last command written.",
         "Soft limits 0317 / 0319 with 0324 bit 0 (positive) and bit 1 (negative): no motion command goes beyond an enabled limit; a target beyond it stops on it, a run or a jog towards it ends on it. Homing ignores them. 0324's other bits are refused (03).",
-        "Homing (0323 = 12): 0305 0 searches the home switch clockwise (negative), 1 counter-clockwise, at 0309, reversing at the limit switch of that side, then finds the switch's edge again at the creep speed 0310; the home then reads as 0311. Until 0305 is written it reads the drive's own method number (0x2160, factory 35: the home is where the axis stands). The inputs for the home switch and the limits are the drive's 0x216C (native map); 0x216B is the timeout.",
+        "Homing (0323 = 12): 0305 0 searches the home switch clockwise (negative), 1 counter-clockwise, at 0309, reversing at the limit switch of that side, then finds the switch's edge again at the creep speed 0310; the home then reads as 0311. Until 0305 is written it reads the drive's own method number (0x2160, factory 35: the home is where the axis stands). Which inputs are the home switch and the limit switches, and their levels, are the drive's 0x216C and 0x216D, and 0x216B is the timeout, in this map at their native addresses (8556-8557, 8555).",
         "Not in this map yet, answered 02: the pulse-input registers 0106, 0224, 0234, 0244 and 0296; the direction switch 0201; the loop gains 0251-0258 and the in-position window 0247; the multi-segment program (0174-0178, 0327, 0328, 1024-1536, commands 14-18, refused with 03); the input and output functions 0400-0430; the timing exceptions 0x0C and 0x0D.",
     ],
     remarks: &[

@@ -2,7 +2,7 @@
 
 use super::index;
 use crate::motion::cubic::Table;
-use crate::od::{Access, OBJECTS, Obj, ObjError, ObjectDef, Range, Type, is_command};
+use crate::od::{Access, OBJECTS, Obj, ObjError, ObjectDef, Range, Storage, Type, is_command};
 use crate::pdu::{Exception, MAX_WRITE, Words};
 use crate::state::DriveState;
 use core::borrow::Borrow;
@@ -63,12 +63,18 @@ impl Default for NativeMap {
     }
 }
 
-/// The objects that can be staged: the 32-bit ones.
+/// Whether the object `d` declares can be staged: a 32-bit one a master can write (a write to
+/// a read-only one is refused before anything is staged).
+const fn stageable(d: &ObjectDef) -> bool {
+    d.words() == 2 && !matches!(d.access, Access::Ro) && !matches!(d.storage, Storage::Const)
+}
+
+/// The objects that can be staged.
 pub(super) const STAGE_SLOTS: usize = {
     let (mut n, mut i) = (0, 0);
     while i < OBJECTS.len() {
         #[allow(clippy::indexing_slicing)] // const evaluation: out of bounds is a compile error
-        if OBJECTS[i].words() == 2 {
+        if stageable(&OBJECTS[i]) {
             n += 1;
         }
         i += 1;
@@ -77,14 +83,14 @@ pub(super) const STAGE_SLOTS: usize = {
 };
 
 /// Each object's place in [`NativeMap::staged`], in the order of the objects; `u8::MAX` for
-/// an object of one register, which is never staged. (One place an object would take 500 bytes
-/// of RAM for 36 objects that can be staged.)
+/// an object that is never staged. (One place an object would take 600 bytes of RAM for the
+/// few that can be staged.)
 pub(super) const STAGE_SLOT: [u8; Obj::COUNT] = {
     let mut slot = [u8::MAX; Obj::COUNT];
     let (mut n, mut i) = (0u8, 0);
     while i < OBJECTS.len() {
         #[allow(clippy::indexing_slicing)] // const evaluation: out of bounds is a compile error
-        if OBJECTS[i].words() == 2 {
+        if stageable(&OBJECTS[i]) {
             slot[i] = n;
             n += 1;
         }
@@ -435,7 +441,7 @@ mod tests {
             _ => (longest, 1),
         });
         assert_eq!(PLAN_CAPACITY, runs.0.min(usize::from(MAX_WRITE)));
-        let drive = DriveState::new(crate::ident::Identity::SIMULATOR, false);
+        let drive = DriveState::new(&crate::ident::Identity::SIMULATOR, false);
         // Every run of writable objects, planned whole with the values they hold.
         let contiguous = |a: &ObjectDef, b: &ObjectDef| u32::from(b.addr) == a.end();
         for run in OBJECTS.chunk_by(contiguous) {
@@ -461,7 +467,7 @@ mod tests {
     /// its range only.
     #[test]
     fn plain_intervals_match_check_def() {
-        let drive = DriveState::new(crate::ident::Identity::SIMULATOR, false);
+        let drive = DriveState::new(&crate::ident::Identity::SIMULATOR, false);
         let mut plain = 0;
         for (d, bounds) in OBJECTS.iter().zip(PLAIN.iter()) {
             if *bounds == NOT_PLAIN {
@@ -496,7 +502,7 @@ mod tests {
     /// register and in long reads across reserved registers, live objects and texts included.
     #[test]
     fn reads_match_the_declarations() {
-        let mut drive = DriveState::new(crate::ident::Identity::SIMULATOR, false);
+        let mut drive = DriveState::new(&crate::ident::Identity::SIMULATOR, false);
         for (k, p) in drive.params.iter_mut().enumerate() {
             *p = 0x0102_0304u32.wrapping_mul(k as u32 + 1);
         }
@@ -536,7 +542,7 @@ mod tests {
     #[test]
     fn plain_blocks_are_all_or_nothing() {
         let mut map = NativeMap::new();
-        let mut drive = DriveState::new(crate::ident::Identity::SIMULATOR, false);
+        let mut drive = DriveState::new(&crate::ident::Identity::SIMULATOR, false);
         let words = |vs: &[u16]| vs.iter().flat_map(|v| v.to_be_bytes()).collect::<heapless::Vec<u8, 64>>();
         // 0x601B..=0x6024: PVT indices, 0..=1000.
         let bad = words(&[1, 2, 3, 4, 1001, 6, 7, 8, 9, 10]);
@@ -563,7 +569,7 @@ mod tests {
             }
             for v in [0u16, 1, 2, 3, 7, 100, 255, 256, 600, 1000, 6000, 6001, 0x7FFF, 0xFFFF] {
                 let mut map = NativeMap::new();
-                let mut drive = DriveState::new(crate::ident::Identity::SIMULATOR, false);
+                let mut drive = DriveState::new(&crate::ident::Identity::SIMULATOR, false);
                 let before = drive.params;
                 let bytes = v.to_be_bytes();
                 let result = map.write(&mut drive, d.addr, Words::new(&bytes));

@@ -323,7 +323,7 @@ objects! {
     /// 0 high word first, 1 low word first.
     MapWordOrder @ 0x2191: U8, Rw, Rom, Span(0, 1), default 0, None, "map word order";
     /// Motion command (our object; seed 002's control command 0323), acting on its write in any
-    /// work mode but PVT: 0 nothing; 1 absolute run to 0x21A1 at 0x6072's speed (re-targets a
+    /// work mode but PVT: 0 nothing; 1 absolute run to 0x21A1 at 0x21B5's speed (re-targets a
     /// running absolute run); 2 relative run by 0x21A1 (the sign the direction; refused (04)
     /// while moving); 3 run at 0x21A3 (its sign the direction; a write to 0x21A3 during the run
     /// changes the speed); 4 / 5 jog positive / negative at 0x21A5 until a stop; 6 stop at the
@@ -343,9 +343,9 @@ objects! {
     JogSpeed @ 0x21A5: U32, Rw, Rom, Span(150, 300_000), default 2000, Pps, "jog speed";
     /// Position preset (our object; seed 002's 0321): the position the motion command 8 sets.
     PositionPreset @ 0x21A7: S32, Rw, Ram, S32_ANY, default 0, Steps, "position preset";
-    /// Positive soft limit (our object; seed 002's 0317): with 0x21AD bit 0, no move the drive
-    /// plans goes beyond it (a target beyond it stops on it; a run or jog towards it becomes a
-    /// move to it), except a homing's.
+    /// Positive soft limit (our object; seed 002's 0317): with 0x21AD bit 0, no motion command
+    /// (0x21A0) goes beyond it: a target beyond it stops on it, a run or jog towards it becomes a
+    /// move to it. Homing and the native map's own moves are not bound by it.
     SoftLimitPositive @ 0x21A9: S32, Rw, Rom, Span(-2_000_000_000, 2_000_000_000), default 2_000_000_000, Steps, "positive soft limit";
     /// Negative soft limit (our object; seed 002's 0319): as 0x21A9, with 0x21AD bit 1.
     SoftLimitNegative @ 0x21AB: S32, Rw, Rom, Span(-2_000_000_000, 2_000_000_000), default -2_000_000_000, Steps, "negative soft limit";
@@ -369,6 +369,9 @@ objects! {
     /// Software revision (our object; seed 002's 0111): the firmware's version, major × 100 +
     /// minor.
     SoftwareRevision @ 0x21B4: U16, Ro, Const, Any, default crate::ident::SOFTWARE_REVISION, None, "software revision";
+    /// Run speed (our object; seed 002's 0306): the speed of the motion command's absolute and
+    /// relative runs (0x21A0 = 1, 2).
+    CommandSpeed @ 0x21B5: U32, Rw, Rom, Span(150, 300_000), default 2000, Pps, "run speed";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake

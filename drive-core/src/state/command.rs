@@ -2,7 +2,7 @@
 //! runs, jogs and stops by one register, planned on the bus side as every other motion is.
 //!
 //! A run to a position or by a distance and a run at a speed ramp as the profile modes do
-//! (0x6067, 0x6069, 0x606B, 0x606D) at 0x6072, 0x21A3 or 0x21A5. With a soft limit enabled no
+//! (0x6067, 0x6069, 0x606B, 0x606D) at 0x21B5, 0x21A3 or 0x21A5. With a soft limit enabled no
 //! motion command goes beyond it: a target beyond it stops on it, and a run or a jog towards it
 //! is a move to it at the run's speed. An axis already beyond a limit moves back freely and no
 //! further out.
@@ -160,9 +160,9 @@ impl Planner<'_> {
         }
     }
 
-    /// A run from `here` to `target` (within the soft limits) at 0x6072's speed.
+    /// A run from `here` to `target` (within the soft limits) at the run speed 0x21B5.
     fn run_to(&self, axis: &mut Axis, here: i64, target: i64) -> Result<(), ObjError> {
-        let speed = libm::fabsf((self.param(Obj::PpRunSpeed) as i32) as f32);
+        let speed = self.param(Obj::CommandSpeed) as f32;
         self.run_to_at(axis, self.soft_limited(here, target), speed)
     }
 

@@ -146,7 +146,7 @@ pub struct DriveState<P = Table> {
     pub(crate) params: [u32; Obj::COUNT],
     /// Storage status bits (0x2120): `STORAGE_*`.
     storage: u8,
-    identity: Identity,
+    identity: &'static Identity,
     can_save: bool,
     pub(crate) request: Option<SystemRequest>,
     /// The time of the event being handled (a frame, a tick): when a command takes effect.
@@ -219,7 +219,7 @@ pub struct Checkpoint {
 
 impl DriveState {
     /// Factory state.
-    pub fn new(identity: Identity, can_save: bool) -> Self {
+    pub fn new(identity: &'static Identity, can_save: bool) -> Self {
         Self::booted(identity, can_save, &Params::factory().values, 0, FaultLog::default(), Table::new())
     }
 }
@@ -234,7 +234,7 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// `Drive::boot_with_table`.)
     #[inline(never)]
     pub(crate) fn booted(
-        identity: Identity,
+        identity: &'static Identity,
         can_save: bool,
         params: &[u32; Obj::COUNT],
         storage: u8,
@@ -461,8 +461,8 @@ impl<P: Borrow<Table>> DriveState<P> {
     }
 
     /// The identification strings.
-    pub fn identity(&self) -> &Identity {
-        &self.identity
+    pub fn identity(&self) -> &'static Identity {
+        self.identity
     }
 
     /// The value of `obj` as its registers show it (S32 as two's complement).

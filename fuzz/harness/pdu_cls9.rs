@@ -1,0 +1,56 @@
+//! Request frames to a drive answering through the DS-CLS9 map (seed 002,
+//! `drive_core::maps::cls9`): decimal registers walked by address with gaps, 32-bit values
+//! whole and high word first, signed 16-bit speeds, per-revolution units, enumerations, the
+//! control command 0323. The input is records `[ctl, len, pdu..]` as for `pdu_jmc`: `ctl` bits
+//! 0-1 choose the function (0x03, 0x06, 0x10, 0x17), bit 2 fixes the quantities and byte counts
+//! to the data given, bits 3-5 the control ticks before the frame, bit 6 takes the address from
+//! the table (the data's first byte picks the entry).
+//!
+//! The oracle: every frame is answered (a normal reply or one of the Modbus codes 1-4); an
+//! exception changes nothing; a read returns its quantity of registers, each what a model of
+//! the address walk written here says (the object's value in the map's unit).
+
+use super::oracle;
+use drive_core::maps::Maps;
+use drive_core::maps::cls9::ENTRIES;
+use drive_core::od::{OBJECTS, Type};
+use drive_core::{Drive, DriveConfig};
+
+/// Every code the map answers.
+const CODES: [u8; 4] = [0x01, 0x02, 0x03, 0x04];
+
+/// t3.5 at the factory 9600 baud.
+const T35: u64 = 4010;
+
+fn snapshot(drive: &Drive<Maps>) -> (Vec<u32>, i64) {
+    let s = drive.state();
+    (OBJECTS.iter().map(|d| s.read_def(d)).collect(), s.position())
+}
+
+/// The registers a read of `qty` from `addr` gets, or `None` if one of them has no entry.
+fn model(drive: &Drive<Maps>, addr: u16, qty: usize) -> Option<Vec<u16>> {
+    (0..qty as u32)
+        .map(|k| {
+            let reg = u32::from(addr) + k;
+            let e = ENTRIES.iter().find(|e| (u32::from(e.addr)..u32::from(e.addr) + e.words()).contains(&reg))?;
+            let m = oracle::map_value(drive.state(), e);
+            Some(if e.narrow && e.obj.def().ty == Type::S32 {
+                m.clamp(i64::from(i16::MIN), i64::from(i16::MAX)) as i16 as u16
+            } else if e.narrow {
+                (m as u32).min(0xFFFF) as u16
+            } else if e.words() == 1 {
+                m as u16
+            } else if reg == u32::from(e.addr) {
+                (m as u32 >> 16) as u16
+            } else {
+                m as u16
+            })
+        })
+        .collect()
+}
+
+/// One execution.
+pub fn run(data: &[u8]) {
+    let mut drive = Drive::with_map(DriveConfig::default(), Maps::cls9());
+    oracle::map_requests(data, &mut drive, &ENTRIES, &CODES, T35, snapshot, model);
+}
