@@ -210,6 +210,29 @@ fn pvt_runs_from_the_table_and_a_stop_ends_them() {
     assert_eq!(out.setpoint.velocity, 0.0);
 }
 
+/// The motion command's emergency stop (0x21A0 = 7) ends a PVT run at the quick-stop
+/// deceleration 0x2183 (320 000 pps²: 63 ms from 20 000 pps).
+#[test]
+fn the_motion_commands_stop_ends_a_pvt_run() {
+    let mut steps = vec![frame(10, w16(0x6007, 2)), frame(20, w16(0x6018, 0)), frame(30, w16(0x2112, 1))];
+    for (k, (p, v, t)) in [(0, 0, 0), (1000, 20_000, 100), (3000, 20_000, 100), (4000, 0, 100)].into_iter().enumerate()
+    {
+        steps.push(frame(50 + 10 * k as u64, point(p, v, t)));
+    }
+    steps.extend([
+        frame(100, w16(0x601C, 3)),
+        frame(120, w16(0x6017, 1)),
+        frame(250, w16(0x21A0, 7)),
+        frame(340, read(0x6001, 1)),
+    ]);
+    let (out, replies) = both(steps, 400);
+    assert!(replies.iter().all(|r| r[1] & 0x80 == 0), "{replies:02X?}");
+    assert_eq!(out.setpoint.velocity, 0.0);
+    // 0x6001 bit 3 (busy) is clear: the run is over.
+    let status = replies.last().expect("the status read");
+    assert_eq!(status.get(4).map(|b| b & 0x08), Some(0), "{status:02X?}");
+}
+
 #[test]
 fn a_fault_stops_and_clearing_it_moves_again() {
     let (_, replies) = both(

@@ -323,7 +323,8 @@ objects! {
     /// 0 high word first, 1 low word first.
     MapWordOrder @ 0x2191: U8, Rw, Rom, Span(0, 1), default 0, None, "map word order";
     /// Motion command (our object; seed 002's control command 0323), acting on its write in any
-    /// work mode but PVT: 0 nothing; 1 absolute run to 0x21A1 at 0x21B5's speed (re-targets a
+    /// work mode (in PVT mode (0x6007 = 2) only 6 and 7, which end the run; the others 04): 0
+    /// nothing; 1 absolute run to 0x21A1 at 0x21B5's speed (re-targets a
     /// running absolute run); 2 relative run by 0x21A1 (the sign the direction; refused (04)
     /// while moving); 3 run at 0x21A3 (its sign the direction; a write to 0x21A3 during the run
     /// changes the speed); 4 / 5 jog positive / negative at 0x21A5 until a stop; 6 stop at the

@@ -77,8 +77,9 @@ impl Planner<'_> {
         if !command.plans() {
             return Ok(false);
         }
-        // A PVT run owns the axis; its own commands stop it.
-        refuse(self.mode() != WorkMode::Pvt, ObjError::NotNow)?;
+        // A PVT run owns the axis: the motion command stops it, and moves it in no other way.
+        let stops = matches!(command, Command::Stop | Command::EmergencyStop);
+        refuse(stops || self.mode() != WorkMode::Pvt, ObjError::NotNow)?;
         let here = axis.setpoint().whole;
         let running = match command {
             Command::Absolute => {

@@ -324,7 +324,13 @@ impl<P: Borrow<Table>> DriveState<P> {
         if obj != Obj::Stop {
             self.set_param(obj, value);
         }
-        if changed && matches!(obj, Obj::Stop | Obj::Enable) {
+        let stops = obj == Obj::MotionCommand
+            && matches!(
+                crate::modes::Command::from_raw(value),
+                Some(crate::modes::Command::Stop | crate::modes::Command::EmergencyStop)
+            );
+        if changed && (stops || matches!(obj, Obj::Stop | Obj::Enable)) {
+            // A stop ends a PVT run too.
             self.ctl.run = None;
         }
         if obj == Obj::Enable {
