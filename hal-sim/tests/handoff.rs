@@ -191,19 +191,21 @@ fn profile_position_set_points_buffered_and_immediate() {
     assert!(replies.iter().all(|r| r[1] & 0x80 == 0), "{replies:02X?}");
 }
 
-#[test]
-fn pvt_runs_from_the_table_and_a_stop_ends_them() {
+/// A PVT run from the table at 20 000 pps, started at 120 ms.
+fn pvt_run() -> Vec<(u64, Step)> {
     let mut steps = vec![frame(10, w16(0x6007, 2)), frame(20, w16(0x6018, 0)), frame(30, w16(0x2112, 1))];
     for (k, (p, v, t)) in [(0, 0, 0), (1000, 20_000, 100), (3000, 20_000, 100), (4000, 0, 100)].into_iter().enumerate()
     {
         steps.push(frame(50 + 10 * k as u64, point(p, v, t)));
     }
-    steps.extend([
-        frame(100, w16(0x601C, 3)),
-        frame(120, w16(0x6017, 1)),
-        frame(250, w16(0x6017, 0)),
-        frame(400, read(0x600E, 2)),
-    ]);
+    steps.extend([frame(100, w16(0x601C, 3)), frame(120, w16(0x6017, 1))]);
+    steps
+}
+
+#[test]
+fn pvt_runs_from_the_table_and_a_stop_ends_them() {
+    let mut steps = pvt_run();
+    steps.extend([frame(250, w16(0x6017, 0)), frame(400, read(0x600E, 2))]);
     // The stop decelerates at 0x600B's level 8 (5210 pps²): 3.8 s from 20000 pps.
     let (out, replies) = both(steps, 4500);
     assert!(replies.iter().all(|r| r[1] & 0x80 == 0), "{replies:02X?}");
@@ -214,17 +216,8 @@ fn pvt_runs_from_the_table_and_a_stop_ends_them() {
 /// deceleration 0x2183 (320 000 pps²: 63 ms from 20 000 pps).
 #[test]
 fn the_motion_commands_stop_ends_a_pvt_run() {
-    let mut steps = vec![frame(10, w16(0x6007, 2)), frame(20, w16(0x6018, 0)), frame(30, w16(0x2112, 1))];
-    for (k, (p, v, t)) in [(0, 0, 0), (1000, 20_000, 100), (3000, 20_000, 100), (4000, 0, 100)].into_iter().enumerate()
-    {
-        steps.push(frame(50 + 10 * k as u64, point(p, v, t)));
-    }
-    steps.extend([
-        frame(100, w16(0x601C, 3)),
-        frame(120, w16(0x6017, 1)),
-        frame(250, w16(0x21A0, 7)),
-        frame(340, read(0x6001, 1)),
-    ]);
+    let mut steps = pvt_run();
+    steps.extend([frame(250, w16(0x21A0, 7)), frame(340, read(0x6001, 1))]);
     let (out, replies) = both(steps, 400);
     assert!(replies.iter().all(|r| r[1] & 0x80 == 0), "{replies:02X?}");
     assert_eq!(out.setpoint.velocity, 0.0);
