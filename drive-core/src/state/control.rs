@@ -24,7 +24,7 @@ use crate::controller::handoff::{Lent, Orders, TickSide};
 use crate::controller::io::{NotifyOutput, PinConfig};
 use crate::controller::{DECAY, Events, STATUS_EXT, STATUS_STALL, Settings};
 use crate::faults::Inputs;
-use crate::modes::{PowerState, Running, WorkMode};
+use crate::modes::{Command, PowerState, Running, WorkMode};
 use crate::motion::axis::Axis;
 use crate::motion::cubic::Table;
 use crate::motion::scurve::Limits;
@@ -268,9 +268,7 @@ impl<P: Borrow<Table>> DriveState<P> {
         if obj == Obj::HomingControl {
             return self.check_homing(value);
         }
-        if obj == Obj::MotionCommand
-            && !crate::modes::Command::from_raw(value).is_some_and(crate::modes::Command::plans)
-        {
+        if obj == Obj::MotionCommand && !super::plans_motion_command(value) {
             return self.check_other_command(value);
         }
         self.check_planned(obj, value)
@@ -325,10 +323,7 @@ impl<P: Borrow<Table>> DriveState<P> {
             self.set_param(obj, value);
         }
         let stops = obj == Obj::MotionCommand
-            && matches!(
-                crate::modes::Command::from_raw(value),
-                Some(crate::modes::Command::Stop | crate::modes::Command::EmergencyStop)
-            );
+            && matches!(Command::from_raw(value), Some(Command::Stop | Command::EmergencyStop));
         if changed && (stops || matches!(obj, Obj::Stop | Obj::Enable)) {
             // A stop ends a PVT run too.
             self.ctl.run = None;

@@ -182,13 +182,13 @@ pub struct DriveState<P = Table> {
     maps: u8,
 }
 
-/// Whether writing `obj` plans a motion (`state::control`): the commands but a declared
-/// position and the PVT objects.
 /// Whether the motion command `value` (0x21A0) plans a motion; the others act at once.
 fn plans_motion_command(value: u32) -> bool {
     crate::modes::Command::from_raw(value).is_some_and(crate::modes::Command::plans)
 }
 
+/// Whether writing `obj` plans a motion (`state::control`): the commands but a declared
+/// position and the PVT objects.
 fn plans_motion(obj: Obj) -> bool {
     is_command(obj)
         && has_effect(obj)
