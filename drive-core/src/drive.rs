@@ -332,11 +332,32 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
         let c = &mut self.counters;
         match error {
             Some(RxError::Overrun) => c.overruns = c.overruns.wrapping_add(1),
-            Some(RxError::Gap) => c.bus_errors = c.bus_errors.wrapping_add(1),
+            Some(RxError::Gap { after_frame }) => {
+                c.bus_errors = c.bus_errors.wrapping_add(1);
+                if self.map.timing_exceptions() {
+                    self.timing_exception(if after_frame { TOO_CLOSE } else { GAP_INSIDE });
+                }
+            }
             None if !self.framer.crc_ok() => c.bus_errors = c.bus_errors.wrapping_add(1),
             None => self.serve(),
         }
         self.framer.clear();
+    }
+
+    /// Answers a frame its timing spoilt with the exception `code`, from the address and the
+    /// function code it began with, if it began with this drive's address (a broadcast, another
+    /// drive's frame or one too short to say are not answered) and not in listen-only mode.
+    fn timing_exception(&mut self, code: u8) {
+        let (frame, _) = self.framer.frame();
+        let (Some(&to), Some(&function)) = (frame.first(), frame.get(1)) else { return };
+        if to != self.address.get() || self.listen_only || function & 0x80 != 0 {
+            return;
+        }
+        self.counters.exceptions = self.counters.exceptions.wrapping_add(1);
+        if let Some(head) = self.tx.first_chunk_mut::<3>() {
+            *head = [to, function | 0x80, code];
+            self.tx_len = seal(&mut self.tx, 3);
+        }
     }
 
     /// Serves a frame with a good CRC that sits in the framer.
@@ -400,6 +421,11 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
         *tx_len = seal(tx, 2 + len);
     }
 }
+
+/// Seed 002's exception for a silence over t1.5 inside a frame.
+const GAP_INSIDE: u8 = 0x0C;
+/// Seed 002's exception for a frame that followed a whole one before t3.5.
+const TOO_CLOSE: u8 = 0x0D;
 
 /// Appends the CRC to the first `n` bytes of `buf`; the frame's length, or 0 if it does not fit.
 #[inline(always)]

@@ -11,8 +11,13 @@ pub const MAX_FRAME: usize = 256;
 /// What the receiver found wrong with a frame, or that it is fine.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RxError {
-    /// A silence longer than t1.5 between two characters.
-    Gap,
+    /// A silence longer than t1.5 between two characters: inside a frame, or (`after_frame`)
+    /// after bytes that made a whole frame with its CRC, a frame that a next one followed
+    /// before t3.5.
+    Gap {
+        /// The bytes before the silence were a whole frame (address, function, CRC).
+        after_frame: bool,
+    },
     /// More than [`MAX_FRAME`] bytes.
     Overrun,
 }
@@ -74,7 +79,7 @@ impl Framer {
             return;
         }
         if self.len > 0 && now.since(self.last) > self.t15 {
-            self.error.get_or_insert(RxError::Gap);
+            self.error.get_or_insert(RxError::Gap { after_frame: self.crc_ok() });
         }
         self.last = now;
         // Byte by byte: a frame's last byte usually comes alone (a receive interrupt), where a
@@ -143,7 +148,7 @@ mod tests {
         f.push(at(1718), 2);
         assert_eq!(f.frame().1, None);
         f.push(at(1718 + 1719), 3);
-        assert_eq!(f.frame().1, Some(RxError::Gap));
+        assert_eq!(f.frame().1, Some(RxError::Gap { after_frame: false }));
     }
 
     #[test]

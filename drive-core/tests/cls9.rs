@@ -349,3 +349,51 @@ fn scale_den(s: drive_core::maps::layout::Scale) -> i64 {
         _ => 1,
     }
 }
+
+/// §十三's timing exceptions, from a raw line (no real master sends them): a silence over 1.5
+/// characters inside a frame is answered 0C, a whole frame followed by the next before 3.5
+/// characters 0D, each after 3.5 characters of quiet, and nothing executes; another drive's
+/// frame is not answered; a frame on time is served as usual.
+#[test]
+fn timing_exceptions_answer_spoilt_frames() {
+    // 9600 baud: a character is 1.146 ms, t1.5 1.72 ms, t3.5 4.01 ms.
+    let mut r = cls9_rig();
+    let before = r.drive.state().read(Obj::JogSpeed);
+    // 0308 = 100 (0x64), its last two bytes 2.5 ms late.
+    let write = common::frame(&[1, 0x06, 0x01, 0x34, 0x00, 0x64]);
+    let (head, tail) = write.split_at(6);
+    r.drive.on_rx(drive_core::Instant::from_micros(r.now), head);
+    r.run(2_500);
+    r.drive.on_rx(drive_core::Instant::from_micros(r.now), tail);
+    let reply = r.run(10_000).expect("an answer");
+    assert_eq!(reply, common::frame(&[1, 0x86, 0x0C]));
+    assert_eq!(r.drive.state().read(Obj::JogSpeed), before, "not executed");
+    // The whole frame, then a read 2.5 ms after it: 0D, nothing executed.
+    r.drive.on_rx(drive_core::Instant::from_micros(r.now), &write);
+    r.run(2_500);
+    r.drive.on_rx(drive_core::Instant::from_micros(r.now), &common::frame(&[1, 0x03, 0x01, 0x6D, 0x00, 0x01]));
+    let reply = r.run(10_000).expect("an answer");
+    assert_eq!(reply, common::frame(&[1, 0x86, 0x0D]));
+    assert_eq!(r.drive.state().read(Obj::JogSpeed), before, "not executed");
+    // Another drive's spoilt frame: no answer.
+    let other = common::frame(&[2, 0x06, 0x01, 0x34, 0x00, 0x64]);
+    r.drive.on_rx(drive_core::Instant::from_micros(r.now), &other[..3]);
+    r.run(2_500);
+    r.drive.on_rx(drive_core::Instant::from_micros(r.now), &other[3..]);
+    assert_eq!(r.run(10_000), None);
+    // On time: served.
+    assert_eq!(r.set(308, 100), Ok(()));
+    assert_ne!(r.drive.state().read(Obj::JogSpeed), before);
+}
+
+/// The native map drops a spoilt frame without an answer, as the Modbus serial line has it.
+#[test]
+fn the_native_map_drops_spoilt_frames() {
+    let mut r = Rig::new(Maps::Native(drive_core::maps::NativeMap::new()));
+    let write = common::frame(&[1, 0x06, 0x60, 0x0C, 0x00, 0x10]);
+    r.drive.on_rx(drive_core::Instant::from_micros(r.now), &write[..4]);
+    r.run(2_500);
+    r.drive.on_rx(drive_core::Instant::from_micros(r.now), &write[4..]);
+    assert_eq!(r.run(10_000), None);
+    assert_eq!(r.drive.state().read(Obj::Microsteps), 0);
+}

@@ -142,8 +142,9 @@ pub fn replay(data: &[u8], t: Timing, line: &mut impl Line) {
 pub struct Closed {
     /// Every byte, including those beyond [`MAX_FRAME`].
     pub bytes: Vec<u8>,
-    /// Whether a silence over t1.5 fell inside it.
-    pub gap: bool,
+    /// A silence over t1.5 inside it: whether the bytes before the first one made a whole
+    /// frame with its CRC.
+    pub gap: Option<bool>,
     /// Whether the bytes kept (the first [`MAX_FRAME`]) are at least four and end in their CRC.
     pub crc_ok: bool,
 }
@@ -168,14 +169,8 @@ impl Closed {
     }
 }
 
-fn expected_error(len: usize, gap: bool) -> Option<RxError> {
-    if len > MAX_FRAME {
-        Some(RxError::Overrun)
-    } else if gap {
-        Some(RxError::Gap)
-    } else {
-        None
-    }
+fn expected_error(len: usize, gap: Option<bool>) -> Option<RxError> {
+    if len > MAX_FRAME { Some(RxError::Overrun) } else { gap.map(|after_frame| RxError::Gap { after_frame }) }
 }
 
 /// Framing by line silence: a frame ends after t3.5 of silence, a silence over t1.5 inside it
@@ -186,7 +181,7 @@ pub struct Reference {
     /// `crcs[i]`: the CRC register over the first `i` bytes kept.
     crcs: Vec<u16>,
     last: u64,
-    gap: bool,
+    gap: Option<bool>,
     /// The frame that ended since the last [`Reference::take`].
     ended: Option<Closed>,
 }
@@ -194,7 +189,7 @@ pub struct Reference {
 impl Reference {
     /// An idle line with timing `t`.
     pub fn new(t: Timing) -> Self {
-        Self { t, cur: Vec::new(), crcs: vec![0xFFFF], last: 0, gap: false, ended: None }
+        Self { t, cur: Vec::new(), crcs: vec![0xFFFF], last: 0, gap: None, ended: None }
     }
 
     fn close(&mut self) {
@@ -211,8 +206,8 @@ impl Reference {
             let since = t - self.last;
             if since >= self.t.t35 {
                 self.close();
-            } else if since > self.t.t15 {
-                self.gap = true;
+            } else if since > self.t.t15 && self.gap.is_none() {
+                self.gap = Some(self.crc_ok());
             }
         }
         if self.cur.len() < MAX_FRAME {

@@ -48,6 +48,7 @@ pub static LAYOUT: Layout = Layout {
     },
     walk: Walk::Address,
     halves: true,
+    timing: false,
 };
 
 /// Every code the layout answers, and the request-level ones.

@@ -41,7 +41,7 @@ impl Harness {
         let Some(c) = closed else { panic!("the framer ended a frame the reference did not") };
         let (bytes, error) = self.framer.frame();
         assert_eq!(bytes, c.kept(), "bytes of the ended frame");
-        assert_eq!(error, c.error(), "error of the ended frame ({} bytes, gap {})", c.bytes.len(), c.gap);
+        assert_eq!(error, c.error(), "error of the ended frame ({} bytes, gap {:?})", c.bytes.len(), c.gap);
         assert_eq!(self.framer.crc_ok(), c.crc_ok, "CRC verdict on the ended frame {bytes:02X?}");
         let kept = bytes.to_vec();
         assert_eq!(self.framer.frame_mut(), &kept[..], "frame_mut");

@@ -10,6 +10,8 @@
 //!   `01 06 600C 0020`. Requests meant as separate frames must lie at least t3.5 apart (4.01 ms at
 //!   9600 baud, 1.75 ms above 19200): closer ones join into one frame, which fails its CRC and
 //!   gets no answer, exactly as on a serial line.
+//! - `raw <ms> <hex>`: these bytes as they are (no CRC appended) reach the drive at `<ms>`: a
+//!   raw master's pieces of frames, with the silences between them that its times make.
 //! - `until <ms>`: run to `<ms>`.
 //!
 //! The runner advances the plant ([`Plant::advance_to`]) up to each time; on the way it calls
@@ -124,16 +126,19 @@ pub fn parse(text: &str) -> Result<Vec<Command>, ScriptError> {
             Ok(t)
         };
         let command = match verb {
-            "at" => {
+            "at" | "raw" => {
                 let t = time(words.next())?;
                 let mut bytes = Vec::new();
                 for word in words {
                     parse_hex(word, &mut bytes).map_err(|m| error(format!("bad bytes `{word}`: {m}")))?;
                 }
                 if bytes.is_empty() {
-                    return Err(error("`at` needs the bytes of a request".into()));
+                    return Err(error(format!("`{verb}` needs the bytes to send")));
                 }
-                bytes.extend_from_slice(&crc16(&bytes).to_le_bytes());
+                // `at` is a request, to which its CRC is appended; `raw` bytes go as they are.
+                if verb == "at" {
+                    bytes.extend_from_slice(&crc16(&bytes).to_le_bytes());
+                }
                 Command::At(t, bytes)
             }
             "until" => {
@@ -143,7 +148,7 @@ pub fn parse(text: &str) -> Result<Vec<Command>, ScriptError> {
                 }
                 Command::Until(t)
             }
-            other => return Err(error(format!("unknown command `{other}` (expected `at` or `until`)"))),
+            other => return Err(error(format!("unknown command `{other}` (expected `at`, `raw` or `until`)"))),
         };
         last = match command {
             Command::At(t, _) | Command::Until(t) => t,

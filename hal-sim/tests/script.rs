@@ -73,6 +73,7 @@ fn a_line_that_does_not_parse_is_named_and_nothing_runs() {
         ("at 1 01 03 600C 002\n", 1, "odd number of hex digits"),
         ("at 1 01 03 600C 00GG\n", 1, "not hex"),
         ("at 1\n", 1, "needs the bytes"),
+        ("raw 1\n", 1, "`raw` needs the bytes"),
         ("until\n", 1, "needs a time"),
         ("until 1.0005\n", 1, "three decimals"),
         ("until -3\n", 1, "bad time"),

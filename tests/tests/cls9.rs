@@ -17,8 +17,8 @@ use tokio_modbus::prelude::ExceptionCode;
 /// Simulated seconds a wall second.
 const SCALE: u32 = 20;
 
-fn power_on(flash: &Path, faults: &[&str]) -> (PowerSwitch, Arc<Mutex<Snapshot>>) {
-    drive_tests::power_on(flash, hal_sim::machine::Machine::default(), SCALE, faults)
+fn power_on(flash: &Path, scale: u32, faults: &[&str]) -> (PowerSwitch, Arc<Mutex<Snapshot>>) {
+    drive_tests::power_on(flash, hal_sim::machine::Machine::default(), scale, faults)
 }
 
 struct Cls9 {
@@ -27,17 +27,17 @@ struct Cls9 {
     snapshot: Arc<Mutex<Snapshot>>,
 }
 
-/// A drive switched to the DS-CLS9 map in the native map, saved and restarted with the
-/// simulator's `faults`, and its master.
-async fn cls9(flash: &Path, faults: &[&str]) -> Cls9 {
-    let (sim, _) = power_on(flash, &[]);
+/// A drive switched to the DS-CLS9 map in the native map, saved and restarted `scale` times
+/// faster than wall time with the simulator's `faults`, and its master.
+async fn cls9(flash: &Path, scale: u32, faults: &[&str]) -> Cls9 {
+    let (sim, _) = power_on(flash, scale, &[]);
     let mut ctx = master(&sim).await;
     assert_eq!(write(&mut ctx, 0x2190, 2).await, Ok(()));
     assert_eq!(write(&mut ctx, 0x200F, 2).await, Ok(()));
     sleep(Duration::from_millis(100)).await;
     drop(ctx);
     sim.off().expect("off");
-    let (sim, snapshot) = power_on(flash, faults);
+    let (sim, snapshot) = power_on(flash, scale, faults);
     let ctx = master(&sim).await;
     Cls9 { _sim: sim, ctx, snapshot }
 }
@@ -82,7 +82,7 @@ impl Cls9 {
 async fn commands_move_the_rotor_as_the_table_says() {
     let dir = tempfile::tempdir().expect("tempdir");
     let flash = dir.path().join("flash.bin");
-    let mut d = cls9(&flash, &[]).await;
+    let mut d = cls9(&flash, SCALE, &[]).await;
     assert_eq!(d.get(109).await, 2, "energised and standing in the DS-CLS9 map");
 
     // The settings in the map's units, saved through 0x200F, survive a power cycle.
@@ -95,7 +95,7 @@ async fn commands_move_the_rotor_as_the_table_says() {
     let Cls9 { _sim: sim, ctx, .. } = d;
     drop(ctx);
     sim.off().expect("off");
-    let (sim, snapshot) = power_on(&flash, &[]);
+    let (sim, snapshot) = power_on(&flash, SCALE, &[]);
     let ctx = master(&sim).await;
     let mut d = Cls9 { _sim: sim, ctx, snapshot };
     assert_eq!(d.get32(242).await, 1600);
@@ -135,7 +135,7 @@ async fn an_alarm_stops_the_run_and_clears() {
     let dir = tempfile::tempdir().expect("tempdir");
     let flash = dir.path().join("flash.bin");
     // 70 V from 2 s of simulated time to 6 s.
-    let mut d = cls9(&flash, &["2000:supply=70", "6000:supply=24"]).await;
+    let mut d = cls9(&flash, SCALE, &["2000:supply=70", "6000:supply=24"]).await;
     let time = |d: &Cls9| d.snapshot.lock().expect("snapshot").time_us;
     assert!(time(&d) < 2_000_000, "jogging before the alarm");
     assert_eq!(d.set(323, 4).await, Ok(()));
@@ -158,4 +158,55 @@ async fn an_alarm_stops_the_run_and_clears() {
     assert_eq!(d.set(323, 13).await, Ok(()));
     sleep(Duration::from_millis(20)).await;
     assert_eq!(read_values(&mut d.ctx, 108, 2).await, vec![0, 2]);
+}
+
+/// §十三's timing exceptions from a raw master (the real masters cannot send them), on the
+/// simulator in simulated time (`hal-sim --script`, whose `raw` command sends bytes as they are,
+/// when it says): a write with a silence of 2.5 ms (over t1.5, under t3.5 at 9600 baud) inside it
+/// is answered 0C at t3.5 after its last byte and not executed; a whole read followed 2.5 ms later
+/// by another is answered 0D; the same write on time is served and acts.
+#[test]
+fn a_raw_master_gets_the_timing_exceptions() {
+    let opts = hal_sim::SimOptions { map: Some(2), ..Default::default() };
+    let mut plant = hal_sim::script::plant(&opts).expect("plant");
+    // 0308 (jog speed) = 100 = 0x64: 01 06 0134 0064, CRC C8 13; a read of 0308: CRC C4 38.
+    let script = "\
+        raw 10 01 06 01\n\
+        raw 12.5 34 00 64 C8 13\n\
+        raw 30 01 03 01 34 00 01 C4 38\n\
+        raw 32.5 01 03 01 34 00 01 C4 38\n\
+        at 50 01 03 0134 0001\n\
+        at 60 01 06 0134 0064\n\
+        at 70 01 03 0134 0001\n\
+        until 80\n";
+    let mut out = Vec::new();
+    hal_sim::script::run_script(script, &mut plant, &mut out).expect("script");
+    let replies: Vec<String> = String::from_utf8(out).expect("utf-8").lines().map(str::to_string).collect();
+    let reply = |body: &[u8]| hal_sim::script::hex(&with_crc(body));
+    assert_eq!(
+        replies[..5],
+        [
+            format!("16.510 reply {}", reply(&[1, 0x86, 0x0C])),
+            format!("36.510 reply {}", reply(&[1, 0x83, 0x0D])),
+            // Not executed: 0308 is its factory 2000 pps, 10.00 rev/s at 200 pulses a turn.
+            format!("54.010 reply {}", reply(&[1, 0x03, 0x02, 0x03, 0xE8])),
+            format!("64.010 reply {}", reply(&[1, 0x06, 0x01, 0x34, 0x00, 0x64])),
+            format!("74.010 reply {}", reply(&[1, 0x03, 0x02, 0x00, 0x64])),
+        ],
+        "{replies:#?}"
+    );
+}
+
+/// The CRC-16/MODBUS of `body`, appended low byte first.
+fn with_crc(body: &[u8]) -> Vec<u8> {
+    let mut crc = 0xFFFFu16;
+    for &b in body {
+        crc ^= u16::from(b);
+        for _ in 0..8 {
+            crc = if crc & 1 != 0 { (crc >> 1) ^ 0xA001 } else { crc >> 1 };
+        }
+    }
+    let mut f = body.to_vec();
+    f.extend_from_slice(&crc.to_le_bytes());
+    f
 }

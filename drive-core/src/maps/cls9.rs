@@ -108,7 +108,8 @@ pub static ENTRIES: [Entry; 42] = [
 ];
 
 /// The manual's codes (§十三): 02 no such register, 03 a value out of range, 04 any refusal of
-/// the drive's (busy, disabled, faulted, not now).
+/// the drive's (busy, disabled, faulted, not now); 0C and 0D for a frame's timing (the layout's
+/// `timing`).
 pub const EXCEPTIONS: Exceptions = Exceptions::MODBUS;
 
 /// The DS-CLS9 layout.
@@ -118,6 +119,7 @@ pub static LAYOUT: Layout = Layout {
     exceptions: EXCEPTIONS,
     walk: Walk::Address,
     halves: false,
+    timing: true,
 };
 
 /// What the reference says beside the table: the decisions where seed 002 is silent or
@@ -138,7 +140,8 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         "0323 control command (the drive's 0x21A0): 1 absolute run to 0313 at 0306's speed, re-targeted when 0313 is written during the run; 2 relative run by 0313, refused (04) while moving (a write of 0313 during it changes nothing of the run); 3 run at 0307 (its sign the direction; a write of 0307 during it changes the speed); 4 and 5 jog at 0308 until 6 or 7; 6 stop at 0304; 7 stop at the quick-stop deceleration (0x2183, 320 000 microsteps/s² from the factory); 8 set the position to 0321, refused (04) while moving; 12 homing; 13 alarm clear. Runs ramp at 0303/0304 from 0301 and down to 0302. A run is refused (04) with the power stage off or an alarm latched, and in the native map's PVT mode, where only 6 and 7 act (they end the PVT run). Reading 0323 gives the last command written.",
         "Soft limits 0317 / 0319 with 0324 bit 0 (positive) and bit 1 (negative): no motion command goes beyond an enabled limit; a target beyond it stops on it, a run or a jog towards it ends on it. Homing ignores them. 0324's other bits are refused (03).",
         "Homing (0323 = 12): 0305 0 searches the home switch clockwise (negative), 1 counter-clockwise, at 0309, reversing at the limit switch of that side, then finds the switch's edge again at the creep speed 0310; the home then reads as 0311. Until 0305 is written it reads the drive's own method number (0x2160, factory 35: the home is where the axis stands). Which inputs are the home switch and the limit switches, and their levels, are the drive's 0x216C and 0x216D, and 0x216B is the timeout, in this map at their native addresses (8556-8557, 8555).",
-        "Not in this map yet, answered 02: the pulse-input registers 0106, 0224, 0234, 0244 and 0296; the direction switch 0201; the loop gains 0251-0258 and the in-position window 0247; the multi-segment program (0174-0178, 0327, 0328, 1024-1536, commands 14-18, refused with 03); the input and output functions 0400-0430; the timing exceptions 0x0C and 0x0D.",
+        "Not in this map yet, answered 02: the pulse-input registers 0106, 0224, 0234, 0244 and 0296; the direction switch 0201; the loop gains 0251-0258 and the in-position window 0247; the multi-segment program (0174-0178, 0327, 0328, 1024-1536, commands 14-18, refused with 03); the input and output functions 0400-0430.",
+        "Timing exceptions (§十三's table): a frame with a silence over 1.5 characters inside it is answered 0C, and a whole frame (its CRC good) that the next bytes followed before 3.5 characters of silence is answered 0D, either once the line has been quiet for 3.5 characters, with the address and function code the frame began with; the bytes in between are dropped and the request is not executed. A frame that did not begin with this drive's address, a broadcast, or one too short to say is not answered. Two frames with less than 1.5 characters between them are one frame with a wrong CRC: not answered, as every frame whose CRC or parity is wrong (its address cannot be trusted).",
     ],
     remarks: &[
         (100, "Motor current: the larger phase current, 0.1 A."),

@@ -101,8 +101,14 @@ pub const EXCEPTIONS: Exceptions = Exceptions {
 };
 
 /// The JMC layout.
-pub static LAYOUT: Layout =
-    Layout { entries: &ENTRIES, order: WordOrder::Setting, exceptions: EXCEPTIONS, walk: Walk::List, halves: false };
+pub static LAYOUT: Layout = Layout {
+    entries: &ENTRIES,
+    order: WordOrder::Setting,
+    exceptions: EXCEPTIONS,
+    walk: Walk::List,
+    halves: false,
+    timing: false,
+};
 
 /// What the reference says beside the table: the decisions where seed 001 is silent or
 /// contradicts itself.

@@ -280,12 +280,16 @@ pub struct Layout {
     /// Whether a 32-bit object may be written one half at a time (staged); if not, such a
     /// write is refused with [`Exceptions::split`].
     pub halves: bool,
+    /// Whether a frame spoilt by its timing is answered once the line has been quiet for t3.5:
+    /// 0x0C for a silence over t1.5 inside a frame, 0x0D for a next frame that came before t3.5
+    /// (seed 002). Without it such a frame is dropped, as the Modbus serial line has it.
+    pub timing: bool,
 }
 
 impl Layout {
     /// A layout walked by address that stages halves.
     pub const fn by_address(entries: &'static [Entry], order: WordOrder, exceptions: Exceptions) -> Self {
-        Self { entries, order, exceptions, walk: Walk::Address, halves: true }
+        Self { entries, order, exceptions, walk: Walk::Address, halves: true, timing: false }
     }
 
     /// The entries a request of `qty` registers from `addr` covers, each with the place of its

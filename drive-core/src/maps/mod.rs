@@ -95,6 +95,10 @@ impl RegisterMap for Maps {
         matches!(self, Self::Layout(m) if core::ptr::eq(m.layout(), &jmc::LAYOUT))
     }
 
+    fn timing_exceptions(&self) -> bool {
+        matches!(self, Self::Layout(m) if m.layout().timing)
+    }
+
     fn application_name(&self) -> Option<&'static str> {
         match self {
             Self::Native(_) => None,

@@ -34,6 +34,11 @@ pub trait RegisterMap {
     fn application_name(&self) -> Option<&'static str> {
         None
     }
+    /// Whether a frame spoilt by its timing is answered (seed 002's exceptions 0x0C and 0x0D)
+    /// rather than dropped.
+    fn timing_exceptions(&self) -> bool {
+        false
+    }
 }
 
 /// The drive's native map (seed 000): register numbers are object addresses, 32-bit objects are
