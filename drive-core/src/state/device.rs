@@ -8,7 +8,6 @@
 //! all (a condition still present latches again) and leaves the drive switch on disabled.
 
 use super::DriveState;
-use crate::controller::{STATUS_EXT, STATUS_STALL};
 use crate::faults::{FAULT_OVER_VOLTAGE, FAULT_OVERLOAD, FAULT_POSITION};
 use crate::modes::{PowerState, WorkMode};
 use crate::motion::cubic::Table;
@@ -129,10 +128,7 @@ impl<P: Borrow<Table>> DriveState<P> {
 
     /// Clears every latch that shows as the fault state, and leaves the drive switch on disabled.
     fn fault_reset(&mut self) -> Result<(), ObjError> {
-        for obj in [Obj::ErrorStatus, Obj::DriveFaults, Obj::CommStatus] {
-            self.apply(obj, 0xFF);
-        }
-        self.apply(Obj::ControllerStatus, u32::from(STATUS_EXT | STATUS_STALL));
+        self.clear_alarms();
         if self.device.energised() {
             self.write_undoable(Obj::Enable.def(), 0)?;
         }
