@@ -108,7 +108,19 @@ impl Cuts {
 
 #[test]
 fn a_power_cut_at_every_operation_leaves_the_old_or_the_new_set() {
+    // The records fall on the pages differently after 0-3 position records first: a cut that
+    // only one layout meets (an erase cut after a migration) is met in one of them.
+    for shift in 0..4 {
+        println!("layout shifted by {shift} position records:");
+        power_cuts(shift);
+    }
+}
+
+fn power_cuts(shift: i32) {
     let mut store = store_on(SimFlash::erased(PAGES));
+    for k in 0..shift {
+        block_on(store.save_position(k)).expect("position save");
+    }
     block_on(store.save(&set(0))).expect("first save");
     let mut params = Cuts::default();
     let mut positions = Cuts::default();
@@ -118,6 +130,9 @@ fn a_power_cut_at_every_operation_leaves_the_old_or_the_new_set() {
     // either).
     let saves = 2 * (PAGES * PAGE) as u32 / item_bytes::<SimFlash>(RECORD) as u32 + 8;
     let mut current = set(0);
+    if shift > 0 {
+        current.set_saved_position(shift - 1);
+    }
     for g in 1..=saves {
         if g % 7 == 0 {
             let mut next = current.clone();
