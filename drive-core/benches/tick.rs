@@ -390,6 +390,7 @@ const MEASURED: Inputs = Inputs {
     levels: 0,
     analog: None,
     index: false,
+    pulses: 0,
 };
 
 #[library_benchmark]

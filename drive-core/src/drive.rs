@@ -160,6 +160,10 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
         if let Some(b) = config.baud {
             set(Obj::BaudRate, b.get());
         }
+        if params.get(Obj::PulseAtPowerUp) == 1 {
+            // Seed 002's 0296 = 0 (external pulses): the drive powers up following them.
+            set(Obj::Mode, crate::modes::WorkMode::Follow.raw());
+        }
         if map.starts_disabled() {
             // CiA 402: switch on disabled at power-up, whatever the enable holds.
             set(Obj::Enable, 0);

@@ -114,6 +114,9 @@ pub struct Inputs {
     pub analog: Option<u16>,
     /// The encoder's index pulse came since the last tick.
     pub index: bool,
+    /// The pulse input's counter (work mode 3), wrapping at 2^16: counted up and down in the
+    /// format the controller's outputs ask for.
+    pub pulses: u16,
 }
 
 /// The fault history and the supervision's memory between ticks.

@@ -5,7 +5,8 @@
 /// ```
 /// use drive_core::modes::WorkMode;
 /// assert_eq!(WorkMode::from_raw(4), Some(WorkMode::ProfilePosition));
-/// assert_eq!(WorkMode::from_raw(3), None);
+/// assert_eq!(WorkMode::from_raw(3), Some(WorkMode::Follow));
+/// assert_eq!(WorkMode::from_raw(7), None);
 /// assert_eq!(WorkMode::Pvt.raw(), 2);
 /// ```
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -17,6 +18,9 @@ pub enum WorkMode {
     Velocity = 1,
     /// PVT mode (2): runs of stored or streamed position-velocity-time points.
     Pvt = 2,
+    /// Pulse following (3, the manual's encoder follower): the setpoint follows the pulse input
+    /// (STEP/DIR, CW/CCW or an encoder's A/B as 0x21B7 says), one microstep a pulse.
+    Follow = 3,
     /// Profile position (4, CiA 402 PP): set-points by the controlword's handshake.
     ProfilePosition = 4,
     /// Profile velocity (5, CiA 402 PV).
@@ -28,10 +32,17 @@ pub enum WorkMode {
 
 impl WorkMode {
     /// Every mode.
-    pub const ALL: [Self; 6] =
-        [Self::Position, Self::Velocity, Self::Pvt, Self::ProfilePosition, Self::ProfileVelocity, Self::Homing];
+    pub const ALL: [Self; 7] = [
+        Self::Position,
+        Self::Velocity,
+        Self::Pvt,
+        Self::Follow,
+        Self::ProfilePosition,
+        Self::ProfileVelocity,
+        Self::Homing,
+    ];
     /// Every mode's value, for the object's declared set.
-    pub const RAW: [u32; 6] = [0, 1, 2, 4, 5, 6];
+    pub const RAW: [u32; 7] = [0, 1, 2, 3, 4, 5, 6];
 
     /// The mode of a register value, if it is one.
     pub const fn from_raw(v: u32) -> Option<Self> {
@@ -39,6 +50,7 @@ impl WorkMode {
             0 => Some(Self::Position),
             1 => Some(Self::Velocity),
             2 => Some(Self::Pvt),
+            3 => Some(Self::Follow),
             4 => Some(Self::ProfilePosition),
             5 => Some(Self::ProfileVelocity),
             6 => Some(Self::Homing),
@@ -83,6 +95,42 @@ impl PvtMode {
             2 => Some(Self::Fifo),
             _ => None,
         }
+    }
+}
+
+/// How the pulse input's two lines carry the pulses (our object 0x21B7; seed 002's 0244).
+///
+/// ```
+/// use drive_core::modes::PulseFormat;
+/// assert_eq!(PulseFormat::from_raw(2), Some(PulseFormat::CwCcw));
+/// assert_eq!(PulseFormat::Quadrature.raw(), 3);
+/// ```
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum PulseFormat {
+    /// Pulse and direction (1): a rising edge on STEP is a pulse, DIR high counts it down.
+    #[default]
+    StepDir = 1,
+    /// Double pulse (2): a rising edge on CW counts up, one on CCW down.
+    CwCcw = 2,
+    /// An encoder's quadrature signals A and B (3): every edge of either counts, the phase
+    /// between them giving the direction.
+    Quadrature = 3,
+}
+
+impl PulseFormat {
+    /// The format of a register value, if it is one.
+    pub const fn from_raw(v: u32) -> Option<Self> {
+        match v {
+            1 => Some(Self::StepDir),
+            2 => Some(Self::CwCcw),
+            3 => Some(Self::Quadrature),
+            _ => None,
+        }
+    }
+
+    /// The register value.
+    pub const fn raw(self) -> u32 {
+        self as u32
     }
 }
 

@@ -19,6 +19,7 @@ const NOMINAL: Inputs = Inputs {
     levels: 0,
     analog: None,
     index: false,
+    pulses: 0,
 };
 
 /// A factory drive with a move speed set.

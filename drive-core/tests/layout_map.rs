@@ -174,7 +174,7 @@ fn refusals_answer_the_layouts_codes_and_change_nothing() {
     let cases: [(&str, Write, u8); 4] = [
         ("no object", |r| r.write1(0x0020, 1), 0x02),
         ("read-only", |r| r.write(0x000C, &[1, 0]), 0x0B),
-        ("out of range", |r| r.write1(0x0000, 3), 0x03),
+        ("out of range", |r| r.write1(0x0000, 7), 0x03),
         ("beyond the map's scale", |r| r.write(0x0001, &[0, 0x7FFF]), 0x03),
     ];
     for (what, write, code) in cases {

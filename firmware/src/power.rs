@@ -1,7 +1,7 @@
 //! The motor's power stage as the control tick sees it.
 
 use drive_core::control::Outputs;
-use drive_core::controller::io::PinConfig;
+use drive_core::controller::io::{PinConfig, PulseInput};
 
 /// What the control tick asks of a power stage, once per tick.
 pub trait PowerStage {
@@ -16,6 +16,9 @@ pub trait PowerStage {
     fn set_pins(&mut self, _pins: &PinConfig, _levels: u16) {}
     /// Sets the coil output's PWM duty, percent. A board without the output ignores it.
     fn set_coil(&mut self, _duty: u8) {}
+    /// Sets the pulse input's counter up as `input` says (format, filter). A board without the
+    /// input ignores it.
+    fn set_pulse_input(&mut self, _input: &PulseInput) {}
 
     /// Applies one tick's outputs: current first, so a freed motor takes no step.
     fn apply(&mut self, out: &Outputs) {
@@ -23,5 +26,6 @@ pub trait PowerStage {
         self.step(out.steps);
         self.set_pins(&out.pins, out.gpio);
         self.set_coil(out.coil_duty);
+        self.set_pulse_input(&out.pulse);
     }
 }

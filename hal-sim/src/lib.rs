@@ -79,6 +79,7 @@ pub mod machine;
 pub mod motor;
 pub mod plant;
 pub mod plot;
+pub mod pulses;
 pub mod script;
 pub mod soak;
 pub mod thermal;

@@ -17,7 +17,7 @@
 //! steps, either side may be empty) blocks the rotor beyond them; `--analog` a source on the
 //! analog input.
 
-use drive_core::controller::io::{PIN_EXT1, PIN_EXT2, PIN_EXT3, PinConfig, PinMode};
+use drive_core::controller::io::{PIN_EXT1, PIN_EXT2, PIN_EXT3, PinConfig, PinMode, PulseInput};
 
 /// What drives a switch's pin.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -226,12 +226,22 @@ pub struct Machine {
     pub switches: Vec<Switch>,
     /// The analog source, if one is connected.
     pub analog: Option<Analog>,
+    /// The pulse source on the pulse input, if one is connected (`--pulses`).
+    pub pulses: Option<crate::pulses::PulseSource>,
+    /// The drive's pulse input timer.
+    counter: crate::pulses::Counter,
     rng: fastrand::Rng,
 }
 
 impl Default for Machine {
     fn default() -> Self {
-        Self { switches: Vec::new(), analog: None, rng: fastrand::Rng::with_seed(0x5EED) }
+        Self {
+            switches: Vec::new(),
+            analog: None,
+            pulses: None,
+            counter: Default::default(),
+            rng: fastrand::Rng::with_seed(0x5EED),
+        }
     }
 }
 
@@ -268,6 +278,15 @@ impl Machine {
     pub fn analog_code(&mut self, t: f64) -> Option<u16> {
         let v = self.analog?.volts(t, &mut self.rng);
         Some((v / ANALOG_FULL_SCALE_V * 4095.0).round().clamp(0.0, 4095.0) as u16)
+    }
+
+    /// The pulse input's count at time `t` (s), its timer set up as `input` (a source connected
+    /// later counts on from where the last left it).
+    pub fn pulse_count(&mut self, t: f64, input: &PulseInput) -> u16 {
+        if let Some(p) = &mut self.pulses {
+            p.run_to(t, &mut self.counter, input);
+        }
+        self.counter.count
     }
 }
 

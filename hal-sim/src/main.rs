@@ -93,6 +93,12 @@ struct Args {
     /// ±NOISE V), `ramp=FROM/TO/S` or `sine=MID/AMP/PERIOD_S`.
     #[arg(long, value_name = "SPEC", value_parser = hal_sim::machine::Analog::parse)]
     analog: Option<hal_sim::machine::Analog>,
+    /// A pulse source on the pulse input (work mode 3): `WIRING:RATE[:count=N][:accel=A][:at=MS]`,
+    /// WIRING `step-dir`, `cw-ccw` or `quadrature`, RATE pulses a second (signed), `count` stops
+    /// after N pulses, `accel` ramps at A pulses/s², `at` starts MS ms after power-up. E.g.
+    /// `--pulses step-dir:20000:count=100000:accel=50000`.
+    #[arg(long, value_name = "SPEC", value_parser = hal_sim::pulses::Train::parse)]
+    pulses: Option<hal_sim::pulses::Train>,
     /// The register map to answer with for this run, instead of the saved 0x2190: `native`
     /// (seed 000), `jmc` (seed 001) or `cls9` (seed 002).
     #[arg(long, value_name = "NAME", value_parser = parse_map)]
@@ -172,7 +178,8 @@ fn main() -> ExitCode {
         },
         trace: args.trace.map(|path| (path, args.trace_every)),
     };
-    let machine = hal_sim::machine::Machine::new(args.switches, args.analog);
+    let mut machine = hal_sim::machine::Machine::new(args.switches, args.analog);
+    machine.pulses = args.pulses.map(hal_sim::pulses::PulseSource::new);
     let hard_stops = args.hard_stop.unwrap_or_default();
     if let Some(path) = &args.script {
         let opts = SimOptions {

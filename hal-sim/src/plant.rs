@@ -219,6 +219,7 @@ impl Plant {
             levels: 0,
             analog: None,
             index: false,
+            pulses: 0,
         }
     }
 
@@ -335,6 +336,8 @@ impl Plant {
         let (pins, gpio) = self.last.map_or((Default::default(), 0), |o| (o.pins, o.gpio));
         inputs.levels = self.machine.levels(t, self.motor.rotor_full_steps(), &pins, gpio);
         inputs.analog = self.machine.analog_code(t);
+        let pulse = self.last.map(|o| o.pulse).unwrap_or_default();
+        inputs.pulses = self.machine.pulse_count(t, &pulse);
         let turns = self.motor.turns();
         let incremental = matches!(self.encoder.kind(), crate::encoder::EncoderKind::Incremental { .. });
         inputs.index = incremental && turns != core::mem::replace(&mut self.last_turns, turns);

@@ -210,3 +210,36 @@ fn with_crc(body: &[u8]) -> Vec<u8> {
     f.extend_from_slice(&crc.to_le_bytes());
     f
 }
+
+/// 0296 = 0 (external pulses), 0244 = 2 (double pulse) and 0234 written in the map, saved: after
+/// a power cycle the drive follows a CW/CCW train on its pulse input (one pulse a pulse of
+/// 0242's resolution) and the rotor ends on the count; the control command's runs are refused.
+#[tokio::test(flavor = "current_thread")]
+async fn external_pulses_after_a_restart_move_the_rotor() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let flash = dir.path().join("flash.bin");
+    let mut d = cls9(&flash, SCALE, &[]).await;
+    assert_eq!((d.get(106).await, d.get(244).await, d.get(296).await), (1, 1, 1), "factory: internal pulses");
+    assert_eq!(d.set(244, 3).await, Err(ExceptionCode::IllegalDataValue), "the map offers formats 1 and 2");
+    d.set32(242, 3200).await;
+    for (reg, v) in [(244, 2), (234, 5), (296, 0), (0x200F, 2)] {
+        assert_eq!(d.set(reg, v).await, Ok(()), "{reg}");
+    }
+    sleep(Duration::from_millis(100)).await;
+    let Cls9 { _sim: sim, ctx, .. } = d;
+    drop(ctx);
+    sim.off().expect("off");
+    // Five revolutions back (16 000 pulses on CCW) at up to 32 kpps, from 1 s after power-up.
+    let train = hal_sim::pulses::Train::parse("cw-ccw:-32000:count=16000:accel=100000:at=1000").expect("train");
+    let mut machine = hal_sim::machine::Machine::default();
+    machine.pulses = Some(hal_sim::pulses::PulseSource::new(train));
+    let (sim, snapshot) = drive_tests::power_on(&flash, machine, SCALE, &[]);
+    let ctx = master(&sim).await;
+    let mut d = Cls9 { _sim: sim, ctx, snapshot };
+    assert_eq!((d.get(106).await, d.get(234).await, d.get(296).await), (2, 5, 0));
+    assert_eq!(d.set(323, 4).await, Err(ExceptionCode::ServerDeviceFailure), "a jog is refused while following");
+    // 1 s to the start, 0.8 s of pulses, in simulated time.
+    sleep(Duration::from_millis(2_000 / u64::from(SCALE) + 300)).await;
+    assert_eq!(d.get32(126).await, -16_000, "the position counted every pulse");
+    assert!((d.rotor() + 16_000.0).abs() < 8.0, "rotor at {}", d.rotor());
+}

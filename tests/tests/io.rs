@@ -28,13 +28,17 @@ struct Rig {
     per_step: f64,
 }
 
-#[allow(clippy::await_holding_lock)] // see faults.rs: one runtime a test
 async fn rig(switches: &[&str], analog: Option<&str>, supply_v: f64) -> Rig {
-    let turn = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let switches = switches.iter().map(|s| Switch::parse(s).expect("switch spec")).collect();
+    rig_on(Machine::new(switches, analog.map(|a| Analog::parse(a).expect("analog spec"))), supply_v).await
+}
+
+#[allow(clippy::await_holding_lock)] // see faults.rs: one runtime a test
+async fn rig_on(machine: Machine, supply_v: f64) -> Rig {
+    let turn = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let opts = SimOptions {
         endpoint: Endpoint::Tcp("127.0.0.1:0".into()),
-        machine: Machine::new(switches, analog.map(|a| Analog::parse(a).expect("analog spec"))),
+        machine,
         motor: MotorOptions { inputs: MotorInputs { supply_v, ..MotorInputs::default() }, ..MotorOptions::default() },
         ..Default::default()
     };
@@ -247,4 +251,26 @@ async fn a_12_v_supply_moves() {
     r.set32(0x6005, 3200).await;
     r.wait_still(3).await;
     assert!((r.rotor() - 200.0).abs() < 0.5, "{}", r.rotor());
+}
+
+/// Work mode 3, the manual's encoder follower, with 0x21B7 = 3: an encoder's quadrature on the
+/// pulse input moves the motor one microstep an edge; moves are refused (04) meanwhile, and
+/// mode 0 stops the following.
+#[tokio::test(flavor = "current_thread")]
+async fn mode_3_follows_an_encoder_on_the_pulse_input() {
+    // 4 000 edges back at up to 8 000 a second, from 300 ms after power-up.
+    let train = hal_sim::pulses::Train::parse("quadrature:-8000:count=4000:accel=100000:at=300").expect("train");
+    let mut machine = Machine::default();
+    machine.pulses = Some(hal_sim::pulses::PulseSource::new(train));
+    let mut r = rig_on(machine, 24.0).await;
+    r.set(0x21B7, 3).await;
+    r.set(0x6007, 3).await;
+    assert_eq!(r.try_set32(0x6005, 800).await, Err(ExceptionCode::ServerDeviceFailure), "moves are refused");
+    sleep(Duration::from_millis(1_200)).await;
+    assert_eq!(r.reg32(0x600E).await, -4_000, "one microstep an edge");
+    assert!((r.rotor() + 250.0).abs() < 0.1, "the rotor followed: {} full steps", r.rotor());
+    r.set(0x6007, 0).await;
+    r.set32(0x6005, 800).await;
+    r.wait_still(3).await;
+    assert_eq!(r.reg32(0x600E).await, -3_200, "mode 0 moves again");
 }

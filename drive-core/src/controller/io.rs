@@ -160,6 +160,28 @@ pub(crate) struct Pins {
     last_position: i64,
     /// Ticks the notification output's pulse still lasts.
     pulse_ticks: u16,
+    /// The pulse input's count at the last tick (none before the first).
+    pulses: Option<u16>,
+}
+
+/// How the pulse input is set up (0x21B7, 0x21B8): what the platform's counter counts, and its
+/// input filter (1-15, the STM32 timer's ICxF).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PulseInput {
+    /// How the two lines carry the pulses.
+    pub format: crate::modes::PulseFormat,
+    /// The input filter.
+    pub filter: u8,
+}
+
+impl Controller {
+    /// The pulses counted since the last tick, for the axis if it follows them (work mode 3).
+    /// The count is a 16-bit counter's: at the top speed of 300 kpps a tick counts 15.
+    #[inline]
+    pub(crate) fn count_pulses(&mut self, now: Instant, count: u16) {
+        let last = self.io.pulses.replace(count).unwrap_or(count);
+        self.axis.add_pulses(now, count.wrapping_sub(last) as i16);
+    }
 }
 
 impl Controller {

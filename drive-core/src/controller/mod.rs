@@ -64,6 +64,8 @@ pub struct Outputs {
     pub microsteps: u16,
     /// The share of fast decay in the chopper's off-time (0x6010).
     pub fast_decay: U0F16,
+    /// How the pulse input's counter counts (0x21B7, 0x21B8).
+    pub pulse: io::PulseInput,
 }
 
 /// The drive's running status bits and measurements: what the live objects report.
@@ -169,6 +171,8 @@ pub struct Settings {
     pub stall_min_speed: f32,
     /// The load angle beyond which the rotor has pulled out, rad.
     pub stall_limit: f32,
+    /// The pulse input's format and filter (0x21B7, 0x21B8).
+    pub pulse: io::PulseInput,
 }
 
 /// What the controller did on its own at a tick, for the bus side to take into account: a set
@@ -376,6 +380,7 @@ impl Controller {
             self.status.analog_in = code;
         }
         self.pvt_tick(now, pvt, table);
+        self.count_pulses(now, inputs.pulses);
         let (setpoint, moved) = self.axis.tick(now);
         self.notify(setpoint.whole);
         if self.axis.take_joined() {
@@ -406,6 +411,7 @@ impl Controller {
             pins: self.settings.pins,
             microsteps: self.settings.microsteps,
             fast_decay: self.settings.fast_decay,
+            pulse: self.settings.pulse,
         }
     }
 }

@@ -59,13 +59,21 @@ static USER_COMMAND: [Choice; 3] =
 /// way, reversing at that side's limit, then found again at the creep speed (0x2160 -9, -10).
 static HOMING: [Choice; 2] = [Choice { lo: 0, hi: 0, drive: 0xFFF7 }, Choice { lo: 1, hi: 1, drive: 0xFFF6 }];
 
+/// 0106 / 0244: 1 pulse and direction, 2 double pulse (the drive's 0x21B7 also counts an
+/// encoder's quadrature, 3, which this map does not offer).
+static PULSE_FORMATS: [Choice; 2] = [Choice { lo: 1, hi: 1, drive: 1 }, Choice { lo: 2, hi: 2, drive: 2 }];
+
+/// 0296: 0 external pulses (the drive powers up following them, 0x21B9 = 1), 1 internal.
+static PULSE_SOURCE: [Choice; 2] = [Choice { lo: 0, hi: 0, drive: 1 }, Choice { lo: 1, hi: 1, drive: 0 }];
+
 /// The registers, by address (decimal, as the manual's `adr` column), then ours at their
 /// native addresses: the save (0x200F), the line's parity (0x2100), the homing's timeout and
 /// switches (0x216B-0x216D) and the map selection (0x2190).
-pub static ENTRIES: [Entry; 42] = [
+pub static ENTRIES: [Entry; 46] = [
     Entry::new(100, Obj::MotorCurrent, Scale::Ratio(100, 1)),
     Entry::new(101, Obj::SupplyVoltage, Scale::Ratio(1000, 1)),
     Entry::new(104, Obj::Microsteps, Scale::Table(&RESOLUTIONS)).wide().read_only(),
+    Entry::new(106, Obj::PulseFormat, Scale::Table(&PULSE_FORMATS)).read_only(),
     Entry::new(108, Obj::AlarmCode, Scale::One),
     Entry::new(109, Obj::RunState, Scale::One),
     Entry::new(110, Obj::HardwareRevision, Scale::One),
@@ -76,10 +84,13 @@ pub static ENTRIES: [Entry; 42] = [
     Entry::new(206, Obj::SystemControl, Scale::Table(&USER_COMMAND)),
     Entry::new(213, Obj::IdleCurrent, Scale::One),
     Entry::new(217, Obj::Feedback, Scale::Table(&LOOP)),
+    Entry::new(234, Obj::PulseFilter, Scale::One),
     Entry::new(241, Obj::PhaseCurrent, Scale::One),
     Entry::new(242, Obj::Microsteps, Scale::Table(&RESOLUTIONS)).wide(),
+    Entry::new(244, Obj::PulseFormat, Scale::Table(&PULSE_FORMATS)),
     Entry::new(245, Obj::IdleDelay, Scale::One),
     Entry::new(246, Obj::EncoderCpr, Scale::Table(&ENCODER)),
+    Entry::new(296, Obj::PulseAtPowerUp, Scale::Table(&PULSE_SOURCE)),
     Entry::new(298, Obj::NodeId, Scale::One),
     Entry::new(299, Obj::BaudRate, Scale::One),
     Entry::new(301, Obj::PpStartSpeed, CENTI_REV).narrow(),
@@ -140,7 +151,8 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         "0323 control command (the drive's 0x21A0): 1 absolute run to 0313 at 0306's speed, re-targeted when 0313 is written during the run; 2 relative run by 0313, refused (04) while moving (a write of 0313 during it changes nothing of the run); 3 run at 0307 (its sign the direction; a write of 0307 during it changes the speed); 4 and 5 jog at 0308 until 6 or 7; 6 stop at 0304; 7 stop at the quick-stop deceleration (0x2183, 320 000 microsteps/s² from the factory); 8 set the position to 0321, refused (04) while moving; 12 homing; 13 alarm clear. Runs ramp at 0303/0304 from 0301 and down to 0302. A run is refused (04) with the power stage off or an alarm latched, and in the native map's PVT mode, where only 6 and 7 act (they end the PVT run). Reading 0323 gives the last command written.",
         "Soft limits 0317 / 0319 with 0324 bit 0 (positive) and bit 1 (negative): no motion command goes beyond an enabled limit; a target beyond it stops on it, a run or a jog towards it ends on it. Homing ignores them. 0324's other bits are refused (03).",
         "Homing (0323 = 12): 0305 0 searches the home switch clockwise (negative), 1 counter-clockwise, at 0309, reversing at the limit switch of that side, then finds the switch's edge again at the creep speed 0310; the home then reads as 0311. Until 0305 is written it reads the drive's own method number (0x2160, factory 35: the home is where the axis stands). Which inputs are the home switch and the limit switches, and their levels, are the drive's 0x216C and 0x216D, and 0x216B is the timeout, in this map at their native addresses (8556-8557, 8555).",
-        "Not in this map yet, answered 02: the pulse-input registers 0106, 0224, 0234, 0244 and 0296; the direction switch 0201; the loop gains 0251-0258 and the in-position window 0247; the multi-segment program (0174-0178, 0327, 0328, 1024-1536, commands 14-18, refused with 03); the input and output functions 0400-0430.",
+        "Pulse input (the drive's work mode 3): with 0296 = 0, saved, the drive powers up following the step train on its pulse input (one pulse a microstep of 0242's resolution), in the format of 0244 (1 pulse and direction, DIR high counting down; 2 double pulse), through the input filter 0234 (1-15: a level must hold 2 to 256 clocks of 170 MHz, 12 ns to 1.5 µs). 0296 reads 1 (internal pulses) from the factory, not the manual's 0: the drive leaves the factory commanded over the bus, and a machine that steps it writes 0 and saves. While it follows, the control commands that move are refused (04) and 6 and 7 stop it where the pulses left it (it follows the next ones); 0109 reads 3 (running). 0244 and 0234 take effect at once, 0296 at the next power-up as the manual says.",
+        "Not in this map yet, answered 02: the angle filter 0224; the direction switch 0201; the loop gains 0251-0258 and the in-position window 0247; the multi-segment program (0174-0178, 0327, 0328, 1024-1536, commands 14-18, refused with 03); the input and output functions 0400-0430.",
         "Timing exceptions (§十三's table): a frame with a silence over 1.5 characters inside it is answered 0C, and a whole frame (its CRC good) that the next bytes followed before 3.5 characters of silence is answered 0D, either once the line has been quiet for 3.5 characters, with the address and function code the frame began with; the bytes in between are dropped and the request is not executed. A frame that did not begin with this drive's address, a broadcast, or one too short to say is not answered. Two frames with less than 1.5 characters between them are one frame with a wrong CRC: not answered, as every frame whose CRC or parity is wrong (its address cannot be trusted).",
     ],
     remarks: &[
@@ -152,13 +164,20 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         (117, "Target position: where the running motion heads (pulses)."),
         (119, "Actual speed, 0.01 rev/s, signed."),
         (126, "Actual position, pulses."),
+        (106, "Pulse input format in force: 1 pulse and direction, 2 double pulse."),
         (206, "User command: 1 parameter reset and save, 2 alarm clear, 3 restart (refused)."),
         (213, "Standstill current, percent of 0241, after 0245."),
         (217, "0 open loop, 1 closed loop; from the next power-up (save first)."),
+        (234, "Pulse input filter, 1-15 (12 ns to 1.5 µs)."),
         (241, "Phase current, mA."),
         (242, "Resolution, pulses a revolution (two words)."),
+        (244, "Pulse input format: 1 pulse and direction, 2 double pulse."),
         (245, "Standstill delay, ms."),
         (246, "Encoder counts a revolution (lines × 4); from the next power-up."),
+        (
+            296,
+            "0 follow the pulse input (external pulses), 1 commanded over the bus; from the next power-up (save first).",
+        ),
         (298, "Node id, from the next power-up (save first)."),
         (299, "Baud rate, from the next power-up (save first)."),
         (301, "Start speed, 0.01 rev/s."),

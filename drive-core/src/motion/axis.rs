@@ -28,6 +28,9 @@ enum Segment {
     /// integers (walked tick by tick, `walk`); held on its end point until the next segment
     /// replaces it or the run ends.
     Cubic { start: Instant, cubic: Cubic, walk: Walk, rates: Rates },
+    /// Following a pulse input from the control tick `start` on: each tick moves the anchor by
+    /// the pulses counted ([`Axis::add_pulses`]); `velocity` is their rate, smoothed.
+    Follow { start: Instant, velocity: f32 },
 }
 
 /// The setpoint of one tick.
@@ -131,7 +134,7 @@ impl Axis {
         match self.segment {
             Segment::Still => None,
             Segment::Track { at, .. } | Segment::Ramp { at, .. } => Some(at),
-            Segment::Cubic { start, .. } => Some(start),
+            Segment::Cubic { start, .. } | Segment::Follow { start, .. } => Some(start),
         }
     }
 
@@ -178,7 +181,7 @@ impl Axis {
         match &self.segment {
             Segment::Track { .. } => self.track.target(),
             Segment::Still => Some(self.anchor),
-            Segment::Ramp { .. } | Segment::Cubic { .. } => None,
+            Segment::Ramp { .. } | Segment::Cubic { .. } | Segment::Follow { .. } => None,
         }
     }
 
@@ -227,6 +230,40 @@ impl Axis {
                 let p = o.fraction as f32 * TWO_POW_M32;
                 (whole, State { p, v: rates.velocity(k), a: rates.acceleration(k) })
             }
+            // Nothing is planned from a pulse input's course (a stop halts it).
+            Segment::Follow { .. } => (self.anchor, State::default()),
+        }
+    }
+
+    /// Follows the pulse input from the first tick at or after `now` on (standing: else nothing
+    /// is done). Returns whether it was done.
+    pub fn follow_pulses(&mut self, now: Instant) -> bool {
+        if !self.is_still() {
+            return false;
+        }
+        let start = self.next_tick(now);
+        self.changed();
+        (self.rest, self.joint) = (0, None);
+        self.segment = Segment::Follow { start, velocity: 0.0 };
+        true
+    }
+
+    /// Whether the axis follows the pulse input.
+    pub fn follows_pulses(&self) -> bool {
+        matches!(self.segment, Segment::Follow { .. })
+    }
+
+    /// Moves the setpoint by `pulses` microsteps at the tick `now`, if the axis follows the pulse
+    /// input: a control tick calls it before [`Axis::tick`] with what its input counted since the
+    /// last one.
+    pub fn add_pulses(&mut self, now: Instant, pulses: i16) {
+        if let Segment::Follow { start, velocity } = &mut self.segment
+            && now >= *start
+        {
+            self.anchor = self.anchor.saturating_add(i64::from(pulses));
+            // A pulse train's rate from whole pulses a tick, smoothed over about 16 ticks.
+            let rate = f32::from(pulses) * crate::units::TICK_HZ as f32;
+            *velocity += (rate - *velocity) * (1.0 / 16.0);
         }
     }
 
@@ -319,7 +356,7 @@ impl Axis {
         match &self.segment {
             Segment::Track { walker, .. } => walker.cruising(&self.track),
             Segment::Ramp { .. } => false,
-            Segment::Still | Segment::Cubic { .. } => true,
+            Segment::Still | Segment::Cubic { .. } | Segment::Follow { .. } => true,
         }
     }
 
@@ -407,6 +444,9 @@ impl Axis {
         let last = self.last;
         let (mut walker, at) = match self.segment {
             Segment::Still => return,
+            // The pulse source's own ramp is the motion: a ramp of the drive's would run on
+            // beyond where the source stopped.
+            Segment::Follow { .. } => return self.halt(),
             Segment::Track { walker, at } | Segment::Ramp { walker, at, .. } => (walker, at),
             Segment::Cubic { start, .. } => {
                 (Walker::moving(last.whole, last.fraction.to_bits(), last.velocity), self.grid.unwrap_or(start))
@@ -489,6 +529,7 @@ impl Axis {
                 let o = walk.at(cubic, k);
                 (cubic.p0.saturating_add(o.whole), o.fraction, rates.velocity(k), rates.acceleration(k))
             }
+            Segment::Follow { velocity, .. } => (self.anchor, 0, *velocity, 0.0),
         };
         let moved = whole.saturating_sub(self.last.whole);
         self.last = Setpoint { whole, fraction: U0F32::from_bits(fraction), velocity, acceleration };

@@ -16,7 +16,7 @@ use super::{
 const MICROSTEPS: &[u32] = &[0, 2, 4, 8, 16, 32, 64, 128, 256];
 /// Encoder resolutions of 0x6054: counts per revolution, or 12 (bits) for the absolute encoder.
 const ENCODER_CPR: &[u32] = &[12, 200, 400, 500, 600, 800, 1000, 1200, 1600];
-/// Modes of 0x6007 (3, encoder follower, needs a special firmware and is refused).
+/// Modes of 0x6007.
 const MODES: &[u32] = &crate::modes::WorkMode::RAW;
 /// The homing methods 0x2160 takes (as the register holds them: -1 is 0xFFFF).
 const HOMING_METHODS: [u32; 26] = [
@@ -373,6 +373,19 @@ objects! {
     /// Run speed (our object; seed 002's 0306): the speed of the motion command's absolute and
     /// relative runs (0x21A0 = 1, 2).
     CommandSpeed @ 0x21B5: U32, Rw, Rom, Span(150, 300_000), default 2000, Pps, "run speed";
+    /// Pulse input format (our object; seed 002's 0244 and 0106): 1 pulse and direction (DIR
+    /// high counts down), 2 double pulse (CW up, CCW down), 3 an encoder's quadrature A/B, every
+    /// edge a count. What the pulse following of work mode 3 counts; takes effect at once.
+    PulseFormat @ 0x21B7: U8, Rw, Rom, Span(1, 3), default 1, None, "pulse input format";
+    /// Pulse input filter (our object; seed 002's 0234): 1-15, the input timer's filter (the
+    /// STM32's ICxF at 170 MHz): a level must hold 2, 4, 8, 12, 16, 24, 32, 48, 64, 80, 96, 128,
+    /// 160, 192 or 256 timer clocks (12 ns to 1.5 µs) to count. Higher filters reject more noise
+    /// and cap the pulse rate lower (at 15: 330 kpps of 50 % pulses).
+    PulseFilter @ 0x21B8: U8, Rw, Rom, Span(1, 15), default 1, None, "pulse input filter";
+    /// Pulse following at power-up (our object; seed 002's 0296, "0 external, 1 internal
+    /// pulses"): 1 the drive powers up in work mode 3, following the pulse input; 0 in mode 0,
+    /// commanded over the bus. Read at power-up only: save it and restart, as seed 002 says.
+    PulseAtPowerUp @ 0x21B9: U8, Rw, Rom, Span(0, 1), default 0, None, "pulse following at power-up";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake
@@ -391,8 +404,10 @@ objects! {
     /// it (INT32; chapter 5 prints U32): a master that writes -3200 means 3200 steps back.
     RelativeMove @ 0x6005: S32, Cmd, Ram, S32_ANY, default 0, Steps, "relative move";
     /// Work mode: 0 position, 1 velocity, 2 PVT, 4 profile position (PP), 5 profile velocity (PV),
-    /// 6 homing (ours: the device controlword 0x2180 starts the homing of 0x2160). 3 (encoder
-    /// follower) needs a special firmware and is refused.
+    /// 6 homing (ours: the device controlword 0x2180 starts the homing of 0x2160), 3 pulse
+    /// following (the manual's encoder follower): the setpoint follows the pulse input in the
+    /// format of 0x21B7, one microstep a pulse, while the power stage is on and no stop is
+    /// latched; motion writes are refused (04) meanwhile. Entered standing (else 04).
     Mode @ 0x6007: U8, Rw, Ram, Set(MODES), default 0, None, "work mode";
     /// Start speed of the S-curve (chapter 5 prints 0x6006, which collides with 0x6005..6).
     StartSpeed @ 0x6008: U16, Rw, Rom, Any, default 600, Pps, "start speed";

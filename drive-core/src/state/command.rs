@@ -77,9 +77,10 @@ impl Planner<'_> {
         if !command.plans() {
             return Ok(false);
         }
-        // A PVT run owns the axis: the motion command stops it, and moves it in no other way.
+        // A PVT run or the pulse input owns the axis: the motion command stops it, and moves it
+        // in no other way.
         let stops = matches!(command, Command::Stop | Command::EmergencyStop);
-        refuse(stops || self.mode() != WorkMode::Pvt, ObjError::NotNow)?;
+        refuse(stops || !matches!(self.mode(), WorkMode::Pvt | WorkMode::Follow), ObjError::NotNow)?;
         let here = axis.setpoint().whole;
         let running = match command {
             Command::Absolute => {

@@ -21,10 +21,10 @@
 
 use super::DriveState;
 use crate::controller::handoff::{Lent, Orders, TickSide};
-use crate::controller::io::{NotifyOutput, PinConfig};
+use crate::controller::io::{NotifyOutput, PinConfig, PulseInput};
 use crate::controller::{DECAY, Events, STATUS_EXT, STATUS_STALL, Settings};
 use crate::faults::Inputs;
-use crate::modes::{Command, PowerState, Running, WorkMode};
+use crate::modes::{Command, PowerState, PulseFormat, Running, WorkMode};
 use crate::motion::axis::Axis;
 use crate::motion::cubic::Table;
 use crate::motion::scurve::Limits;
@@ -134,6 +134,8 @@ pub(crate) const fn runs_on(obj: Obj) -> bool {
             | Obj::NotifyPos1
             | Obj::NotifyPos2
             | Obj::NotifyOutput
+            | Obj::PulseFormat
+            | Obj::PulseFilter
     )
 }
 
@@ -185,6 +187,10 @@ pub(crate) fn settings_of(params: &[u32; Obj::COUNT]) -> Settings {
         motor_l: get(Obj::MotorInductance) as f32 * 1e-6,
         stall_min_speed: get(Obj::StallMinSpeed) as f32,
         stall_limit: stall_limit(get(Obj::StallParams)),
+        pulse: PulseInput {
+            format: PulseFormat::from_raw(get(Obj::PulseFormat)).unwrap_or_default(),
+            filter: get(Obj::PulseFilter) as u8,
+        },
     }
 }
 
@@ -380,19 +386,37 @@ impl<P: Borrow<Table>> DriveState<P> {
         self.now = now;
         self.homing_service();
         self.analog_service();
+        self.follow_service();
         self.quick_stop_settle();
     }
 
     /// When [`DriveState::service`] has something to do: a homing's checks, the analog input's
     /// next reading.
     pub fn service_due(&self) -> Option<Instant> {
-        self.homing_due().into_iter().chain(self.analog_due()).chain(self.device_due()).min()
+        let due = self.homing_due().into_iter().chain(self.analog_due()).chain(self.device_due());
+        due.chain(self.follow_due()).min()
     }
 
     /// Whether [`DriveState::service`] has something to do at `now`: for a platform that must
     /// sync the model first, and so asks before.
     pub fn service_is_due(&self, now: Instant) -> bool {
         self.service_due().is_some_and(|due| now >= due)
+    }
+
+    /// When the pulse following (work mode 3) is to start: now, standing in the mode with the
+    /// power stage on and no stop latched (again after a stop, once the master cleared it).
+    fn follow_due(&self) -> Option<Instant> {
+        let ready = self.mode() == WorkMode::Follow && self.ctl.axis.is_still() && self.may_move().is_ok();
+        ready.then_some(self.now)
+    }
+
+    /// Starts the pulse following if it is due.
+    fn follow_service(&mut self) {
+        if self.follow_due().is_some() {
+            let at = self.plan_time();
+            self.ctl.axis.follow_pulses(at);
+            self.pp = Pp::default();
+        }
     }
 
     /// Lends the model of the controller to a control tick that owns a controller of its own,
@@ -657,9 +681,16 @@ impl Planner<'_> {
                 if new == mode {
                     return Ok(false);
                 }
-                // Leaving a mode while moving: the manual decelerates from velocity to position.
-                refuse(!busy || (mode == WorkMode::Velocity && new == WorkMode::Position), ObjError::Busy)?;
-                if busy {
+                // Leaving a mode while moving: the manual decelerates from velocity to position;
+                // leaving the pulse following stops it where the pulses left it.
+                let following = axis.follows_pulses();
+                refuse(
+                    !busy || following || (mode == WorkMode::Velocity && new == WorkMode::Position),
+                    ObjError::Busy,
+                )?;
+                if following {
+                    axis.halt();
+                } else if busy {
                     axis.run_at(now, 0.0, 0.0, &self.scurve_limits(speed)).map_err(|_| ObjError::Infeasible)?;
                 }
                 *pp = Pp::default();

@@ -64,6 +64,7 @@ const MEASURED: Inputs = Inputs {
     levels: 0,
     analog: None,
     index: false,
+    pulses: 0,
 };
 
 /// The cases, in the order printed.

@@ -18,6 +18,8 @@
 //! | GPIO8           | PB7         | GPIO in or out (0x602E/2F)  | 0x6031 bit 11; GPIO1-7 are not brought out |
 //! | Coil+ / Coil-   | PA7         | TIM17_CH1 (AF1), 20 kHz PWM | gate of the coil's low-side switch, 0x6038 |
 //! | FSET            | PC13        | GPIO in, pull-up, EXTI13    | factory-settings button to ground          |
+//! | STEP / CW / A   | PB5         | TIM3_CH2 (AF2), counter     | the pulse input's clock (work mode 3)      |
+//! | DIR / CCW / B   | PB4         | TIM3_CH1 (AF2), counter     | its direction or second line               |
 //! | SWDIO / SWCLK   | PA13 / PA14 | debug                       | left alone for the probe (RTT logs)        |
 //!
 //! Flash: the last four 2 KiB pages ([`STORE`], 0x0801E000..0x08020000) hold the parameter
@@ -27,10 +29,11 @@
 //! Clock: HSI16 / 4 × 85 / 2 = 170 MHz SYSCLK from the PLL, range-1 boost mode; AHB, APB1 and
 //! APB2 undivided, so USART1 and every timer count at 170 MHz.
 //!
-//! Timers: TIM3 is embassy-time's free-running 1 MHz clock (the time stamps of received bytes
+//! Timers: TIM15 is embassy-time's free-running 1 MHz clock (the time stamps of received bytes
 //! and the t3.5 timer); TIM6 is the 20 kHz control tick (interrupt priority 0, above all
-//! others); TIM1 emits step pulses; TIM4 the current reference; TIM2 counts the encoder; TIM17
-//! the coil output's PWM.
+//! others); TIM1 emits step pulses; TIM4 the current reference; TIM2 counts the encoder; TIM3
+//! the pulse input (its encoder interface in the format 0x21B7 asks for); TIM17 the coil
+//! output's PWM.
 
 use core::cell::{Cell, RefCell};
 use core::ops::Range;
@@ -39,8 +42,9 @@ use cortex_m::singleton;
 use critical_section::Mutex;
 use drive_core::Baud;
 use drive_core::control::TICK_HZ;
-use drive_core::controller::io::{PinConfig, PinMode};
+use drive_core::controller::io::{PinConfig, PinMode, PulseInput};
 use drive_core::faults::Inputs as Measured;
+use drive_core::modes::PulseFormat;
 use drive_core::store::Store;
 use embassy_embedded_hal::adapter::BlockingAsync;
 use embassy_stm32::adc::{Adc, AdcConfig, SampleTime, Temperature};
@@ -210,6 +214,7 @@ static MEASURED: Mutex<Cell<Measured>> = Mutex::new(Cell::new(Measured {
     levels: 0,
     analog: None,
     index: false,
+    pulses: 0,
 }));
 
 /// The encoder's 16-bit quadrature counter, owned by the control tick, with the count extended to
@@ -240,7 +245,8 @@ fn measure(cs: critical_section::CriticalSection<'_>) -> Measured {
     if index {
         pac::TIM2.sr().modify(|w| w.set_ccif(2, false));
     }
-    Measured { encoder, levels, index, ..MEASURED.borrow(cs).get() }
+    let pulses = pac::TIM3.cnt().read().cnt();
+    Measured { encoder, levels, index, pulses, ..MEASURED.borrow(cs).get() }
 }
 
 /// STEP (TIM1 pulses), DIR and ENABLE to an external step/direction driver, and its current
@@ -252,6 +258,8 @@ pub struct StepDir {
     pending: i64,
     /// The pins as last set up, and the outputs' levels (set again only when they change).
     pins: Option<(PinConfig, u16)>,
+    /// The pulse input as last set up.
+    pulse: Option<PulseInput>,
 }
 
 impl StepDir {
@@ -321,6 +329,36 @@ impl PowerStage for StepDir {
     fn set_coil(&mut self, duty: u8) {
         let ccr = u32::from(duty.min(100)) * COIL_PWM_PERIOD / 100;
         pac::TIM17.ccr(0).write(|w| w.set_ccr(ccr as u16));
+    }
+
+    fn set_pulse_input(&mut self, input: &PulseInput) {
+        if self.pulse == Some(*input) {
+            return;
+        }
+        self.pulse = Some(*input);
+        use pac::timer::vals::{FilterValue, Sms};
+        // RM0440 §29.4.24: clock plus direction counts CH2's clock with CH1's level for the
+        // direction (CC1P = 1: high counts down); the directional clock counts CH2's edges up
+        // and CH1's down (CCxP = 1: rising edges); quadrature counts every edge of both, CH1
+        // inverted so that A on CH2 leading counts up.
+        let (sms, clock_rising, dir_inverted) = match input.format {
+            PulseFormat::StepDir => (Sms::ENCODER_UP_X1, false, true),
+            PulseFormat::CwCcw => (Sms::ENCODER_DIR_X1, true, true),
+            PulseFormat::Quadrature => (Sms::ENCODER_MODE_3, false, true),
+        };
+        let t = pac::TIM3;
+        t.cr1().modify(|w| w.set_cen(false));
+        t.ccer().modify(|w| {
+            w.set_ccp(0, dir_inverted);
+            w.set_ccp(1, clock_rising);
+        });
+        let f = FilterValue::from_bits(input.filter.min(15));
+        t.ccmr_input(0).modify(|w| {
+            w.set_icf(0, f);
+            w.set_icf(1, f);
+        });
+        t.smcr().modify(|w| w.set_sms(sms));
+        t.cr1().modify(|w| w.set_cen(true));
     }
 }
 
@@ -445,11 +483,14 @@ pub fn init() -> Board {
         enable: Output::new(p.PB2, Level::High, Speed::Low), // motor off until told otherwise
         pending: 0,
         pins: None,
+        pulse: None,
     };
     let _ = (p.TIM1, p.TIM4, p.TIM17, p.PB0, p.PB6, p.PA7); // owned by the raw timer setup below
     setup_step_timer();
     setup_current_pwm();
     setup_coil_pwm();
+    let _ = (p.TIM3, p.PB4, p.PB5);
+    setup_pulse_input();
     // EXT1-3 and GPIO8: inputs at reset, set up by the control tick's outputs (`set_pins`).
     let _ = (p.PA4, p.PA5, p.PA6, p.PB7);
 
@@ -516,6 +557,23 @@ fn setup_step_timer() {
     t.ccer().modify(|w| w.set_ccne(1, true));
     t.bdtr().modify(|w| w.set_moe(true));
     gpiob_af(0, 6);
+}
+
+/// TIM3 on PB4 (CH1) and PB5 (CH2): the pulse input's counter, both channels inputs on their
+/// own lines; the format and filter are the drive's (`set_pulse_input`, at the first tick).
+fn setup_pulse_input() {
+    pac::RCC.apb1enr1().modify(|w| w.set_tim3en(true));
+    let t = pac::TIM3;
+    t.psc().write_value(0);
+    t.arr().write(|w| w.set_arr(u16::MAX));
+    t.ccmr_input(0).modify(|w| {
+        w.set_ccs(0, pac::timer::vals::CcmrInputCcs::TI4);
+        w.set_ccs(1, pac::timer::vals::CcmrInputCcs::TI4);
+    });
+    for pin in [4, 5] {
+        pac::GPIOB.afr(0).modify(|w| w.set_afr(pin, 2));
+        pac::GPIOB.moder().modify(|w| w.set_moder(pin, pac::gpio::vals::Moder::ALTERNATE));
+    }
 }
 
 /// TIM17 channel 1 on PA7: the coil output's 20 kHz PWM, duty 0 until the drive asks for it.
