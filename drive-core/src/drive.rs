@@ -122,45 +122,54 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
     /// ```
     #[inline(never)]
     pub fn boot_with_table(config: DriveConfig, map: M, params: &Params, storage: u8, table: P) -> Self {
-        Self::assemble(config, map, params, storage, table)
+        let mut params = params.clone();
+        let faults = FaultLog::restored(&params.fault_history());
+        params.keep_saved();
+        Self::assemble(config, map, &mut params, faults, storage, table)
     }
 
-    /// [`Drive::boot_with_table`] built in `slot`, where a microcontroller keeps its drive: the
-    /// drive is written where it lives, not built on the stack (4 KB on a Cortex-M4) and copied.
+    /// [`Drive::boot_with_table`] built in `slot`, where a microcontroller keeps its drive, from
+    /// `params` (settled in place: the objects a save does not cover take their factory values,
+    /// and the config's overrides are applied), so that no copy of them is on the stack.
     #[inline(never)]
     pub fn boot_in<'a>(
         slot: &'a mut core::mem::MaybeUninit<Self>,
         config: DriveConfig,
         map: M,
-        params: &Params,
+        params: &mut Params,
         storage: u8,
         table: P,
     ) -> &'a mut Self {
-        slot.write(Self::assemble(config, map, params, storage, table))
+        let faults = FaultLog::restored(&params.fault_history());
+        params.keep_saved();
+        slot.write(Self::assemble(config, map, params, faults, storage, table))
     }
 
-    /// The drive [`Drive::boot_with_table`] builds; inlined into each caller, so that the one
-    /// writing into a slot builds it there.
+    /// The drive [`Drive::boot_with_table`] builds from `params` (what a save covers, and the
+    /// power-down position), with `faults` the history loaded; inlined into each caller.
     #[inline(always)]
-    fn assemble(config: DriveConfig, map: M, params: &Params, storage: u8, table: P) -> Self {
+    fn assemble(config: DriveConfig, map: M, params: &mut Params, faults: FaultLog, storage: u8, table: P) -> Self {
         // The values are settled first and the drive is one struct expression (as the state is,
         // `DriveState::booted`), so that the drive is not built aside and copied once more.
-        let mut values = Params::factory().values;
-        params.copy_saved_into(&mut values);
+        let values = &mut params.values;
         let mut set = |obj: Obj, value: u32| {
             if let Some(v) = values.get_mut(obj as usize) {
                 *v = value;
             }
         };
-        // The power-down position is not in the saved set proper (it has its own record).
-        set(Obj::SavedPosition, params.get(Obj::SavedPosition));
         if let Some(a) = config.address {
             set(Obj::NodeId, u32::from(a.get()));
         }
         if let Some(b) = config.baud {
             set(Obj::BaudRate, b.get());
         }
-        if params.get(Obj::PulseAtPowerUp) == 1 {
+        let pulses = values.get(Obj::PulseAtPowerUp as usize) == Some(&1);
+        let mut set = |obj: Obj, value: u32| {
+            if let Some(v) = values.get_mut(obj as usize) {
+                *v = value;
+            }
+        };
+        if pulses {
             // Seed 002's 0296 = 0 (external pulses): the drive powers up following them.
             set(Obj::Mode, crate::modes::WorkMode::Follow.raw());
         }
@@ -168,8 +177,8 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
             // CiA 402: switch on disabled at power-up, whatever the enable holds.
             set(Obj::Enable, 0);
         }
+        let values = &params.values;
         let get = |obj: Obj| values.get(obj as usize).copied().unwrap_or(0);
-        let faults = FaultLog::restored(&params.fault_history());
         // The serial settings in force are those of power-up; writes take effect at the next one.
         let address = SlaveAddr::new(get(Obj::NodeId) as u8).unwrap_or(SlaveAddr::BROADCAST);
         let baud = Baud::new(get(Obj::BaudRate)).unwrap_or(Baud::FACTORY);
@@ -185,7 +194,7 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
             state: DriveState::booted(
                 config.identity,
                 config.can_save,
-                &values,
+                values,
                 storage & !STORAGE_SAVING,
                 faults,
                 table,

@@ -73,7 +73,7 @@ static IDENTITY: Identity = Identity {
 /// 0x200F = 2 is refused). Returns the drive, for the Modbus task, and the serial line settings
 /// in force: the baud rate and the parity (0x2100).
 #[allow(clippy::mut_from_ref, reason = "the drive is a singleton's memory, not borrowed from the inputs")]
-pub fn start(params: &Params, status: u8, can_save: bool) -> (&'static mut Drive, Baud, u32) {
+pub fn start(params: &mut Params, status: u8, can_save: bool) -> (&'static mut Drive, Baud, u32) {
     let config = DriveConfig { identity: &IDENTITY, can_save, ..DriveConfig::default() };
     // singleton! yields its memory once; uninitialised, it is .bss with no flash image.
     let (Some(slot), Some(tick)) = (
@@ -94,7 +94,7 @@ pub fn start(params: &Params, status: u8, can_save: bool) -> (&'static mut Drive
 fn boot_into(
     slot: &'static mut MaybeUninit<Drive>,
     config: DriveConfig,
-    params: &Params,
+    params: &mut Params,
     status: u8,
 ) -> &'static mut Drive {
     let map = Maps::by_id(params.get(drive_core::od::Obj::RegisterMap));

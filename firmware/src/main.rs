@@ -102,8 +102,8 @@ mod run {
         let Board { flash, mut uart, stage, mut inputs, encoder, sense, mut watchdog } = board::init();
         // Power-up, before the drive answers anything: the FSET check and the parameters from
         // flash, then the drive, then the UART at their baud rate and parity.
-        let (store, loaded) = power_up(flash, &mut inputs.fset);
-        let (drive, baud, parity) = app::start(&loaded.params, loaded.status, true);
+        let (store, mut loaded) = power_up(flash, &mut inputs.fset);
+        let (drive, baud, parity) = app::start(&mut loaded.params, loaded.status, true);
         board::set_serial(&mut uart, baud, parity);
         info!("drive up: {} baud, parity {}, storage status {:#x}", baud.get(), parity, loaded.status);
         board::start_tick(stage, encoder);
@@ -244,8 +244,8 @@ mod run {
     /// in `main`'s frame under every task the executor polls.
     #[inline(never)]
     fn power_up(spawner: embassy_executor::Spawner) {
-        let (store, loaded) = load();
-        let (drive, _, _) = app::start(&loaded.params, loaded.status, true);
+        let (store, mut loaded) = load();
+        let (drive, _, _) = app::start(&mut loaded.params, loaded.status, true);
         let serial = board::init();
         spawner.spawn(unwrap!(app::modbus(drive, serial, store)));
     }

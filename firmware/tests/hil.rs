@@ -67,7 +67,7 @@ mod tests {
     fn init() -> Hil {
         let board = board::init();
         // As after a power-up on erased store pages: factory values, saving allowed.
-        let (drive, _, _) = app::start(&Params::factory(), 0, true);
+        let (drive, _, _) = app::start(&mut Params::factory(), 0, true);
         Hil { board, drive }
     }
 

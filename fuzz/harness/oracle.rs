@@ -391,6 +391,7 @@ pub fn map_value(state: &drive_core::DriveState, e: &drive_core::maps::layout::E
         Scale::Ratio(n, den) => round(v * i64::from(den), i64::from(n)),
         Scale::PerRev(n, den) => round(v * i64::from(den), i64::from(n) * per_rev),
         Scale::Table(choices) => choices.iter().find(|c| i64::from(c.drive) == v).map_or(v, |c| i64::from(c.lo)),
+        Scale::Bit(k) => (v >> k) & 1,
     }
 }
 

@@ -230,6 +230,9 @@ pub struct Machine {
     pub pulses: Option<crate::pulses::PulseSource>,
     /// The drive's pulse input timer.
     counter: crate::pulses::Counter,
+    /// Pins an outside source drives (a button, a PLC output): their bits (as 0x6031), and
+    /// their levels.
+    driven: (u16, u16),
     rng: fastrand::Rng,
 }
 
@@ -240,6 +243,7 @@ impl Default for Machine {
             analog: None,
             pulses: None,
             counter: Default::default(),
+            driven: (0, 0),
             rng: fastrand::Rng::with_seed(0x5EED),
         }
     }
@@ -256,9 +260,14 @@ impl Machine {
     /// pin reads what the drive drives; an input what a switch drives, else its pull.
     pub fn levels(&mut self, t: f64, position: f64, pins: &PinConfig, outputs: u16) -> u16 {
         let mut levels = outputs & pins.outputs;
+        let (driven, high) = self.driven;
         for k in 0..12u32 {
             let bit = 1u16 << k;
             if pins.outputs & bit != 0 {
+                continue;
+            }
+            if driven & bit != 0 {
+                levels |= high & bit;
                 continue;
             }
             let mut level = pins.mode(k) == PinMode::PullUp;
@@ -278,6 +287,20 @@ impl Machine {
     pub fn analog_code(&mut self, t: f64) -> Option<u16> {
         let v = self.analog?.volts(t, &mut self.rng);
         Some((v / ANALOG_FULL_SCALE_V * 4095.0).round().clamp(0.0, 4095.0) as u16)
+    }
+
+    /// Drives the input pin `pin` (a bit number of 0x6031) `Some(high)` from outside (a button,
+    /// a PLC's output), or lets it go (`None`: its switches and pull again).
+    pub fn drive_pin(&mut self, pin: u32, level: Option<bool>) {
+        let bit = 1u16.checked_shl(pin).unwrap_or(0);
+        let (driven, high) = &mut self.driven;
+        match level {
+            Some(l) => {
+                *driven |= bit;
+                *high = if l { *high | bit } else { *high & !bit };
+            }
+            None => *driven &= !bit,
+        }
     }
 
     /// The pulse input's count at time `t` (s), its timer set up as `input` (a source connected

@@ -118,6 +118,19 @@ impl Plant {
         Self { tick, ..Self::combined(drive, motor) }
     }
 
+    /// A factory drive turning the catalogue's default motor ([`crate::DEFAULT_MOTOR`]) at 24 V
+    /// in `machine`: what the scenario tests start from.
+    pub fn factory_on(machine: crate::machine::Machine) -> Self {
+        let params = crate::motor::MotorCatalog::builtin()
+            .get(crate::DEFAULT_MOTOR)
+            .cloned()
+            .expect("the built-in catalogue has the default motor");
+        let mut plant =
+            Self::new(drive_core::Drive::factory(), Motor::new(params, crate::motor::MotorInputs::default()));
+        *plant.machine_mut() = machine;
+        plant
+    }
+
     /// [`Plant::new`] with the drive's own controller ticked (no handoff): what the handoff is
     /// compared against.
     pub fn combined(drive: impl IntoDrive, motor: Motor) -> Self {

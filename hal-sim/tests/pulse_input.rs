@@ -5,11 +5,8 @@
 //! stop are not followed, and following resumes when the master clears the stop; motion writes
 //! are refused in the mode and change nothing.
 
-use drive_core::Drive;
 use drive_core::od::{Obj, ObjError};
-use hal_sim::DEFAULT_MOTOR;
 use hal_sim::machine::{Machine, Switch};
-use hal_sim::motor::{Motor, MotorCatalog, MotorInputs};
 use hal_sim::plant::Plant;
 use hal_sim::pulses::{PulseSource, Train, Wiring};
 
@@ -23,8 +20,7 @@ fn plant(format: u32) -> Plant {
 
 /// [`plant`] at `microsteps` a full step.
 fn plant_at(format: u32, microsteps: u32) -> Plant {
-    let params = MotorCatalog::builtin().get(DEFAULT_MOTOR).cloned().expect("catalogue motor");
-    let mut plant = Plant::new(Drive::factory(), Motor::new(params, MotorInputs::default()));
+    let mut plant = Plant::factory_on(Machine::default());
     let objects =
         [(Obj::Microsteps, microsteps), (Obj::PhaseCurrent, 1500), (Obj::PulseFormat, format), (Obj::Mode, 3)];
     for (obj, v) in objects {
@@ -145,10 +141,8 @@ fn pulses_count_only_while_the_drive_follows_and_motion_writes_change_nothing() 
 
 #[test]
 fn an_external_stop_halts_the_following_until_the_master_clears_it() {
-    let params = MotorCatalog::builtin().get(DEFAULT_MOTOR).cloned().expect("catalogue motor");
-    let mut p = Plant::new(Drive::factory(), Motor::new(params, MotorInputs::default()));
     // A limit switch 10 full steps up, NPN, on EXT1 (falling edge).
-    *p.machine_mut() = Machine::new(vec![Switch::parse("ext1:npn:10").expect("switch")], None);
+    let mut p = Plant::factory_on(Machine::new(vec![Switch::parse("ext1:npn:10").expect("switch")], None));
     for (obj, v) in [(Obj::Microsteps, 16), (Obj::ExtStopEnable, 1), (Obj::ExtDebounce, 1), (Obj::Mode, 3)] {
         set(&mut p, obj, v);
     }

@@ -1,7 +1,8 @@
 """A master we did not write (pymodbus) drives the simulator on the DS-CLS9 map (seed 002):
 every command of the control command 0323, the axis doing what the manual's table says (read
 back as the actual position 0126 and speed 0119), the soft limits on the enabled side only,
-homing both ways with the offset, and refusals with nothing changed.
+homing both ways with the offset, refusals with nothing changed, input functions given by
+pseudo-inputs, and the output and in-position settings.
 
 Usage: pymodbus_cls9.py ENDPOINT   where ENDPOINT is a pseudo-terminal path or HOST:PORT of
 `hal-sim --map cls9 --switch ext1:pnp:40:to=44 --switch ext2:pnp:-120:below --switch
@@ -158,5 +159,19 @@ for direction, name in [(0, "clockwise"), (1, "counter-clockwise")]:
     # Standing on the cam's edge found at the creep speed: the home reads as 0311.
     check(f"homing {name}: the home reads as 0311", at is not None and abs(at - 1000) <= 16, at)
     check(f"0305 reads {direction}", read(305) == [direction])
+
+# Inputs 0400-0416: IN4 jogs + and IN5 stops, given by their pseudo-inputs 0413 and 0414.
+check("0403 = 4, 0404 = 6", write(403, 4) == 0 and write(404, 6) == 0)
+check("0400 = 14 (multi-segment) refused (03)", write(400, 14) == 3 and read(400) == [0])
+check("0413 = 1: IN4 jogs +", write(413, 1) == 0 and speed_after(0.3) == 200)
+check("0414 = 1: IN5 stops", write(414, 1) == 0 and settle(3) is not None)
+check("0410-0416 read back", read(410, 7) == [0, 0, 0, 1, 1, 0, 0], read(410, 7))
+check("0413, 0414 released", write(413, 0) == 0 and write(414, 0) == 0)
+
+# Outputs 0420-0430 and the in-position window 0247.
+check("0420 = 101 (alarm)", write(420, 101) == 0 and read(420) == [101], read(420))
+check("0421 = 99 refused (03)", write(421, 99) == 3 and read(421) == [0], read(421))
+check("0428, 0429, 0430", write(428, 1) == 0 and write(429, 3) == 0 and write(430, 2) == 0)
+check("0247 = 20 (two words)", write32(247, 20) == 0 and read32(247) == 20, read32(247))
 
 finish(client, "pymodbus, DS-CLS9 map")

@@ -113,6 +113,7 @@ impl Controller {
         s.gpio_out = merge(s.gpio_out, b.gpio_out, m.gpio_out);
         s.faults = merge(s.faults, b.faults, m.faults);
         s.comm = merge(s.comm, b.comm, m.comm);
+        s.input_edges = merge(s.input_edges, b.input_edges, m.input_edges);
         if m.analog_in != b.analog_in {
             s.analog_in = m.analog_in;
         }
@@ -192,11 +193,13 @@ impl TickSide {
     }
 
     /// Whether the bus side should sync soon without waiting for a request: power is failing
-    /// (the position save), an alarm was recorded (the history save), or a watch caught what
-    /// it waited for (the next step of a homing). Once a tick.
+    /// (the position save), an alarm was recorded (the history save), a watch caught what it
+    /// waited for (the next step of a homing), or an input turned active (its function). Once a
+    /// tick.
     pub fn needs_bus(&mut self) -> bool {
         let alarms = core::mem::replace(&mut self.alarms, self.ctl.faults.count);
-        self.ctl.events.has(Events::POWER_FAILING) || self.ctl.events.has(Events::CAUGHT) || alarms != self.alarms
+        let e = self.ctl.events;
+        e.has(Events::POWER_FAILING) || e.has(Events::CAUGHT) || e.has(Events::INPUT) || alarms != self.alarms
     }
 
     /// The controller the tick runs.

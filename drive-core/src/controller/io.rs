@@ -28,6 +28,67 @@ pub const PIN_ENC2: u16 = 1 << 10;
 /// Pins that are inputs whatever 0x602E says.
 pub const INPUT_ONLY: u16 = PIN_EXT1 | PIN_EXT2 | PIN_EXT3 | PIN_ENC2;
 
+/// The pins of the inputs IN1-IN7 (seed 002's, our 0x21BA-0x21C0): EXT1-EXT3, GPIO1-GPIO4.
+pub const IN_PINS: [u16; 7] = [PIN_EXT1, PIN_EXT2, PIN_EXT3, 1 << 0, 1 << 1, 1 << 2, 1 << 3];
+/// The pins of the outputs OUT1-OUT4 (seed 002's, our 0x21C3-0x21C6): GPIO5-GPIO8.
+pub const OUT_PINS: [u16; 4] = [1 << 4, 1 << 5, 1 << 6, 1 << 11];
+
+/// What an output shows (our 0x21C3-0x21C6; seed 002's 0420-0423 are 100 more).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum OutputFunction {
+    /// None (0): the pin is a GPIO as 0x602E, 0x602F and 0x6031 set it.
+    #[default]
+    None = 0,
+    /// A general output (1): on while its bit of 0x21C7 is set.
+    General = 1,
+    /// Alarm (2): on while no alarm is latched.
+    Alarm = 2,
+    /// In position (3): on while the axis stands on its target within 0x21C9.
+    InPosition = 3,
+    /// Motor free (4): on while the power stage is off.
+    Free = 4,
+    /// Ready (5): on while the power stage drives the motor.
+    Ready = 5,
+}
+
+impl OutputFunction {
+    /// The function of a register value, if it is one.
+    pub const fn from_raw(v: u32) -> Option<Self> {
+        Some(match v {
+            0 => Self::None,
+            1 => Self::General,
+            2 => Self::Alarm,
+            3 => Self::InPosition,
+            4 => Self::Free,
+            5 => Self::Ready,
+            _ => return None,
+        })
+    }
+}
+
+/// What the tick does with the inputs' and outputs' functions (our 0x21BA-0x21C9).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct IoFunctions {
+    /// The inputs with a function (bit k: IN k+1): the tick reads no other.
+    pub inputs: u8,
+    /// The pins of the outputs with a function: the tick sets no other.
+    pub output_pins: u16,
+    /// The inputs active low (bit k: IN k+1; 0x21C1).
+    pub input_low: u8,
+    /// The inputs that are positive limit switches (function 9).
+    pub limit_positive: u8,
+    /// The inputs that are negative limit switches (function 10).
+    pub limit_negative: u8,
+    /// OUT1-OUT4's functions.
+    pub outputs: [OutputFunction; 4],
+    /// The general outputs on (bit k: OUT k+1; 0x21C7).
+    pub general: u8,
+    /// The outputs active low (0x21C8).
+    pub output_low: u8,
+    /// The in-position window (0x21C9): counts of the encoder in closed loop.
+    pub in_position: u16,
+}
+
 /// The three external stops: their pin, their bit in 0x6013/0x6014, their bit in 0x6001.
 pub const EXT: [(u16, u8, u8); 3] =
     [(PIN_EXT1, 1 << 0, STATUS_EXT1), (PIN_EXT2, 1 << 1, STATUS_EXT2), (PIN_EXT3, 1 << 4, STATUS_EXT3)];
@@ -74,6 +135,17 @@ impl PinConfig {
             }
         }
         Self { outputs, fields }
+    }
+
+    /// The same pins with `pins` push-pull outputs (an output with a function).
+    pub fn with_outputs(self, pins: u16) -> Self {
+        let mut fields = self.fields;
+        for k in 0..16 {
+            if pins & (1 << k) != 0 {
+                fields = (fields & !(3 << (2 * k))) | (1 << (2 * k));
+            }
+        }
+        Self { outputs: self.outputs | (pins & PINS), fields }
     }
 
     /// The mode of pin `k` (0..=11).
@@ -162,6 +234,10 @@ pub(crate) struct Pins {
     pulse_ticks: u16,
     /// The pulse input's count at the last tick (none before the first).
     pulses: Option<u16>,
+    /// The inputs were read at least once (the first reading is no edge).
+    inputs_read: bool,
+    /// A limit switch stopped the axis, which has not stood still since.
+    limit_stop: bool,
 }
 
 /// How the pulse input is set up (0x21B7, 0x21B8): what the platform's counter counts, and its
@@ -194,6 +270,41 @@ impl Controller {
         if s.ext_enable != 0 {
             self.external_stops(now, levels);
         }
+        self.functions(levels);
+    }
+
+    /// IN1-IN7: which are active, the activations for the bus side (an input's function acts
+    /// there), and the limit switches, which stop a motion heading into them.
+    #[inline]
+    fn functions(&mut self, levels: u16) {
+        let io = &self.settings.io;
+        if io.inputs == 0 {
+            return;
+        }
+        // IN1-IN3 are 0x6031's bits 7-9, IN4-IN7 its bits 0-3 (`IN_PINS`).
+        let high = ((levels >> 7) & 0b111) as u8 | (((levels & 0b1111) as u8) << 3);
+        let active = (high ^ io.input_low) & io.inputs;
+        let rose = if self.io.inputs_read { active & !self.status.inputs } else { 0 };
+        (self.status.inputs, self.io.inputs_read) = (active, true);
+        if rose != 0 {
+            self.status.input_edges |= rose;
+            self.events.set(super::Events::INPUT);
+        }
+        let v = self.axis.setpoint().velocity;
+        let into = (v > 0.0 && active & io.limit_positive != 0) || (v < 0.0 && active & io.limit_negative != 0);
+        if self.axis.is_still() {
+            self.io.limit_stop = false;
+        } else if into && !self.io.limit_stop {
+            self.io.limit_stop = true;
+            self.decelerate_to_stop();
+        }
+    }
+
+    /// Whether the axis stands on its target: within 0x21C9's window of the encoder in closed
+    /// loop.
+    fn in_position(&self) -> bool {
+        let window = i64::from(self.settings.io.in_position);
+        self.axis.is_still() && (self.servo.feedback.encoder().is_none() || self.servo.following.abs() <= window)
     }
 
     /// The watch the bus side armed: its condition met while its plan runs, the setpoint's
@@ -282,7 +393,24 @@ impl Controller {
     pub(crate) fn output_levels(&self) -> u16 {
         let s = &self.settings;
         let pulse = if self.io.pulse_ticks != 0 { s.notify_output.pin } else { 0 };
-        (!self.status.gpio_out | pulse) & s.pins.outputs
+        let mut levels = (!self.status.gpio_out | pulse) & s.pins.outputs;
+        if s.io.output_pins == 0 {
+            return levels;
+        }
+        let (alarm, ready) = (self.faulted(), self.power_stage_on());
+        for (k, (&pin, &function)) in OUT_PINS.iter().zip(&s.io.outputs).enumerate() {
+            let on = match function {
+                OutputFunction::None => continue,
+                OutputFunction::General => s.io.general & (1 << k) != 0,
+                OutputFunction::Alarm => !alarm,
+                OutputFunction::InPosition => self.in_position(),
+                OutputFunction::Free => !ready,
+                OutputFunction::Ready => ready,
+            };
+            let high = on != (s.io.output_low & (1 << k) != 0);
+            levels = if high { levels | pin } else { levels & !pin };
+        }
+        levels
     }
 
     /// The coil output's duty (0x6038): in brake mode released only while the power stage is on

@@ -95,6 +95,10 @@ pub struct Status {
     pub supply_mv: u16,
     /// The larger phase current last measured, mA (0x21B0).
     pub current_ma: u16,
+    /// The inputs IN1-IN7 active (bit k: IN k+1).
+    pub inputs: u8,
+    /// The inputs that turned active since the bus side last took them.
+    pub input_edges: u8,
 }
 
 /// The settings the controller runs, checked and converted from the dictionary's values.
@@ -173,6 +177,8 @@ pub struct Settings {
     pub stall_limit: f32,
     /// The pulse input's format and filter (0x21B7, 0x21B8).
     pub pulse: io::PulseInput,
+    /// The inputs' and outputs' functions (0x21BA-0x21C9).
+    pub io: io::IoFunctions,
 }
 
 /// What the controller did on its own at a tick, for the bus side to take into account: a set
@@ -193,6 +199,8 @@ impl Events {
     /// The watch the bus side armed saw what it waited for: the position is in
     /// [`Controller::caught`], and the axis is stopping.
     pub const CAUGHT: Self = Self(1 << 4);
+    /// An input turned active: its function is the bus side's to carry out.
+    pub const INPUT: Self = Self(1 << 5);
 
     /// Whether every flag of `e` is set.
     pub const fn has(self, e: Self) -> bool {
@@ -400,6 +408,12 @@ impl Controller {
         let full = s.phase_current_ma * if idle { s.idle_current_pct } else { 100 } / 100;
         let current = (full as f32 * share.clamp(0.0, 1.0)) as u32;
         let enabled = self.power_stage_on();
+        let gpio = self.output_levels();
+        let function_pins = self.settings.io.output_pins;
+        if function_pins != 0 {
+            // 0x6031 shows what an output with a function drives (inverted, as the manual has it).
+            self.status.gpio = (self.status.gpio & !function_pins) | (!gpio & function_pins);
+        }
         Outputs {
             setpoint,
             commutation,
@@ -407,7 +421,7 @@ impl Controller {
             current_ma: if enabled { current as u16 } else { 0 },
             enabled,
             coil_duty: self.coil_duty(),
-            gpio: self.output_levels(),
+            gpio,
             pins: self.settings.pins,
             microsteps: self.settings.microsteps,
             fast_decay: self.settings.fast_decay,

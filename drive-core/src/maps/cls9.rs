@@ -66,10 +66,20 @@ static PULSE_FORMATS: [Choice; 2] = [Choice { lo: 1, hi: 1, drive: 1 }, Choice {
 /// 0296: 0 external pulses (the drive powers up following them, 0x21B9 = 1), 1 internal.
 static PULSE_SOURCE: [Choice; 2] = [Choice { lo: 0, hi: 0, drive: 1 }, Choice { lo: 1, hi: 1, drive: 0 }];
 
+/// 0420-0423: 100 general, 101 alarm, 102 in position, 103 motor free (enable control), 104
+/// ready; the drive's 0 (the pin a GPIO of the native map's) is not among them.
+static OUTPUT_FUNCTIONS: [Choice; 5] = [
+    Choice { lo: 100, hi: 100, drive: 1 },
+    Choice { lo: 101, hi: 101, drive: 2 },
+    Choice { lo: 102, hi: 102, drive: 3 },
+    Choice { lo: 103, hi: 103, drive: 4 },
+    Choice { lo: 104, hi: 104, drive: 5 },
+];
+
 /// The registers, by address (decimal, as the manual's `adr` column), then ours at their
 /// native addresses: the save (0x200F), the line's parity (0x2100), the homing's timeout and
 /// switches (0x216B-0x216D) and the map selection (0x2190).
-pub static ENTRIES: [Entry; 46] = [
+pub static ENTRIES: [Entry; 68] = [
     Entry::new(100, Obj::MotorCurrent, Scale::Ratio(100, 1)),
     Entry::new(101, Obj::SupplyVoltage, Scale::Ratio(1000, 1)),
     Entry::new(104, Obj::Microsteps, Scale::Table(&RESOLUTIONS)).wide().read_only(),
@@ -90,6 +100,7 @@ pub static ENTRIES: [Entry; 46] = [
     Entry::new(244, Obj::PulseFormat, Scale::Table(&PULSE_FORMATS)),
     Entry::new(245, Obj::IdleDelay, Scale::One),
     Entry::new(246, Obj::EncoderCpr, Scale::Table(&ENCODER)),
+    Entry::new(247, Obj::InPositionWindow, Scale::One).wide(),
     Entry::new(296, Obj::PulseAtPowerUp, Scale::Table(&PULSE_SOURCE)),
     Entry::new(298, Obj::NodeId, Scale::One),
     Entry::new(299, Obj::BaudRate, Scale::One),
@@ -110,6 +121,27 @@ pub static ENTRIES: [Entry; 46] = [
     Entry::new(321, Obj::PositionPreset, Scale::One),
     Entry::new(323, Obj::MotionCommand, Scale::One),
     Entry::new(324, Obj::SoftLimits, Scale::One),
+    Entry::new(400, Obj::InputFunction1, Scale::One),
+    Entry::new(401, Obj::InputFunction2, Scale::One),
+    Entry::new(402, Obj::InputFunction3, Scale::One),
+    Entry::new(403, Obj::InputFunction4, Scale::One),
+    Entry::new(404, Obj::InputFunction5, Scale::One),
+    Entry::new(405, Obj::InputFunction6, Scale::One),
+    Entry::new(406, Obj::InputFunction7, Scale::One),
+    Entry::new(410, Obj::PseudoInputs, Scale::Bit(0)),
+    Entry::new(411, Obj::PseudoInputs, Scale::Bit(1)),
+    Entry::new(412, Obj::PseudoInputs, Scale::Bit(2)),
+    Entry::new(413, Obj::PseudoInputs, Scale::Bit(3)),
+    Entry::new(414, Obj::PseudoInputs, Scale::Bit(4)),
+    Entry::new(415, Obj::PseudoInputs, Scale::Bit(5)),
+    Entry::new(416, Obj::PseudoInputs, Scale::Bit(6)),
+    Entry::new(420, Obj::OutputFunction1, Scale::Table(&OUTPUT_FUNCTIONS)),
+    Entry::new(421, Obj::OutputFunction2, Scale::Table(&OUTPUT_FUNCTIONS)),
+    Entry::new(422, Obj::OutputFunction3, Scale::Table(&OUTPUT_FUNCTIONS)),
+    Entry::new(423, Obj::OutputFunction4, Scale::Table(&OUTPUT_FUNCTIONS)),
+    Entry::new(428, Obj::GeneralOutputs, Scale::One),
+    Entry::new(429, Obj::InputLogic, Scale::One),
+    Entry::new(430, Obj::OutputLogic, Scale::One),
     Entry::new(0x200F, Obj::SystemControl, Scale::One),
     Entry::new(0x2100, Obj::Parity, Scale::One),
     Entry::new(0x216B, Obj::HomingTimeout, Scale::One),
@@ -152,7 +184,9 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         "Soft limits 0317 / 0319 with 0324 bit 0 (positive) and bit 1 (negative): no motion command goes beyond an enabled limit; a target beyond it stops on it, a run or a jog towards it ends on it. Homing ignores them. 0324's other bits are refused (03).",
         "Homing (0323 = 12): 0305 0 searches the home switch clockwise (negative), 1 counter-clockwise, at 0309, reversing at the limit switch of that side, then finds the switch's edge again at the creep speed 0310; the home then reads as 0311. Until 0305 is written it reads the drive's own method number (0x2160, factory 35: the home is where the axis stands). Which inputs are the home switch and the limit switches, and their levels, are the drive's 0x216C and 0x216D, and 0x216B is the timeout, in this map at their native addresses (8556-8557, 8555).",
         "Pulse input (the drive's work mode 3): with 0296 = 0, saved, the drive powers up following the step train on its pulse input (one pulse a microstep of 0242's resolution), in the format of 0244 (1 pulse and direction, DIR high counting down; 2 double pulse), through the input filter 0234 (1-15: a level must hold 2 to 256 clocks of 170 MHz, 12 ns to 1.5 µs). 0296 reads 1 (internal pulses) from the factory, not the manual's 0: the drive leaves the factory commanded over the bus, and a machine that steps it writes 0 and saves. While it follows, the control commands that move are refused (04) and 6 and 7 stop it where the pulses left it (it follows the next ones); 0109 reads 3 (running). 0244 and 0234 take effect at once, 0296 at the next power-up as the manual says.",
-        "Not in this map yet, answered 02: the angle filter 0224; the direction switch 0201; the loop gains 0251-0258 and the in-position window 0247; the multi-segment program (0174-0178, 0327, 0328, 1024-1536, commands 14-18, refused with 03); the input and output functions 0400-0430.",
+        "Inputs IN1-IN7 are the drive's EXT1-EXT3 and GPIO1-GPIO4 (on the G431 board EXT1-EXT3 only), outputs OUT1-OUT4 its GPIO5-GPIO8 (on the board GPIO8). 0400-0406 give each input a function, acted on when the input turns active (at 0429's level: bit k set, IN k+1 is active low) or when its pseudo-input 0410-0416 is written 1 (written 0 it is released): 1-8, 12, 13 the control command of that number (as a write of 0323, refused in the same cases, and then nothing moves); 9 and 10 the positive and negative limit switches (a motion heading into an active one stops at the drive's stop deceleration, and a command towards it is refused with 04; the homing reverses at them); 11 the home switch of the homing (over the drive's 0x216C); 20 enable (the power stage follows the input). An input acts on its activation only, not while it stays active, and the levels at power-up are no activation. The multi-segment functions 14-18 and 25-29 are refused (03) until the multi-segment programs are in this map. IN6 and IN7 stay inputs with external pulses: the drive's pulse input has lines of its own.",
+        "0420-0423 give each output a function: 100 general (on while its bit of 0428 is set), 101 alarm (on while no alarm is latched), 102 in position (on while the axis stands on its target, within 0247 encoder counts in closed loop), 103 motor free (on while the power stage is off, the manual's 'enable control'), 104 ready (on while the power stage drives the motor; the manual lists 104 without saying what it is). 0430 bit k set makes OUT k+1 low when on. From the factory the outputs have no function and read 0, not the manual's 101 and 100: they are the native map's GPIO until 0420-0423 are written.",
+        "Not in this map yet, answered 02: the angle filter 0224; the direction switch 0201; the loop gains 0251-0258; the multi-segment program (0174-0178, 0327, 0328, 1024-1536, commands 14-18, refused with 03).",
         "Timing exceptions (§十三's table): a frame with a silence over 1.5 characters inside it is answered 0C, and a whole frame (its CRC good) that the next bytes followed before 3.5 characters of silence is answered 0D, either once the line has been quiet for 3.5 characters, with the address and function code the frame began with; the bytes in between are dropped and the request is not executed. A frame that did not begin with this drive's address, a broadcast, or one too short to say is not answered. Two frames with less than 1.5 characters between them are one frame with a wrong CRC: not answered, as every frame whose CRC or parity is wrong (its address cannot be trusted).",
     ],
     remarks: &[
@@ -174,6 +208,7 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         (244, "Pulse input format: 1 pulse and direction, 2 double pulse."),
         (245, "Standstill delay, ms."),
         (246, "Encoder counts a revolution (lines × 4); from the next power-up."),
+        (247, "In-position window, encoder counts (two words)."),
         (
             296,
             "0 follow the pulse input (external pulses), 1 commanded over the bus; from the next power-up (save first).",
@@ -197,6 +232,15 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         (321, "The position command 8 sets, pulses."),
         (323, "Control command (see the notes)."),
         (324, "Bit 0 the positive soft limit on, bit 1 the negative one."),
+        (400, "IN1 function (see the notes); 0401-0406 IN2-IN7."),
+        (410, "Pseudo-input IN1: 1 acts as IN1 turning active; 0411-0416 IN2-IN7."),
+        (
+            420,
+            "OUT1 function: 100 general, 101 alarm, 102 in position, 103 motor free, 104 ready; 0421-0423 OUT2-OUT4.",
+        ),
+        (428, "General outputs: bit k turns OUT k+1 on (function 100)."),
+        (429, "Input logic: bit k set, IN k+1 active low."),
+        (430, "Output logic: bit k set, OUT k+1 low when on."),
     ],
     decimal: true,
 };

@@ -116,6 +116,9 @@ fn values(out: &mut impl Write, e: &Entry) -> fmt::Result {
         }
         return Ok(());
     }
+    if let Scale::Bit(k) = e.scale {
+        return write!(out, "0, 1 (bit {k} of the drive object)");
+    }
     let map = |v: i64| match e.scale {
         Scale::One => v,
         s => s.to_map(v, FACTORY_PER_REV).unwrap_or(v),
@@ -146,7 +149,7 @@ fn unit(e: &Entry) -> &'static str {
         (Scale::PerRev(1, 1), Unit::Pps2) => "rev/s²",
         (Scale::Ratio(100, 1), Unit::MilliAmps) => "0.1 A",
         (Scale::Ratio(1000, 1), Unit::MilliVolts) => "V",
-        (Scale::One | Scale::Ratio(-1, 1) | Scale::Table(_), u) => u.symbol(),
+        (Scale::One | Scale::Ratio(-1, 1) | Scale::Table(_) | Scale::Bit(_), u) => u.symbol(),
         _ => "see the description",
     }
 }

@@ -93,6 +93,9 @@ pub enum Scale {
     /// An enumeration: the map's values and the drive's, one by one (a value not listed is out
     /// of range).
     Table(&'static [Choice]),
+    /// One bit of the drive's value, 0 or 1 (a register a bit: seed 002's pseudo-inputs); a
+    /// write changes that bit alone.
+    Bit(u8),
 }
 
 /// `n / d` rounded to the nearest (halves away from zero); `None` for `d == 0` or overflow.
@@ -110,7 +113,7 @@ impl Scale {
     /// The factor as a fraction, given the microsteps a revolution.
     const fn fraction(self, per_rev: i64) -> (i64, i64) {
         match self {
-            Scale::One | Scale::Table(_) => (1, 1),
+            Scale::One | Scale::Table(_) | Scale::Bit(_) => (1, 1),
             Scale::Ratio(n, d) => (n as i64, d as i64),
             Scale::PerRev(n, d) => (n as i64 * per_rev, d as i64),
         }
@@ -393,6 +396,9 @@ impl LayoutMap {
     /// The map's value of `e` now, as register bits (32 at most).
     fn map_value<P: Borrow<Table>>(&self, drive: &DriveState<P>, e: &Entry) -> u32 {
         let d = e.obj.def();
+        if let Scale::Bit(k) = e.scale {
+            return drive.read_def(d).checked_shr(u32::from(k)).unwrap_or(0) & 1;
+        }
         let v = signed(d, drive.read_def(d));
         // A drive value beyond the map's range reads as its low bits.
         e.scale.to_map(v, per_rev(drive)).unwrap_or(v) as u32
@@ -401,6 +407,15 @@ impl LayoutMap {
     /// The drive's raw value of the map's register bits `bits` for `e`.
     fn drive_value<P: Borrow<Table>>(&self, drive: &DriveState<P>, e: &Entry, bits: u32) -> Result<u32, ObjError> {
         let d = e.obj.def();
+        if let Scale::Bit(k) = e.scale {
+            let bit = 1u32.checked_shl(u32::from(k)).unwrap_or(0);
+            let old = drive.read_def(d);
+            return match bits {
+                0 => Ok(old & !bit),
+                1 => Ok(old | bit),
+                _ => Err(ObjError::OutOfRange),
+            };
+        }
         // The map's register is signed as the object is.
         let v = match d.ty {
             Type::S32 if e.narrow => i64::from(bits as u16 as i16),

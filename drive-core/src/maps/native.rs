@@ -524,6 +524,8 @@ mod tests {
             comm: 0x01,
             supply_mv: 24_000,
             current_ma: 1_500,
+            inputs: 0,
+            input_edges: 0,
         };
         let map = NativeMap::new();
         for d in OBJECTS.iter() {

@@ -23,6 +23,9 @@ const HOMING_METHODS: [u32; 26] = [
     1, 2, 3, 4, 5, 6, 17, 18, 19, 20, 21, 22, 33, 34, 35, 37, 0xFFFF, 0xFFFE, 0xFFFD, 0xFFFC, 0xFFFB, 0xFFFA, 0xFFF9,
     0xFFF8, 0xFFF7, 0xFFF6,
 ];
+/// The functions an input takes (0x21BA-0x21C0): the motion commands, the limit and home
+/// switches, enable.
+const INPUT_FUNCTIONS: &[u32] = &[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 20];
 /// A PVT table index or count.
 const PVT_INDEX: Range = Span(0, 1000);
 /// Full signed 32-bit range.
@@ -386,6 +389,52 @@ objects! {
     /// pulses"): 1 the drive powers up in work mode 3, following the pulse input; 0 in mode 0,
     /// commanded over the bus. Read at power-up only: save it and restart, as seed 002 says.
     PulseAtPowerUp @ 0x21B9: U8, Rw, Rom, Span(0, 1), default 0, None, "pulse following at power-up";
+    /// IN1 function (our object; seed 002's 0400; IN2-IN7 are 0x21BB-0x21C0, its 0401-0406):
+    /// what the input does when it turns active (at 0x21C1's level, or its pseudo-input 0x21C2
+    /// set): 0 nothing; 1-8, 12 and 13 the motion command of that number (0x21A0); 9 / 10 the
+    /// positive / negative limit switch: a motion heading into an active one stops at the stop
+    /// deceleration and a command towards it is refused (04); 11 the home switch of the homing
+    /// (9 and 10 its limits too), over 0x216C; 20 enable: 0x6011 follows the input. IN1-IN3
+    /// are EXT1-EXT3, IN4-IN7 GPIO1-GPIO4. Seed 002's multi-segment functions (14-18, 25-29) are
+    /// refused (03).
+    InputFunction1 @ 0x21BA: U8, Rw, Rom, Set(INPUT_FUNCTIONS), default 0, None, "IN1 function";
+    /// IN2 function (our object; seed 002's 0401): as 0x21BA.
+    InputFunction2 @ 0x21BB: U8, Rw, Rom, Set(INPUT_FUNCTIONS), default 0, None, "IN2 function";
+    /// IN3 function (our object; seed 002's 0402): as 0x21BA.
+    InputFunction3 @ 0x21BC: U8, Rw, Rom, Set(INPUT_FUNCTIONS), default 0, None, "IN3 function";
+    /// IN4 function (our object; seed 002's 0403): as 0x21BA.
+    InputFunction4 @ 0x21BD: U8, Rw, Rom, Set(INPUT_FUNCTIONS), default 0, None, "IN4 function";
+    /// IN5 function (our object; seed 002's 0404): as 0x21BA.
+    InputFunction5 @ 0x21BE: U8, Rw, Rom, Set(INPUT_FUNCTIONS), default 0, None, "IN5 function";
+    /// IN6 function (our object; seed 002's 0405): as 0x21BA.
+    InputFunction6 @ 0x21BF: U8, Rw, Rom, Set(INPUT_FUNCTIONS), default 0, None, "IN6 function";
+    /// IN7 function (our object; seed 002's 0406): as 0x21BA.
+    InputFunction7 @ 0x21C0: U8, Rw, Rom, Set(INPUT_FUNCTIONS), default 0, None, "IN7 function";
+    /// Input logic (our object; seed 002's 0429): bit k set, IN k+1 is active low.
+    InputLogic @ 0x21C1: U8, Rw, Rom, Bits(0x7F), default 0, None, "input logic";
+    /// Pseudo-inputs (our object; seed 002's 0410-0416, a bit each): bit k set acts as IN k+1
+    /// turning active (its function at once; an enable input's level while set).
+    PseudoInputs @ 0x21C2: U8, Rw, Ram, Bits(0x7F), default 0, None, "pseudo inputs";
+    /// OUT1 function (our object; seed 002's 0420, 100 more; OUT2-OUT4 are 0x21C4-0x21C6): 0 none
+    /// (the pin is GPIO5 as 0x602E/0x602F/0x6031 set it), 1 general (on while 0x21C7's bit is
+    /// set), 2 alarm (on while no alarm is latched), 3 in position (on while the axis stands on
+    /// its target, within 0x21C9 in closed loop), 4 motor free (on while the power stage is off),
+    /// 5 ready (on while it drives the motor). An output with a function is a push-pull output,
+    /// high when on unless 0x21C8 inverts it. OUT1-OUT4 are GPIO5-GPIO8.
+    OutputFunction1 @ 0x21C3: U8, Rw, Rom, Span(0, 5), default 0, None, "OUT1 function";
+    /// OUT2 function (our object; seed 002's 0421): as 0x21C3, on GPIO6.
+    OutputFunction2 @ 0x21C4: U8, Rw, Rom, Span(0, 5), default 0, None, "OUT2 function";
+    /// OUT3 function (our object; seed 002's 0422): as 0x21C3, on GPIO7.
+    OutputFunction3 @ 0x21C5: U8, Rw, Rom, Span(0, 5), default 0, None, "OUT3 function";
+    /// OUT4 function (our object; seed 002's 0423): as 0x21C3, on GPIO8.
+    OutputFunction4 @ 0x21C6: U8, Rw, Rom, Span(0, 5), default 0, None, "OUT4 function";
+    /// General outputs (our object; seed 002's 0428): bit k turns OUT k+1 on if its function is 1.
+    GeneralOutputs @ 0x21C7: U8, Rw, Ram, Bits(0x0F), default 0, None, "general outputs";
+    /// Output logic (our object; seed 002's 0430): bit k set, OUT k+1 is low when on.
+    OutputLogic @ 0x21C8: U8, Rw, Rom, Bits(0x0F), default 0, None, "output logic";
+    /// In-position window (our object; seed 002's 0247): in closed loop the in-position output
+    /// needs the encoder within this many counts of the target; in open loop standing on it.
+    InPositionWindow @ 0x21C9: U16, Rw, Rom, Span(0, 1000), default 0, None, "in-position window";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake

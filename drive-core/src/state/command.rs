@@ -141,6 +141,11 @@ impl Planner<'_> {
         Ok(true)
     }
 
+    /// Refuses (04) a motion heading up (`up`) into an active limit switch.
+    fn away_from_limits(&self, up: bool) -> Result<(), ObjError> {
+        refuse(self.limits & if up { 1 } else { 2 } == 0, ObjError::NotNow)
+    }
+
     /// The enabled soft limits: the lowest and the highest position a motion command may reach.
     fn soft_limits(&self) -> (i64, i64) {
         let on = self.param(Obj::SoftLimits);
@@ -164,6 +169,9 @@ impl Planner<'_> {
 
     /// A run from `here` to `target` (within the soft limits) at the run speed 0x21B5.
     fn run_to(&self, axis: &mut Axis, here: i64, target: i64) -> Result<(), ObjError> {
+        if target != here {
+            self.away_from_limits(target > here)?;
+        }
         let speed = self.param(Obj::CommandSpeed) as f32;
         self.run_to_at(axis, self.soft_limited(here, target), speed)
     }
@@ -175,6 +183,7 @@ impl Planner<'_> {
 
     /// A run at `v` (its sign the direction), or a move to the soft limit it heads for.
     fn run(&self, axis: &mut Axis, v: f32) -> Result<(), ObjError> {
+        self.away_from_limits(v > 0.0)?;
         let (lo, hi) = self.soft_limits();
         let here = axis.setpoint().whole;
         let (limit, far) = if v > 0.0 { (hi, i64::MAX) } else { (lo, i64::MIN) };

@@ -21,7 +21,7 @@
 
 use super::DriveState;
 use crate::controller::handoff::{Lent, Orders, TickSide};
-use crate::controller::io::{NotifyOutput, PinConfig, PulseInput};
+use crate::controller::io::{IoFunctions, NotifyOutput, OUT_PINS, OutputFunction, PinConfig, PulseInput};
 use crate::controller::{DECAY, Events, STATUS_EXT, STATUS_STALL, Settings};
 use crate::faults::Inputs;
 use crate::modes::{Command, PowerState, PulseFormat, Running, WorkMode};
@@ -136,6 +136,21 @@ pub(crate) const fn runs_on(obj: Obj) -> bool {
             | Obj::NotifyOutput
             | Obj::PulseFormat
             | Obj::PulseFilter
+            | Obj::InputFunction1
+            | Obj::InputFunction2
+            | Obj::InputFunction3
+            | Obj::InputFunction4
+            | Obj::InputFunction5
+            | Obj::InputFunction6
+            | Obj::InputFunction7
+            | Obj::InputLogic
+            | Obj::OutputFunction1
+            | Obj::OutputFunction2
+            | Obj::OutputFunction3
+            | Obj::OutputFunction4
+            | Obj::GeneralOutputs
+            | Obj::OutputLogic
+            | Obj::InPositionWindow
     )
 }
 
@@ -145,6 +160,7 @@ pub(crate) fn settings_of(params: &[u32; Obj::COUNT]) -> Settings {
     let get = |obj: Obj| params.get(obj as usize).copied().unwrap_or(0);
     let mode = WorkMode::from_raw(get(Obj::Mode)).unwrap_or_default();
     let control = get(Obj::PowerLossControl);
+    let io = io_functions(&get);
     Settings {
         enabled: get(Obj::Enable) == 1,
         stop_decel: stop_deceleration(mode, get(Obj::PpDecel), get(Obj::DecelLevel)),
@@ -164,7 +180,8 @@ pub(crate) fn settings_of(params: &[u32; Obj::COUNT]) -> Settings {
             get(Obj::ExtStopEnable) as u8,
             get(Obj::ExtStopTrigger) as u8,
             get(Obj::SensorType) == 1,
-        ),
+        )
+        .with_outputs(io.output_pins),
         notify: [i64::from(get(Obj::NotifyPos1) as i32), i64::from(get(Obj::NotifyPos2) as i32)],
         notify_output: NotifyOutput::from_object(get(Obj::NotifyOutput)),
         under_voltage_mv: get(Obj::UnderVoltage),
@@ -191,8 +208,43 @@ pub(crate) fn settings_of(params: &[u32; Obj::COUNT]) -> Settings {
             format: PulseFormat::from_raw(get(Obj::PulseFormat)).unwrap_or_default(),
             filter: get(Obj::PulseFilter) as u8,
         },
+        io,
     }
 }
+
+/// The inputs' and outputs' functions of the objects' values (`get`).
+fn io_functions(get: &impl Fn(Obj) -> u32) -> IoFunctions {
+    let inputs = INPUT_FUNCTION_OBJECTS.map(get);
+    let with = |function: u32| inputs.iter().enumerate().fold(0u8, |m, (k, &f)| m | (u8::from(f == function) << k));
+    let outputs = OUTPUT_FUNCTION_OBJECTS.map(|o| OutputFunction::from_raw(get(o)).unwrap_or_default());
+    let output_pins =
+        OUT_PINS.iter().zip(outputs).fold(0, |m, (&pin, f)| if f == OutputFunction::None { m } else { m | pin });
+    IoFunctions {
+        inputs: inputs.iter().enumerate().fold(0u8, |m, (k, &f)| m | (u8::from(f != 0) << k)),
+        output_pins,
+        input_low: get(Obj::InputLogic) as u8,
+        limit_positive: with(super::inputs::INPUT_LIMIT_POSITIVE),
+        limit_negative: with(super::inputs::INPUT_LIMIT_NEGATIVE),
+        outputs,
+        general: get(Obj::GeneralOutputs) as u8,
+        output_low: get(Obj::OutputLogic) as u8,
+        in_position: get(Obj::InPositionWindow) as u16,
+    }
+}
+
+/// OUT1-OUT4's function objects.
+pub(crate) const OUTPUT_FUNCTION_OBJECTS: [Obj; 4] =
+    [Obj::OutputFunction1, Obj::OutputFunction2, Obj::OutputFunction3, Obj::OutputFunction4];
+/// IN1-IN7's function objects.
+pub(crate) const INPUT_FUNCTION_OBJECTS: [Obj; 7] = [
+    Obj::InputFunction1,
+    Obj::InputFunction2,
+    Obj::InputFunction3,
+    Obj::InputFunction4,
+    Obj::InputFunction5,
+    Obj::InputFunction6,
+    Obj::InputFunction7,
+];
 
 /// The deceleration of a stop in `mode`, pps²: `pp_decel` (0x6068) in the profile modes, else
 /// the level `level` of 0x600B; 0 (stop at once) for level 0, which has no ramp.
@@ -247,7 +299,13 @@ impl<P: Borrow<Table>> DriveState<P> {
             now: self.plan_time(),
             may_move: self.may_move(),
             encoder: self.encoder_position(),
+            limits: self.active_limits(),
         }
+    }
+
+    /// The limit switches active now: bit 0 the positive, bit 1 the negative.
+    fn active_limits(&self) -> u8 {
+        u8::from(self.limit_ahead(true)) | (u8::from(self.limit_ahead(false)) << 1)
     }
 
     /// Plans writing `value` to the motion object `obj` at the plan time on `planned`, a copy of
@@ -261,8 +319,8 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// with no copy: for a multi-object write, whose checkpoint restores them if it is refused
     /// (a refused plan may have halted the axis). What [`DriveState::plan_motion`] returns.
     pub(crate) fn plan_motion_in_place(&mut self, obj: Obj, value: u32) -> Result<bool, ObjError> {
-        let (may_move, encoder) = (self.may_move(), self.encoder_position());
-        let planner = Planner { params: &self.params, now: self.plan_time(), may_move, encoder };
+        let (may_move, encoder, limits) = (self.may_move(), self.encoder_position(), self.active_limits());
+        let planner = Planner { params: &self.params, now: self.plan_time(), may_move, encoder, limits };
         planner.plan_motion(obj, value, &mut self.ctl.axis, &mut self.pp)
     }
 
@@ -387,6 +445,7 @@ impl<P: Borrow<Table>> DriveState<P> {
         self.homing_service();
         self.analog_service();
         self.follow_service();
+        self.inputs_service();
         self.quick_stop_settle();
     }
 
@@ -394,7 +453,7 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// next reading.
     pub fn service_due(&self) -> Option<Instant> {
         let due = self.homing_due().into_iter().chain(self.analog_due()).chain(self.device_due());
-        due.chain(self.follow_due()).min()
+        due.chain(self.follow_due()).chain(self.inputs_due()).min()
     }
 
     /// Whether [`DriveState::service`] has something to do at `now`: for a platform that must
@@ -506,6 +565,9 @@ pub(crate) struct Planner<'a> {
     pub(crate) may_move: Result<(), ObjError>,
     /// The encoder position, counts, in closed loop.
     encoder: Option<i64>,
+    /// The limit switches active (bit 0 positive, bit 1 negative): a motion command towards
+    /// one is refused.
+    pub(super) limits: u8,
 }
 
 impl Planner<'_> {

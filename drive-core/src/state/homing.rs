@@ -35,6 +35,8 @@
 //! method with the EXT stops on its limits.
 
 use super::DriveState;
+use super::inputs::{INPUT_HOME, INPUT_LIMIT_NEGATIVE, INPUT_LIMIT_POSITIVE};
+use crate::controller::io::IN_PINS;
 use crate::controller::{Events, STATUS_STALL, Watch, WatchOn};
 use crate::faults::FAULT_POSITION;
 use crate::motion::cubic::Table;
@@ -186,17 +188,28 @@ fn pin_of(k: u32) -> Option<u16> {
 }
 
 impl<P: Borrow<Table>> DriveState<P> {
-    /// Whether the home switch, the negative and the positive limit switch of 0x216C are
-    /// actuated now (one without an input is not).
+    /// The pin of the home switch (`field` 0), the negative (1) or the positive limit switch (2),
+    /// and whether it is active high: an input whose function (0x21BA-0x21C0) is that switch (11,
+    /// 10, 9) with its level of 0x21C1, else 0x216C's input and 0x216D's level.
+    pub(crate) fn homing_switch(&self, field: u8) -> Option<(u16, bool)> {
+        let function = [INPUT_HOME, INPUT_LIMIT_NEGATIVE, INPUT_LIMIT_POSITIVE].get(usize::from(field)).copied();
+        if let Some(k) = (0..IN_PINS.len()).find(|&k| Some(self.input_function(k)) == function) {
+            let low = self.param(Obj::InputLogic) & (1 << k) != 0;
+            return IN_PINS.get(k).map(|&pin| (pin, !low));
+        }
+        let k = (self.param(Obj::HomingInputs) >> (4 * field)) & 0xF;
+        pin_of(k).map(|pin| (pin, self.param(Obj::HomingPolarity) & (1 << field) != 0))
+    }
+
+    /// Whether the home switch, the negative and the positive limit switch are actuated now (one
+    /// without an input is not).
     pub(crate) fn switches(&self) -> [bool; 3] {
-        let inputs = self.param(Obj::HomingInputs);
-        let polarity = self.param(Obj::HomingPolarity);
         let mut out = [false; 3];
-        for (input, actuated) in (0..).zip(out.iter_mut()) {
-            if let Some(pin) = pin_of((inputs >> (4 * input)) & 0xF) {
+        for (field, actuated) in (0..).zip(out.iter_mut()) {
+            if let Some((pin, active_high)) = self.homing_switch(field) {
                 // 0x6031 holds an input's level inverted.
                 let high = self.ctl.status.gpio & pin == 0;
-                *actuated = high == (polarity & (1 << input) != 0);
+                *actuated = high == active_high;
             }
         }
         out
@@ -216,10 +229,7 @@ impl<P: Borrow<Table>> DriveState<P> {
         refuse(self.ctl.axis.is_still() && self.ctl.run.is_none(), ObjError::Busy)?;
         let method = Method::of(self.param(Obj::HomingMethod)).ok_or(ObjError::OutOfRange)?;
         match method {
-            Method::Switch { input, .. } => {
-                let k = (self.param(Obj::HomingInputs) >> (4 * input)) & 0xF;
-                refuse(pin_of(k).is_some(), ObjError::NotNow)
-            }
+            Method::Switch { input, .. } => refuse(self.homing_switch(input).is_some(), ObjError::NotNow),
             Method::HardStop { .. } => {
                 // The stall must be seen: the closed loop's following error, or the sensorless
                 // detection on and the creep above its minimum speed.
@@ -230,7 +240,7 @@ impl<P: Borrow<Table>> DriveState<P> {
                 refuse(closed || sensorless, ObjError::NotNow)
             }
             Method::Search { target, reverse, .. } => {
-                let has = |field: u8| pin_of((self.param(Obj::HomingInputs) >> (4 * field)) & 0xF).is_some();
+                let has = |field: u8| self.homing_switch(field).is_some();
                 refuse(has(target) && reverse.is_none_or(has), ObjError::NotNow)
             }
             Method::Index { .. } | Method::Here => Ok(()),
@@ -255,8 +265,13 @@ impl<P: Borrow<Table>> DriveState<P> {
             ..Homing::default()
         };
         let one = |s: Step| [Some(s), None, None, None];
-        let (inputs, polarity) = (self.param(Obj::HomingInputs), self.param(Obj::HomingPolarity));
-        let field = move |f: u8| (pin_of((inputs >> (4 * f)) & 0xF).unwrap_or(0), polarity & (1 << f) != 0);
+        let switch = |f: u8| self.homing_switch(f).unwrap_or((0, false));
+        let (home, negative, positive) = (switch(0), switch(1), switch(2));
+        let field = move |f: u8| match f {
+            0 => home,
+            1 => negative,
+            _ => positive,
+        };
         match method {
             Method::Search { target, up, reverse, edge } => {
                 let step = |up, fast, until, home, reverse| Some(Step { up, fast, until, home, reverse });
@@ -288,9 +303,7 @@ impl<P: Borrow<Table>> DriveState<P> {
                 self.homing.steps = one(Step { up, fast: false, until: Until::Stall, home: true, reverse: false })
             }
             Method::Switch { input, above, up, index } => {
-                let inputs = self.param(Obj::HomingInputs);
-                let pin = pin_of((inputs >> (4 * input)) & 0xF).unwrap_or(0);
-                let active_high = self.param(Obj::HomingPolarity) & (1 << input) != 0;
+                let (pin, active_high) = self.homing_switch(input).unwrap_or((0, false));
                 // 0x6031 holds an input's level inverted.
                 let high = self.ctl.status.gpio & pin == 0;
                 let active = high == active_high;

@@ -7,6 +7,7 @@ mod command;
 pub mod control;
 mod device;
 pub mod homing;
+mod inputs;
 pub mod pvt;
 
 use crate::controller::handoff::{Base, Orders};
@@ -84,6 +85,16 @@ impl Params {
         for ((v, p), d) in values.iter_mut().zip(self.values.iter()).zip(OBJECTS.iter()) {
             if Self::covers(d) {
                 *v = *p;
+            }
+        }
+    }
+
+    /// Gives the objects a save does not cover their factory values, in place, but the
+    /// power-down position (a record of its own): what a drive is built from.
+    pub(crate) fn keep_saved(&mut self) {
+        for (v, d) in self.values.iter_mut().zip(OBJECTS.iter()) {
+            if !Self::covers(d) && d.obj != Obj::SavedPosition {
+                *v = d.default;
             }
         }
     }
@@ -171,6 +182,8 @@ pub struct DriveState<P = Table> {
     pub(crate) homing: homing::Homing,
     /// The analog input's follower.
     pub(crate) analog: analog::Analog,
+    /// What the inputs' functions did.
+    pub(crate) inputs: inputs::Inputs,
     /// How long after a request its motion starts, µs: 0 where `ctl` is ticked itself; where the
     /// tick owns a controller of its own, longer than planning and handing over take.
     margin: u64,
@@ -259,6 +272,7 @@ impl<P: Borrow<Table>> DriveState<P> {
             orders: Orders::default(),
             homing: homing::Homing::default(),
             analog: analog::Analog::default(),
+            inputs: inputs::Inputs::default(),
             margin: 0,
             device: if get(Obj::Enable) == 1 {
                 crate::power::DeviceState::OperationEnabled
@@ -289,6 +303,7 @@ impl<P: Borrow<Table>> DriveState<P> {
             orders,
             homing,
             analog: _,
+            inputs: _,
             margin: _,
             device,
             quick_check: _,

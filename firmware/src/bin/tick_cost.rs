@@ -24,6 +24,10 @@
 //! - `sensorless`: open loop with the stall detection (0x2107 = 1), fed the phase currents and
 //!   bridge voltages of a motor turning 30° electrical behind its current.
 //!
+//! - `io_functions`: open loop with every input and output given a function (0x21BA-0x21C6:
+//!   limit and home switches, commands; alarm, in position, general, ready), the inputs
+//!   inactive.
+//!
 //! It prints one line a case through semihosting, then ends QEMU.
 #![no_std]
 #![no_main]
@@ -78,10 +82,11 @@ enum Case {
     ServoLoop,
     ServoLoopRamp,
     Sensorless,
+    IoFunctions,
 }
 
 impl Case {
-    const ALL: [Case; 8] = [
+    const ALL: [Case; 9] = [
         Case::Open,
         Case::OpenRamp,
         Case::OpenPvt,
@@ -90,6 +95,7 @@ impl Case {
         Case::ServoLoop,
         Case::ServoLoopRamp,
         Case::Sensorless,
+        Case::IoFunctions,
     ];
 
     fn name(self) -> &'static str {
@@ -102,6 +108,7 @@ impl Case {
             Case::ServoLoop => "servo_loop",
             Case::ServoLoopRamp => "servo_loop_ramp",
             Case::Sensorless => "sensorless",
+            Case::IoFunctions => "io_functions",
         }
     }
 
@@ -112,6 +119,19 @@ impl Case {
             Case::PositionLoop => &[(Obj::Feedback, 1), (Obj::TorqueLoop, 0)],
             Case::ServoLoop | Case::ServoLoopRamp => &[(Obj::Feedback, 1), (Obj::TorqueLoop, 1)],
             Case::Sensorless => &[(Obj::StallDetect, 1)],
+            Case::IoFunctions => &[
+                (Obj::InputFunction1, 9),
+                (Obj::InputFunction2, 10),
+                (Obj::InputFunction3, 11),
+                (Obj::InputFunction4, 4),
+                (Obj::InputFunction5, 5),
+                (Obj::InputFunction6, 6),
+                (Obj::InputFunction7, 13),
+                (Obj::OutputFunction1, 2),
+                (Obj::OutputFunction2, 3),
+                (Obj::OutputFunction3, 1),
+                (Obj::OutputFunction4, 5),
+            ],
         }
     }
 
@@ -120,13 +140,13 @@ impl Case {
         let Some(last) = last else {
             // Power-up: the encoder reads 0, nothing turns yet.
             return match self {
-                Case::Open | Case::OpenRamp | Case::OpenPvt => Inputs::default(),
+                Case::Open | Case::OpenRamp | Case::OpenPvt | Case::IoFunctions => Inputs::default(),
                 Case::PositionLoop | Case::ServoLoop | Case::ServoLoopRamp => Inputs { encoder: Some(0), ..MEASURED },
                 Case::OpenMeasured | Case::Sensorless => MEASURED,
             };
         };
         match self {
-            Case::Open | Case::OpenRamp | Case::OpenPvt => Inputs::default(),
+            Case::Open | Case::OpenRamp | Case::OpenPvt | Case::IoFunctions => Inputs::default(),
             Case::OpenMeasured => MEASURED,
             // Closed loop: the setpoint is in encoder counts.
             Case::PositionLoop | Case::ServoLoop | Case::ServoLoopRamp => {
@@ -188,7 +208,7 @@ impl<'a> Rig<'a> {
         if !settings.iter().chain(case.settings()).all(|&(obj, v)| params.set(obj, v)) {
             return None;
         }
-        let drive = boot_into(slot, &params);
+        let drive = boot_into(slot, &mut params);
         drive.state_mut().set_plan_margin(PLAN_MARGIN_US);
         let tick = tick.write(drive.state().tick_side());
         let last = tick.tick(Instant::from_micros(0), &case.measure(None), &TABLE);
@@ -304,7 +324,7 @@ impl<'a> Rig<'a> {
 }
 
 /// Builds the drive in `slot`, lending it the table as the firmware does.
-fn boot_into<'a>(slot: &'a mut MaybeUninit<Drive>, params: &Params) -> &'a mut Drive {
+fn boot_into<'a>(slot: &'a mut MaybeUninit<Drive>, params: &mut Params) -> &'a mut Drive {
     Drive::boot_in(slot, DriveConfig::default(), NativeMap::new(), params, 0, &TABLE)
 }
 

@@ -1,0 +1,90 @@
+//! The inputs' functions on the bus side (our 0x21BA-0x21C2; seed 002's 0400-0416, 0429): an
+//! input turning active, or its pseudo-input written 1, carries out its function here, planned
+//! as a write of the motion command would be; an enable input holds 0x6011 at its level. The
+//! control tick reads the inputs, latches their activations for this side and stops a motion
+//! heading into an active limit switch (`controller::io`); the homing takes its switches from
+//! the inputs' functions (`homing`).
+//!
+//! Choices where seed 002 is silent: an input acts on its activation (its edge), not while it
+//! stays active, so that a held jog input jogs once it is pressed and a stop (6) ends it; the
+//! levels an input is in at power-up are no activation. A command an input gives is refused as
+//! the same write over the bus would be, and then nothing moves; the master sees the refusal in
+//! nothing but the motion not happening (seed 002 has no status for it).
+
+use super::DriveState;
+use super::control::INPUT_FUNCTION_OBJECTS;
+use crate::modes::Command;
+use crate::motion::cubic::Table;
+use crate::od::Obj;
+use crate::units::Instant;
+use core::borrow::Borrow;
+
+/// Input function 9: the positive limit switch.
+pub(crate) const INPUT_LIMIT_POSITIVE: u32 = 9;
+/// Input function 10: the negative limit switch.
+pub(crate) const INPUT_LIMIT_NEGATIVE: u32 = 10;
+/// Input function 11: the home switch.
+pub(crate) const INPUT_HOME: u32 = 11;
+/// Input function 20: enable.
+const INPUT_ENABLE: u32 = 20;
+
+/// The bus side's memory of the inputs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct Inputs {
+    /// The pseudo-inputs (0x21C2) already acted on.
+    pseudo_seen: u8,
+}
+
+impl<P: Borrow<Table>> DriveState<P> {
+    /// The function of IN k+1 (0x21BA-0x21C0).
+    pub(crate) fn input_function(&self, k: usize) -> u32 {
+        INPUT_FUNCTION_OBJECTS.get(k).map_or(0, |&obj| self.param(obj))
+    }
+
+    /// Whether an input with function `function` is active now (or its pseudo-input set).
+    pub(crate) fn input_active(&self, function: u32) -> bool {
+        let active = self.ctl.status.inputs | self.param(Obj::PseudoInputs) as u8;
+        (0..INPUT_FUNCTION_OBJECTS.len()).any(|k| active & (1 << k) != 0 && self.input_function(k) == function)
+    }
+
+    /// The enable an enable input asks for, if an input has that function.
+    fn enable_asked(&self) -> Option<bool> {
+        let has = (0..INPUT_FUNCTION_OBJECTS.len()).any(|k| self.input_function(k) == INPUT_ENABLE);
+        has.then(|| self.input_active(INPUT_ENABLE))
+    }
+
+    /// When [`DriveState::inputs_service`] has something to do: now, if an input turned active,
+    /// a pseudo-input was set, or an enable input disagrees with 0x6011.
+    pub(crate) fn inputs_due(&self) -> Option<Instant> {
+        let pseudo = self.param(Obj::PseudoInputs) as u8;
+        let enable = self.enable_asked().is_some_and(|on| on != (self.param(Obj::Enable) == 1));
+        let due = self.ctl.status.input_edges != 0 || pseudo != self.inputs.pseudo_seen || enable;
+        due.then_some(self.now)
+    }
+
+    /// Carries out the functions of the inputs that turned active since the last time, and the
+    /// enable input's level.
+    pub(crate) fn inputs_service(&mut self) {
+        let pseudo = self.param(Obj::PseudoInputs) as u8;
+        let edges = self.ctl.status.input_edges | (pseudo & !self.inputs.pseudo_seen);
+        (self.ctl.status.input_edges, self.inputs.pseudo_seen) = (0, pseudo);
+        for k in 0..INPUT_FUNCTION_OBJECTS.len() {
+            let function = self.input_function(k);
+            if edges & (1 << k) == 0 || !Command::from_raw(function).is_some_and(|c| c != Command::None) {
+                continue;
+            }
+            // Refused as the same write over the bus would be: nothing moves.
+            let _ = self.write_undoable(Obj::MotionCommand.def(), function);
+        }
+        if let Some(on) = self.enable_asked()
+            && on != (self.param(Obj::Enable) == 1)
+        {
+            let _ = self.write_undoable(Obj::Enable.def(), u32::from(on));
+        }
+    }
+
+    /// Whether a motion heading up (`up`) runs into an active limit switch.
+    pub(crate) fn limit_ahead(&self, up: bool) -> bool {
+        self.input_active(if up { INPUT_LIMIT_POSITIVE } else { INPUT_LIMIT_NEGATIVE })
+    }
+}
