@@ -125,7 +125,9 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
         let mut params = params.clone();
         let faults = FaultLog::restored(&params.fault_history());
         params.keep_saved();
-        Self::assemble(config, map, &mut params, faults, storage, table)
+        let mut drive = Self::assemble(config, map, &mut params, faults, storage, table);
+        drive.factory_settings_if_empty(storage);
+        drive
     }
 
     /// [`Drive::boot_with_table`] built in `slot`, where a microcontroller keeps its drive, from
@@ -142,7 +144,16 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
     ) -> &'a mut Self {
         let faults = FaultLog::restored(&params.fault_history());
         params.keep_saved();
-        slot.write(Self::assemble(config, map, params, faults, storage, table))
+        let drive = slot.write(Self::assemble(config, map, params, faults, storage, table));
+        drive.factory_settings_if_empty(storage);
+        drive
+    }
+
+    /// With nothing saved (`storage`), the register map's own factory settings over the drive's.
+    fn factory_settings_if_empty(&mut self, storage: u8) {
+        if storage & (STORAGE_EMPTY | STORAGE_CORRUPT | STORAGE_FSET) != 0 {
+            self.map.factory_settings(&mut self.state);
+        }
     }
 
     /// The drive [`Drive::boot_with_table`] builds from `params` (what a save covers, and the
@@ -352,7 +363,13 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
                 }
             }
             None if !self.framer.crc_ok() => c.bus_errors = c.bus_errors.wrapping_add(1),
-            None => self.serve(),
+            None => {
+                self.serve();
+                if core::mem::take(&mut self.state.factory_restored) {
+                    // The map's own factory settings go over the drive's, before the save.
+                    self.map.factory_settings(&mut self.state);
+                }
+            }
         }
         self.framer.clear();
     }

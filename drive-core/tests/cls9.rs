@@ -7,6 +7,7 @@ mod common;
 
 use drive_core::maps::Maps;
 use drive_core::od::{OBJECTS, Obj};
+use drive_core::{Drive, DriveConfig, Params};
 
 /// A DS-CLS9 drive with a clock.
 type Rig = common::MapRig;
@@ -309,6 +310,27 @@ fn the_map_is_a_saved_setting_and_switches_back() {
     assert_eq!(r.set(0x2190, 3), Err(3));
     r.set(0x2190, 0).expect("native");
     assert_eq!(r.drive.state().read(Obj::RegisterMap), 0);
+}
+
+/// With nothing saved the drive takes the manual's factory values where they differ from its
+/// own, and a factory reset (0206 = 1) brings them back; the native map keeps the drive's.
+#[test]
+fn the_manuals_factory_values_with_nothing_saved_and_after_a_reset() {
+    let empty = drive_core::drive::STORAGE_EMPTY;
+    let config = DriveConfig { can_save: true, ..DriveConfig::default() };
+    let cls9 = Drive::boot_with_map(config, Maps::cls9(), &Params::factory(), empty);
+    let mut r = common::MapRig::with_drive(cls9);
+    let defaults = vec![100, 100, 100, 100, 0, 1000, 1000, 1000, 1000, 1000];
+    assert_eq!(r.read(301, 10), Ok(defaults.clone()));
+    assert_eq!(r.read(420, 4), Ok(vec![101, 100, 100, 100]));
+    r.set(306, 500).expect("0306");
+    r.set(420, 102).expect("0420");
+    r.set(206, 1).expect("parameter reset");
+    assert_eq!(r.read(301, 10), Ok(defaults), "the manual's values again");
+    assert_eq!(r.read(420, 1), Ok(vec![101]));
+    assert_eq!(r.drive.take_system_request(), Some(drive_core::SystemRequest::Save), "and saved");
+    let native = Drive::boot_with_map(DriveConfig::default(), Maps::by_id(0), &Params::factory(), empty);
+    assert_eq!(native.state().read(Obj::CommandSpeed), Obj::CommandSpeed.def().default);
 }
 
 proptest::proptest! {

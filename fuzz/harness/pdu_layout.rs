@@ -49,6 +49,7 @@ pub static LAYOUT: Layout = Layout {
     walk: Walk::Address,
     halves: true,
     timing: false,
+    defaults: &[],
 };
 
 /// Every code the layout answers, and the request-level ones.

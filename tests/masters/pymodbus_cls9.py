@@ -68,6 +68,9 @@ def speed_after(seconds):
 # Factory: 200 pulses a revolution, energised and standing, no alarm.
 check("0104 resolution", read32(104) == 200, read32(104))
 check("0108/0109 no alarm, standing", read(108, 2) == [0, 2], read(108, 2))
+factory = [100, 100, 100, 100, 0, 1000, 1000, 1000, 1000, 1000]
+check("0301-0310 the manual's factory values", read(301, 10) == factory, read(301, 10))
+check("0420-0423 the manual's factory values", read(420, 4) == [101, 100, 100, 100], read(420, 4))
 
 # 3200 pulses a revolution, ramps of 50 rev/s², runs at 5 rev/s, jogs at 2 rev/s.
 check("0242 = 3200", write32(242, 3200) == 0 and read32(104) == 3200)
@@ -170,7 +173,7 @@ check("0413, 0414 released", write(413, 0) == 0 and write(414, 0) == 0)
 
 # Outputs 0420-0430 and the in-position window 0247.
 check("0420 = 101 (alarm)", write(420, 101) == 0 and read(420) == [101], read(420))
-check("0421 = 99 refused (03)", write(421, 99) == 3 and read(421) == [0], read(421))
+check("0421 = 99 refused (03)", write(421, 99) == 3 and read(421) == [100], read(421))
 check("0428, 0429, 0430", write(428, 1) == 0 and write(429, 3) == 0 and write(430, 2) == 0)
 check("0247 = 20 (two words)", write32(247, 20) == 0 and read32(247) == 20, read32(247))
 

@@ -163,7 +163,29 @@ pub static LAYOUT: Layout = Layout {
     walk: Walk::Address,
     halves: false,
     timing: true,
+    defaults: &DEFAULTS,
 };
+
+/// The manual's factory values (§九) where they differ from the drive's: start and stop
+/// speeds 1 rev/s, ramps 100 rev/s², runs, jogs and homing at 10 rev/s, the homing clockwise,
+/// OUT1 the alarm output and OUT2-OUT4 general outputs (0307's 10 rev/s is a speed, the drive's
+/// run velocity as it stands).
+static DEFAULTS: [(u16, i32); 14] = [
+    (301, 100),
+    (302, 100),
+    (303, 100),
+    (304, 100),
+    (305, 0),
+    (306, 1000),
+    (307, 1000),
+    (308, 1000),
+    (309, 1000),
+    (310, 1000),
+    (420, 101),
+    (421, 100),
+    (422, 100),
+    (423, 100),
+];
 
 /// What the reference says beside the table: the decisions where seed 002 is silent or
 /// contradicts itself.
@@ -173,6 +195,7 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
     notes: &[
         "Chosen with 0x2190 = 2, saved (0x200F = 2), from the next power-up; `hal-sim --map cls9` for one run. 0x2190 = 0 and a save switch back to the native map. Register numbers are decimal (0299 has two words and the next entry is 0301), and the drive's own registers keep their native (hexadecimal) numbers: 0x200F (8207) saves, 0x2100 (8448) the parity, 0x216B-0x216D (8555-8557) the homing's timeout and switches, 0x2190 (8592) the map.",
         "Parameters are kept by a save (0x200F = 2, as in the native map); the manual does not say when its drive stores them.",
+        "Factory values: a drive with nothing saved in this map, and a parameter reset (0206 = 1), take the manual's where they differ from the drive's: 0301-0304 100, 0305 0, 0306-0310 1000, 0420 101, 0421-0423 100, in the resolution in force. The serial line stays at the drive's 9600 baud, 8N1, node 1 (0299's printed 19200 would make a fresh drive unreachable at the rate every other map starts at), 0217 at open loop (the manual's 1, closed loop, needs an encoder the drive may not have) and 0296 at internal pulses (see below). A drive switched from the native map keeps its saved values: the map changes the registers, not the settings.",
         "Functions 0x03, 0x06 and 0x10 (§十三), and the native map's 0x04, 0x08, 0x17 and 0x2B. A read takes up to 125 registers, a write up to 123. A request that covers a register number the table does not have (0102, 0105, ...) is refused with 02.",
         "32-bit values (two words) are high word first (§十二, big-endian) and written whole with 0x10: one half alone is refused with 02.",
         "Speeds are in 0.01 rev/s and accelerations in rev/s² of the resolution in force (0242: a revolution is 0242 pulses), converted exactly to the drive's microsteps (a revolution is 200 × the microsteps, so 0.01 rev/s is a whole number of microsteps a second); a drive value that is not a whole number of the map's units (one a native master wrote) reads rounded to the nearest. The drive runs 150 to 300 000 microsteps a second: a speed below that is refused (03). Start and stop speeds (0301, 0302) take 151 microsteps a second at least.",
@@ -182,10 +205,10 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         "0206 user command: 1 restores the factory parameters and saves them (0x200F = 3), 2 clears the alarms, 3 (restart) is refused (04): the drive does not restart itself; switch the power.",
         "0323 control command (the drive's 0x21A0): 1 absolute run to 0313 at 0306's speed, re-targeted when 0313 is written during the run; 2 relative run by 0313, refused (04) while moving (a write of 0313 during it changes nothing of the run); 3 run at 0307 (its sign the direction; a write of 0307 during it changes the speed); 4 and 5 jog at 0308 until 6 or 7; 6 stop at 0304; 7 stop at the quick-stop deceleration (0x2183, 320 000 microsteps/s² from the factory); 8 set the position to 0321, refused (04) while moving; 12 homing; 13 alarm clear. Runs ramp at 0303/0304 from 0301 and down to 0302. A run is refused (04) with the power stage off or an alarm latched, and in the native map's PVT mode, where only 6 and 7 act (they end the PVT run). Reading 0323 gives the last command written.",
         "Soft limits 0317 / 0319 with 0324 bit 0 (positive) and bit 1 (negative): no motion command goes beyond an enabled limit; a target beyond it stops on it, a run or a jog towards it ends on it. Homing ignores them. 0324's other bits are refused (03).",
-        "Homing (0323 = 12): 0305 0 searches the home switch clockwise (negative), 1 counter-clockwise, at 0309, reversing at the limit switch of that side, then finds the switch's edge again at the creep speed 0310; the home then reads as 0311. Until 0305 is written it reads the drive's own method number (0x2160, factory 35: the home is where the axis stands). Which inputs are the home switch and the limit switches, and their levels, are the drive's 0x216C and 0x216D, and 0x216B is the timeout, in this map at their native addresses (8556-8557, 8555).",
+        "Homing (0323 = 12): 0305 0 searches the home switch clockwise (negative), 1 counter-clockwise, at 0309, reversing at the limit switch of that side, then finds the switch's edge again at the creep speed 0310; the home then reads as 0311. 0305 is 0 with the manual's factory values; on a drive switched from the native map it reads the drive's own method number until written (0x2160, the native factory 35: the home is where the axis stands). Which inputs are the home switch and the limit switches, and their levels, are the drive's 0x216C and 0x216D, and 0x216B is the timeout, in this map at their native addresses (8556-8557, 8555).",
         "Pulse input (the drive's work mode 3): with 0296 = 0, saved, the drive powers up following the step train on its pulse input (one pulse a microstep of 0242's resolution), in the format of 0244 (1 pulse and direction, DIR high counting down; 2 double pulse), through the input filter 0234 (1-15: a level must hold 2 to 256 clocks of 170 MHz, 12 ns to 1.5 µs). 0296 reads 1 (internal pulses) from the factory, not the manual's 0: the drive leaves the factory commanded over the bus, and a machine that steps it writes 0 and saves. While it follows, the control commands that move are refused (04) and 6 and 7 stop it where the pulses left it (it follows the next ones); 0109 reads 3 (running). 0244 and 0234 take effect at once, 0296 at the next power-up as the manual says.",
         "Inputs IN1-IN7 are the drive's EXT1-EXT3 and GPIO1-GPIO4 (on the G431 board EXT1-EXT3 only), outputs OUT1-OUT4 its GPIO5-GPIO8 (on the board GPIO8). 0400-0406 give each input a function, acted on when the input turns active (at 0429's level: bit k set, IN k+1 is active low) or when its pseudo-input 0410-0416 is written 1 (written 0 it is released): 1-8, 12, 13 the control command of that number (as a write of 0323, refused in the same cases, and then nothing moves); 9 and 10 the positive and negative limit switches (a motion heading into an active one stops at the drive's stop deceleration, and a command towards it is refused with 04; the homing reverses at them); 11 the home switch of the homing (over the drive's 0x216C); 20 enable (the power stage follows the input). An input acts on its activation only, not while it stays active, and the levels at power-up are no activation. The multi-segment functions 14-18 and 25-29 are refused (03) until the multi-segment programs are in this map. IN6 and IN7 stay inputs with external pulses: the drive's pulse input has lines of its own.",
-        "0420-0423 give each output a function: 100 general (on while its bit of 0428 is set), 101 alarm (on while no alarm is latched), 102 in position (on while the axis stands on its target, within 0247 encoder counts in closed loop), 103 motor free (on while the power stage is off, the manual's 'enable control'), 104 ready (on while the power stage drives the motor; the manual lists 104 without saying what it is). 0430 bit k set makes OUT k+1 low when on. From the factory the outputs have no function and read 0, not the manual's 101 and 100: they are the native map's GPIO until 0420-0423 are written.",
+        "0420-0423 give each output a function: 100 general (on while its bit of 0428 is set), 101 alarm (on while no alarm is latched), 102 in position (on while the axis stands on its target, within 0247 encoder counts in closed loop), 103 motor free (on while the power stage is off, the manual's 'enable control'), 104 ready (on while the power stage drives the motor; the manual lists 104 without saying what it is). 0430 bit k set makes OUT k+1 low when on. With the manual's factory values OUT1 is the alarm output (101) and OUT2-OUT4 general outputs (100); on a drive switched from the native map the outputs keep no function (0: the native map's GPIO) until 0420-0423 are written.",
         "Not in this map yet, answered 02: the angle filter 0224; the direction switch 0201; the loop gains 0251-0258; the multi-segment program (0174-0178, 0327, 0328, 1024-1536, commands 14-18, refused with 03).",
         "Timing exceptions (§十三's table): a frame with a silence over 1.5 characters inside it is answered 0C, and a whole frame (its CRC good) that the next bytes followed before 3.5 characters of silence is answered 0D, either once the line has been quiet for 3.5 characters, with the address and function code the frame began with; the bytes in between are dropped and the request is not executed. A frame that did not begin with this drive's address, a broadcast, or one too short to say is not answered. Two frames with less than 1.5 characters between them are one frame with a wrong CRC: not answered, as every frame whose CRC or parity is wrong (its address cannot be trusted).",
     ],

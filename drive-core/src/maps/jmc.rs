@@ -108,6 +108,7 @@ pub static LAYOUT: Layout = Layout {
     walk: Walk::List,
     halves: false,
     timing: false,
+    defaults: &[],
 };
 
 /// What the reference says beside the table: the decisions where seed 001 is silent or

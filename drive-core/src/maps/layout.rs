@@ -287,12 +287,16 @@ pub struct Layout {
     /// 0x0C for a silence over t1.5 inside a frame, 0x0D for a next frame that came before t3.5
     /// (seed 002). Without it such a frame is dropped, as the Modbus serial line has it.
     pub timing: bool,
+    /// The map's factory settings where its manual's differ from the drive's: register values
+    /// in the map's units, set after the drive's factory values (a drive with nothing saved, a
+    /// factory reset).
+    pub defaults: &'static [(u16, i32)],
 }
 
 impl Layout {
     /// A layout walked by address that stages halves.
     pub const fn by_address(entries: &'static [Entry], order: WordOrder, exceptions: Exceptions) -> Self {
-        Self { entries, order, exceptions, walk: Walk::Address, halves: true, timing: false }
+        Self { entries, order, exceptions, walk: Walk::Address, halves: true, timing: false, defaults: &[] }
     }
 
     /// The entries a request of `qty` registers from `addr` covers, each with the place of its
@@ -567,6 +571,16 @@ impl RegisterMap for LayoutMap {
         match e {
             Exception::ByteCount => self.layout.exceptions.byte_count,
             e => e,
+        }
+    }
+
+    fn factory_settings<P: Borrow<Table>>(&self, drive: &mut DriveState<P>) {
+        for &(addr, value) in self.layout.defaults {
+            let Some(e) = self.layout.entries.iter().find(|e| e.addr == addr) else { continue };
+            // A default the drive does not take (a unit it cannot convert) leaves its own.
+            if let Ok(raw) = self.drive_value(drive, e, value as u32) {
+                drive.set_factory_value(e.obj, raw);
+            }
         }
     }
 }

@@ -99,6 +99,12 @@ impl RegisterMap for Maps {
         matches!(self, Self::Layout(m) if m.layout().timing)
     }
 
+    fn factory_settings<P: Borrow<Table>>(&self, drive: &mut DriveState<P>) {
+        if let Self::Layout(m) = self {
+            m.factory_settings(drive);
+        }
+    }
+
     fn application_name(&self) -> Option<&'static str> {
         match self {
             Self::Native(_) => None,

@@ -34,6 +34,9 @@ pub trait RegisterMap {
     fn application_name(&self) -> Option<&'static str> {
         None
     }
+    /// Sets the map's own factory settings over the drive's factory values (a drive with
+    /// nothing saved, a factory reset); most maps have none.
+    fn factory_settings<P: Borrow<Table>>(&self, _drive: &mut DriveState<P>) {}
     /// Whether a frame spoilt by its timing is answered (seed 002's exceptions 0x0C and 0x0D)
     /// rather than dropped.
     fn timing_exceptions(&self) -> bool {

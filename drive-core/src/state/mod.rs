@@ -184,6 +184,9 @@ pub struct DriveState<P = Table> {
     pub(crate) analog: analog::Analog,
     /// What the inputs' functions did.
     pub(crate) inputs: inputs::Inputs,
+    /// The factory values were restored by the request being served: the register map sets
+    /// its own over them before the save is taken.
+    pub(crate) factory_restored: bool,
     /// How long after a request its motion starts, µs: 0 where `ctl` is ticked itself; where the
     /// tick owns a controller of its own, longer than planning and handing over take.
     margin: u64,
@@ -273,6 +276,7 @@ impl<P: Borrow<Table>> DriveState<P> {
             homing: homing::Homing::default(),
             analog: analog::Analog::default(),
             inputs: inputs::Inputs::default(),
+            factory_restored: false,
             margin: 0,
             device: if get(Obj::Enable) == 1 {
                 crate::power::DeviceState::OperationEnabled
@@ -304,6 +308,7 @@ impl<P: Borrow<Table>> DriveState<P> {
             homing,
             analog: _,
             inputs: _,
+            factory_restored: _,
             margin: _,
             device,
             quick_check: _,
@@ -725,6 +730,7 @@ impl<P: Borrow<Table>> DriveState<P> {
                     }
                     if value == 3 {
                         self.restore_factory();
+                        self.factory_restored = true;
                     }
                     // Factory settings are saved too, so that they survive a restart as §3.11's
                     // FSET reset does; without storage they hold until power-off.
@@ -744,6 +750,12 @@ impl<P: Borrow<Table>> DriveState<P> {
     pub fn restore_factory(&mut self) {
         Params::factory().copy_saved_into(&mut self.params);
         self.refresh_settings();
+    }
+
+    /// Sets `obj` to `value` as its factory value (a register map's own, see
+    /// `RegisterMap::factory_settings`).
+    pub(crate) fn set_factory_value(&mut self, obj: Obj, value: u32) {
+        self.set_param(obj, value);
     }
 
     /// The platform finished the save it was asked for ([`SystemRequest::Save`]); `ok` if the

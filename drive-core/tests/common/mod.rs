@@ -78,7 +78,11 @@ pub struct MapRig {
 impl MapRig {
     /// A factory drive on `map`, 1 ms after power-up.
     pub fn new(map: drive_core::maps::Maps) -> Self {
-        let drive = Drive::with_map(drive_core::DriveConfig::default(), map);
+        Self::with_drive(Drive::with_map(drive_core::DriveConfig::default(), map))
+    }
+
+    /// `drive`, 1 ms after power-up.
+    pub fn with_drive(drive: Drive<drive_core::maps::Maps>) -> Self {
         let mut r = Self { drive, now: 0, inputs: drive_core::faults::Inputs::default() };
         r.run(1_000);
         r
