@@ -14,6 +14,12 @@ impl Controller {
     pub(crate) fn sense(&mut self, inputs: &Inputs) {
         let Some(raw) = inputs.encoder else { return };
         let kind = self.servo.encoder_kind(self.settings.encoder_cpr);
+        // A reversed motor's encoder counts the other way.
+        let raw = match (self.reversed, kind) {
+            (false, _) => raw,
+            (true, Encoder::SingleTurn) => 4096u32.wrapping_sub(raw) & 0xFFF,
+            (true, _) => raw.wrapping_neg(),
+        };
         let first = self.servo.read(kind, raw);
         self.status.encoder = self.servo.encoder as i32;
         let Feedback::Closed(encoder) = self.servo.feedback else { return };
@@ -106,9 +112,13 @@ impl Controller {
 
     /// Open loop: the sensorless stall detection (0x2107), from the phase currents and voltages.
     fn detect_stall_sensorless(&mut self, now: Instant, sp: &Setpoint, inputs: &Inputs, per_step: u32) {
-        let (Some(ma), Some(mv)) = (inputs.phase_ma, inputs.phase_mv) else {
+        let (Some(mut ma), Some(mut mv)) = (inputs.phase_ma, inputs.phase_mv) else {
             return self.servo.sensorless.reset();
         };
+        if self.reversed {
+            // A reversed motor's phase B is driven inverted.
+            (ma[1], mv[1]) = (ma[1].saturating_neg(), mv[1].saturating_neg());
+        }
         let s = &self.settings;
         if !s.stall_detect || !self.power_stage_on() {
             return self.servo.sensorless.reset();

@@ -19,7 +19,7 @@ use crate::motion::axis::{Axis, Setpoint};
 use crate::motion::cubic::{Ahead, Table};
 use crate::servo::{Feedback, Gains, Servo};
 use crate::units::Instant;
-use fixed::types::U0F16;
+use fixed::types::{U0F16, U0F32};
 
 pub use run::{Pvt, STATUS_FIFO_EMPTY, STATUS_FIFO_HIGH, STATUS_FIFO_LOW};
 
@@ -251,6 +251,21 @@ pub struct Controller {
     pub(crate) suspend: u16,
     /// Where the setpoint was when the watch saw its condition.
     pub(crate) caught: Option<i64>,
+    /// The motor turns the other way (0x21CA at power-up): the electrical angle out, the
+    /// encoder and phase B in, mirrored (each where it is used, so that what a board never
+    /// measures stays known to the compiler).
+    pub(crate) reversed: bool,
+}
+
+/// A reversed motor's electrical angle `a` and steps: the other way round (phase B inverted).
+#[cold]
+#[inline(never)]
+fn mirror(a: &mut Setpoint, steps: &mut i64) {
+    let fraction = U0F32::from_bits(0u32.wrapping_sub(a.fraction.to_bits()));
+    let carry = i64::from(a.fraction.to_bits() != 0);
+    let whole = a.whole.saturating_neg().saturating_sub(carry);
+    *a = Setpoint { whole, fraction, velocity: -a.velocity, acceleration: -a.acceleration };
+    *steps = steps.saturating_neg();
 }
 
 /// A condition the tick watches for while the plan of `version` runs, for the bus side (a
@@ -289,11 +304,11 @@ impl Controller {
     /// A controller at power-up, standing at 0, with no fault history: what a test or a tool
     /// runs on its own, without a drive around it.
     pub fn new(settings: Settings, feedback: Feedback) -> Self {
-        Self::restored(settings, feedback, FaultLog::default())
+        Self::restored(settings, feedback, FaultLog::default(), false)
     }
 
     /// The controller at power-up, standing at 0, with the fault history loaded.
-    pub(crate) fn restored(settings: Settings, feedback: Feedback, faults: FaultLog) -> Self {
+    pub(crate) fn restored(settings: Settings, feedback: Feedback, faults: FaultLog, reversed: bool) -> Self {
         Self {
             settings,
             axis: Axis::new(0),
@@ -309,6 +324,7 @@ impl Controller {
             caught: None,
             events: Events::default(),
             heard: false,
+            reversed,
         }
     }
 
@@ -413,6 +429,10 @@ impl Controller {
         if function_pins != 0 {
             // 0x6031 shows what an output with a function drives (inverted, as the manual has it).
             self.status.gpio = (self.status.gpio & !function_pins) | (!gpio & function_pins);
+        }
+        let (mut commutation, mut steps) = (commutation, steps);
+        if self.reversed {
+            mirror(&mut commutation, &mut steps);
         }
         Outputs {
             setpoint,

@@ -79,7 +79,7 @@ static OUTPUT_FUNCTIONS: [Choice; 5] = [
 /// The registers, by address (decimal, as the manual's `adr` column), then ours at their
 /// native addresses: the save (0x200F), the line's parity (0x2100), the homing's timeout and
 /// switches (0x216B-0x216D) and the map selection (0x2190).
-pub static ENTRIES: [Entry; 68] = [
+pub static ENTRIES: [Entry; 69] = [
     Entry::new(100, Obj::MotorCurrent, Scale::Ratio(100, 1)),
     Entry::new(101, Obj::SupplyVoltage, Scale::Ratio(1000, 1)),
     Entry::new(104, Obj::Microsteps, Scale::Table(&RESOLUTIONS)).wide().read_only(),
@@ -91,6 +91,7 @@ pub static ENTRIES: [Entry; 68] = [
     Entry::new(117, Obj::TargetPosition, Scale::One),
     Entry::new(119, Obj::RealSpeed, CENTI_REV).narrow(),
     Entry::new(126, Obj::Position, Scale::One).read_only(),
+    Entry::new(201, Obj::MotorDirection, Scale::One),
     Entry::new(206, Obj::SystemControl, Scale::Table(&USER_COMMAND)),
     Entry::new(213, Obj::IdleCurrent, Scale::One),
     Entry::new(217, Obj::Feedback, Scale::Table(&LOOP)),
@@ -209,7 +210,7 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         "Pulse input (the drive's work mode 3): with 0296 = 0, saved, the drive powers up following the step train on its pulse input (one pulse a microstep of 0242's resolution), in the format of 0244 (1 pulse and direction, DIR high counting down; 2 double pulse), through the input filter 0234 (1-15: a level must hold 2 to 256 clocks of 170 MHz, 12 ns to 1.5 µs). 0296 reads 1 (internal pulses) from the factory, not the manual's 0: the drive leaves the factory commanded over the bus, and a machine that steps it writes 0 and saves. While it follows, the control commands that move are refused (04) and 6 and 7 stop it where the pulses left it (it follows the next ones); 0109 reads 3 (running). 0244 and 0234 take effect at once, 0296 at the next power-up as the manual says.",
         "Inputs IN1-IN7 are the drive's EXT1-EXT3 and GPIO1-GPIO4 (on the G431 board EXT1-EXT3 only), outputs OUT1-OUT4 its GPIO5-GPIO8 (on the board GPIO8). 0400-0406 give each input a function, acted on when the input turns active (at 0429's level: bit k set, IN k+1 is active low) or when its pseudo-input 0410-0416 is written 1 (written 0 it is released): 1-8, 12, 13 the control command of that number (as a write of 0323, refused in the same cases, and then nothing moves); 9 and 10 the positive and negative limit switches (a motion heading into an active one stops at the drive's stop deceleration, and a command towards it is refused with 04; the homing reverses at them); 11 the home switch of the homing (over the drive's 0x216C); 20 enable (the power stage follows the input). An input acts on its activation only, not while it stays active, and the levels at power-up are no activation. The multi-segment functions 14-18 and 25-29 are refused (03) until the multi-segment programs are in this map. IN6 and IN7 stay inputs with external pulses: the drive's pulse input has lines of its own.",
         "0420-0423 give each output a function: 100 general (on while its bit of 0428 is set), 101 alarm (on while no alarm is latched), 102 in position (on while the axis stands on its target, within 0247 encoder counts in closed loop), 103 motor free (on while the power stage is off, the manual's 'enable control'), 104 ready (on while the power stage drives the motor; the manual lists 104 without saying what it is). 0430 bit k set makes OUT k+1 low when on. With the manual's factory values OUT1 is the alarm output (101) and OUT2-OUT4 general outputs (100); on a drive switched from the native map the outputs keep no function (0: the native map's GPIO) until 0420-0423 are written.",
-        "Not in this map yet, answered 02: the angle filter 0224; the direction switch 0201; the loop gains 0251-0258; the multi-segment program (0174-0178, 0327, 0328, 1024-1536, commands 14-18, refused with 03).",
+        "Not in this map yet, answered 02: the angle filter 0224; the loop gains 0251-0258; the multi-segment program (0174-0178, 0327, 0328, 1024-1536, commands 14-18, refused with 03).",
         "Timing exceptions (§十三's table): a frame with a silence over 1.5 characters inside it is answered 0C, and a whole frame (its CRC good) that the next bytes followed before 3.5 characters of silence is answered 0D, either once the line has been quiet for 3.5 characters, with the address and function code the frame began with; the bytes in between are dropped and the request is not executed. A frame that did not begin with this drive's address, a broadcast, or one too short to say is not answered. Two frames with less than 1.5 characters between them are one frame with a wrong CRC: not answered, as every frame whose CRC or parity is wrong (its address cannot be trusted).",
     ],
     remarks: &[
@@ -222,6 +223,7 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         (119, "Actual speed, 0.01 rev/s, signed."),
         (126, "Actual position, pulses."),
         (106, "Pulse input format in force: 1 pulse and direction, 2 double pulse."),
+        (201, "Motor direction: 1 turns the motor the other way; from the next power-up (save first)."),
         (206, "User command: 1 parameter reset and save, 2 alarm clear, 3 restart (refused)."),
         (213, "Standstill current, percent of 0241, after 0245."),
         (217, "0 open loop, 1 closed loop; from the next power-up (save first)."),

@@ -435,6 +435,11 @@ objects! {
     /// In-position window (our object; seed 002's 0247): in closed loop the in-position output
     /// needs the encoder within this many counts of the target; in open loop standing on it.
     InPositionWindow @ 0x21C9: U16, Rw, Rom, Span(0, 1000), default 0, None, "in-position window";
+    /// Motor direction (our object; seed 002's 0201): 1 turns the motor the other way for the same
+    /// commands, positions and pulses (the power stage drives phase B inverted and reads the
+    /// encoder and phase B mirrored). From the next power-up (save first): switched under a
+    /// standing, energised motor it would jump by up to two full steps.
+    MotorDirection @ 0x21CA: U8, Rw, Rom, Span(0, 1), default 0, None, "motor direction";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake

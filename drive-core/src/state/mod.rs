@@ -261,7 +261,7 @@ impl<P: Borrow<Table>> DriveState<P> {
         let feedback = Feedback::from_objects(get(Obj::Feedback), get(Obj::EncoderCpr));
         Self {
             faults_saved: faults.count,
-            ctl: Controller::restored(settings_of(params), feedback, faults),
+            ctl: Controller::restored(settings_of(params), feedback, faults, get(Obj::MotorDirection) == 1),
             params: *params,
             storage,
             identity,
