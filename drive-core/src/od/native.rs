@@ -394,9 +394,9 @@ objects! {
     /// set): 0 nothing; 1-8, 12 and 13 the motion command of that number (0x21A0); 9 / 10 the
     /// positive / negative limit switch: a motion heading into an active one stops at the stop
     /// deceleration and a command towards it is refused (04); 11 the home switch of the homing
-    /// (9 and 10 its limits too), over 0x216C; 20 enable: 0x6011 follows the input. IN1-IN3
-    /// are EXT1-EXT3, IN4-IN7 GPIO1-GPIO4. Seed 002's multi-segment functions (14-18, 25-29) are
-    /// refused (03).
+    /// (9 and 10 its limits too), over 0x216C; 20 enable: 0x6011 takes the input's level when
+    /// it changes. IN1-IN3 are EXT1-EXT3, IN4-IN7 GPIO1-GPIO4. Seed 002's multi-segment
+    /// functions (14-18, 25-29) are refused (03).
     InputFunction1 @ 0x21BA: U8, Rw, Rom, Set(INPUT_FUNCTIONS), default 0, None, "IN1 function";
     /// IN2 function (our object; seed 002's 0401): as 0x21BA.
     InputFunction2 @ 0x21BB: U8, Rw, Rom, Set(INPUT_FUNCTIONS), default 0, None, "IN2 function";

@@ -9,7 +9,9 @@
 //! stays active, so that a held jog input jogs once it is pressed and a stop (6) ends it; the
 //! levels an input is in at power-up are no activation. A command an input gives is refused as
 //! the same write over the bus would be, and then nothing moves; the master sees the refusal in
-//! nothing but the motion not happening (seed 002 has no status for it).
+//! nothing but the motion not happening (seed 002 has no status for it). An enable input sets
+//! 0x6011 to its level when the level changes (and at power-up); a master's write of 0x6011
+//! in between stands until the next change.
 
 use super::DriveState;
 use super::control::INPUT_FUNCTION_OBJECTS;
@@ -33,6 +35,8 @@ const INPUT_ENABLE: u32 = 20;
 pub(crate) struct Inputs {
     /// The pseudo-inputs (0x21C2) already acted on.
     pseudo_seen: u8,
+    /// The enable input's level last acted on (none yet).
+    enable_seen: Option<bool>,
 }
 
 impl<P: Borrow<Table>> DriveState<P> {
@@ -54,10 +58,11 @@ impl<P: Borrow<Table>> DriveState<P> {
     }
 
     /// When [`DriveState::inputs_service`] has something to do: now, if an input turned active,
-    /// a pseudo-input was set, or an enable input disagrees with 0x6011.
+    /// a pseudo-input changed, or an enable input's level is not yet acted on (once a level:
+    /// a refused enable does not make the service due again and again).
     pub(crate) fn inputs_due(&self) -> Option<Instant> {
         let pseudo = self.param(Obj::PseudoInputs) as u8;
-        let enable = self.enable_asked().is_some_and(|on| on != (self.param(Obj::Enable) == 1));
+        let enable = self.enable_asked().is_some_and(|on| self.inputs.enable_seen != Some(on));
         let due = self.ctl.status.input_edges != 0 || pseudo != self.inputs.pseudo_seen || enable;
         due.then_some(self.now)
     }
@@ -77,9 +82,12 @@ impl<P: Borrow<Table>> DriveState<P> {
             let _ = self.write_undoable(Obj::MotionCommand.def(), function);
         }
         if let Some(on) = self.enable_asked()
-            && on != (self.param(Obj::Enable) == 1)
+            && self.inputs.enable_seen != Some(on)
         {
-            let _ = self.write_undoable(Obj::Enable.def(), u32::from(on));
+            self.inputs.enable_seen = Some(on);
+            if on != (self.param(Obj::Enable) == 1) {
+                let _ = self.write_undoable(Obj::Enable.def(), u32::from(on));
+            }
         }
     }
 
