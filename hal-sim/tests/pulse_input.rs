@@ -159,3 +159,28 @@ fn an_external_stop_halts_the_following_until_the_master_clears_it() {
     p.run_for(0.2);
     assert_eq!(setpoint(&p), stopped - 100);
 }
+
+#[test]
+fn pulses_into_an_active_limit_input_are_dropped_and_those_away_from_it_followed() {
+    // IN1 (EXT1) the positive limit switch, an NPN switch 10 full steps up, pulled up, active low.
+    let mut p = Plant::factory_on(Machine::new(vec![Switch::parse("ext1:npn:10").expect("switch")], None));
+    let objects = [
+        (Obj::Microsteps, 16),
+        (Obj::GpioConfig, 1 << 14),
+        (Obj::InputLogic, 1),
+        (Obj::InputFunction1, 9),
+        (Obj::Mode, 3),
+    ];
+    for (obj, v) in objects {
+        set(&mut p, obj, v);
+    }
+    p.run_for(0.02);
+    connect(&mut p, Wiring::StepDir, 2_000.0, 1_000);
+    p.run_for(0.7);
+    let at = setpoint(&p);
+    assert!((150..=165).contains(&at), "stopped following at the limit (160 microsteps): {at}");
+    assert_eq!(p.drive().state().read(Obj::Mode), 3, "still following");
+    connect(&mut p, Wiring::StepDir, 2_000.0, -100);
+    p.run_for(0.2);
+    assert_eq!(setpoint(&p), at - 100, "pulses away from the limit are followed");
+}

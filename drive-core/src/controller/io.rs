@@ -251,12 +251,17 @@ pub struct PulseInput {
 }
 
 impl Controller {
-    /// The pulses counted since the last tick, for the axis if it follows them (work mode 3).
-    /// The count is a 16-bit counter's: at the top speed of 300 kpps a tick counts 15.
+    /// The pulses counted since the last tick, for the axis if it follows them (work mode 3),
+    /// but for those heading into an active limit switch. The count is a 16-bit counter's: at
+    /// the top speed of 300 kpps a tick counts 15.
     #[inline]
     pub(crate) fn count_pulses(&mut self, now: Instant, count: u16) {
         let last = self.io.pulses.replace(count).unwrap_or(count);
-        self.axis.add_pulses(now, count.wrapping_sub(last) as i16);
+        let pulses = count.wrapping_sub(last) as i16;
+        let (io, active) = (&self.settings.io, self.status.inputs);
+        let blocked =
+            (pulses > 0 && active & io.limit_positive != 0) || (pulses < 0 && active & io.limit_negative != 0);
+        self.axis.add_pulses(now, if blocked { 0 } else { pulses });
     }
 }
 
@@ -292,9 +297,10 @@ impl Controller {
         }
         let v = self.axis.setpoint().velocity;
         let into = (v > 0.0 && active & io.limit_positive != 0) || (v < 0.0 && active & io.limit_negative != 0);
+        // The pulse following drops the pulses heading into a limit instead (`count_pulses`).
         if self.axis.is_still() {
             self.io.limit_stop = false;
-        } else if into && !self.io.limit_stop {
+        } else if into && !self.io.limit_stop && !self.axis.follows_pulses() {
             self.io.limit_stop = true;
             self.decelerate_to_stop();
         }
