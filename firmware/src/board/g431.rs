@@ -337,10 +337,11 @@ impl PowerStage for StepDir {
         }
         self.pulse = Some(*input);
         use pac::timer::vals::{FilterValue, Sms};
-        // RM0440 §29.4.24: clock plus direction counts CH2's clock with CH1's level for the
-        // direction (CC1P = 1: high counts down); the directional clock counts CH2's edges up
-        // and CH1's down (CCxP = 1: rising edges); quadrature counts every edge of both, CH1
-        // inverted so that A on CH2 leading counts up.
+        // RM0440's encoder interface: clock plus direction counts one edge of CH2's clock a
+        // pulse (either edge counts each pulse once) with CH1's level for the direction (CC1P =
+        // 1: high counts down); the directional clock counts CH2's edges up and CH1's down
+        // (CCxP = 1: rising edges); quadrature counts every edge of both, CH1 inverted so that
+        // A on CH2 leading counts up. Not yet checked on a board (docs/board-g431.md).
         let (sms, clock_rising, dir_inverted) = match input.format {
             PulseFormat::StepDir => (Sms::ENCODER_UP_X1, false, true),
             PulseFormat::CwCcw => (Sms::ENCODER_DIR_X1, true, true),
