@@ -201,10 +201,16 @@ const STREAM_LOAD: f64 = 0.5;
 /// axis must not let another's FIFO run dry.
 const PUSH_BURST: usize = 24;
 
-/// Settings the master changes (ROM objects that act on motion or the power stage), with the
-/// values it picks from (inclusive).
-const SETTINGS: [(Obj, u32, u32); 9] = [
+/// Settings the master changes (ROM objects that act on motion, the power stage, the outputs
+/// or the pulse input), with the values it picks from (inclusive).
+const SETTINGS: [(Obj, u32, u32); 15] = [
     (Obj::JerkTime, 10, 300),
+    (Obj::PulseFormat, 1, 3),
+    (Obj::PulseFilter, 1, 15),
+    (Obj::OutputFunction1, 0, 5),
+    (Obj::OutputFunction4, 0, 5),
+    (Obj::OutputLogic, 0, 15),
+    (Obj::InPositionWindow, 0, 1000),
     (Obj::IdleCurrent, 50, 100),
     (Obj::IdleDelay, 100, 2000),
     (Obj::StartSpeed, 100, 600),

@@ -6,7 +6,7 @@ use hal_sim::soak::{Config, run};
 
 #[test]
 fn three_drives_for_three_simulated_minutes() {
-    let cfg = Config { seed: 2027, duration_us: 180_000_000, axes: 3, progress_s: 0, trace: false };
+    let cfg = Config { seed: 2029, duration_us: 180_000_000, axes: 3, progress_s: 0, trace: false };
     let report = match run(&cfg) {
         Ok(report) => report,
         Err(failure) => panic!("{failure}"),
