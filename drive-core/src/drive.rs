@@ -162,6 +162,7 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
     fn assemble(config: DriveConfig, map: M, params: &mut Params, faults: FaultLog, storage: u8, table: P) -> Self {
         // The values are settled first and the drive is one struct expression (as the state is,
         // `DriveState::booted`), so that the drive is not built aside and copied once more.
+        let pulses = params.get(Obj::PulseAtPowerUp) == 1;
         let values = &mut params.values;
         let mut set = |obj: Obj, value: u32| {
             if let Some(v) = values.get_mut(obj as usize) {
@@ -174,12 +175,6 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
         if let Some(b) = config.baud {
             set(Obj::BaudRate, b.get());
         }
-        let pulses = values.get(Obj::PulseAtPowerUp as usize) == Some(&1);
-        let mut set = |obj: Obj, value: u32| {
-            if let Some(v) = values.get_mut(obj as usize) {
-                *v = value;
-            }
-        };
         if pulses {
             // Seed 002's 0296 = 0 (external pulses): the drive powers up following them.
             set(Obj::Mode, crate::modes::WorkMode::Follow.raw());

@@ -4,11 +4,8 @@
 //! both directions with their output pulse; GPIO outputs and inputs with the manual's inverted
 //! bits; the coil output as a brake and as a general output; a hard stop holds the rotor.
 
-use drive_core::Drive;
 use drive_core::od::{Obj, ObjError};
-use hal_sim::DEFAULT_MOTOR;
 use hal_sim::machine::{Machine, Switch};
-use hal_sim::motor::{Motor, MotorCatalog, MotorInputs};
 use hal_sim::plant::Plant;
 
 /// Microsteps a full step here.
@@ -17,10 +14,8 @@ const PER_STEP: i64 = 16;
 /// The NEMA 17 at 24 V, 1/16 microsteps, 1000 mA, 3200 pps (200 full steps a second), with
 /// `switches` on its machine.
 fn plant(switches: &[&str]) -> Plant {
-    let params = MotorCatalog::builtin().get(DEFAULT_MOTOR).cloned().expect("catalogue motor");
-    let mut plant = Plant::new(Drive::factory(), Motor::new(params, MotorInputs::default()));
     let switches = switches.iter().map(|s| Switch::parse(s).expect("switch spec")).collect();
-    *plant.machine_mut() = Machine::new(switches, None);
+    let mut plant = Plant::factory_on(Machine::new(switches, None));
     for (obj, v) in [(Obj::Microsteps, 16), (Obj::PhaseCurrent, 1000), (Obj::MaxSpeed, 3200)] {
         set(&mut plant, obj, v);
     }

@@ -91,8 +91,11 @@ impl<P: Borrow<Table>> DriveState<P> {
         }
     }
 
-    /// Whether a motion heading up (`up`) runs into an active limit switch.
+    /// Whether a motion heading up (`up`) runs into an active limit switch (the settings know
+    /// which inputs are limits).
     pub(crate) fn limit_ahead(&self, up: bool) -> bool {
-        self.input_active(if up { INPUT_LIMIT_POSITIVE } else { INPUT_LIMIT_NEGATIVE })
+        let io = &self.ctl.settings.io;
+        let limits = if up { io.limit_positive } else { io.limit_negative };
+        (self.ctl.status.inputs | self.param(Obj::PseudoInputs) as u8) & limits != 0
     }
 }

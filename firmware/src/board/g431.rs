@@ -342,15 +342,16 @@ impl PowerStage for StepDir {
         // 1: high counts down); the directional clock counts CH2's edges up and CH1's down
         // (CCxP = 1: rising edges); quadrature counts every edge of both, CH1 inverted so that
         // A on CH2 leading counts up. Not yet checked on a board (docs/board-g431.md).
-        let (sms, clock_rising, dir_inverted) = match input.format {
-            PulseFormat::StepDir => (Sms::ENCODER_UP_X1, false, true),
-            PulseFormat::CwCcw => (Sms::ENCODER_DIR_X1, true, true),
-            PulseFormat::Quadrature => (Sms::ENCODER_MODE_3, false, true),
+        let (sms, clock_rising) = match input.format {
+            PulseFormat::StepDir => (Sms::ENCODER_UP_X1, false),
+            PulseFormat::CwCcw => (Sms::ENCODER_DIR_X1, true),
+            PulseFormat::Quadrature => (Sms::ENCODER_MODE_3, false),
         };
         let t = pac::TIM3;
         t.cr1().modify(|w| w.set_cen(false));
         t.ccer().modify(|w| {
-            w.set_ccp(0, dir_inverted);
+            // CH1 inverted in every format (see above).
+            w.set_ccp(0, true);
             w.set_ccp(1, clock_rising);
         });
         let f = FilterValue::from_bits(input.filter.min(15));
