@@ -149,8 +149,10 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
         drive
     }
 
-    /// With nothing saved (`storage`), the register map's own factory settings over the drive's.
+    /// With nothing saved (`storage`), the register map's own factory settings over the drive's;
+    /// and the program's memory if the map has a program.
     fn factory_settings_if_empty(&mut self, storage: u8) {
+        self.state.program.memory = self.map.has_program();
         if storage & (STORAGE_EMPTY | STORAGE_CORRUPT | STORAGE_FSET) != 0 {
             self.map.factory_settings(&mut self.state);
         }
@@ -211,8 +213,10 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
     /// The same drive answering through the map `f` makes of its own (the native map into
     /// [`Maps`](crate::maps::Maps), say).
     pub fn map_into<N: RegisterMap>(self, f: impl FnOnce(M) -> N) -> Drive<N, P> {
-        let Self { framer, address, baud, listen_only, counters, tx, tx_len, map, state } = self;
-        Drive { framer, address, baud, listen_only, counters, tx, tx_len, map: f(map), state }
+        let Self { framer, address, baud, listen_only, counters, tx, tx_len, map, mut state } = self;
+        let map = f(map);
+        state.program.memory = map.has_program();
+        Drive { framer, address, baud, listen_only, counters, tx, tx_len, map, state }
     }
 
     /// The address this drive answers to.

@@ -194,11 +194,21 @@ pub enum Command {
     Home = 12,
     /// Clear the alarms (13).
     AlarmClear = 13,
+    /// Check the multi-segment program (14).
+    ProgramCheck = 14,
+    /// Save the multi-segment program with the parameters (15).
+    ProgramSave = 15,
+    /// Start the selected program segment, or resume a paused one (16).
+    ProgramStart = 16,
+    /// Pause the running program segment (17).
+    ProgramPause = 17,
+    /// End the running program segment (18).
+    ProgramEnd = 18,
 }
 
 impl Command {
     /// Every command's value, for the object's declared set.
-    pub const RAW: [u32; 11] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 13];
+    pub const RAW: [u32; 16] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 13, 14, 15, 16, 17, 18];
 
     /// The command of a register value, if it is one.
     pub const fn from_raw(v: u32) -> Option<Self> {
@@ -214,6 +224,11 @@ impl Command {
             8 => Self::SetPosition,
             12 => Self::Home,
             13 => Self::AlarmClear,
+            14 => Self::ProgramCheck,
+            15 => Self::ProgramSave,
+            16 => Self::ProgramStart,
+            17 => Self::ProgramPause,
+            18 => Self::ProgramEnd,
             _ => return None,
         })
     }

@@ -15,6 +15,12 @@
 //!   ([`FaultHistory`]), saved whenever an alarm is recorded ([`SystemRequest::SaveFaults`]):
 //!   `[format, 0, count (u16), 10 entries (u32), newest first]`, little endian, 44 bytes. A record
 //!   of another [`FAULTS_FORMAT`] or length is not read (the history starts empty).
+//! - [`PROGRAM_KEYS`]: the multi-segment program of a map that has one (seed 002's registers
+//!   1024-1536, kept in the PVT table's memory), saved with the parameters in
+//!   [`PROGRAM_CHUNKS`] records of up to 256 bytes (the store's buffer holds one):
+//!   `[format, chunk, crc (u16)]` and the chunk's words high byte first, the CRC-16 of the whole
+//!   program in each, so that a power cut between two chunks leaves a set that does not load
+//!   (the program reads empty) rather than a mix of two programs.
 //!
 //! The functions are async as the flash traits are; the drive state machine is not: the platform
 //! [`Store::load`]s before it builds the [`Drive`](crate::Drive) and performs the saves that
@@ -36,6 +42,7 @@ use crate::faults::HISTORY_LEN;
 use crate::maps::RegisterMap;
 use crate::motion::cubic::Table;
 use crate::od::{Access, OBJECTS, Storage};
+use crate::state::program::WORDS as PROGRAM_WORDS;
 
 /// Map key of the parameter record.
 pub const PARAMS_KEY: u8 = 0;
@@ -43,6 +50,14 @@ pub const PARAMS_KEY: u8 = 0;
 pub const POSITION_KEY: u8 = 1;
 /// Map key of the fault history record.
 pub const FAULTS_KEY: u8 = 2;
+/// Map keys of the program's records, one a chunk.
+pub const PROGRAM_KEYS: core::ops::Range<u8> = 3..3 + PROGRAM_CHUNKS as u8;
+/// Program bytes a record holds.
+const PROGRAM_CHUNK: usize = 256;
+/// Records the program takes.
+pub const PROGRAM_CHUNKS: usize = (2 * PROGRAM_WORDS).div_ceil(PROGRAM_CHUNK);
+/// Format of the program records.
+pub const PROGRAM_FORMAT: u8 = 1;
 /// Format of the parameter record; bumped only if the entry layout changes (new objects do not).
 pub const FORMAT: u8 = 1;
 /// Format of the fault history record.
@@ -104,6 +119,7 @@ const ENTRY: usize = 6;
 pub const RECORD: usize = HEADER + ENTRY * SAVED;
 /// The crate's work buffer: key and value, rounded up to its largest flash word (32 bytes).
 const BUFFER: usize = (1 + RECORD).next_multiple_of(32);
+const _: () = assert!(1 + 4 + PROGRAM_CHUNK <= BUFFER, "a program record fits the buffer");
 
 /// Writes the parameter record of `params` into `out`; its length, or `None` if `out` is short.
 pub fn encode(params: &Params, out: &mut [u8]) -> Option<usize> {
@@ -259,16 +275,25 @@ impl<S: NorFlash> Store<S> {
         drive: &mut Drive<M, P>,
     ) -> Option<(SystemRequest, Result<(), Error<S>>)> {
         let job = Job::take(drive)?;
-        let done = self.run(&job).await;
+        let done = self.run(&job, drive.state().program_memory()).await;
         job.finish(drive, done.is_ok());
         Some((job.request(), done))
     }
 
     /// Carries out `job` on the flash, without the drive; report the result with [`Job::finish`].
-    /// A boot loader request has nothing to write here.
-    pub async fn run(&mut self, job: &Job) -> Result<(), Error<S>> {
+    /// A parameter save saves the program too where the drive keeps one (`program`: its
+    /// [`DriveState::program_memory`](crate::state::DriveState::program_memory), which the
+    /// drive leaves unchanged while the save is under way). A boot loader request has nothing to
+    /// write here.
+    pub async fn run(&mut self, job: &Job, program: Option<&Table>) -> Result<(), Error<S>> {
         match job {
-            Job::Save(params) => self.save(params).await,
+            Job::Save(params) => {
+                self.save(params).await?;
+                match program {
+                    Some(table) => self.save_program(table).await,
+                    None => Ok(()),
+                }
+            }
             Job::SavePosition(position) => self.save_position(*position).await,
             Job::SaveFaults(history) => self.save_faults(history).await,
             Job::BootLoader => Ok(()),
@@ -296,6 +321,63 @@ impl<S: NorFlash> Store<S> {
         let n = encode(params, &mut record).ok_or(sequential_storage::Error::BufferTooSmall(RECORD))?;
         let record = record.get(..n).unwrap_or_default();
         self.map.store_item(&mut self.buf, &PARAMS_KEY, &record).await
+    }
+
+    /// Saves the program kept in `table` (see the module documentation).
+    pub async fn save_program(&mut self, table: &Table) -> Result<(), Error<S>> {
+        let bytes = 2 * PROGRAM_WORDS;
+        let crc = (0..bytes).fold(crate::crc::INIT, |c, i| crate::crc::update(c, table.byte(i).unwrap_or(0)));
+        let [lo, hi] = crc.to_le_bytes();
+        for (chunk, key) in PROGRAM_KEYS.enumerate() {
+            let mut record = [0u8; 4 + PROGRAM_CHUNK];
+            let first = chunk * PROGRAM_CHUNK;
+            let n = PROGRAM_CHUNK.min(bytes - first);
+            if let Some((head, body)) = record.split_first_chunk_mut::<4>() {
+                *head = [PROGRAM_FORMAT, chunk as u8, lo, hi];
+                for (i, b) in body.iter_mut().take(n).enumerate() {
+                    *b = table.byte(first + i).unwrap_or(0);
+                }
+            }
+            let record = record.get(..4 + n).unwrap_or_default();
+            self.map.store_item(&mut self.buf, &key, &record).await?;
+        }
+        Ok(())
+    }
+
+    /// Loads the saved program into `table`, where a map with a program keeps it: whether a
+    /// whole one was found (else `table` reads as an empty program, all zero).
+    pub async fn load_program(&mut self, table: &Table) -> bool {
+        let bytes = 2 * PROGRAM_WORDS;
+        let mut crc = None;
+        for (chunk, key) in PROGRAM_KEYS.enumerate() {
+            let first = chunk * PROGRAM_CHUNK;
+            let n = PROGRAM_CHUNK.min(bytes - first);
+            let record = match self.map.fetch_item::<&[u8]>(&mut self.buf, &key).await {
+                Ok(Some(record)) => record,
+                _ => break,
+            };
+            let Some((&[format, k, lo, hi], body)) = record.split_first_chunk::<4>() else { break };
+            if format != PROGRAM_FORMAT || usize::from(k) != chunk || body.len() != n {
+                break;
+            }
+            if crc.is_some_and(|c| c != [lo, hi]) {
+                break;
+            }
+            crc = Some([lo, hi]);
+            for (i, &b) in body.iter().enumerate() {
+                table.set_byte(first + i, b);
+            }
+        }
+        let whole = crc.is_some_and(|c| {
+            (0..bytes).fold(crate::crc::INIT, |c, i| crate::crc::update(c, table.byte(i).unwrap_or(0)))
+                == u16::from_le_bytes(c)
+        });
+        if !whole {
+            for i in 0..bytes {
+                table.set_byte(i, 0);
+            }
+        }
+        whole
     }
 
     /// Saves the power-down position (0x6055): one small record, for the power-loss detector.

@@ -10,6 +10,9 @@ pub const TICK_HZ: u32 = 20_000;
 /// The control tick period in microseconds.
 pub const TICK_MICROS: u64 = 1_000_000 / TICK_HZ as u64;
 
+/// Full steps a revolution of the motors the drive runs (1.8°), for units per revolution.
+pub const FULL_STEPS_PER_REV: i64 = 200;
+
 /// A point in time in microseconds since the drive started. Wraps after 584 000 years.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct Instant(u64);

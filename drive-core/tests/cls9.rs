@@ -285,7 +285,7 @@ fn refusals_change_nothing() {
     // Values out of range: a resolution the drive does not have, a command it does not do, a
     // speed below the drive's, a read-only register.
     assert_eq!(r.write32(242, 300), Err(3));
-    assert_eq!(r.command(14), Err(3));
+    assert_eq!(r.command(19), Err(3));
     assert_eq!(r.command(9), Err(3));
     assert_eq!(r.set(306, 0), Err(3));
     assert_eq!(r.set(109, 2), Err(2));

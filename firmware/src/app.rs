@@ -90,6 +90,14 @@ pub fn start(params: &mut Params, status: u8, can_save: bool) -> (&'static mut D
     (drive, baud, parity)
 }
 
+/// Where the map `params` choose keeps its multi-segment program, if it has one: the PVT table,
+/// which such a map does not use for points. Power-up loads the saved program into it before the
+/// drive is built.
+pub fn program_memory(params: &Params) -> Option<&'static Table> {
+    use drive_core::maps::RegisterMap;
+    Maps::by_id(params.get(drive_core::od::Obj::RegisterMap)).has_program().then_some(&TABLE)
+}
+
 /// Builds the drive in `slot`, lending it the table.
 fn boot_into(
     slot: &'static mut MaybeUninit<Drive>,
@@ -230,7 +238,7 @@ pub fn serve_store(drive: &mut Drive, store: &mut crate::board::ParamStore) {
         // The flash driver is blocking, so the save completes in one poll. Polled here, not
         // awaited, the job and the save's state (about 1.7 KB) sit on the stack for the moment
         // instead of in the task's static storage.
-        let done = embassy_futures::block_on(store.run(&job));
+        let done = embassy_futures::block_on(store.run(&job, drive.state().program_memory()));
         job.finish(drive, done.is_ok());
         match (job, done) {
             (Job::Save(_), Err(_)) => warn!("parameter save failed"),

@@ -135,6 +135,9 @@ mod run {
         embassy_futures::block_on(async {
             let fset_low = fset_held(fset).await;
             let loaded = store.power_up(fset_low).await;
+            if let Some(table) = app::program_memory(&loaded.params) {
+                store.load_program(table).await;
+            }
             (store, loaded)
         })
     }
@@ -264,7 +267,13 @@ mod run {
             defmt::panic!("the store's range is not whole pages");
         };
         let store = slot.insert(store);
-        let loaded = embassy_futures::block_on(store.power_up(false));
+        let loaded = embassy_futures::block_on(async {
+            let loaded = store.power_up(false).await;
+            if let Some(table) = app::program_memory(&loaded.params) {
+                store.load_program(table).await;
+            }
+            loaded
+        });
         (store, loaded)
     }
 }

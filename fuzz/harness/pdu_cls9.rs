@@ -7,13 +7,15 @@
 //! the table (the data's first byte picks the entry).
 //!
 //! The oracle: every frame is answered (a normal reply or one of the Modbus codes 1-4); an
-//! exception changes nothing; a read returns its quantity of registers, each what a model of
-//! the address walk written here says (the object's value in the map's unit).
+//! exception changes nothing (the program's registers included); a read returns its quantity of
+//! registers, each what a model of the address walk written here says (the object's value in
+//! the map's unit, a program register's stored word).
 
 use super::oracle;
 use drive_core::maps::Maps;
 use drive_core::maps::cls9::ENTRIES;
 use drive_core::od::{OBJECTS, Type};
+use drive_core::state::program::WORDS;
 use drive_core::{Drive, DriveConfig};
 
 /// Every code the map answers.
@@ -24,11 +26,16 @@ const T35: u64 = 4010;
 
 fn snapshot(drive: &Drive<Maps>) -> (Vec<u32>, i64) {
     let s = drive.state();
-    (OBJECTS.iter().map(|d| s.read_def(d)).collect(), s.position())
+    let program = (0..WORDS).map(|k| u32::from(s.program_word(k)));
+    (OBJECTS.iter().map(|d| s.read_def(d)).chain(program).collect(), s.position())
 }
 
 /// The registers a read of `qty` from `addr` gets, or `None` if one of them has no entry.
 fn model(drive: &Drive<Maps>, addr: u16, qty: usize) -> Option<Vec<u16>> {
+    // The program's window, 1024-1536: its words as stored, read whole or not at all.
+    if let Some(k) = usize::from(addr).checked_sub(1024).filter(|&k| k < WORDS) {
+        return (k + qty <= WORDS).then(|| (k..k + qty).map(|j| drive.state().program_word(j)).collect());
+    }
     (0..qty as u32)
         .map(|k| {
             let reg = u32::from(addr) + k;

@@ -50,6 +50,7 @@ pub static LAYOUT: Layout = Layout {
     halves: true,
     timing: false,
     defaults: &[],
+    program: None,
 };
 
 /// Every code the layout answers, and the request-level ones.

@@ -363,7 +363,11 @@ pub fn store(flash: SimFlash) -> io::Result<Store<SimFlash>> {
 pub fn boot(store: &mut Store<SimFlash>, config: DriveConfig, fset_low: bool, map: Option<u8>) -> Drive {
     let loaded = block_on(store.power_up(fset_low));
     let map = Maps::by_id(map.map_or(loaded.params.get(Obj::RegisterMap), u32::from));
-    Drive::boot_with_map(config, map, &loaded.params, loaded.status)
+    let drive = Drive::boot_with_map(config, map, &loaded.params, loaded.status);
+    if let Some(table) = drive.state().program_memory() {
+        block_on(store.load_program(table));
+    }
+    drive
 }
 
 /// Does what the drive asks of its platform ([`Store::serve`]); failures are logged (the drive

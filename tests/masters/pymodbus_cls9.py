@@ -2,7 +2,8 @@
 every command of the control command 0323, the axis doing what the manual's table says (read
 back as the actual position 0126 and speed 0119), the soft limits on the enabled side only,
 homing both ways with the offset, refusals with nothing changed, input functions given by
-pseudo-inputs, and the output and in-position settings.
+pseudo-inputs, the output and in-position settings, and a multi-segment program checked,
+refused with its error segment, and run.
 
 Usage: pymodbus_cls9.py ENDPOINT   where ENDPOINT is a pseudo-terminal path or HOST:PORT of
 `hal-sim --map cls9 --switch ext1:pnp:40:to=44 --switch ext2:pnp:-120:below --switch
@@ -144,7 +145,7 @@ before = read(301, 8)
 check("0102 does not exist (02)", write(102, 1) == 2)
 check("a half of 0313 alone (02)", write(313, 1) == 2)
 check("resolution 300 (03)", write32(242, 300) == 3)
-check("command 14 (03)", command(14) == 3)
+check("command 19 (03)", command(19) == 3)
 check("state unchanged", read(301, 8) == before and read32(104) == 3200)
 
 # Homing (12): the home cam between 40 and 44 full steps (640-704 pulses); inputs: home EXT1,
@@ -165,7 +166,7 @@ for direction, name in [(0, "clockwise"), (1, "counter-clockwise")]:
 
 # Inputs 0400-0416: IN4 jogs + and IN5 stops, given by their pseudo-inputs 0413 and 0414.
 check("0403 = 4, 0404 = 6", write(403, 4) == 0 and write(404, 6) == 0)
-check("0400 = 14 (multi-segment) refused (03)", write(400, 14) == 3 and read(400) == [0])
+check("0400 = 19 (no such function) refused (03)", write(400, 19) == 3 and read(400) == [0])
 check("0413 = 1: IN4 jogs +", write(413, 1) == 0 and speed_after(0.3) == 200)
 check("0414 = 1: IN5 stops", write(414, 1) == 0 and settle(3) is not None)
 check("0410-0416 read back", read(410, 7) == [0, 0, 0, 1, 1, 0, 0], read(410, 7))
@@ -176,5 +177,25 @@ check("0420 = 101 (alarm)", write(420, 101) == 0 and read(420) == [101], read(42
 check("0421 = 99 refused (03)", write(421, 99) == 3 and read(421) == [100], read(421))
 check("0428, 0429, 0430", write(428, 1) == 0 and write(429, 3) == 0 and write(430, 2) == 0)
 check("0247 = 20 (two words)", write32(247, 20) == 0 and read32(247) == 20, read32(247))
+
+# Multi-segment program (1024-1536): to 1000, 100 ms, three times 200 back, end (between the
+# home cam the homing left the axis on and the positive limit); segment 2 an unknown code. The check names segment 2, a start of it
+# is refused and nothing moves.
+write32(321, 0)
+command(8)
+program = [54, 500, 61, 50, 62, 50, 1, 0, 1000, 65, 5, 100, 2, 0xFFFF, 0xFF38, 66, 3, 5, 100, 3, 0, 0, 100]
+r = client.write_registers(1024, program, device_id=DEV)
+check("1024.. program written and read back", not r.isError() and read(1024, len(program)) == program)
+check("0327 = 2, 0323 = 14: segment 2 in error", write(327, 2) == 0 and command(14) == 0 and read(176) == [2], read(176))
+check("0328 = 1, 0323 = 16 refused (04), 0178 = 0", write(328, 1) == 0 and command(16) == 4 and read(178) == [0])
+check("nothing moved", settle() == 0, read32(126))
+check("0328 = 0 still refused: every segment of 0327 is checked", write(328, 0) == 0 and command(16) == 4)
+check("0327 = 1, 0323 = 16: segment 1 runs", write(327, 1) == 0 and command(16) == 0 and read(178) == [1], read(178))
+check("program writes refused while it runs (04)", write(1024, 54) == 4)
+deadline = time.time() + 30
+while time.time() < deadline and read(178) != [0]:
+    time.sleep(0.05)
+check("segment 1 ends at 1000 - 3 x 200", read(178) == [0] and read32(126) == 400, read32(126))
+check("0174 with no select input", read(174) == [0], read(174))
 
 finish(client, "pymodbus, DS-CLS9 map")

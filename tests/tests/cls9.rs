@@ -61,6 +61,17 @@ impl Cls9 {
         ((u32::from(w[0]) << 16) | u32::from(w[1])) as i32
     }
 
+    /// Switches the drive off once its save is done and on again on `flash`.
+    async fn restart(self, flash: &Path) -> Self {
+        sleep(Duration::from_millis(100)).await;
+        let Cls9 { _sim: sim, ctx, .. } = self;
+        drop(ctx);
+        sim.off().expect("off");
+        let (sim, snapshot) = power_on(flash, SCALE, &[]);
+        let ctx = master(&sim).await;
+        Cls9 { _sim: sim, ctx, snapshot }
+    }
+
     /// The rotor, microsteps (pulses) from power-up.
     fn rotor(&self) -> f64 {
         self.snapshot.lock().expect("snapshot").rotor_microsteps
@@ -91,13 +102,7 @@ async fn commands_move_the_rotor_as_the_table_says() {
         assert_eq!(d.set(reg, v).await, Ok(()), "{reg}");
     }
     assert_eq!(d.set(0x200F, 2).await, Ok(()));
-    sleep(Duration::from_millis(100)).await;
-    let Cls9 { _sim: sim, ctx, .. } = d;
-    drop(ctx);
-    sim.off().expect("off");
-    let (sim, snapshot) = power_on(&flash, SCALE, &[]);
-    let ctx = master(&sim).await;
-    let mut d = Cls9 { _sim: sim, ctx, snapshot };
+    let mut d = d.restart(&flash).await;
     assert_eq!(d.get32(242).await, 1600);
     assert_eq!(read_values(&mut d.ctx, 303, 6).await, vec![20, 20, 35, 300, 125, 100]);
 
@@ -242,4 +247,62 @@ async fn external_pulses_after_a_restart_move_the_rotor() {
     sleep(Duration::from_millis(2_000 / u64::from(SCALE) + 300)).await;
     assert_eq!(d.get32(126).await, -16_000, "the position counted every pulse");
     assert!((d.rotor() + 16_000.0).abs() < 8.0, "rotor at {}", d.rotor());
+}
+
+/// Seed 002's multi-segment program through tokio-modbus: written to 1024-1536, checked, saved
+/// by 0323 = 15, still there after a power cycle, and started by an input's function (the
+/// pseudo-input IN1 with function 16) for the segment 0328 selects: the rotor goes through the
+/// segment's moves, wait and loop and ends where the program says.
+#[tokio::test(flavor = "current_thread")]
+async fn a_saved_program_runs_after_a_restart() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let flash = dir.path().join("flash.bin");
+    let mut d = cls9(&flash, SCALE, &[]).await;
+    d.set32(242, 3200).await;
+    #[rustfmt::skip]
+    let program: [u16; 27] = [
+        54, 300,            // 0: run speed 3 rev/s
+        61, 20, 62, 20,     // 1, 2: ramps 20 rev/s²
+        1, 0, 16_000,       // 3: to 16 000
+        65, 5, 2_000,       // 4: 2 s, then on at 5
+        2, 0xFFFF, 0xF060,  // 5: back by 4 000
+        66, 2, 5,           // 6: the body (5) twice
+        100,                // 7: end of segment 1
+        54, 50,             // 8: segment 2: 0.5 rev/s
+        1, 0xFFFF, 0xF830,  // 9: to -2 000
+        100, 0, 0,          // 10: end (and two unused words)
+    ];
+    assert_eq!(write_many(&mut d.ctx, 1024, &program).await, Ok(()));
+    for (reg, v) in [(327, 2), (328, 1), (323, 14)] {
+        assert_eq!(d.set(reg, v).await, Ok(()), "{reg}");
+    }
+    assert_eq!(d.get(176).await, 0, "no segment in error");
+    assert_eq!(d.set(323, 15).await, Ok(()), "saved");
+    let mut d = d.restart(&flash).await;
+    assert_eq!(read_values(&mut d.ctx, 1024, 27).await, program.to_vec(), "the program survived");
+    assert_eq!(read_values(&mut d.ctx, 327, 2).await, vec![2, 1]);
+    // Segment 2 first (0328 = 1), by a write of 0323.
+    assert_eq!(d.set(323, 16).await, Ok(()));
+    assert_eq!(d.get(178).await, 2, "segment 2 runs");
+    d.wait_still(5).await;
+    sleep(Duration::from_millis(100)).await;
+    assert_eq!(d.get(178).await, 0);
+    assert_eq!(d.get32(126).await, -2_000);
+    assert!((d.rotor() + 2_000.0).abs() < 8.0, "rotor at {}", d.rotor());
+    // Segment 1 by IN1 (function 16, start) through its pseudo-input.
+    assert_eq!(d.set(328, 0).await, Ok(()));
+    assert_eq!(d.set(400, 16).await, Ok(()));
+    assert_eq!(d.set(410, 1).await, Ok(()));
+    let mut furthest = f64::MIN;
+    for _ in 0..200 {
+        sleep(Duration::from_millis(10)).await;
+        furthest = furthest.max(d.rotor());
+        if d.get(178).await == 0 {
+            break;
+        }
+    }
+    assert_eq!(d.get(178).await, 0, "segment 1 ended");
+    assert!((furthest - 16_000.0).abs() < 8.0, "to 16 000 first: {furthest}");
+    assert_eq!(d.get32(126).await, 8_000, "then twice 4 000 back");
+    assert!((d.rotor() - 8_000.0).abs() < 8.0, "rotor at {}", d.rotor());
 }

@@ -79,7 +79,7 @@ static OUTPUT_FUNCTIONS: [Choice; 5] = [
 /// The registers, by address (decimal, as the manual's `adr` column), then ours at their
 /// native addresses: the save (0x200F), the line's parity (0x2100), the homing's timeout and
 /// switches (0x216B-0x216D) and the map selection (0x2190).
-pub static ENTRIES: [Entry; 69] = [
+pub static ENTRIES: [Entry; 74] = [
     Entry::new(100, Obj::MotorCurrent, Scale::Ratio(100, 1)),
     Entry::new(101, Obj::SupplyVoltage, Scale::Ratio(1000, 1)),
     Entry::new(104, Obj::Microsteps, Scale::Table(&RESOLUTIONS)).wide().read_only(),
@@ -91,6 +91,9 @@ pub static ENTRIES: [Entry; 69] = [
     Entry::new(117, Obj::TargetPosition, Scale::One),
     Entry::new(119, Obj::RealSpeed, CENTI_REV).narrow(),
     Entry::new(126, Obj::Position, Scale::One).read_only(),
+    Entry::new(174, Obj::ProgramInputSegment, Scale::One),
+    Entry::new(176, Obj::ProgramErrorSegment, Scale::One),
+    Entry::new(178, Obj::ProgramRunning, Scale::One),
     Entry::new(201, Obj::MotorDirection, Scale::One),
     Entry::new(206, Obj::SystemControl, Scale::Table(&USER_COMMAND)),
     Entry::new(213, Obj::IdleCurrent, Scale::One),
@@ -122,6 +125,8 @@ pub static ENTRIES: [Entry; 69] = [
     Entry::new(321, Obj::PositionPreset, Scale::One),
     Entry::new(323, Obj::MotionCommand, Scale::One),
     Entry::new(324, Obj::SoftLimits, Scale::One),
+    Entry::new(327, Obj::ProgramSegments, Scale::One),
+    Entry::new(328, Obj::ProgramSelect, Scale::One),
     Entry::new(400, Obj::InputFunction1, Scale::One),
     Entry::new(401, Obj::InputFunction2, Scale::One),
     Entry::new(402, Obj::InputFunction3, Scale::One),
@@ -165,6 +170,7 @@ pub static LAYOUT: Layout = Layout {
     halves: false,
     timing: true,
     defaults: &DEFAULTS,
+    program: Some(1024),
 };
 
 /// The manual's factory values (§九) where they differ from the drive's: start and stop
@@ -204,13 +210,15 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         "0100 (motor current) reads in 0.1 A and 0101 (supply) in volts, as last measured; 0241 (current setting) in mA as the manual's range 100-4500 says.",
         "0108 is the drive's alarm code, which uses the manual's table 1-2: 10 over-current, 11 phase loss, 13 under-voltage, 14 over-voltage, 25 position error, 26 overload; 15 (over-temperature) and 27 (encoder lost) are the drive's own among \"other\". 0109 is table 1-1's run state: 1 enable off (or a fault), 2 standing, 3 running.",
         "0206 user command: 1 restores the factory parameters and saves them (0x200F = 3), 2 clears the alarms, 3 (restart) is refused (04): the drive does not restart itself; switch the power.",
-        "0323 control command (the drive's 0x21A0): 1 absolute run to 0313 at 0306's speed, re-targeted when 0313 is written during the run; 2 relative run by 0313, refused (04) while moving (a write of 0313 during it changes nothing of the run); 3 run at 0307 (its sign the direction; a write of 0307 during it changes the speed); 4 and 5 jog at 0308 until 6 or 7; 6 stop at 0304; 7 stop at the quick-stop deceleration (0x2183, 320 000 microsteps/s² from the factory); 8 set the position to 0321, refused (04) while moving; 12 homing; 13 alarm clear. Runs ramp at 0303/0304 from 0301 and down to 0302. A run is refused (04) with the power stage off or an alarm latched, and in the native map's PVT mode, where only 6 and 7 act (they end the PVT run). Reading 0323 gives the last command written.",
+        "0323 control command (the drive's 0x21A0): 1 absolute run to 0313 at 0306's speed, re-targeted when 0313 is written during the run; 2 relative run by 0313, refused (04) while moving (a write of 0313 during it changes nothing of the run); 3 run at 0307 (its sign the direction; a write of 0307 during it changes the speed); 4 and 5 jog at 0308 until 6 or 7; 6 stop at 0304; 7 stop at the quick-stop deceleration (0x2183, 320 000 microsteps/s² from the factory); 8 set the position to 0321, refused (04) while moving; 12 homing; 13 alarm clear; 14-18 the multi-segment program's check, save, start, pause and end (see below). Runs ramp at 0303/0304 from 0301 and down to 0302. A run is refused (04) with the power stage off or an alarm latched, and in the native map's PVT mode, where only 6 and 7 act (they end the PVT run). Reading 0323 gives the last command written.",
         "Soft limits 0317 / 0319 with 0324 bit 0 (positive) and bit 1 (negative): no motion command goes beyond an enabled limit; a target beyond it stops on it, a run or a jog towards it ends on it. Homing ignores them. 0324's other bits are refused (03).",
         "Homing (0323 = 12): 0305 0 searches the home switch clockwise (negative), 1 counter-clockwise, at 0309, reversing at the limit switch of that side, then finds the switch's edge again at the creep speed 0310; the home then reads as 0311. 0305 is 0 with the manual's factory values; on a drive switched from the native map it reads the drive's own method number until written (0x2160, the native factory 35: the home is where the axis stands). Which inputs are the home switch and the limit switches, and their levels, are the drive's 0x216C and 0x216D, and 0x216B is the timeout, in this map at their native addresses (8556-8557, 8555).",
         "Pulse input (the drive's work mode 3): with 0296 = 0, saved, the drive powers up following the step train on its pulse input (one pulse a microstep of 0242's resolution), in the format of 0244 (1 pulse and direction, DIR high counting down; 2 double pulse), through the input filter 0234 (1-15: a level must hold 2 to 256 clocks of 170 MHz, 12 ns to 1.5 µs). 0296 reads 1 (internal pulses) from the factory, not the manual's 0: the drive leaves the factory commanded over the bus, and a machine that steps it writes 0 and saves. While it follows, the control commands that move are refused (04) and 6 and 7 stop it where the pulses left it (it follows the next ones); 0109 reads 3 (running). 0244 and 0234 take effect at once, 0296 at the next power-up as the manual says.",
-        "Inputs IN1-IN7 are the drive's EXT1-EXT3 and GPIO1-GPIO4 (on the G431 board EXT1-EXT3 only), outputs OUT1-OUT4 its GPIO5-GPIO8 (on the board GPIO8). 0400-0406 give each input a function, acted on when the input turns active (at 0429's level: bit k set, IN k+1 is active low) or when its pseudo-input 0410-0416 is written 1 (written 0 it is released): 1-8, 12, 13 the control command of that number (as a write of 0323, refused in the same cases, and then nothing moves); 9 and 10 the positive and negative limit switches (a motion heading into an active one stops at the drive's stop deceleration, and a command towards it is refused with 04; the homing reverses at them); 11 the home switch of the homing (over the drive's 0x216C); 20 enable (0x6011 takes the input's level whenever it changes, and at power-up). An input acts on its activation only, not while it stays active, and the levels at power-up are no activation. The multi-segment functions 14-18 and 25-29 are refused (03) until the multi-segment programs are in this map. IN6 and IN7 stay inputs with external pulses: the drive's pulse input has lines of its own.",
+        "Inputs IN1-IN7 are the drive's EXT1-EXT3 and GPIO1-GPIO4 (on the G431 board EXT1-EXT3 only), outputs OUT1-OUT4 its GPIO5-GPIO8 (on the board GPIO8). 0400-0406 give each input a function, acted on when the input turns active (at 0429's level: bit k set, IN k+1 is active low) or when its pseudo-input 0410-0416 is written 1 (written 0 it is released): 1-8, 12, 13 the control command of that number (as a write of 0323, refused in the same cases, and then nothing moves); 9 and 10 the positive and negative limit switches (a motion heading into an active one stops at the drive's stop deceleration, and a command towards it is refused with 04; the homing reverses at them); 11 the home switch of the homing (over the drive's 0x216C); 20 enable (0x6011 takes the input's level whenever it changes, and at power-up). 14-18 the program commands of 0323; 25-29 bits 0-4 of the program segment a start runs (acted on by their level at the start, not by an edge). An input acts on its activation only, not while it stays active, and the levels at power-up are no activation. IN6 and IN7 stay inputs with external pulses: the drive's pulse input has lines of its own.",
         "0420-0423 give each output a function: 100 general (on while its bit of 0428 is set), 101 alarm (on while no alarm is latched), 102 in position (on while the axis stands on its target, within 0247 encoder counts in closed loop), 103 motor free (on while the power stage is off, the manual's 'enable control'), 104 ready (on while the power stage drives the motor; the manual lists 104 without saying what it is). 0430 bit k set makes OUT k+1 low when on. With the manual's factory values OUT1 is the alarm output (101) and OUT2-OUT4 general outputs (100); on a drive switched from the native map the outputs keep no function (0: the native map's GPIO) until 0420-0423 are written.",
-        "Not in this map, answered 02: the angle filter 0224 and the loop gains 0251-0258. The drive's closed loop is one position loop (or its servo PID, 0x6057-0x605A in the native map) on the encoder, not the manual's speed loop inside a position loop, so the manual's gains and filter have no counterpart to act on; its following-error limit is the native map's 0x605C, in microsteps rather than encoder counts. Not in this map yet: the multi-segment program (0174-0178, 0327, 0328, 1024-1536; commands 14-18 and input functions 14-18 and 25-29 are refused with 03).",
+        "Not in this map, answered 02: the angle filter 0224 and the loop gains 0251-0258. The drive's closed loop is one position loop (or its servo PID, 0x6057-0x605A in the native map) on the encoder, not the manual's speed loop inside a position loop, so the manual's gains and filter have no counterpart to act on; its following-error limit is the native map's 0x605C, in microsteps rather than encoder counts.",
+        "Multi-segment programs (§7), registers 1024-1536: an instruction stream, each a code word and its parameter words (two-word values high word first): 1 absolute run (2 words, pulses), 2 relative run (2 words), 51 start speed, 53 stop speed (1-2000, 0.01 rev/s), 54 run speed (1-5000, 0.01 rev/s), 61 acceleration, 62 deceleration (5-10000 rev/s²), 65 wait and jump (2 words: the instruction to go on at, its high byte 0, then the wait in ms), 66 loop (2 words: how many times the body runs in all, 0 for ever, then the instruction to jump back to), 100 the end of a segment. Segment 1 begins at 1024 and each next one after the previous one's 100; 0327 says how many there are. A jump's address is an instruction's number, counted from 0 at 1024 across the program (256 at most), and must lie in its own segment; a segment holds 8 counted loops at most. Each segment starts at the manual's defaults (start and stop speed 100, run speed 1000, ramps 100), and the next instruction follows a move once the axis stands on its target. The registers read back as written; a write is refused (04) while a program runs or a save is under way, and a request that runs past 1536 with 02.",
+        "0323 = 14 checks segments 1 to 0327: 0176 shows the first one in error (an unknown code, a value out of range, a speed the drive cannot run at the resolution in force, a jump outside the segment, no end code before 1536, more than 256 instructions), 0 if none. 16 starts the segment the inputs with functions 25-29 select (0174, 1 + their bits: the manual's table), or else 0328 + 1; it is refused (04) with 0176 set if a segment is in error or the selected one is beyond 0327, and as a run is (04) with the power stage off, an alarm latched, the axis moving or in the pulse following. 17 pauses (the axis stops at the segment's deceleration; 16 resumes the move or the wait it paused), 18 ends the program at the segment's deceleration, and 6, 7, a fault, a disable or a move ending anywhere but on its target (a limit) end it too. While it runs 0178 shows the segment (1-32) and the other motion commands are refused (04). 15 saves the program and the parameters (as 0x200F = 2); so does 0x200F = 2 and 0206 = 1; the program is saved in flash beside the parameters and loaded at power-up (a program torn by a power cut during a save reads empty, all 0). The manual's note that function 15 starts a program contradicts its list (16 start, 15 save): the list is followed. The program's memory is the native map's PVT table, so the native map has no program (0x21A0 = 14-18 refused there, 04).",
         "Timing exceptions (§十三's table): a frame with a silence over 1.5 characters inside it is answered 0C, and a whole frame (its CRC good) that the next bytes followed before 3.5 characters of silence is answered 0D, either once the line has been quiet for 3.5 characters, with the address and function code the frame began with; the bytes in between are dropped and the request is not executed. A frame that did not begin with this drive's address, a broadcast, or one too short to say is not answered. Two frames with less than 1.5 characters between them are one frame with a wrong CRC: not answered, as every frame whose CRC or parity is wrong (its address cannot be trusted).",
     ],
     remarks: &[
@@ -223,6 +231,9 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         (119, "Actual speed, 0.01 rev/s, signed."),
         (126, "Actual position, pulses."),
         (106, "Pulse input format in force: 1 pulse and direction, 2 double pulse."),
+        (174, "Segment the inputs select (functions 25-29), 1-32; 0 when no input selects."),
+        (176, "First segment in error at the last check or refused start, 0 none."),
+        (178, "Running segment (1-32), 0 when no program runs."),
         (201, "Motor direction: 1 turns the motor the other way; from the next power-up (save first)."),
         (206, "User command: 1 parameter reset and save, 2 alarm clear, 3 restart (refused)."),
         (213, "Standstill current, percent of 0241, after 0245."),
@@ -257,6 +268,8 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         (321, "The position command 8 sets, pulses."),
         (323, "Control command (see the notes)."),
         (324, "Bit 0 the positive soft limit on, bit 1 the negative one."),
+        (327, "Program segments, 1-32."),
+        (328, "Segment a start runs, 0-31 (segment + 1), unless inputs select one."),
         (400, "IN1 function (see the notes); 0401-0406 IN2-IN7."),
         (410, "Pseudo-input IN1: 1 acts as IN1 turning active; 0411-0416 IN2-IN7."),
         (

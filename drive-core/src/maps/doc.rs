@@ -70,10 +70,28 @@ pub fn write_layout(out: &mut impl Write, layout: &Layout, r: &Reference) -> fmt
     writeln!(out)?;
     writeln!(out, "| Register | Words | Name | Access | Values | Default | Unit | Drive object | Description |")?;
     writeln!(out, "|---|---|---|---|---|---|---|---|---|")?;
+    let mut program = layout.program;
     for entry in layout.entries {
+        if let Some(first) = program.filter(|&first| entry.addr > first) {
+            program_row(out, first)?;
+            program = None;
+        }
         row(out, entry, r)?;
     }
+    if let Some(first) = program {
+        program_row(out, first)?;
+    }
     Ok(())
+}
+
+/// The multi-segment program's window: raw words, not an object.
+fn program_row(out: &mut impl Write, first: u16) -> fmt::Result {
+    let words = crate::state::program::WORDS;
+    let last = usize::from(first) + words - 1;
+    writeln!(
+        out,
+        "| {first:04}-{last:04} | {words} | multi-segment program | rw | 0..65535 | 0 |  | - | The program's instructions (see the notes), saved with the parameters. |"
+    )
 }
 
 fn row(out: &mut impl Write, e: &Entry, r: &Reference) -> fmt::Result {

@@ -109,6 +109,7 @@ pub static LAYOUT: Layout = Layout {
     halves: false,
     timing: false,
     defaults: &[],
+    program: None,
 };
 
 /// What the reference says beside the table: the decisions where seed 001 is silent or

@@ -31,8 +31,7 @@ use crate::pdu::{Exception, Words};
 use crate::state::DriveState;
 use core::borrow::Borrow;
 
-/// Full steps a revolution of the motors the drive runs (1.8°), for scales per revolution.
-pub const FULL_STEPS_PER_REV: i64 = 200;
+pub use crate::units::FULL_STEPS_PER_REV;
 
 /// The order of a 32-bit object's two registers.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -291,12 +290,25 @@ pub struct Layout {
     /// in the map's units, set after the drive's factory values (a drive with nothing saved, a
     /// factory reset).
     pub defaults: &'static [(u16, i32)],
+    /// The first register of the multi-segment program's window, if the map has one (seed
+    /// 002's 1024-1536): raw words the drive keeps as written, in the PVT table's memory (a map
+    /// with a program has no PVT).
+    pub program: Option<u16>,
 }
 
 impl Layout {
     /// A layout walked by address that stages halves.
     pub const fn by_address(entries: &'static [Entry], order: WordOrder, exceptions: Exceptions) -> Self {
-        Self { entries, order, exceptions, walk: Walk::Address, halves: true, timing: false, defaults: &[] }
+        Self {
+            entries,
+            order,
+            exceptions,
+            walk: Walk::Address,
+            halves: true,
+            timing: false,
+            defaults: &[],
+            program: None,
+        }
     }
 
     /// The entries a request of `qty` registers from `addr` covers, each with the place of its
@@ -327,6 +339,16 @@ impl Layout {
             (left, reg, i, k) = (left - n, reg + n, i + 1, 0);
         }
         Some(())
+    }
+}
+
+impl Layout {
+    /// The place in the program of `qty` registers from `addr`, if they are in its window;
+    /// `Err` if they begin in it but run past its end.
+    fn in_program(&self, addr: u16, qty: usize) -> Option<Result<usize, ()>> {
+        let k = usize::from(addr.checked_sub(self.program?)?);
+        (k < crate::state::program::WORDS).then_some(())?;
+        Some(if k + qty <= crate::state::program::WORDS { Ok(k) } else { Err(()) })
     }
 }
 
@@ -491,6 +513,13 @@ impl RegisterMap for LayoutMap {
         let ex = self.layout.exceptions;
         let order = self.layout.order;
         let qty = (out.len() / 2) as u32;
+        if let Some(window) = self.layout.in_program(addr, qty as usize) {
+            let k = window.map_err(|()| ex.unknown)?;
+            for (j, slot) in out.chunks_exact_mut(2).enumerate() {
+                slot.copy_from_slice(&drive.program_word(k + j).to_be_bytes());
+            }
+            return Ok(());
+        }
         let mut slots = out.chunks_exact_mut(2);
         let mut refused = None;
         let walked = self.layout.covered(addr, qty, |e, k, n| {
@@ -521,6 +550,9 @@ impl RegisterMap for LayoutMap {
 
     fn check_read(&self, addr: u16, qty: u16) -> Result<(), Exception> {
         let ex = self.layout.exceptions;
+        if let Some(window) = self.layout.in_program(addr, usize::from(qty)) {
+            return window.map(|_| ()).map_err(|()| ex.unknown);
+        }
         let mut refused = None;
         let walked = self.layout.covered(addr, u32::from(qty), |e, _, _| {
             if e.view == View::WriteOnly {
@@ -544,6 +576,10 @@ impl RegisterMap for LayoutMap {
         values: Words<'_>,
     ) -> Result<(), Exception> {
         let ex = self.layout.exceptions;
+        if let Some(window) = self.layout.in_program(addr, values.len()) {
+            let k = window.map_err(|()| ex.unknown)?;
+            return drive.write_program(k, &values).map_err(|x| ex.of(x));
+        }
         let mut plan = heapless::Vec::new();
         self.plan(drive, addr, &values, &mut plan)?;
         if let [(e, Op::Commit(bits))] = plan.as_slice() {
@@ -572,6 +608,10 @@ impl RegisterMap for LayoutMap {
             Exception::ByteCount => self.layout.exceptions.byte_count,
             e => e,
         }
+    }
+
+    fn has_program(&self) -> bool {
+        self.layout.program.is_some()
     }
 
     fn factory_settings<P: Borrow<Table>>(&self, drive: &mut DriveState<P>) {

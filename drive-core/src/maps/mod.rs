@@ -95,6 +95,10 @@ impl RegisterMap for Maps {
         matches!(self, Self::Layout(m) if core::ptr::eq(m.layout(), &jmc::LAYOUT))
     }
 
+    fn has_program(&self) -> bool {
+        matches!(self, Self::Layout(m) if m.has_program())
+    }
+
     fn timing_exceptions(&self) -> bool {
         matches!(self, Self::Layout(m) if m.layout().timing)
     }

@@ -37,6 +37,11 @@ pub trait RegisterMap {
     /// Sets the map's own factory settings over the drive's factory values (a drive with
     /// nothing saved, a factory reset); most maps have none.
     fn factory_settings<P: Borrow<Table>>(&self, _drive: &mut DriveState<P>) {}
+    /// Whether the map has a multi-segment program (seed 002's), kept in the PVT table's memory:
+    /// such a map has no PVT.
+    fn has_program(&self) -> bool {
+        false
+    }
     /// Whether a frame spoilt by its timing is answered (seed 002's exceptions 0x0C and 0x0D)
     /// rather than dropped.
     fn timing_exceptions(&self) -> bool {

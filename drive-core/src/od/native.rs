@@ -25,7 +25,8 @@ const HOMING_METHODS: [u32; 26] = [
 ];
 /// The functions an input takes (0x21BA-0x21C0): the motion commands, the limit and home
 /// switches, enable.
-const INPUT_FUNCTIONS: &[u32] = &[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 20];
+const INPUT_FUNCTIONS: &[u32] =
+    &[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 20, 25, 26, 27, 28, 29];
 /// A PVT table index or count.
 const PVT_INDEX: Range = Span(0, 1000);
 /// Full signed 32-bit range.
@@ -335,7 +336,12 @@ objects! {
     /// (04) while moving); 12 the homing of 0x2160 (as 0x2161 = 1); 13 clear the alarms (0x6000,
     /// 0x2135, 0x2138, 0x6001's external stop and stall), leaving the enable as it is. Runs and
     /// jogs ramp with 0x6067, 0x6069, 0x606B and 0x606D, and stop at an enabled soft limit
-    /// (0x21AD). A value the drive does not do is refused (03).
+    /// (0x21AD). 14-18 act on the multi-segment program (`state::program`) of a map that has
+    /// one (seed 002's; its memory is the PVT table's, so the native map refuses them, 04): 14
+    /// check it (0x21CE), 15 save it with the parameters (as 0x200F = 2), 16 start the selected
+    /// segment or resume a paused one, 17 pause, 18 end; while a program runs the other motion
+    /// commands but 6 and 7 (which end it) are refused (04). A value the drive does not do is
+    /// refused (03).
     MotionCommand @ 0x21A0: U16, Cmd, Ram, Set(&crate::modes::Command::RAW), default 0, None, "motion command";
     /// Command target (our object; seed 002's 0313): the position of an absolute run, the
     /// distance of a relative one (0x21A0).
@@ -395,8 +401,8 @@ objects! {
     /// positive / negative limit switch: a motion heading into an active one stops at the stop
     /// deceleration and a command towards it is refused (04); 11 the home switch of the homing
     /// (9 and 10 its limits too), over 0x216C; 20 enable: 0x6011 takes the input's level when
-    /// it changes. IN1-IN3 are EXT1-EXT3, IN4-IN7 GPIO1-GPIO4. Seed 002's multi-segment
-    /// functions (14-18, 25-29) are refused (03).
+    /// it changes; 14-18 the program commands of 0x21A0; 25-29 bits 0-4 of the program segment
+    /// a start runs (0x21CD). IN1-IN3 are EXT1-EXT3, IN4-IN7 GPIO1-GPIO4.
     InputFunction1 @ 0x21BA: U8, Rw, Rom, Set(INPUT_FUNCTIONS), default 0, None, "IN1 function";
     /// IN2 function (our object; seed 002's 0401): as 0x21BA.
     InputFunction2 @ 0x21BB: U8, Rw, Rom, Set(INPUT_FUNCTIONS), default 0, None, "IN2 function";
@@ -440,6 +446,21 @@ objects! {
     /// encoder and phase B mirrored). From the next power-up (save first): switched under a
     /// standing, energised motor it would jump by up to two full steps.
     MotorDirection @ 0x21CA: U8, Rw, Rom, Span(0, 1), default 0, None, "motor direction";
+    /// Program segments (our object; seed 002's 0327): how many segments the multi-segment
+    /// program has, 1-32; a check (0x21A0 = 14) and a start check all of them.
+    ProgramSegments @ 0x21CB: U8, Rw, Rom, Span(1, 32), default 1, None, "program segments";
+    /// Program segment select (our object; seed 002's 0328): a start (0x21A0 = 16) runs segment
+    /// this + 1, unless an input selects one (functions 25-29 of 0x21BA-0x21C0).
+    ProgramSelect @ 0x21CC: U8, Rw, Rom, Span(0, 31), default 0, None, "program segment select";
+    /// The segment the inputs select (our object; seed 002's 0174): 1 + the bits of the inputs
+    /// with functions 25-29 (bit 0-4) that are active, 0 when no input has such a function.
+    ProgramInputSegment @ 0x21CD: U8, Ro, Live, Span(0, 32), default 0, None, "input-selected segment";
+    /// The segment in error (our object; seed 002's 0176): the first segment the last check
+    /// (0x21A0 = 14) or refused start (16) found in error, 1-32; 0 none.
+    ProgramErrorSegment @ 0x21CE: U8, Ro, Live, Span(0, 32), default 0, None, "program error segment";
+    /// The running segment (our object; seed 002's 0178): 1-32 while a program runs or is
+    /// paused, else 0.
+    ProgramRunning @ 0x21CF: U8, Ro, Live, Span(0, 32), default 0, None, "running segment";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake

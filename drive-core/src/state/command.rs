@@ -8,7 +8,7 @@
 //! further out.
 
 use super::DriveState;
-use super::control::{Planner, Pp};
+use super::control::{Planner, Pp, SetPoint};
 use crate::controller::{STATUS_EXT, STATUS_STALL};
 use crate::modes::{Command, PowerState, Running, WorkMode};
 use crate::motion::axis::Axis;
@@ -24,7 +24,13 @@ const LIMIT_NEGATIVE: u32 = 1 << 1;
 impl<P: Borrow<Table>> DriveState<P> {
     /// Checks a motion command that does not plan (set position, home, clear the alarms).
     pub(crate) fn check_other_command(&self, value: u32) -> Result<(), ObjError> {
-        match Command::from_raw(value).ok_or(ObjError::OutOfRange)? {
+        let command = Command::from_raw(value).ok_or(ObjError::OutOfRange)?;
+        if command.raw() >= Command::ProgramCheck.raw() {
+            return self.check_program_command(command);
+        }
+        // A running program owns the axis.
+        refuse(!self.program_runs() || matches!(command, Command::AlarmClear | Command::None), ObjError::NotNow)?;
+        match command {
             Command::SetPosition => {
                 refuse(self.ctl.axis.is_still(), ObjError::Busy)?;
                 self.check(Obj::Position, self.param(Obj::PositionPreset))
@@ -37,12 +43,19 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// Writes a motion command that does not plan, once [`DriveState::check_other_command`]
     /// accepts it.
     pub(crate) fn other_command(&mut self, value: u32) -> Result<(), ObjError> {
-        self.check_other_command(value)?;
+        if let Err(e) = self.check_other_command(value) {
+            // A start refused for the program's errors reports the segment in error.
+            if value == Command::ProgramStart.raw() {
+                self.program_refused();
+            }
+            return Err(e);
+        }
         match Command::from_raw(value) {
             Some(Command::SetPosition) => self.apply(Obj::Position, self.param(Obj::PositionPreset)),
             Some(Command::Home) => self.homing_command(1),
             Some(Command::AlarmClear) => self.clear_alarms(),
-            _ => {}
+            Some(command) => self.program_command(command),
+            None => {}
         }
         self.set_param(Obj::MotionCommand, value);
         Ok(())
@@ -80,7 +93,7 @@ impl Planner<'_> {
         // A PVT run or the pulse input owns the axis: the motion command stops it, and moves it
         // in no other way.
         let stops = matches!(command, Command::Stop | Command::EmergencyStop);
-        refuse(stops || !matches!(self.mode(), WorkMode::Pvt | WorkMode::Follow), ObjError::NotNow)?;
+        refuse(stops || !matches!(self.mode(), WorkMode::Pvt | WorkMode::Follow) && !self.program, ObjError::NotNow)?;
         let here = axis.setpoint().whole;
         let running = match command {
             Command::Absolute => {
@@ -174,6 +187,19 @@ impl Planner<'_> {
         }
         let speed = self.param(Obj::CommandSpeed) as f32;
         self.run_to_at(axis, self.soft_limited(here, target), speed)
+    }
+
+    /// A program's move to `sp.target` (within the soft limits) at its set-point's speeds: the
+    /// target it heads for.
+    pub(super) fn program_move(&self, axis: &mut Axis, sp: &SetPoint) -> Result<i64, ObjError> {
+        self.may_move?;
+        let here = axis.setpoint().whole;
+        if sp.target != here {
+            self.away_from_limits(sp.target > here)?;
+        }
+        let target = self.soft_limited(here, sp.target);
+        axis.move_to(self.now, target, sp.depart, sp.arrive, &sp.limits).map_err(|_| ObjError::Infeasible)?;
+        Ok(target)
     }
 
     fn run_to_at(&self, axis: &mut Axis, target: i64, speed: f32) -> Result<(), ObjError> {

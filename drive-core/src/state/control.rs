@@ -300,11 +300,12 @@ impl<P: Borrow<Table>> DriveState<P> {
             may_move: self.may_move(),
             encoder: self.encoder_position(),
             limits: self.active_limits(),
+            program: self.program_runs(),
         }
     }
 
     /// The limit switches active now: bit 0 the positive, bit 1 the negative.
-    fn active_limits(&self) -> u8 {
+    pub(super) fn active_limits(&self) -> u8 {
         u8::from(self.limit_ahead(true)) | (u8::from(self.limit_ahead(false)) << 1)
     }
 
@@ -320,8 +321,17 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// (a refused plan may have halted the axis). What [`DriveState::plan_motion`] returns.
     pub(crate) fn plan_motion_in_place(&mut self, obj: Obj, value: u32) -> Result<bool, ObjError> {
         let (may_move, encoder, limits) = (self.may_move(), self.encoder_position(), self.active_limits());
-        let planner = Planner { params: &self.params, now: self.plan_time(), may_move, encoder, limits };
+        let program = self.program_runs();
+        let planner = Planner { params: &self.params, now: self.plan_time(), may_move, encoder, limits, program };
         planner.plan_motion(obj, value, &mut self.ctl.axis, &mut self.pp)
+    }
+
+    /// Plans a program's move to `sp.target` on the drive's own axis: the target it heads for
+    /// (within the soft limits), or why it is refused.
+    pub(super) fn plan_program_move(&mut self, sp: &SetPoint) -> Result<i64, ObjError> {
+        let (may_move, encoder, limits) = (self.may_move(), self.encoder_position(), self.active_limits());
+        let planner = Planner { params: &self.params, now: self.plan_time(), may_move, encoder, limits, program: true };
+        planner.program_move(&mut self.ctl.axis, sp)
     }
 
     /// Checks a write to a motion object: refused when the drive cannot act on it now.
@@ -389,8 +399,9 @@ impl<P: Borrow<Table>> DriveState<P> {
         let stops = obj == Obj::MotionCommand
             && matches!(Command::from_raw(value), Some(Command::Stop | Command::EmergencyStop));
         if changed && (stops || matches!(obj, Obj::Stop | Obj::Enable)) {
-            // A stop ends a PVT run too.
+            // A stop ends a PVT run too, and a program.
             self.ctl.run = None;
+            self.program_stopped();
         }
         if obj == Obj::Enable {
             self.enable_written(value);
@@ -414,6 +425,7 @@ impl<P: Borrow<Table>> DriveState<P> {
     fn take_events(&mut self, events: Events) {
         if events.has(Events::STOPPED) {
             self.pp = Pp::default();
+            self.program_stopped();
         }
         if events.has(Events::JOINED)
             && self.mode() == WorkMode::ProfilePosition
@@ -446,6 +458,7 @@ impl<P: Borrow<Table>> DriveState<P> {
         self.analog_service();
         self.follow_service();
         self.inputs_service();
+        self.program_service();
         self.quick_stop_settle();
     }
 
@@ -453,7 +466,7 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// next reading.
     pub fn service_due(&self) -> Option<Instant> {
         let due = self.homing_due().into_iter().chain(self.analog_due()).chain(self.device_due());
-        due.chain(self.follow_due()).chain(self.inputs_due()).min()
+        due.chain(self.follow_due()).chain(self.inputs_due()).chain(self.program_due()).min()
     }
 
     /// Whether [`DriveState::service`] has something to do at `now`: for a platform that must
@@ -568,6 +581,8 @@ pub(crate) struct Planner<'a> {
     /// The limit switches active (bit 0 positive, bit 1 negative): a motion command towards
     /// one is refused.
     pub(super) limits: u8,
+    /// A program runs: it owns the axis, and motion commands but the stops are refused.
+    pub(super) program: bool,
 }
 
 impl Planner<'_> {

@@ -8,6 +8,7 @@ pub mod control;
 mod device;
 pub mod homing;
 mod inputs;
+pub mod program;
 pub mod pvt;
 
 use crate::controller::handoff::{Base, Orders};
@@ -184,6 +185,8 @@ pub struct DriveState<P = Table> {
     pub(crate) analog: analog::Analog,
     /// What the inputs' functions did.
     pub(crate) inputs: inputs::Inputs,
+    /// The multi-segment program's run.
+    pub(crate) program: program::Program,
     /// The factory values were restored by the request being served: the register map sets
     /// its own over them before the save is taken.
     pub(crate) factory_restored: bool,
@@ -231,6 +234,7 @@ pub struct Checkpoint {
     watch: Option<crate::controller::Watch>,
     suspend: u16,
     device: crate::power::DeviceState,
+    program: program::Program,
 }
 
 impl DriveState {
@@ -276,6 +280,7 @@ impl<P: Borrow<Table>> DriveState<P> {
             homing: homing::Homing::default(),
             analog: analog::Analog::default(),
             inputs: inputs::Inputs::default(),
+            program: program::Program::default(),
             factory_restored: false,
             margin: 0,
             device: if get(Obj::Enable) == 1 {
@@ -308,6 +313,7 @@ impl<P: Borrow<Table>> DriveState<P> {
             homing,
             analog: _,
             inputs: _,
+            program,
             factory_restored: _,
             margin: _,
             device,
@@ -329,6 +335,7 @@ impl<P: Borrow<Table>> DriveState<P> {
             watch: ctl.watch,
             suspend: ctl.suspend,
             device: *device,
+            program: *program,
         }
     }
 
@@ -371,10 +378,12 @@ impl<P: Borrow<Table>> DriveState<P> {
             watch,
             suspend,
             device,
+            program,
         } = c;
         (self.params, self.storage, self.request, self.now, self.orders) = (params, storage, request, now, orders);
         (self.ctl.status, self.ctl.axis, self.ctl.run, self.pp, self.pvt) = (status, axis, run, pp, pvt);
         (self.homing, self.ctl.watch, self.ctl.suspend, self.device) = (homing, watch, suspend, device);
+        self.program = program;
         self.refresh_settings();
     }
 
@@ -531,6 +540,7 @@ impl<P: Borrow<Table>> DriveState<P> {
             Obj::TargetPosition => self.ctl.axis.target().unwrap_or(self.ctl.axis.setpoint().whole) as u32,
             Obj::SupplyVoltage => u32::from(s.supply_mv),
             Obj::MotorCurrent => u32::from(s.current_ma),
+            Obj::ProgramInputSegment | Obj::ProgramErrorSegment | Obj::ProgramRunning => self.program_live(obj),
             // The ten entries are consecutive objects.
             h if (Obj::FaultHistory0 as usize..=Obj::FaultHistory9 as usize).contains(&(h as usize)) => {
                 self.ctl.history(h as usize - Obj::FaultHistory0 as usize)
