@@ -119,7 +119,8 @@ const ENTRY: usize = 6;
 pub const RECORD: usize = HEADER + ENTRY * SAVED;
 /// The crate's work buffer: key and value, rounded up to its largest flash word (32 bytes).
 const BUFFER: usize = (1 + RECORD).next_multiple_of(32);
-const _: () = assert!(1 + 4 + PROGRAM_CHUNK <= BUFFER, "a program record fits the buffer");
+const _: () =
+    assert!(4 + PROGRAM_CHUNK <= RECORD && FAULTS_RECORD <= RECORD, "every record fits a parameter record's room");
 
 /// Writes the parameter record of `params` into `out`; its length, or `None` if `out` is short.
 pub fn encode(params: &Params, out: &mut [u8]) -> Option<usize> {
@@ -202,42 +203,31 @@ impl<S: NorFlash> Store<S> {
     /// save works. Never fails: what went wrong is in the status bits.
     pub async fn load(&mut self) -> Loaded {
         let mut params = Params::factory();
-        let mut status = 0;
-        let mut unreadable = false;
-        match self.map.fetch_item::<&[u8]>(&mut self.buf, &PARAMS_KEY).await {
-            Ok(Some(record)) => {
-                if decode(record, &mut params).is_err() {
-                    status |= STORAGE_CORRUPT;
+        let mut status = STORAGE_EMPTY;
+        let mut found_other = false;
+        let mut unreadable = self
+            .read(PARAMS_KEY..FAULTS_KEY + 1, &mut |key, record| match key {
+                PARAMS_KEY => status = if decode(record, &mut params).is_err() { STORAGE_CORRUPT } else { 0 },
+                POSITION_KEY => {
+                    // An `i32`, little endian, as the crate stores one.
+                    if let Some(&bytes) = record.first_chunk::<4>() {
+                        params.set_saved_position(i32::from_le_bytes(bytes));
+                    }
+                    found_other = true;
                 }
-            }
-            Ok(None) => status |= STORAGE_EMPTY,
-            Err(_) => unreadable = true,
-        }
-        let mut position_found = false;
-        match self.map.fetch_item::<i32>(&mut self.buf, &POSITION_KEY).await {
-            Ok(Some(position)) => {
-                params.set_saved_position(position);
-                position_found = true;
-            }
-            Ok(None) => {}
-            Err(_) => unreadable = true,
-        }
-        let mut faults_found = false;
-        match self.map.fetch_item::<&[u8]>(&mut self.buf, &FAULTS_KEY).await {
-            Ok(Some(record)) => {
-                faults_found = true;
-                // A record this firmware cannot read is a history lost, not a reason to drop the
-                // parameters.
-                if let Ok(history) = FaultHistory::decode(record) {
-                    params.set_fault_history(&history);
+                _ => {
+                    found_other = true;
+                    // A record this firmware cannot read is a history lost, not a reason to drop
+                    // the parameters.
+                    if let Ok(history) = FaultHistory::decode(record) {
+                        params.set_fault_history(&history);
+                    }
                 }
-            }
-            Ok(None) => {}
-            Err(_) => unreadable = true,
-        }
+            })
+            .await;
         // No record, yet the pages are not erased: not a store of ours (or one torn beyond
         // repair). Saving into it would fail on programmed words.
-        if status & STORAGE_EMPTY != 0 && !position_found && !faults_found && !self.is_erased().await {
+        if status & STORAGE_EMPTY != 0 && !found_other && !self.is_erased().await {
             unreadable = true;
         }
         if unreadable {
@@ -317,29 +307,21 @@ impl<S: NorFlash> Store<S> {
 
     /// Saves `params` as one record (see the module documentation).
     pub async fn save(&mut self, params: &Params) -> Result<(), Error<S>> {
-        let mut record = [0u8; RECORD];
-        let n = encode(params, &mut record).ok_or(sequential_storage::Error::BufferTooSmall(RECORD))?;
-        let record = record.get(..n).unwrap_or_default();
-        self.map.store_item(&mut self.buf, &PARAMS_KEY, &record).await
+        self.write(Record::Params(params)).await
     }
 
     /// Saves the program kept in `table` (see the module documentation).
     pub async fn save_program(&mut self, table: &Table) -> Result<(), Error<S>> {
-        let bytes = 2 * PROGRAM_WORDS;
-        let crc = (0..bytes).fold(crate::crc::INIT, |c, i| crate::crc::update(c, table.byte(i).unwrap_or(0)));
-        let [lo, hi] = crc.to_le_bytes();
-        for (chunk, key) in PROGRAM_KEYS.enumerate() {
-            let mut record = [0u8; 4 + PROGRAM_CHUNK];
-            let first = chunk * PROGRAM_CHUNK;
-            let n = PROGRAM_CHUNK.min(bytes - first);
-            if let Some((head, body)) = record.split_first_chunk_mut::<4>() {
-                *head = [PROGRAM_FORMAT, chunk as u8, lo, hi];
-                for (i, b) in body.iter_mut().take(n).enumerate() {
-                    *b = table.byte(first + i).unwrap_or(0);
-                }
-            }
-            let record = record.get(..4 + n).unwrap_or_default();
-            self.map.store_item(&mut self.buf, &key, &record).await?;
+        self.write(Record::Program(table)).await
+    }
+
+    /// Writes the records of `what`: one write of the crate's for every record (one copy of its
+    /// code in a firmware).
+    async fn write(&mut self, what: Record<'_>) -> Result<(), Error<S>> {
+        for k in 0..PROGRAM_CHUNKS {
+            let mut out = [0u8; RECORD];
+            let Some((key, n)) = what.encode(k, &mut out) else { break };
+            self.map.store_item(&mut self.buf, &key, &out.get(..n).unwrap_or_default()).await?;
         }
         Ok(())
     }
@@ -349,29 +331,26 @@ impl<S: NorFlash> Store<S> {
     pub async fn load_program(&mut self, table: &Table) -> bool {
         let bytes = 2 * PROGRAM_WORDS;
         let mut crc = None;
-        for (chunk, key) in PROGRAM_KEYS.enumerate() {
-            let first = chunk * PROGRAM_CHUNK;
-            let n = PROGRAM_CHUNK.min(bytes - first);
-            let record = match self.map.fetch_item::<&[u8]>(&mut self.buf, &key).await {
-                Ok(Some(record)) => record,
-                _ => break,
-            };
-            let Some((&[format, k, lo, hi], body)) = record.split_first_chunk::<4>() else { break };
-            if format != PROGRAM_FORMAT || usize::from(k) != chunk || body.len() != n {
-                break;
+        let mut torn = false;
+        self.read(PROGRAM_KEYS, &mut |key, record| {
+            let chunk = usize::from(key - PROGRAM_KEYS.start);
+            let start = chunk * PROGRAM_CHUNK;
+            let n = PROGRAM_CHUNK.min(bytes - start);
+            match record.split_first_chunk::<4>() {
+                Some((&[PROGRAM_FORMAT, k, lo, hi], body))
+                    if usize::from(k) == chunk && body.len() == n && crc.is_none_or(|c| c == [lo, hi]) =>
+                {
+                    crc = Some([lo, hi]);
+                    for (i, &b) in body.iter().enumerate() {
+                        table.set_byte(start + i, b);
+                    }
+                }
+                _ => torn = true,
             }
-            if crc.is_some_and(|c| c != [lo, hi]) {
-                break;
-            }
-            crc = Some([lo, hi]);
-            for (i, &b) in body.iter().enumerate() {
-                table.set_byte(first + i, b);
-            }
-        }
-        let whole = crc.is_some_and(|c| {
-            (0..bytes).fold(crate::crc::INIT, |c, i| crate::crc::update(c, table.byte(i).unwrap_or(0)))
-                == u16::from_le_bytes(c)
-        });
+        })
+        .await;
+        let sum = (0..bytes).fold(crate::crc::INIT, |c, i| crate::crc::update(c, table.byte(i).unwrap_or(0)));
+        let whole = !torn && crc.is_some_and(|c| u16::from_le_bytes(c) == sum);
         if !whole {
             for i in 0..bytes {
                 table.set_byte(i, 0);
@@ -380,15 +359,28 @@ impl<S: NorFlash> Store<S> {
         whole
     }
 
+    /// Reads the records `keys`, handing each one found to `each`: one read of the crate's for
+    /// every record (one copy of its code in a firmware). Whether a read failed.
+    async fn read(&mut self, keys: core::ops::Range<u8>, each: &mut dyn FnMut(u8, &[u8])) -> bool {
+        let mut failed = false;
+        for key in keys {
+            match self.map.fetch_item::<&[u8]>(&mut self.buf, &key).await {
+                Ok(Some(record)) => each(key, record),
+                Ok(None) => {}
+                Err(_) => failed = true,
+            }
+        }
+        failed
+    }
+
     /// Saves the power-down position (0x6055): one small record, for the power-loss detector.
     pub async fn save_position(&mut self, position: i32) -> Result<(), Error<S>> {
-        self.map.store_item(&mut self.buf, &POSITION_KEY, &position).await
+        self.write(Record::Position(position)).await
     }
 
     /// Saves the fault history and alarm count: one small record.
     pub async fn save_faults(&mut self, history: &FaultHistory) -> Result<(), Error<S>> {
-        let record = history.encode();
-        self.map.store_item(&mut self.buf, &FAULTS_KEY, &record.as_slice()).await
+        self.write(Record::Faults(history)).await
     }
 
     /// Erases every page of the store.
@@ -449,6 +441,45 @@ impl Job {
     pub fn finish<M: RegisterMap, P: Borrow<Table>>(&self, drive: &mut Drive<M, P>, ok: bool) {
         if matches!(self, Job::Save(_)) {
             drive.save_done(ok);
+        }
+    }
+}
+
+/// What a save writes: its records, built one at a time into the store's buffer-sized scratch.
+enum Record<'a> {
+    Params(&'a Params),
+    Position(i32),
+    Faults(&'a FaultHistory),
+    Program(&'a Table),
+}
+
+impl Record<'_> {
+    /// Record `k` of this save into `out`: its key and length, `None` past the last one.
+    fn encode(&self, k: usize, out: &mut [u8; RECORD]) -> Option<(u8, usize)> {
+        let first = |bytes: &[u8], out: &mut [u8; RECORD]| {
+            let n = bytes.len().min(RECORD);
+            out.get_mut(..n)?.copy_from_slice(bytes.get(..n)?);
+            Some(n)
+        };
+        match (self, k) {
+            (Self::Params(params), 0) => Some((PARAMS_KEY, encode(params, out)?)),
+            // An `i32`, little endian, as the crate stores one.
+            (Self::Position(position), 0) => Some((POSITION_KEY, first(&position.to_le_bytes(), out)?)),
+            (Self::Faults(history), 0) => Some((FAULTS_KEY, first(&history.encode(), out)?)),
+            (Self::Program(table), k) if k < PROGRAM_CHUNKS => {
+                let bytes = 2 * PROGRAM_WORDS;
+                let crc = (0..bytes).fold(crate::crc::INIT, |c, i| crate::crc::update(c, table.byte(i).unwrap_or(0)));
+                let [lo, hi] = crc.to_le_bytes();
+                let start = k * PROGRAM_CHUNK;
+                let n = PROGRAM_CHUNK.min(bytes - start);
+                let (head, body) = out.split_first_chunk_mut::<4>()?;
+                *head = [PROGRAM_FORMAT, k as u8, lo, hi];
+                for (i, b) in body.iter_mut().take(n).enumerate() {
+                    *b = table.byte(start + i).unwrap_or(0);
+                }
+                Some((PROGRAM_KEYS.start + k as u8, 4 + n))
+            }
+            _ => None,
         }
     }
 }

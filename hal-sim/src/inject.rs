@@ -34,12 +34,16 @@ pub enum Change {
     DriverTemperature(f64),
     /// The shaft encoder gets this fault (noise, line break, slipped coupling) or is repaired.
     Encoder(EncoderFault),
+    /// An input pin (0x6031's bit number) is driven high (`Some(true)`), low, or left to the
+    /// machine's switches again (`None`): a wire the machine's controller sets.
+    Input(u32, Option<bool>),
 }
 
 impl Change {
     /// Parses a `--fault` specification: `supply=V`, `supply=V/MS` (ramp to V in MS ms),
     /// `load=NM`, `blocked`, `free`, `open-a`, `open-b`, `short-a`, `short-b`, `heal-a`,
-    /// `heal-b`, `temp=C`, `encoder-noise=N`, `encoder-lost`, `encoder-frozen`, `encoder-ok`.
+    /// `heal-b`, `temp=C`, `encoder-noise=N`, `encoder-lost`, `encoder-frozen`, `encoder-ok`,
+    /// `input=PIN:high|low|free` (PIN `ext1`..`ext3`, `gpio1`..`gpio8`).
     pub fn parse(spec: &str) -> Result<Self, String> {
         let number =
             |t: &str| t.trim().parse::<f64>().ok().filter(|v| v.is_finite()).ok_or(format!("bad number {t:?}"));
@@ -64,6 +68,16 @@ impl Change {
             "encoder-lost" => Change::Encoder(EncoderFault::Lost),
             "encoder-frozen" => Change::Encoder(EncoderFault::Frozen),
             "encoder-ok" => Change::Encoder(EncoderFault::Ok),
+            "input" => {
+                let (pin, level) = value.split_once(':').ok_or(format!("{spec:?}: expected input=PIN:LEVEL"))?;
+                let level = match level.trim() {
+                    "high" => Some(true),
+                    "low" => Some(false),
+                    "free" => None,
+                    l => return Err(format!("no level {l:?} (high, low or free)")),
+                };
+                Change::Input(crate::machine::parse_pin(pin.trim())?, level)
+            }
             k => match k.split_once('-') {
                 Some(("open", p)) => Change::Phase(phase(p)?, PhaseFault::Open),
                 Some(("short", p)) => Change::Phase(phase(p)?, PhaseFault::Short),

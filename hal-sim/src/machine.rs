@@ -136,8 +136,8 @@ impl Switch {
     }
 }
 
-/// The pin number of `name` (`ext1`..`ext3`, `gpio1`..`gpio8`).
-fn parse_pin(name: &str) -> Result<u32, String> {
+/// 0x6031's bit number of the pin `name` (`ext1`..`ext3`, `gpio1`..`gpio8`).
+pub(crate) fn parse_pin(name: &str) -> Result<u32, String> {
     let pin = match name {
         "ext1" => PIN_EXT1.trailing_zeros(),
         "ext2" => PIN_EXT2.trailing_zeros(),

@@ -68,7 +68,8 @@ struct Args {
     /// `short-a`, `short-b` (bridge output shorted: over-current), `heal-a`, `heal-b` (repaired),
     /// `temp=C` (the driver temperature becomes C: the ambient steps by the difference),
     /// `encoder-noise=N` (±N counts of jitter), `encoder-lost` (line break), `encoder-frozen`
-    /// (slipped coupling), `encoder-ok` (repaired).
+    /// (slipped coupling), `encoder-ok` (repaired), `input=PIN:high|low|free` (an input's wire
+    /// driven by the machine's controller, or left to the switches; PIN ext1-ext3, gpio1-gpio8).
     #[arg(long = "fault", value_name = "MS:SPEC")]
     faults: Vec<hal_sim::inject::Scheduled>,
     /// The encoder on the motor shaft: `inc:CPR` (incremental, CPR 200, 400, 500, 600, 800,

@@ -170,6 +170,7 @@ impl Plant {
             Change::Phase(k, fault) => self.motor.set_phase_fault(k, fault),
             Change::DriverTemperature(c) => self.thermal.force(c),
             Change::Encoder(fault) => self.encoder.apply(fault, &self.motor),
+            Change::Input(pin, level) => self.machine.drive_pin(pin, level),
         }
     }
 

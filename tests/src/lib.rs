@@ -76,9 +76,21 @@ pub fn power_on(
         faults: faults.iter().map(|f| f.parse().expect("fault spec")).collect(),
         ..Default::default()
     };
+    let (sim, snapshot, _) = power_on_with(opts);
+    (sim, snapshot)
+}
+
+/// The simulator `opts` describe, switched on: its power switch, its snapshot, and the handle
+/// that changes its machine while it runs (an input's wire, the supply).
+///
+/// # Panics
+/// If the simulator cannot bind its endpoint.
+pub fn power_on_with(
+    opts: hal_sim::SimOptions,
+) -> (hal_sim::PowerSwitch, std::sync::Arc<std::sync::Mutex<hal_sim::Snapshot>>, hal_sim::inject::Injector) {
     let sim = hal_sim::Simulator::bind(opts).expect("bind simulator");
-    let snapshot = sim.snapshot();
-    (sim.power_on(), snapshot)
+    let (snapshot, injector) = (sim.snapshot(), sim.injector());
+    (sim.power_on(), snapshot, injector)
 }
 
 /// A tokio-modbus RTU master over the simulator's TCP endpoint, to node 1.

@@ -249,18 +249,21 @@ async fn external_pulses_after_a_restart_move_the_rotor() {
     assert!((d.rotor() + 16_000.0).abs() < 8.0, "rotor at {}", d.rotor());
 }
 
-/// Seed 002's multi-segment program through tokio-modbus: written to 1024-1536, checked, saved
-/// by 0323 = 15, still there after a power cycle, and started by an input's function (the
-/// pseudo-input IN1 with function 16) for the segment 0328 selects: the rotor goes through the
-/// segment's moves, wait and loop and ends where the program says.
+/// Seed 002's multi-segment program through tokio-modbus, three segments: written to
+/// 1024-1536, checked, saved by 0323 = 15, still there after a power cycle; segment 2 started by
+/// a write of 0323, segment 1 (a wait, a loop and a jump) by the pseudo-input of IN1 (function
+/// 16), segment 3 by the simulated input IN2 (EXT2, function 16) going high. The simulator's
+/// trace shows each segment's moves, and a program with a jump out of its segment is refused with
+/// that segment's number.
 #[tokio::test(flavor = "current_thread")]
-async fn a_saved_program_runs_after_a_restart() {
+async fn a_saved_three_segment_program_runs_after_a_restart() {
     let dir = tempfile::tempdir().expect("tempdir");
     let flash = dir.path().join("flash.bin");
+    let trace = dir.path().join("motor.trace");
     let mut d = cls9(&flash, SCALE, &[]).await;
     d.set32(242, 3200).await;
     #[rustfmt::skip]
-    let program: [u16; 27] = [
+    let program: [u16; 33] = [
         54, 300,            // 0: run speed 3 rev/s
         61, 20, 62, 20,     // 1, 2: ramps 20 rev/s²
         1, 0, 16_000,       // 3: to 16 000
@@ -270,39 +273,101 @@ async fn a_saved_program_runs_after_a_restart() {
         100,                // 7: end of segment 1
         54, 50,             // 8: segment 2: 0.5 rev/s
         1, 0xFFFF, 0xF830,  // 9: to -2 000
-        100, 0, 0,          // 10: end (and two unused words)
+        100,                // 10: end of segment 2
+        54, 100,            // 11: segment 3: 1 rev/s
+        1, 0, 1_000,        // 12: to 1 000
+        100, 0, 0,          // 13: end (and two unused words)
     ];
     assert_eq!(write_many(&mut d.ctx, 1024, &program).await, Ok(()));
-    for (reg, v) in [(327, 2), (328, 1), (323, 14)] {
+    for (reg, v) in [(327, 3), (328, 1), (323, 14)] {
         assert_eq!(d.set(reg, v).await, Ok(()), "{reg}");
     }
     assert_eq!(d.get(176).await, 0, "no segment in error");
     assert_eq!(d.set(323, 15).await, Ok(()), "saved");
-    let mut d = d.restart(&flash).await;
-    assert_eq!(read_values(&mut d.ctx, 1024, 27).await, program.to_vec(), "the program survived");
-    assert_eq!(read_values(&mut d.ctx, 327, 2).await, vec![2, 1]);
-    // Segment 2 first (0328 = 1), by a write of 0323.
+    sleep(Duration::from_millis(100)).await;
+    let Cls9 { _sim: sim, ctx, .. } = d;
+    drop(ctx);
+    sim.off().expect("off");
+    let opts = hal_sim::SimOptions {
+        endpoint: hal_sim::Endpoint::Tcp("127.0.0.1:0".into()),
+        flash: Some(flash.clone()),
+        time_scale: SCALE,
+        motor: hal_sim::MotorOptions { trace: Some((trace.clone(), 20)), ..Default::default() },
+        ..Default::default()
+    };
+    let (sim, snapshot, wires) = drive_tests::power_on_with(opts);
+    let ctx = master(&sim).await;
+    let mut d = Cls9 { _sim: sim, ctx, snapshot };
+    assert_eq!(read_values(&mut d.ctx, 1024, 33).await, program.to_vec(), "the program survived");
+    assert_eq!(read_values(&mut d.ctx, 327, 2).await, vec![3, 1]);
+    // Segment 2 (0328 = 1), by a write of 0323.
     assert_eq!(d.set(323, 16).await, Ok(()));
     assert_eq!(d.get(178).await, 2, "segment 2 runs");
-    d.wait_still(5).await;
-    sleep(Duration::from_millis(100)).await;
-    assert_eq!(d.get(178).await, 0);
+    d.wait_program(10).await;
     assert_eq!(d.get32(126).await, -2_000);
     assert!((d.rotor() + 2_000.0).abs() < 8.0, "rotor at {}", d.rotor());
     // Segment 1 by IN1 (function 16, start) through its pseudo-input.
-    assert_eq!(d.set(328, 0).await, Ok(()));
-    assert_eq!(d.set(400, 16).await, Ok(()));
-    assert_eq!(d.set(410, 1).await, Ok(()));
-    let mut furthest = f64::MIN;
-    for _ in 0..200 {
-        sleep(Duration::from_millis(10)).await;
-        furthest = furthest.max(d.rotor());
-        if d.get(178).await == 0 {
-            break;
-        }
+    for (reg, v) in [(328, 0), (400, 16), (401, 16), (410, 1)] {
+        assert_eq!(d.set(reg, v).await, Ok(()), "{reg}");
     }
-    assert_eq!(d.get(178).await, 0, "segment 1 ended");
-    assert!((furthest - 16_000.0).abs() < 8.0, "to 16 000 first: {furthest}");
-    assert_eq!(d.get32(126).await, 8_000, "then twice 4 000 back");
+    d.wait_segment(1).await;
+    d.wait_program(20).await;
+    assert_eq!(d.get32(126).await, 8_000, "to 16 000, then twice 4 000 back");
     assert!((d.rotor() - 8_000.0).abs() < 8.0, "rotor at {}", d.rotor());
+    // Segment 3 by IN2 (EXT2) going high on its wire.
+    assert_eq!(d.set(328, 2).await, Ok(()));
+    wires.inject(hal_sim::inject::Change::Input(8, Some(true)));
+    d.wait_segment(3).await;
+    d.wait_program(5).await;
+    assert_eq!(d.get32(126).await, 1_000);
+    assert!((d.rotor() - 1_000.0).abs() < 8.0, "rotor at {}", d.rotor());
+
+    // A jump out of its segment (segment 3 jumping to instruction 0): refused with 3.
+    assert_eq!(write_many(&mut d.ctx, 1024 + 29, &[65, 0, 10, 100]).await, Ok(()));
+    assert_eq!(d.set(323, 14).await, Ok(()));
+    assert_eq!(d.get(176).await, 3);
+    assert_eq!(d.set(323, 16).await, Err(ExceptionCode::ServerDeviceFailure));
+    sleep(Duration::from_millis(100)).await;
+    assert_eq!(d.get32(126).await, 1_000, "nothing moved");
+
+    // The trace: -2 000 (segment 2), 16 000 held for the wait, 8 000 (segment 1), 1 000 (3).
+    let Cls9 { _sim: sim, ctx, .. } = d;
+    drop(ctx);
+    sim.off().expect("off");
+    let file = std::fs::File::open(&trace).expect("trace");
+    let rows = hal_sim::trace::read_csv(std::io::BufReader::new(file)).expect("trace rows");
+    let held = |at: f64, secs: f64| {
+        let near: Vec<f64> =
+            rows.iter().filter(|r| (r.commanded_position_usteps - at).abs() < 0.5).map(|r| r.t_s).collect();
+        near.last().zip(near.first()).is_some_and(|(last, first)| last - first >= secs)
+    };
+    assert!(held(-2_000.0, 0.05), "segment 2 ends at -2 000");
+    assert!(held(16_000.0, 1.9), "segment 1 waits 2 s at 16 000");
+    assert!(held(12_000.0, 0.0), "then passes 12 000");
+    assert!(held(8_000.0, 0.05), "and ends at 8 000");
+    assert!(held(1_000.0, 0.05), "segment 3 ends at 1 000");
+}
+
+impl Cls9 {
+    /// Waits until segment `n` runs (0178), within a second.
+    async fn wait_segment(&mut self, n: u16) {
+        for _ in 0..100 {
+            if self.get(178).await == n {
+                return;
+            }
+            sleep(Duration::from_millis(10)).await;
+        }
+        panic!("segment {n} does not run");
+    }
+
+    /// Waits until no program segment runs (0178 = 0), within `secs` simulated seconds.
+    async fn wait_program(&mut self, secs: u64) {
+        for _ in 0..secs * 100 / u64::from(SCALE) + 20 {
+            sleep(Duration::from_millis(10)).await;
+            if self.get(178).await == 0 {
+                return;
+            }
+        }
+        panic!("a segment still runs after {secs} s");
+    }
 }

@@ -24,7 +24,7 @@ const TARGET: &str = "thumbv7em-none-eabihf";
 const FLASH_BUDGET: u64 = 80 * 1024;
 /// Flash the build may not grow past (the task fails): the build as it stands and a little
 /// headroom, so that a change that adds code says so by raising it.
-const FLASH_CEILING: u64 = 108 * 1024;
+const FLASH_CEILING: u64 = 104 * 1024;
 /// RAM budget: the statics plus the stack's peak, as `tick-cost` measures it (it fails over it).
 const RAM_BUDGET: u64 = 24 * 1024;
 /// The control tick's budget, instructions: a mean of a quarter of a 20 kHz tick at 170 MHz in

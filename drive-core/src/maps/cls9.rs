@@ -23,7 +23,7 @@ const CENTI_REV: Scale = Scale::PerRev(1, 100);
 const REV: Scale = Scale::PerRev(1, 1);
 
 /// 0104 / 0242: pulses a revolution, the drive's microstep resolutions (1.8° motors).
-static RESOLUTIONS: [Choice; 9] = [
+static RESOLUTIONS: &[Choice] = &[
     Choice { lo: 200, hi: 200, drive: 0 },
     Choice { lo: 400, hi: 400, drive: 2 },
     Choice { lo: 800, hi: 800, drive: 4 },
@@ -36,7 +36,7 @@ static RESOLUTIONS: [Choice; 9] = [
 ];
 
 /// 0246: the encoder's counts a revolution (lines × 4), the drive's line counts.
-static ENCODER: [Choice; 8] = [
+static ENCODER: &[Choice] = &[
     Choice { lo: 800, hi: 800, drive: 200 },
     Choice { lo: 1600, hi: 1600, drive: 400 },
     Choice { lo: 2000, hi: 2000, drive: 500 },
@@ -48,27 +48,27 @@ static ENCODER: [Choice; 8] = [
 ];
 
 /// 0217: 0 open loop, 1 closed loop on the incremental encoder.
-static LOOP: [Choice; 2] = [Choice { lo: 0, hi: 0, drive: 0 }, Choice { lo: 1, hi: 1, drive: 1 }];
+static LOOP: &[Choice] = &[Choice { lo: 0, hi: 0, drive: 0 }, Choice { lo: 1, hi: 1, drive: 1 }];
 
 /// 0206: 1 parameter reset (0x200F = 3), 2 alarm clear (0x200F = 4), 3 restart (0x200F = 1,
 /// refused: the drive does not restart itself).
-static USER_COMMAND: [Choice; 3] =
-    [Choice { lo: 1, hi: 1, drive: 3 }, Choice { lo: 2, hi: 2, drive: 4 }, Choice { lo: 3, hi: 3, drive: 1 }];
+static USER_COMMAND: &[Choice] =
+    &[Choice { lo: 1, hi: 1, drive: 3 }, Choice { lo: 2, hi: 2, drive: 4 }, Choice { lo: 3, hi: 3, drive: 1 }];
 
 /// 0305: 0 clockwise (negative), 1 counter-clockwise (positive): the home switch searched that
 /// way, reversing at that side's limit, then found again at the creep speed (0x2160 -9, -10).
-static HOMING: [Choice; 2] = [Choice { lo: 0, hi: 0, drive: 0xFFF7 }, Choice { lo: 1, hi: 1, drive: 0xFFF6 }];
+static HOMING: &[Choice] = &[Choice { lo: 0, hi: 0, drive: 0xFFF7 }, Choice { lo: 1, hi: 1, drive: 0xFFF6 }];
 
 /// 0106 / 0244: 1 pulse and direction, 2 double pulse (the drive's 0x21B7 also counts an
 /// encoder's quadrature, 3, which this map does not offer).
-static PULSE_FORMATS: [Choice; 2] = [Choice { lo: 1, hi: 1, drive: 1 }, Choice { lo: 2, hi: 2, drive: 2 }];
+static PULSE_FORMATS: &[Choice] = &[Choice { lo: 1, hi: 1, drive: 1 }, Choice { lo: 2, hi: 2, drive: 2 }];
 
 /// 0296: 0 external pulses (the drive powers up following them, 0x21B9 = 1), 1 internal.
-static PULSE_SOURCE: [Choice; 2] = [Choice { lo: 0, hi: 0, drive: 1 }, Choice { lo: 1, hi: 1, drive: 0 }];
+static PULSE_SOURCE: &[Choice] = &[Choice { lo: 0, hi: 0, drive: 1 }, Choice { lo: 1, hi: 1, drive: 0 }];
 
 /// 0420-0423: 100 general, 101 alarm, 102 in position, 103 motor free (enable control), 104
 /// ready; the drive's 0 (the pin a GPIO of the native map's) is not among them.
-static OUTPUT_FUNCTIONS: [Choice; 5] = [
+static OUTPUT_FUNCTIONS: &[Choice] = &[
     Choice { lo: 100, hi: 100, drive: 1 },
     Choice { lo: 101, hi: 101, drive: 2 },
     Choice { lo: 102, hi: 102, drive: 3 },

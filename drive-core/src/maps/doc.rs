@@ -141,7 +141,7 @@ fn values(out: &mut impl Write, e: &Entry) -> fmt::Result {
         Scale::One => v,
         s => s.to_map(v, FACTORY_PER_REV).unwrap_or(v),
     };
-    match (d.range, e.scale) {
+    match (*d.range, e.scale) {
         (Range::Any, _) | (_, Scale::PerRev(..)) => write!(out, "as the drive object"),
         (Range::Span(a, b), _) => {
             let (a, b) = (map(i64::from(a)), map(i64::from(b)));

@@ -21,12 +21,12 @@ use crate::pdu::Exception;
 const TENTH_REV: Scale = Scale::PerRev(1, 10);
 
 /// The modes of 0x6060/0x6061: 1 profile position, 3 profile velocity, 6 homing.
-static MODES: [Choice; 3] =
-    [Choice { lo: 1, hi: 1, drive: 4 }, Choice { lo: 3, hi: 3, drive: 5 }, Choice { lo: 6, hi: 6, drive: 6 }];
+static MODES: &[Choice] =
+    &[Choice { lo: 1, hi: 1, drive: 4 }, Choice { lo: 3, hi: 3, drive: 5 }, Choice { lo: 6, hi: 6, drive: 6 }];
 
 /// 0x605A: 1 the deceleration 0x6084, 2 the quick-stop deceleration 0x6085, 3-32767 at once;
 /// 0 (the manual's default, which it does not define) as 2.
-static QUICK_STOP: [Choice; 4] = [
+static QUICK_STOP: &[Choice] = &[
     Choice { lo: 2, hi: 2, drive: 2 },
     Choice { lo: 1, hi: 1, drive: 1 },
     Choice { lo: 3, hi: 32_767, drive: 0xFFFF },
@@ -36,7 +36,7 @@ static QUICK_STOP: [Choice; 4] = [
 /// 0x6098: §6.3's methods 1-8 are the homing engine's -3 to -10 (left, CW, is the negative
 /// direction; the CW limit is the negative limit switch, the CCW limit the positive one).
 /// (As 0x2160 holds them: a 16-bit register, -3 is 0xFFFD.)
-static HOMING_METHODS: [Choice; 8] = [
+static HOMING_METHODS: &[Choice] = &[
     Choice { lo: 1, hi: 1, drive: 0xFFFD },
     Choice { lo: 2, hi: 2, drive: 0xFFFC },
     Choice { lo: 3, hi: 3, drive: 0xFFFB },

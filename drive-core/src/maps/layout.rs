@@ -84,14 +84,15 @@ pub enum Scale {
     /// The same unit.
     One,
     /// `drive = map × num / den`.
-    Ratio(i32, i32),
+    Ratio(i16, i16),
     /// Per revolution of the motor: `drive = map × microsteps a revolution × num / den` (a
     /// speed in 0.1 rev/s is `PerRev(1, 10)` of the drive's microsteps a second). The
     /// revolution follows the microstep resolution 0x600C.
-    PerRev(i32, i32),
+    PerRev(i16, i16),
     /// An enumeration: the map's values and the drive's, one by one (a value not listed is out
-    /// of range).
-    Table(&'static [Choice]),
+    /// of range). A reference to a static slice, so that a scale is 8 bytes and a layout's entry
+    /// 16.
+    Table(&'static &'static [Choice]),
     /// One bit of the drive's value, 0 or 1 (a register a bit: seed 002's pseudo-inputs); a
     /// write changes that bit alone.
     Bit(u8),

@@ -293,7 +293,7 @@ static PLAIN: [(u16, u16); Obj::COUNT] = {
         {
             if DriveState::<Table>::plain(&OBJECTS[i])
                 && OBJECTS[i].words() == 1
-                && let Some(bounds) = interval(OBJECTS[i].ty, OBJECTS[i].range)
+                && let Some(bounds) = interval(OBJECTS[i].ty, *OBJECTS[i].range)
             {
                 table[i] = bounds;
             }

@@ -62,7 +62,7 @@ fn row(out: &mut impl Write, d: &ObjectDef) -> fmt::Result {
 }
 
 fn range(out: &mut impl Write, d: &ObjectDef) -> fmt::Result {
-    match d.range {
+    match *d.range {
         Range::Any => match d.ty {
             Type::U8 => write!(out, "0..255"),
             Type::U16 => write!(out, "0..65535"),

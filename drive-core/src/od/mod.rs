@@ -225,8 +225,9 @@ pub struct ObjectDef {
     pub access: Access,
     /// Where the value lives.
     pub storage: Storage,
-    /// Accepted values.
-    pub range: Range,
+    /// Accepted values (a reference: an object table entry is 16 bytes rather than 24, and the
+    /// objects share their few distinct ranges).
+    pub range: &'static Range,
     /// Factory value (raw register bits; S32 as two's complement).
     pub default: u32,
     /// Unit.

@@ -56,7 +56,7 @@ macro_rules! objects {
                 ty: $ty,
                 access: $acc,
                 storage: $sto,
-                range: $range,
+                range: &$range,
                 default: ($def as i64) as u32,
                 unit: Unit::$unit,
                 #[cfg(feature = "docs")]

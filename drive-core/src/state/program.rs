@@ -71,31 +71,45 @@ pub(crate) enum Instruction {
 }
 
 impl Instruction {
-    /// The instruction at word `at` of `word` and its length in words; `None` for an unknown
-    /// code, a value out of the manual's range, or one that runs past the program's end.
-    pub(crate) fn decode(word: impl Fn(usize) -> Option<u16>, at: usize) -> Option<(Self, usize)> {
-        let p = |k: usize| word(at + k);
-        let long = || Some((u32::from(p(1)?) << 16 | u32::from(p(2)?)) as i32);
-        let span = |lo: u16, hi: u16| p(1).filter(|v| (lo..=hi).contains(v));
-        Some(match p(0)? {
-            1 => (Self::Absolute(long()?), 3),
-            2 => (Self::Relative(long()?), 3),
+    /// The instruction at word `at` of the program in `table` and its length in words; `None`
+    /// for an unknown code, a value out of the manual's range, or one that runs past the
+    /// program's end.
+    pub(crate) fn decode(table: &Table, at: usize) -> Option<(Self, usize)> {
+        let p = |k: usize| word(table, at + k);
+        let (code, a) = (p(0)?, p(1));
+        let two = || Some((a?, p(2)?));
+        let span = |lo: u16, hi: u16| a.filter(|v| (lo..=hi).contains(v));
+        Some(match code {
+            1 | 2 => {
+                let (hi, lo) = two()?;
+                let v = (u32::from(hi) << 16 | u32::from(lo)) as i32;
+                (if code == 1 { Self::Absolute(v) } else { Self::Relative(v) }, 3)
+            }
             51 => (Self::StartSpeed(span(1, 2000)?), 2),
             53 => (Self::StopSpeed(span(1, 2000)?), 2),
             54 => (Self::Speed(span(1, 5000)?), 2),
             61 => (Self::Accel(span(5, 10_000)?), 2),
             62 => (Self::Decel(span(5, 10_000)?), 2),
             65 => {
-                let to = p(1)?;
+                let (to, ms) = two()?;
                 // A (the high byte) is 0 in the manual's encoding.
                 (to <= 0xFF).then_some(())?;
-                (Self::WaitJump { to, ms: p(2)? }, 3)
+                (Self::WaitJump { to, ms }, 3)
             }
-            66 => (Self::Loop { count: p(1)?, to: p(2)? }, 3),
+            66 => {
+                let (count, to) = two()?;
+                (Self::Loop { count, to }, 3)
+            }
             100 => (Self::End, 1),
             _ => return None,
         })
     }
+}
+
+/// Register `k` of the program kept in `table` (1024 + k), if there is such a register.
+fn word(table: &Table, k: usize) -> Option<u16> {
+    (k < WORDS).then_some(())?;
+    Some(u16::from_be_bytes([table.byte(2 * k)?, table.byte(2 * k + 1)?]))
 }
 
 /// The speeds a segment's moves run with, in the drive's units (microsteps a second, and a
@@ -219,15 +233,7 @@ impl Run {
 impl<P: Borrow<Table>> DriveState<P> {
     /// Register `k` of the program (seed 002's 1024 + k), 0 past its end or without a program.
     pub fn program_word(&self, k: usize) -> u16 {
-        self.program_word_at(k).unwrap_or(0)
-    }
-
-    fn program_word_at(&self, k: usize) -> Option<u16> {
-        if !self.program.memory || k >= WORDS {
-            return None;
-        }
-        let t = self.table.borrow();
-        Some(u16::from_be_bytes([t.byte(2 * k)?, t.byte(2 * k + 1)?]))
+        self.program_memory().and_then(|t| word(t, k)).unwrap_or(0)
     }
 
     /// Writes `words` into the program from register `k`: refused (busy) while a program runs or
@@ -260,37 +266,29 @@ impl<P: Borrow<Table>> DriveState<P> {
         let count = self.param(Obj::ProgramSegments).clamp(1, u32::from(MAX_SEGMENTS)) as u8;
         let (mut at, mut index) = (0usize, 0u16);
         let mut found = Start { word: 0, index: 0 };
-        let word = |k: usize| self.program_word_at(k);
+        let table = self.table.borrow();
         for s in 1..=count {
             let start = Start { word: at as u16, index };
             if s == segment {
                 found = start;
             }
             let mut speeds = default_speeds(self.per_rev()).ok_or(s)?;
-            let mut loops = 0;
-            // Walk to the end code, checking each instruction, then each jump's target.
+            let (mut loops, mut lowest, mut highest) = (0, u16::MAX, 0);
+            // Walk to the end code, checking each instruction; then the jumps' targets.
             loop {
-                let (i, len) = Instruction::decode(word, at).filter(|_| index < MAX_INSTRUCTIONS).ok_or(s)?;
+                let (i, len) = Instruction::decode(table, at).filter(|_| index < MAX_INSTRUCTIONS).ok_or(s)?;
                 speeds = speeds.after(i, self.per_rev()).ok_or(s)?;
-                loops += usize::from(matches!(i, Instruction::Loop { count, .. } if count != 0));
+                if let Instruction::WaitJump { to, .. } | Instruction::Loop { to, .. } = i {
+                    (lowest, highest) = (lowest.min(to), highest.max(to));
+                    loops += usize::from(matches!(i, Instruction::Loop { count, .. } if count != 0));
+                }
                 (at, index) = (at + len, index + 1);
                 if i == Instruction::End {
                     break;
                 }
             }
-            if loops > MAX_LOOPS {
+            if loops > MAX_LOOPS || lowest < start.index || highest >= index {
                 return Err(s);
-            }
-            let inside = |to: u16| (start.index..index).contains(&to);
-            let (mut k, mut j) = (usize::from(start.word), start.index);
-            while j < index {
-                let (i, len) = Instruction::decode(word, k).ok_or(s)?;
-                if let Instruction::WaitJump { to, .. } | Instruction::Loop { to, .. } = i
-                    && !inside(to)
-                {
-                    return Err(s);
-                }
-                (k, j) = (k + len, j + 1);
             }
         }
         if segment == 0 || segment > count {
@@ -470,7 +468,7 @@ impl<P: Borrow<Table>> DriveState<P> {
                     self.jump(&mut run, to);
                 }
                 Step::Next => {
-                    let Some((i, len)) = Instruction::decode(|k| self.program_word_at(k), usize::from(run.at)) else {
+                    let Some((i, len)) = Instruction::decode(self.table.borrow(), usize::from(run.at)) else {
                         // Changed under the run (it cannot be): end it rather than guess.
                         self.program.run = None;
                         return;
@@ -487,15 +485,15 @@ impl<P: Borrow<Table>> DriveState<P> {
                         }
                         Instruction::Loop { count, to } => {
                             let index = run.index - 1;
-                            let jump = match run.counter(index, count) {
-                                // For ever.
-                                _ if count == 0 => true,
-                                Some(left) if *left > 1 => {
-                                    *left -= 1;
-                                    true
-                                }
-                                _ => false,
-                            };
+                            // 0 loops for ever, with no counter.
+                            let jump = count == 0
+                                || match run.counter(index, count) {
+                                    Some(left) if *left > 1 => {
+                                        *left -= 1;
+                                        true
+                                    }
+                                    _ => false,
+                                };
                             if jump {
                                 self.jump(&mut run, to);
                             } else {
@@ -526,7 +524,7 @@ impl<P: Borrow<Table>> DriveState<P> {
     fn jump(&self, run: &mut Run, to: u16) {
         let (mut at, mut index) = (usize::from(run.start.word), run.start.index);
         while index < to {
-            let Some((_, len)) = Instruction::decode(|k| self.program_word_at(k), at) else { break };
+            let Some((_, len)) = Instruction::decode(self.table.borrow(), at) else { break };
             (at, index) = (at + len, index + 1);
         }
         (run.at, run.index) = (at as u16, index);
