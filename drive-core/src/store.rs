@@ -17,10 +17,12 @@
 //!   of another [`FAULTS_FORMAT`] or length is not read (the history starts empty).
 //! - [`PROGRAM_KEYS`]: the multi-segment program of a map that has one (seed 002's registers
 //!   1024-1536, kept in the PVT table's memory), saved with the parameters in
-//!   [`PROGRAM_CHUNKS`] records of up to 256 bytes (the store's buffer holds one):
-//!   `[format, chunk, crc (u16)]` and the chunk's words high byte first, the CRC-16 of the whole
-//!   program in each, so that a power cut between two chunks leaves a set that does not load
-//!   (the program reads empty) rather than a mix of two programs.
+//!   [`PROGRAM_CHUNKS`] records of up to 256 bytes (the store's buffer holds one),
+//!   `[format, chunk, crc (u16)]` and the chunk's words high byte first, in one of two banks of
+//!   keys: a save writes the bank the last one did not, then the commit record
+//!   [`PROGRAM_COMMIT_KEY`] `[format, bank, crc (u16)]` (the CRC-16 of the whole program). A
+//!   power cut before the commit leaves the old program, after it the new one; a bank whose
+//!   chunks do not make the committed CRC is not loaded (the program reads empty).
 //!
 //! The functions are async as the flash traits are; the drive state machine is not: the platform
 //! [`Store::load`]s before it builds the [`Drive`](crate::Drive) and performs the saves that
@@ -50,8 +52,10 @@ pub const PARAMS_KEY: u8 = 0;
 pub const POSITION_KEY: u8 = 1;
 /// Map key of the fault history record.
 pub const FAULTS_KEY: u8 = 2;
-/// Map keys of the program's records, one a chunk.
-pub const PROGRAM_KEYS: core::ops::Range<u8> = 3..3 + PROGRAM_CHUNKS as u8;
+/// Map keys of the program's records, one a chunk: bank 0, then bank 1.
+pub const PROGRAM_KEYS: core::ops::Range<u8> = 3..3 + 2 * PROGRAM_CHUNKS as u8;
+/// Map key of the program's commit record: which bank holds the program saved last.
+pub const PROGRAM_COMMIT_KEY: u8 = PROGRAM_KEYS.end;
 /// Program bytes a record holds.
 const PROGRAM_CHUNK: usize = 256;
 /// Records the program takes.
@@ -310,17 +314,33 @@ impl<S: NorFlash> Store<S> {
         self.write(Record::Params(params)).await
     }
 
-    /// Saves the program kept in `table` (see the module documentation).
+    /// Saves the program kept in `table` into the bank the last save did not use, then commits
+    /// it (see the module documentation).
     pub async fn save_program(&mut self, table: &Table) -> Result<(), Error<S>> {
-        self.write(Record::Program(table)).await
+        let bank = self.program_commit().await.map_or(0, |(bank, _)| bank ^ 1);
+        self.write(Record::Program(table, bank)).await
+    }
+
+    /// The bank and CRC of the program saved last, if a commit record says.
+    async fn program_commit(&mut self) -> Option<(u8, [u8; 2])> {
+        let mut commit = None;
+        self.read(PROGRAM_COMMIT_KEY..PROGRAM_COMMIT_KEY + 1, &mut |_, record| {
+            if let Some(&[PROGRAM_FORMAT, bank @ 0..=1, lo, hi]) = record.first_chunk::<4>() {
+                commit = Some((bank, [lo, hi]));
+            }
+        })
+        .await;
+        commit
     }
 
     /// Writes the records of `what`: one write of the crate's for every record (one copy of its
     /// code in a firmware).
     async fn write(&mut self, what: Record<'_>) -> Result<(), Error<S>> {
-        for k in 0..PROGRAM_CHUNKS {
+        for k in 0..=PROGRAM_CHUNKS {
             let mut out = [0u8; RECORD];
-            let Some((key, n)) = what.encode(k, &mut out) else { break };
+            let Some((key, n)) = what.encode(k, &mut out) else {
+                return if k == 0 { Err(sequential_storage::Error::BufferTooSmall(RECORD)) } else { Ok(()) };
+            };
             self.map.store_item(&mut self.buf, &key, &out.get(..n).unwrap_or_default()).await?;
         }
         Ok(())
@@ -330,17 +350,17 @@ impl<S: NorFlash> Store<S> {
     /// whole one was found (else `table` reads as an empty program, all zero).
     pub async fn load_program(&mut self, table: &Table) -> bool {
         let bytes = 2 * PROGRAM_WORDS;
-        let mut crc = None;
+        let Some((bank, crc)) = self.program_commit().await else { return false };
+        let first = PROGRAM_KEYS.start + bank * PROGRAM_CHUNKS as u8;
         let mut torn = false;
-        self.read(PROGRAM_KEYS, &mut |key, record| {
-            let chunk = usize::from(key - PROGRAM_KEYS.start);
+        self.read(first..first + PROGRAM_CHUNKS as u8, &mut |key, record| {
+            let chunk = usize::from(key - first);
             let start = chunk * PROGRAM_CHUNK;
             let n = PROGRAM_CHUNK.min(bytes - start);
             match record.split_first_chunk::<4>() {
                 Some((&[PROGRAM_FORMAT, k, lo, hi], body))
-                    if usize::from(k) == chunk && body.len() == n && crc.is_none_or(|c| c == [lo, hi]) =>
+                    if usize::from(k) == chunk && body.len() == n && [lo, hi] == crc =>
                 {
-                    crc = Some([lo, hi]);
                     for (i, &b) in body.iter().enumerate() {
                         table.set_byte(start + i, b);
                     }
@@ -349,8 +369,7 @@ impl<S: NorFlash> Store<S> {
             }
         })
         .await;
-        let sum = (0..bytes).fold(crate::crc::INIT, |c, i| crate::crc::update(c, table.byte(i).unwrap_or(0)));
-        let whole = !torn && crc.is_some_and(|c| u16::from_le_bytes(c) == sum);
+        let whole = !torn && u16::from_le_bytes(crc) == program_crc(table);
         if !whole {
             for i in 0..bytes {
                 table.set_byte(i, 0);
@@ -445,12 +464,18 @@ impl Job {
     }
 }
 
+/// The CRC-16 of the program kept in `table`.
+fn program_crc(table: &Table) -> u16 {
+    (0..2 * PROGRAM_WORDS).fold(crate::crc::INIT, |c, i| crate::crc::update(c, table.byte(i).unwrap_or(0)))
+}
+
 /// What a save writes: its records, built one at a time into the store's buffer-sized scratch.
 enum Record<'a> {
     Params(&'a Params),
     Position(i32),
     Faults(&'a FaultHistory),
-    Program(&'a Table),
+    /// The program in a table, into a bank (0 or 1), then its commit.
+    Program(&'a Table, u8),
 }
 
 impl Record<'_> {
@@ -466,18 +491,22 @@ impl Record<'_> {
             // An `i32`, little endian, as the crate stores one.
             (Self::Position(position), 0) => Some((POSITION_KEY, first(&position.to_le_bytes(), out)?)),
             (Self::Faults(history), 0) => Some((FAULTS_KEY, first(&history.encode(), out)?)),
-            (Self::Program(table), k) if k < PROGRAM_CHUNKS => {
+            (&Self::Program(table, bank), k) if k <= PROGRAM_CHUNKS => {
                 let bytes = 2 * PROGRAM_WORDS;
-                let crc = (0..bytes).fold(crate::crc::INIT, |c, i| crate::crc::update(c, table.byte(i).unwrap_or(0)));
-                let [lo, hi] = crc.to_le_bytes();
+                let [lo, hi] = program_crc(table).to_le_bytes();
+                let (head, body) = out.split_first_chunk_mut::<4>()?;
+                if k == PROGRAM_CHUNKS {
+                    // The commit, once every chunk is written.
+                    *head = [PROGRAM_FORMAT, bank, lo, hi];
+                    return Some((PROGRAM_COMMIT_KEY, 4));
+                }
                 let start = k * PROGRAM_CHUNK;
                 let n = PROGRAM_CHUNK.min(bytes - start);
-                let (head, body) = out.split_first_chunk_mut::<4>()?;
                 *head = [PROGRAM_FORMAT, k as u8, lo, hi];
                 for (i, b) in body.iter_mut().take(n).enumerate() {
                     *b = table.byte(start + i).unwrap_or(0);
                 }
-                Some((PROGRAM_KEYS.start + k as u8, 4 + n))
+                Some((PROGRAM_KEYS.start + bank * PROGRAM_CHUNKS as u8 + k as u8, 4 + n))
             }
             _ => None,
         }

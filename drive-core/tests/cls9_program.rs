@@ -244,24 +244,31 @@ fn errors_name_their_segment_and_a_start_of_a_program_in_error_moves_nothing() {
 }
 
 #[test]
-fn inputs_select_the_segment_and_start_it() {
-    let mut r = rig(&[abs(800), END.to_vec(), abs(-800), END.to_vec(), abs(1600), END.to_vec()]);
-    r.set_segments(3);
+fn inputs_select_the_segment_as_the_manuals_example_and_start_it() {
+    let mut r =
+        rig(&[abs(800), END.to_vec(), abs(-800), END.to_vec(), abs(1600), END.to_vec(), abs(2400), END.to_vec()]);
+    r.set_segments(4);
     assert_eq!(r.reg(174), 0, "no input selects");
-    // IN1: select bit 0, IN2: select bit 1, IN3: start.
-    for (reg, f) in [(400, 25), (401, 26), (402, 16)] {
+    // §7's example: IN1 select bit 0 (25), IN3 select bit 1 (26); IN2 starts (16).
+    for (reg, f) in [(400, 25), (402, 26), (401, 16)] {
         assert_eq!(r.write(reg, f), Ok(()));
     }
-    assert_eq!(r.reg(174), 1);
-    assert_eq!(r.write(411, 1), Ok(()), "IN2 on: segment 3");
-    assert_eq!(r.reg(174), 3);
-    assert_eq!(r.write(412, 1), Ok(()), "IN3: start");
+    // Its table: IN3 IN1 = 00 segment 1, 01 segment 2, 10 segment 3, 11 segment 4.
+    for (in3, in1, segment) in [(0, 0, 1), (0, 1, 2), (1, 0, 3), (1, 1, 4)] {
+        assert_eq!(r.write(410, in1), Ok(()));
+        assert_eq!(r.write(412, in3), Ok(()));
+        assert_eq!(r.reg(174), segment, "IN3 {in3} IN1 {in1}");
+    }
+    // 0328 does not count while inputs select.
+    assert_eq!(r.write(328, 0), Ok(()));
+    assert_eq!(r.write(410, 0), Ok(()), "IN3 on, IN1 off: segment 3");
+    assert_eq!(r.write(411, 1), Ok(()), "IN2: start");
     r.finish(5);
     assert_eq!(r.position(), 1600);
-    assert_eq!(r.write(412, 0), Ok(()));
     assert_eq!(r.write(411, 0), Ok(()));
+    assert_eq!(r.write(412, 0), Ok(()));
     assert_eq!(r.write(410, 1), Ok(()), "IN1 on: segment 2");
-    assert_eq!(r.write(412, 1), Ok(()));
+    assert_eq!(r.write(411, 1), Ok(()));
     r.finish(5);
     assert_eq!(r.position(), -800);
 }
@@ -292,4 +299,13 @@ fn the_native_map_has_no_program() {
         assert_eq!(r.write(0x21A0, c), Err(0x04), "command {c}");
     }
     assert_eq!(r.read(0x21CF, 1), Ok(vec![0]));
+}
+
+#[test]
+fn only_the_cls9_map_has_a_program() {
+    use drive_core::maps::RegisterMap;
+    for id in 0..8 {
+        assert_eq!(Maps::by_id(id).has_program(), Maps::has_program_id(id), "0x2190 = {id}");
+    }
+    assert!(Maps::has_program_id(2));
 }

@@ -94,8 +94,7 @@ pub fn start(params: &mut Params, status: u8, can_save: bool) -> (&'static mut D
 /// which such a map does not use for points. Power-up loads the saved program into it before the
 /// drive is built.
 pub fn program_memory(params: &Params) -> Option<&'static Table> {
-    use drive_core::maps::RegisterMap;
-    Maps::by_id(params.get(drive_core::od::Obj::RegisterMap)).has_program().then_some(&TABLE)
+    Maps::has_program_id(params.get(drive_core::od::Obj::RegisterMap)).then_some(&TABLE)
 }
 
 /// Builds the drive in `slot`, lending it the table.
@@ -183,11 +182,6 @@ async fn lend(lent: &mut Lent<'_>) {
     .await;
 }
 
-/// Before a request is served: the model synced.
-async fn before_request(drive: &mut Drive) {
-    sync(drive).await;
-}
-
 /// After the drive had its say: the reply out while the tick takes in what the request changed
 /// (a motion from the tick it was planned for), then the flash operations the request asked for.
 async fn after_request(drive: &mut Drive, serial: &mut Serial, store: &mut crate::board::ParamStore) {
@@ -271,26 +265,29 @@ pub async fn modbus(drive: &'static mut Drive, mut serial: Serial, store: &'stat
                 None => core::future::pending().await,
             }
         };
-        match select3(serial.read(&mut buf), timeout, ATTENTION.wait()).await {
-            // A chunk shares one stamp: with a read woken per byte, chunks are one byte unless
-            // the task ran late, and then the stamp is late by at most that delay.
-            Either3::First(Ok(n)) => {
-                let now = now();
-                if drive.frame_due(now) {
-                    before_request(drive).await;
-                }
-                drive.on_rx(now, buf.get(..n).unwrap_or_default());
-            }
+        let event = select3(serial.read(&mut buf), timeout, ATTENTION.wait()).await;
+        // A chunk shares one stamp: with a read woken per byte, chunks are one byte unless the
+        // task ran late, and then the stamp is late by at most that delay.
+        let now = now();
+        // The model synced (one place that awaits it, for the task's size): before a frame that
+        // completes a request, a request that ended or the bus side's own work in time (either
+        // reads the tick's state), and when the tick asks.
+        let synced = match event {
+            Either3::First(Ok(_)) => drive.frame_due(now),
+            Either3::First(Err(_)) => false,
+            Either3::Second(()) | Either3::Third(()) => true,
+        };
+        if synced {
+            sync(drive).await;
+        }
+        match event {
+            Either3::First(Ok(n)) => drive.on_rx(now, buf.get(..n).unwrap_or_default()),
             Either3::First(Err(_)) => warn!("uart: receive error"),
             Either3::Second(()) => {
-                // A request that ended, or the bus side's own work in time: either reads the
-                // tick's state.
-                let now = now();
-                before_request(drive).await;
                 drive.on_timer(now);
                 drive.state_mut().service(now);
             }
-            Either3::Third(()) => sync(drive).await,
+            Either3::Third(()) => {}
         }
         after_request(drive, &mut serial, store).await;
     }
@@ -356,7 +353,8 @@ async fn deliver(
     serial: &mut Serial,
     store: &mut crate::board::ParamStore,
 ) {
-    before_request(drive).await;
+    // The model synced before the request is served.
+    sync(drive).await;
     let t = now().as_micros();
     let t35 = drive.baud().t35_micros();
     drive.on_rx(Instant::from_micros(t.saturating_sub(t35)), frame.bytes());

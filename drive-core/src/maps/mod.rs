@@ -30,13 +30,22 @@ pub enum Maps {
 }
 
 impl Maps {
-    /// The map of 0x2190's value `id` (an unknown one is the native map).
+    /// The map of 0x2190's value `id` (an unknown one is the native map). Out of line: inlined
+    /// into a microcontroller's power-up, each map's value would have a place in its frame, the
+    /// deepest of the stack.
+    #[inline(never)]
     pub fn by_id(id: u32) -> Self {
         match id {
             1 => Self::jmc(),
             2 => Self::cls9(),
             _ => Self::Native(NativeMap::new()),
         }
+    }
+
+    /// Whether the map of 0x2190's value `id` has a multi-segment program (seed 002's), without
+    /// building it: where power-up loads the program before the drive exists.
+    pub const fn has_program_id(id: u32) -> bool {
+        id == 2
     }
 
     /// The map named `name` ([`NAMES`]), if there is one.

@@ -98,14 +98,14 @@ impl Planner<'_> {
         let running = match command {
             Command::Absolute => {
                 self.may_move?;
-                self.run_to(axis, here, i64::from(self.param(Obj::CommandTarget) as i32))?;
+                self.run_to(axis, i64::from(self.param(Obj::CommandTarget) as i32))?;
                 Running::Absolute
             }
             Command::Relative => {
                 refuse(axis.is_still(), ObjError::Busy)?;
                 self.may_move?;
                 let target = here.saturating_add(i64::from(self.param(Obj::CommandTarget) as i32));
-                self.run_to(axis, here, target)?;
+                self.run_to(axis, target)?;
                 Running::Relative
             }
             Command::Velocity => {
@@ -139,11 +139,10 @@ impl Planner<'_> {
         if axis.is_still() {
             return Ok(false);
         }
-        let here = axis.setpoint().whole;
         match (obj, pp.running) {
             (Obj::CommandTarget, Running::Absolute) => {
                 self.may_move?;
-                self.run_to(axis, here, i64::from(value as i32))?;
+                self.run_to(axis, i64::from(value as i32))?;
             }
             (Obj::CommandVelocity, Running::Velocity) => {
                 self.may_move?;
@@ -181,18 +180,21 @@ impl Planner<'_> {
     }
 
     /// A run from `here` to `target` (within the soft limits) at the run speed 0x21B5.
-    fn run_to(&self, axis: &mut Axis, here: i64, target: i64) -> Result<(), ObjError> {
-        if target != here {
-            self.away_from_limits(target > here)?;
-        }
+    fn run_to(&self, axis: &mut Axis, target: i64) -> Result<(), ObjError> {
         let speed = self.param(Obj::CommandSpeed) as f32;
-        self.run_to_at(axis, self.soft_limited(here, target), speed)
+        self.go(axis, &self.pp_setpoint(target, speed)).map(|_| ())
     }
 
     /// A program's move to `sp.target` (within the soft limits) at its set-point's speeds: the
     /// target it heads for.
     pub(super) fn program_move(&self, axis: &mut Axis, sp: &SetPoint) -> Result<i64, ObjError> {
         self.may_move?;
+        self.go(axis, sp)
+    }
+
+    /// A move to `sp.target` within the soft limits, refused towards an active limit switch:
+    /// the target it heads for.
+    fn go(&self, axis: &mut Axis, sp: &SetPoint) -> Result<i64, ObjError> {
         let here = axis.setpoint().whole;
         if sp.target != here {
             self.away_from_limits(sp.target > here)?;
@@ -202,11 +204,6 @@ impl Planner<'_> {
         Ok(target)
     }
 
-    fn run_to_at(&self, axis: &mut Axis, target: i64, speed: f32) -> Result<(), ObjError> {
-        let sp = self.pp_setpoint(target, speed);
-        axis.move_to(self.now, sp.target, sp.depart, sp.arrive, &sp.limits).map_err(|_| ObjError::Infeasible)
-    }
-
     /// A run at `v` (its sign the direction), or a move to the soft limit it heads for.
     fn run(&self, axis: &mut Axis, v: f32) -> Result<(), ObjError> {
         self.away_from_limits(v > 0.0)?;
@@ -214,7 +211,7 @@ impl Planner<'_> {
         let here = axis.setpoint().whole;
         let (limit, far) = if v > 0.0 { (hi, i64::MAX) } else { (lo, i64::MIN) };
         if limit != far {
-            return self.run_to_at(axis, self.soft_limited(here, far), libm::fabsf(v));
+            return self.go(axis, &self.pp_setpoint(self.soft_limited(here, far), libm::fabsf(v))).map(|_| ());
         }
         let sp = self.pp_setpoint(0, v);
         axis.run_at(self.now, v, sp.depart, &sp.limits).map_err(|_| ObjError::Infeasible)
