@@ -7,14 +7,15 @@
 //! the table (the data's first byte picks the entry).
 //!
 //! The oracle: every frame is answered (a normal reply or one of the Modbus codes 1-4); an
-//! exception changes nothing (the program's registers included); a read returns its quantity of
+//! exception changes nothing (the program's registers included; 0176 reports a refused start's
+//! segment in error); a read returns its quantity of
 //! registers, each what a model of the address walk written here says (the object's value in
 //! the map's unit, a program register's stored word).
 
 use super::oracle;
 use drive_core::maps::Maps;
 use drive_core::maps::cls9::ENTRIES;
-use drive_core::od::{OBJECTS, Type};
+use drive_core::od::{OBJECTS, Obj, Type};
 use drive_core::state::program::WORDS;
 use drive_core::{Drive, DriveConfig};
 
@@ -24,10 +25,13 @@ const CODES: [u8; 4] = [0x01, 0x02, 0x03, 0x04];
 /// t3.5 at the factory 9600 baud.
 const T35: u64 = 4010;
 
+/// Everything a refusal must leave as it was: every object but 0176 (the segment in error, which
+/// a start refused for the program's errors reports, as the manual has it), and the program.
 fn snapshot(drive: &Drive<Maps>) -> (Vec<u32>, i64) {
     let s = drive.state();
     let program = (0..WORDS).map(|k| u32::from(s.program_word(k)));
-    (OBJECTS.iter().map(|d| s.read_def(d)).chain(program).collect(), s.position())
+    let objects = OBJECTS.iter().filter(|d| d.obj != Obj::ProgramErrorSegment).map(|d| s.read_def(d));
+    (objects.chain(program).collect(), s.position())
 }
 
 /// The registers a read of `qty` from `addr` gets, or `None` if one of them has no entry.
