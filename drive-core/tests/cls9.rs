@@ -419,3 +419,25 @@ fn the_native_map_drops_spoilt_frames() {
     assert_eq!(r.run(10_000), None);
     assert_eq!(r.drive.state().read(Obj::Microsteps), 0);
 }
+
+/// 0258, the position error threshold in encoder counts, is the closed loop's following-error
+/// limit at the resolution in force; 0 leaves the drive's own (0x605C, microsteps).
+#[test]
+fn the_position_error_threshold_is_the_following_error_limit_in_encoder_counts() {
+    let mut r = cls9_rig();
+    let limit = |r: &Rig| r.drive.state().controller().settings().following_limit;
+    assert_eq!(limit(&r), 64, "0258 = 0: 0x605C's 64 microsteps");
+    // A 1000-line encoder (4000 counts a revolution) at 3200 pulses a revolution.
+    assert_eq!(r.set(246, 4000), Ok(()));
+    assert_eq!(r.set(258, 4000), Ok(()));
+    assert_eq!(limit(&r), 3200, "a revolution");
+    assert_eq!(r.set(258, 1), Ok(()));
+    assert_eq!(limit(&r), 1, "0.8 microsteps: one at least");
+    r.write32(242, 51_200).expect("resolution");
+    assert_eq!(r.set(258, 30_000), Ok(()));
+    assert_eq!(limit(&r), 384_000, "7.5 revolutions at 51 200 a revolution");
+    assert_eq!(r.set(258, 30_001), Err(3));
+    assert_eq!(r.read(258, 1), Ok(vec![30_000]));
+    assert_eq!(r.set(258, 0), Ok(()));
+    assert_eq!(limit(&r), 64);
+}

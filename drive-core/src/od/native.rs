@@ -461,6 +461,11 @@ objects! {
     /// The running segment (our object; seed 002's 0178): 1-32 while a program runs or is
     /// paused, else 0.
     ProgramRunning @ 0x21CF: U8, Ro, Live, Span(0, 32), default 0, None, "running segment";
+    /// Position error limit (our object; seed 002's 0258), encoder counts (lines × 4 a
+    /// revolution): in closed loop a following error beyond it is the position error alarm (25),
+    /// as beyond 0x605C, which it replaces while it is not 0 (converted at the resolution in
+    /// force, rounded to the nearest microstep, one at least).
+    PositionErrorLimit @ 0x21D0: U16, Rw, Rom, Span(0, 30_000), default 0, None, "position error limit";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake

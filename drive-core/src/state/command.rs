@@ -43,18 +43,12 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// Writes a motion command that does not plan, once [`DriveState::check_other_command`]
     /// accepts it.
     pub(crate) fn other_command(&mut self, value: u32) -> Result<(), ObjError> {
-        if let Err(e) = self.check_other_command(value) {
-            // A start refused for the program's errors reports the segment in error.
-            if value == Command::ProgramStart.raw() {
-                self.program_refused();
-            }
-            return Err(e);
-        }
+        self.check_other_command(value)?;
         match Command::from_raw(value) {
             Some(Command::SetPosition) => self.apply(Obj::Position, self.param(Obj::PositionPreset)),
             Some(Command::Home) => self.homing_command(1),
             Some(Command::AlarmClear) => self.clear_alarms(),
-            Some(command) => self.program_command(command),
+            Some(command) => self.program_command(command)?,
             None => {}
         }
         self.set_param(Obj::MotionCommand, value);

@@ -151,6 +151,7 @@ pub(crate) const fn runs_on(obj: Obj) -> bool {
             | Obj::GeneralOutputs
             | Obj::OutputLogic
             | Obj::InPositionWindow
+            | Obj::PositionErrorLimit
     )
 }
 
@@ -195,7 +196,12 @@ pub(crate) fn settings_of(params: &[u32; Obj::COUNT]) -> Settings {
         saved_position: get(Obj::SavedPosition) as i32,
         encoder_cpr: get(Obj::EncoderCpr),
         zero_offset: get(Obj::ZeroOffset) as i32,
-        following_limit: get(Obj::StallLength),
+        following_limit: following_limit(
+            get(Obj::StallLength),
+            get(Obj::PositionErrorLimit),
+            get(Obj::Microsteps),
+            get(Obj::EncoderCpr),
+        ),
         servo_loop: get(Obj::TorqueLoop) == 1,
         gains: Gains::from_objects(get(Obj::Kp), get(Obj::Ki), get(Obj::Kd), get(Obj::PreFilter)),
         stall_detect: get(Obj::StallDetect) == 1,
@@ -210,6 +216,19 @@ pub(crate) fn settings_of(params: &[u32; Obj::COUNT]) -> Settings {
         },
         io,
     }
+}
+
+/// The closed loop's following-error limit, microsteps: `counts` encoder counts (0x21D0, at
+/// `lines` × 4 a revolution) at `microsteps` (0x600C), or 0x605C's `steps` while `counts` is 0
+/// (4 000 counts of a 1000-line encoder at 1/16 are 3 200 microsteps).
+fn following_limit(steps: u32, counts: u32, microsteps: u32, lines: u32) -> u32 {
+    if counts == 0 {
+        return steps;
+    }
+    // At most 30 000 counts × 51 200 microsteps a revolution: within 32 bits.
+    let lines = lines.max(1);
+    let per_rev = crate::units::FULL_STEPS_PER_REV as u32 * microsteps.max(1);
+    ((counts * per_rev + 2 * lines) / (4 * lines)).max(1)
 }
 
 /// The inputs' and outputs' functions of the objects' values (`get`).

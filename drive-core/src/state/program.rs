@@ -333,13 +333,17 @@ impl<P: Borrow<Table>> DriveState<P> {
     pub(crate) fn check_program_command(&self, command: Command) -> Result<(), ObjError> {
         refuse(self.program.memory, ObjError::Unsupported)?;
         match command {
-            Command::ProgramSave => self.check(Obj::SystemControl, 2),
+            // As 0x200F = 2.
+            Command::ProgramSave => {
+                refuse(self.can_save, ObjError::Unsupported)?;
+                refuse(self.ctl.axis.is_still() && self.storage & super::STORAGE_SAVING == 0, ObjError::Busy)
+            }
             Command::ProgramStart if !self.program.run.is_some_and(|r| r.paused) => {
                 refuse(self.program.run.is_none(), ObjError::Busy)?;
                 refuse(!matches!(self.mode(), WorkMode::Pvt | WorkMode::Follow), ObjError::NotNow)?;
                 refuse(self.ctl.axis.is_still(), ObjError::Busy)?;
-                self.may_move()?;
-                self.locate(self.selected_segment()).map(|_| ()).map_err(|_| ObjError::NotNow)
+                // The program itself is checked when it starts (`program_start`).
+                self.may_move()
             }
             Command::ProgramStart => self.may_move(),
             _ => Ok(()),
@@ -352,13 +356,13 @@ impl<P: Borrow<Table>> DriveState<P> {
     }
 
     /// Carries out the program command `command`, which
-    /// [`DriveState::check_program_command`] accepted (a check and a refused start report the
-    /// segment in error in 0x21CE).
-    pub(crate) fn program_command(&mut self, command: Command) {
+    /// [`DriveState::check_program_command`] accepted: a start is refused (04) if the program
+    /// has a segment in error, which a check and a refused start report in 0x21CE.
+    pub(crate) fn program_command(&mut self, command: Command) -> Result<(), ObjError> {
         match command {
             Command::ProgramCheck => self.program.error = self.locate(1).err().unwrap_or(0),
             Command::ProgramSave => self.apply(Obj::SystemControl, 2),
-            Command::ProgramStart => self.program_start(),
+            Command::ProgramStart => return self.program_start(),
             Command::ProgramPause => {
                 let now = self.now;
                 if let Some(run) = self.program.run.as_mut().filter(|r| !r.paused) {
@@ -377,10 +381,11 @@ impl<P: Borrow<Table>> DriveState<P> {
             }
             _ => {}
         }
+        Ok(())
     }
 
-    /// Starts the selected segment, or resumes a paused one.
-    fn program_start(&mut self) {
+    /// Starts the selected segment, or resumes a paused one; refused if a segment is in error.
+    fn program_start(&mut self) -> Result<(), ObjError> {
         let now = self.now;
         if let Some(run) = self.program.run.as_mut() {
             run.paused = false;
@@ -394,7 +399,7 @@ impl<P: Borrow<Table>> DriveState<P> {
                 }
                 Step::Next => {}
             }
-            return;
+            return Ok(());
         }
         let segment = self.selected_segment();
         match self.locate(segment) {
@@ -411,18 +416,12 @@ impl<P: Borrow<Table>> DriveState<P> {
                     paused: false,
                     loops: [(u16::MAX, 0); MAX_LOOPS],
                 });
+                Ok(())
             }
-            Err(s) => self.program.error = s,
-        }
-    }
-
-    /// A start was refused: the segment in error, if the program has one, shows in 0x21CE.
-    pub(crate) fn program_refused(&mut self) {
-        if self.program.memory
-            && self.program.run.is_none()
-            && let Err(s) = self.locate(self.selected_segment())
-        {
-            self.program.error = s;
+            Err(s) => {
+                self.program.error = s;
+                Err(ObjError::NotNow)
+            }
         }
     }
 
