@@ -341,9 +341,7 @@ impl Layout {
         }
         Some(())
     }
-}
 
-impl Layout {
     /// The place in the program of `qty` registers from `addr`, if they are in its window;
     /// `Err` if they begin in it but run past its end.
     fn in_program(&self, addr: u16, qty: usize) -> Option<Result<usize, ()>> {
