@@ -386,7 +386,7 @@ pub fn map_value(state: &drive_core::DriveState, e: &drive_core::maps::layout::E
     let raw = state.read_def(d);
     let v = if d.ty == drive_core::od::Type::S32 { i64::from(raw as i32) } else { i64::from(raw) };
     let per_rev = FULL_STEPS_PER_REV * i64::from(state.read(drive_core::od::Obj::Microsteps).max(1));
-    match e.scale {
+    match *e.scale {
         Scale::One => v,
         Scale::Ratio(n, den) => round(v * i64::from(den), i64::from(n)),
         Scale::PerRev(n, den) => round(v * i64::from(den), i64::from(n) * per_rev),

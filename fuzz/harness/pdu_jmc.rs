@@ -38,7 +38,7 @@ fn model(drive: &Drive<Maps>, addr: u16, qty: usize) -> Option<Vec<u16>> {
         if out.len() >= qty {
             break;
         }
-        if e.view == View::WriteOnly {
+        if e.view() == View::WriteOnly {
             return None;
         }
         let d = e.obj.def();
@@ -47,7 +47,7 @@ fn model(drive: &Drive<Maps>, addr: u16, qty: usize) -> Option<Vec<u16>> {
             continue;
         }
         let m = oracle::map_value(drive.state(), e) as u32;
-        if e.narrow {
+        if e.is_narrow() {
             out.push(m.min(0xFFFF) as u16);
         } else if d.words() == 1 {
             out.push(m as u16);

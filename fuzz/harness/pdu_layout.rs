@@ -16,16 +16,16 @@ use drive_core::{Drive, DriveConfig};
 
 /// The layout's objects (shared with `drive-core/tests/layout_map.rs`).
 pub static ENTRIES: [Entry; 10] = [
-    Entry::new(0x0000, Obj::Mode, Scale::One),
-    Entry::new(0x0001, Obj::MaxSpeed, Scale::PerRev(1, 10)),
-    Entry::new(0x0003, Obj::AbsoluteMove, Scale::One),
-    Entry::new(0x0005, Obj::RelativeMove, Scale::One),
-    Entry::new(0x0007, Obj::Position, Scale::One),
-    Entry::new(0x0009, Obj::Microsteps, Scale::One),
-    Entry::new(0x000A, Obj::Enable, Scale::One),
-    Entry::new(0x000B, Obj::PhaseCurrent, Scale::Ratio(100, 1)),
-    Entry::new(0x000C, Obj::EncoderPosition, Scale::One),
-    Entry::new(0x000E, Obj::ControllerStatus, Scale::One),
+    Entry::new(0x0000, Obj::Mode, &Scale::One),
+    Entry::new(0x0001, Obj::MaxSpeed, &Scale::PerRev(1, 10)),
+    Entry::new(0x0003, Obj::AbsoluteMove, &Scale::One),
+    Entry::new(0x0005, Obj::RelativeMove, &Scale::One),
+    Entry::new(0x0007, Obj::Position, &Scale::One),
+    Entry::new(0x0009, Obj::Microsteps, &Scale::One),
+    Entry::new(0x000A, Obj::Enable, &Scale::One),
+    Entry::new(0x000B, Obj::PhaseCurrent, &Scale::Ratio(100, 1)),
+    Entry::new(0x000C, Obj::EncoderPosition, &Scale::One),
+    Entry::new(0x000E, Obj::ControllerStatus, &Scale::One),
 ];
 
 /// The layout: low word first, vendor codes for the refusals.

@@ -96,7 +96,7 @@ fn program_row(out: &mut impl Write, first: u16) -> fmt::Result {
 
 fn row(out: &mut impl Write, e: &Entry, r: &Reference) -> fmt::Result {
     let d = e.obj.def();
-    let access = match (e.view, d.access) {
+    let access = match (e.view(), d.access) {
         (View::ReadOnly, _) | (_, Access::Ro) => "ro",
         (View::WriteOnly, _) => "wo",
         (View::Declared, a) => a.name(),
@@ -134,14 +134,14 @@ fn values(out: &mut impl Write, e: &Entry) -> fmt::Result {
         }
         return Ok(());
     }
-    if let Scale::Bit(k) = e.scale {
+    if let Scale::Bit(k) = *e.scale {
         return write!(out, "0, 1 (bit {k} of the drive object)");
     }
-    let map = |v: i64| match e.scale {
+    let map = |v: i64| match *e.scale {
         Scale::One => v,
         s => s.to_map(v, FACTORY_PER_REV).unwrap_or(v),
     };
-    match (*d.range, e.scale) {
+    match (*d.range, *e.scale) {
         (Range::Any, _) | (_, Scale::PerRev(..)) => write!(out, "as the drive object"),
         (Range::Span(a, b), _) => {
             let (a, b) = (map(i64::from(a)), map(i64::from(b)));
@@ -160,7 +160,7 @@ fn values(out: &mut impl Write, e: &Entry) -> fmt::Result {
 
 /// The map's unit of `e`.
 fn unit(e: &Entry) -> &'static str {
-    match (e.scale, e.obj.def().unit) {
+    match (*e.scale, e.obj.def().unit) {
         (Scale::PerRev(1, 10), Unit::Pps) => "0.1 rev/s",
         (Scale::PerRev(1, 10), Unit::Pps2) => "0.1 rev/s²",
         (Scale::PerRev(1, 100), Unit::Pps) => "0.01 rev/s",

@@ -14,7 +14,7 @@
 //! use drive_core::maps::layout::{Entry, Exceptions, Layout, LayoutMap, Scale, WordOrder};
 //! use drive_core::od::Obj;
 //! use drive_core::{Drive, DriveConfig, Instant};
-//! static ENTRIES: [Entry; 1] = [Entry::new(0x0100, Obj::PhaseCurrent, Scale::Ratio(100, 1))];
+//! static ENTRIES: [Entry; 1] = [Entry::new(0x0100, Obj::PhaseCurrent, &Scale::Ratio(100, 1))];
 //! static LAYOUT: Layout = Layout::by_address(&ENTRIES, WordOrder::LowFirst, Exceptions::MODBUS);
 //! let mut drive = Drive::with_map(DriveConfig::default(), LayoutMap::new(&LAYOUT));
 //! // Write 12 (× 100 mA) to register 0x0100 of node 1.
@@ -141,46 +141,68 @@ impl Scale {
     }
 }
 
-/// One object's place in a layout.
+/// One object's place in a layout: 8 bytes (a map's table is a few hundred of them).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Entry {
     /// Its first register.
     pub addr: u16,
     /// The object (numeric: one or two registers, as the drive declares it).
     pub obj: Obj,
-    /// The map's unit against the drive's.
-    pub scale: Scale,
-    /// What the map lets a master do with it.
-    pub view: View,
-    /// One register for a 32-bit object whose values the map keeps within 16 bits (a value
-    /// beyond them reads as the nearest 16-bit one: 0xFFFF, or for a signed object -32768 or
-    /// 32767; a signed object's register is signed).
-    pub narrow: bool,
-    /// Two registers for a 16-bit object (a map that gives it 32 bits).
-    pub wide: bool,
+    /// [`Entry::view`] in bits 0-1, [`Entry::is_narrow`] bit 2, [`Entry::is_wide`] bit 3.
+    flags: u8,
+    /// The map's unit against the drive's (a reference: the entries share their few scales).
+    pub scale: &'static Scale,
 }
+
+/// [`Entry`]'s flags: one register for a 32-bit object.
+const NARROW: u8 = 1 << 2;
+/// [`Entry`]'s flags: two registers for a 16-bit object.
+const WIDE: u8 = 1 << 3;
+/// [`Entry`]'s flags: the bits of its view.
+const VIEW: u8 = 3;
 
 impl Entry {
     /// `obj` at `addr`, in the map's unit `scale`, with the object's own access.
-    pub const fn new(addr: u16, obj: Obj, scale: Scale) -> Self {
-        Self { addr, obj, scale, view: View::Declared, narrow: false, wide: false }
+    pub const fn new(addr: u16, obj: Obj, scale: &'static Scale) -> Self {
+        Self { addr, obj, flags: 0, scale }
     }
 
-    /// The entry, one register wide.
+    /// The entry, one register wide: a 32-bit object whose values the map keeps within 16 bits
+    /// (a value beyond them reads as the nearest 16-bit one: 0xFFFF, or for a signed object
+    /// -32768 or 32767; a signed object's register is signed).
     pub const fn narrow(self) -> Self {
-        Self { narrow: true, ..self }
+        Self { flags: self.flags | NARROW, ..self }
     }
 
-    /// The entry, two registers wide.
+    /// The entry, two registers wide: a 16-bit object that the map gives 32 bits.
     pub const fn wide(self) -> Self {
-        Self { wide: true, ..self }
+        Self { flags: self.flags | WIDE, ..self }
+    }
+
+    /// Whether the entry is one register for a 32-bit object ([`Entry::narrow`]).
+    pub const fn is_narrow(&self) -> bool {
+        self.flags & NARROW != 0
+    }
+
+    /// Whether the entry is two registers for a 16-bit object ([`Entry::wide`]).
+    pub const fn is_wide(&self) -> bool {
+        self.flags & WIDE != 0
+    }
+
+    /// What the map lets a master do with it.
+    pub const fn view(&self) -> View {
+        match self.flags & VIEW {
+            1 => View::ReadOnly,
+            2 => View::WriteOnly,
+            _ => View::Declared,
+        }
     }
 
     /// Its registers.
     pub fn words(&self) -> u32 {
-        if self.narrow {
+        if self.is_narrow() {
             1
-        } else if self.wide {
+        } else if self.is_wide() {
             2
         } else {
             u32::from(self.obj.def().words())
@@ -197,12 +219,12 @@ impl Entry {
 
     /// The entry, read only.
     pub const fn read_only(self) -> Self {
-        Self { view: View::ReadOnly, ..self }
+        Self { flags: (self.flags & !VIEW) | 1, ..self }
     }
 
     /// The entry, write only.
     pub const fn write_only(self) -> Self {
-        Self { view: View::WriteOnly, ..self }
+        Self { flags: (self.flags & !VIEW) | 2, ..self }
     }
 }
 
@@ -421,7 +443,7 @@ impl LayoutMap {
     /// The map's value of `e` now, as register bits (32 at most).
     fn map_value<P: Borrow<Table>>(&self, drive: &DriveState<P>, e: &Entry) -> u32 {
         let d = e.obj.def();
-        if let Scale::Bit(k) = e.scale {
+        if let Scale::Bit(k) = *e.scale {
             return drive.read_def(d).checked_shr(u32::from(k)).unwrap_or(0) & 1;
         }
         let v = signed(d, drive.read_def(d));
@@ -432,7 +454,7 @@ impl LayoutMap {
     /// The drive's raw value of the map's register bits `bits` for `e`.
     fn drive_value<P: Borrow<Table>>(&self, drive: &DriveState<P>, e: &Entry, bits: u32) -> Result<u32, ObjError> {
         let d = e.obj.def();
-        if let Scale::Bit(k) = e.scale {
+        if let Scale::Bit(k) = *e.scale {
             let bit = 1u32.checked_shl(u32::from(k)).unwrap_or(0);
             let old = drive.read_def(d);
             return match bits {
@@ -443,7 +465,7 @@ impl LayoutMap {
         }
         // The map's register is signed as the object is.
         let v = match d.ty {
-            Type::S32 if e.narrow => i64::from(bits as u16 as i16),
+            Type::S32 if e.is_narrow() => i64::from(bits as u16 as i16),
             _ => signed(d, bits),
         };
         let v = e.scale.to_drive(v, per_rev(drive)).ok_or(ObjError::OutOfRange)?;
@@ -471,7 +493,7 @@ impl LayoutMap {
                 at += 1;
                 values.get(at - 1).map_or(0, u32::from)
             };
-            let op = if d.access == Access::Ro || e.view == View::ReadOnly || matches!(d.ty, Type::Str(_)) {
+            let op = if d.access == Access::Ro || e.view() == View::ReadOnly || matches!(d.ty, Type::Str(_)) {
                 Err(ex.read_only)
             } else if e.words() == 1 {
                 Ok(Op::Commit(word()))
@@ -522,7 +544,7 @@ impl RegisterMap for LayoutMap {
         let mut slots = out.chunks_exact_mut(2);
         let mut refused = None;
         let walked = self.layout.covered(addr, qty, |e, k, n| {
-            if e.view == View::WriteOnly {
+            if e.view() == View::WriteOnly {
                 refused = refused.or(Some(ex.write_only));
             }
             let d = e.obj.def();
@@ -530,8 +552,8 @@ impl RegisterMap for LayoutMap {
             for j in k..k + n {
                 let w = match d.ty {
                     Type::Str(_) => drive.text_word(e.obj, j as usize),
-                    _ if e.narrow => e.narrow_word(v),
-                    _ if d.words() == 1 && !e.wide => v as u16,
+                    _ if e.is_narrow() => e.narrow_word(v),
+                    _ if d.words() == 1 && !e.is_wide() => v as u16,
                     _ if is_high(order, drive, j) => (v >> 16) as u16,
                     _ => v as u16,
                 };
@@ -554,7 +576,7 @@ impl RegisterMap for LayoutMap {
         }
         let mut refused = None;
         let walked = self.layout.covered(addr, u32::from(qty), |e, _, _| {
-            if e.view == View::WriteOnly {
+            if e.view() == View::WriteOnly {
                 refused = refused.or(Some(ex.write_only));
             }
         });
