@@ -26,6 +26,7 @@ pub mod drive;
 pub mod faults;
 pub mod ident;
 pub mod maps;
+pub mod math;
 pub mod modes;
 pub mod motion;
 pub mod od;

@@ -239,7 +239,7 @@ impl Sensorless {
         let alpha = (1.5 * speed * TICK_S).clamp(EMF_ALPHA_MIN, EMF_ALPHA_MAX);
         self.dot += (dot - self.dot) * alpha;
         self.cross += (cross - self.cross) * alpha;
-        self.emf += (libm::sqrtf(ea * ea + eb * eb) - self.emf) * alpha;
+        self.emf += (crate::math::sqrt(ea * ea + eb * eb) - self.emf) * alpha;
         let s = if x.speed < 0.0 { -1.0 } else { 1.0 };
         self.load_angle = libm::atan2f(s * self.dot, -s * self.cross);
         if speed < x.min_speed || x.min_speed <= 0.0 {

@@ -38,25 +38,26 @@ fn assert_only(module: &str, allowed: &[&str]) {
 
 #[test]
 fn the_lower_layers_import_nothing_from_above() {
-    // Leaves: units, checksums, the PDU's types, identification, modes, the power states.
-    for leaf in ["units", "crc", "pdu", "ident", "modes", "power"] {
+    // Leaves: units, FPU arithmetic, checksums, the PDU's types, identification, modes, the power states.
+    for leaf in ["units", "math", "crc", "pdu", "ident", "modes", "power"] {
         assert_only(leaf, &[]);
     }
     assert_only("rtu", &["crc", "units"]);
-    assert_only("motion", &["units"]);
+    assert_only("motion", &["math", "units"]);
     // The store persists what the faults part keeps, not the other way round.
     assert!(!imports("faults").contains("store"), "faults imports the store");
     // The closed loop's and supervision's data know nothing of the drive or its dictionary
     // (faults names the history objects), and the controller the tick owns nothing of the bus
     // side: no dictionary, no maps, no planning of modes.
-    assert_only("servo", &["units"]);
+    assert_only("servo", &["math", "units"]);
     assert_only("faults", &["od", "units"]);
-    assert_only("controller", &["faults", "modes", "motion", "servo", "units"]);
+    assert_only("controller", &["faults", "math", "modes", "motion", "servo", "units"]);
 }
 
 /// Every top-level module of drive-core.
-const MODULES: [&str; 17] = [
+const MODULES: [&str; 18] = [
     "units",
+    "math",
     "crc",
     "pdu",
     "ident",

@@ -87,7 +87,8 @@
 //! ```
 
 use super::whole::floor;
-use libm::{fabsf as fabs, sqrtf as sqrt};
+use crate::math::sqrt;
+use libm::fabsf as fabs;
 
 /// The kinematic limits of a move. All values are in microsteps and seconds.
 ///
