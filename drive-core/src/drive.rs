@@ -126,7 +126,7 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
         let faults = FaultLog::restored(&params.fault_history());
         params.keep_saved();
         let mut drive = Self::assemble(config, map, &mut params, faults, storage, table);
-        drive.factory_settings_if_empty(storage);
+        drive.map_power_up(storage);
         drive
     }
 
@@ -145,13 +145,13 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
         let faults = FaultLog::restored(&params.fault_history());
         params.keep_saved();
         let drive = slot.write(Self::assemble(config, map, params, faults, storage, table));
-        drive.factory_settings_if_empty(storage);
+        drive.map_power_up(storage);
         drive
     }
 
-    /// With nothing saved (`storage`), the register map's own factory settings over the drive's;
-    /// and the program's memory if the map has a program.
-    fn factory_settings_if_empty(&mut self, storage: u8) {
+    /// The register map's part of power-up: the program's memory if it has a program, and with
+    /// nothing saved (`storage`) its own factory settings over the drive's.
+    fn map_power_up(&mut self, storage: u8) {
         self.state.program.memory = self.map.has_program();
         if storage & (STORAGE_EMPTY | STORAGE_CORRUPT | STORAGE_FSET) != 0 {
             self.map.factory_settings(&mut self.state);

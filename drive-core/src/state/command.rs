@@ -173,7 +173,7 @@ impl Planner<'_> {
         }
     }
 
-    /// A run from `here` to `target` (within the soft limits) at the run speed 0x21B5.
+    /// A run to `target` (within the soft limits) at the run speed 0x21B5.
     fn run_to(&self, axis: &mut Axis, target: i64) -> Result<(), ObjError> {
         let speed = self.param(Obj::CommandSpeed) as f32;
         self.go(axis, &self.pp_setpoint(target, speed)).map(|_| ())
