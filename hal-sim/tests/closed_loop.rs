@@ -1,5 +1,6 @@
 //! The closed loop on the physical motor model: the encoder corrects what a load takes away, the
-//! servo loop holds its target, and a following error beyond 0x605C latches alarm 25.
+//! servo loop holds its target, and a following error beyond 0x605C (or 0x21D0's encoder counts)
+//! latches alarm 25.
 
 use drive_core::od::Obj;
 use drive_core::{Drive, DriveConfig, Params};
@@ -149,6 +150,36 @@ fn a_blocked_rotor_latches_the_position_error() {
         let target = p.drive().state().position() as f64;
         assert!((rotor(&p, true) - target).abs() < 4.0, "loop {torque_loop}");
     }
+}
+
+/// Seed 002's 0258 (our 0x21D0): a position error limit in encoder counts replaces 0x605C's
+/// microsteps while it is not 0.
+#[test]
+fn a_position_error_limit_in_encoder_counts_replaces_the_stall_length() {
+    let mut p = plant(1, 0);
+    // 4000 counts: a turn, 3 200 microsteps; 0x605C's 255 microsteps no longer count.
+    set(&mut p, Obj::PositionErrorLimit, 4000);
+    set(&mut p, Obj::MaxSpeed, 4000);
+    set(&mut p, Obj::RelativeMove, 400_000);
+    run(&mut p, 0.5);
+    p.inject(Change::Blocked(true));
+    // 0.3 s blocked at 4 000 microsteps a second: about 1 200 microsteps behind, past 255.
+    run(&mut p, 0.3);
+    assert_eq!(read(&p, Obj::DriveFaults), 0, "within a turn");
+    run(&mut p, 1.0);
+    assert_eq!(read(&p, Obj::AlarmCode), 25, "a turn behind");
+    assert_eq!(read(&p, Obj::DriveFaults), 1 << 2);
+    // Back to 0: 0x605C's 255 microsteps again.
+    p.inject(Change::Blocked(false));
+    set(&mut p, Obj::PositionErrorLimit, 0);
+    set(&mut p, Obj::DriveFaults, 0x0F);
+    set(&mut p, Obj::ControllerStatus, 0xFF);
+    run(&mut p, 0.1);
+    set(&mut p, Obj::RelativeMove, 400_000);
+    run(&mut p, 0.5);
+    p.inject(Change::Blocked(true));
+    run(&mut p, 0.2);
+    assert_eq!(read(&p, Obj::AlarmCode), 25, "0x605C's 255 microsteps");
 }
 
 #[test]
