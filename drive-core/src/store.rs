@@ -318,7 +318,7 @@ impl<S: NorFlash> Store<S> {
     /// it (see the module documentation).
     pub async fn save_program(&mut self, table: &Table) -> Result<(), Error<S>> {
         let bank = self.program_commit().await.map_or(0, |(bank, _)| bank ^ 1);
-        self.write(Record::Program(table, bank)).await
+        self.write(Record::Program { table, bank, crc: program_crc(table) }).await
     }
 
     /// The bank and CRC of the program saved last, if a commit record says.
@@ -474,8 +474,12 @@ enum Record<'a> {
     Params(&'a Params),
     Position(i32),
     Faults(&'a FaultHistory),
-    /// The program in a table, into a bank (0 or 1), then its commit.
-    Program(&'a Table, u8),
+    /// The program in a table, into a bank (0 or 1), then its commit; its CRC, in each.
+    Program {
+        table: &'a Table,
+        bank: u8,
+        crc: u16,
+    },
 }
 
 impl Record<'_> {
@@ -491,9 +495,9 @@ impl Record<'_> {
             // An `i32`, little endian, as the crate stores one.
             (Self::Position(position), 0) => Some((POSITION_KEY, first(&position.to_le_bytes(), out)?)),
             (Self::Faults(history), 0) => Some((FAULTS_KEY, first(&history.encode(), out)?)),
-            (&Self::Program(table, bank), k) if k <= PROGRAM_CHUNKS => {
+            (&Self::Program { table, bank, crc }, k) if k <= PROGRAM_CHUNKS => {
                 let bytes = 2 * PROGRAM_WORDS;
-                let [lo, hi] = program_crc(table).to_le_bytes();
+                let [lo, hi] = crc.to_le_bytes();
                 let (head, body) = out.split_first_chunk_mut::<4>()?;
                 if k == PROGRAM_CHUNKS {
                     // The commit, once every chunk is written.

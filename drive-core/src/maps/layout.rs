@@ -383,11 +383,6 @@ fn is_high<P: Borrow<Table>>(order: WordOrder, drive: &DriveState<P>, k: u32) ->
     (k == 0) == high_first
 }
 
-/// Microsteps a revolution at the drive's resolution (0x600C; 0 is full steps).
-fn per_rev<P: Borrow<Table>>(drive: &DriveState<P>) -> i64 {
-    FULL_STEPS_PER_REV * i64::from(drive.read(Obj::Microsteps).max(1))
-}
-
 /// The drive's raw value as a number: two's complement for a signed object.
 const fn signed(d: &ObjectDef, raw: u32) -> i64 {
     match d.ty {
@@ -448,7 +443,7 @@ impl LayoutMap {
         }
         let v = signed(d, drive.read_def(d));
         // A drive value beyond the map's range reads as its low bits.
-        e.scale.to_map(v, per_rev(drive)).unwrap_or(v) as u32
+        e.scale.to_map(v, i64::from(drive.per_rev())).unwrap_or(v) as u32
     }
 
     /// The drive's raw value of the map's register bits `bits` for `e`.
@@ -468,7 +463,7 @@ impl LayoutMap {
             Type::S32 if e.is_narrow() => i64::from(bits as u16 as i16),
             _ => signed(d, bits),
         };
-        let v = e.scale.to_drive(v, per_rev(drive)).ok_or(ObjError::OutOfRange)?;
+        let v = e.scale.to_drive(v, i64::from(drive.per_rev())).ok_or(ObjError::OutOfRange)?;
         raw_of(d, v).ok_or(ObjError::OutOfRange)
     }
 

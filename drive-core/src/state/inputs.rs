@@ -45,9 +45,14 @@ impl<P: Borrow<Table>> DriveState<P> {
         INPUT_FUNCTION_OBJECTS.get(k).map_or(0, |&obj| self.param(obj))
     }
 
+    /// The inputs active now, or set as pseudo-inputs: bit k IN k+1.
+    pub(crate) fn active_inputs(&self) -> u8 {
+        self.ctl.status.inputs | self.param(Obj::PseudoInputs) as u8
+    }
+
     /// Whether an input with function `function` is active now (or its pseudo-input set).
     pub(crate) fn input_active(&self, function: u32) -> bool {
-        let active = self.ctl.status.inputs | self.param(Obj::PseudoInputs) as u8;
+        let active = self.active_inputs();
         (0..INPUT_FUNCTION_OBJECTS.len()).any(|k| active & (1 << k) != 0 && self.input_function(k) == function)
     }
 
@@ -96,6 +101,6 @@ impl<P: Borrow<Table>> DriveState<P> {
     pub(crate) fn limit_ahead(&self, up: bool) -> bool {
         let io = &self.ctl.settings.io;
         let limits = if up { io.limit_positive } else { io.limit_negative };
-        (self.ctl.status.inputs | self.param(Obj::PseudoInputs) as u8) & limits != 0
+        self.active_inputs() & limits != 0
     }
 }

@@ -434,6 +434,12 @@ impl<P: Borrow<Table>> DriveState<P> {
         self.ctl.axis.setpoint().whole
     }
 
+    /// Microsteps a revolution at the resolution in force (0x600C; 0 is full steps): what a
+    /// map's units per revolution and a program's speeds convert by.
+    pub(crate) fn per_rev(&self) -> u32 {
+        crate::units::FULL_STEPS_PER_REV as u32 * self.params.get(Obj::Microsteps as usize).copied().unwrap_or(0).max(1)
+    }
+
     /// Declares the present position, as writing 0x600E..F does; refused while moving.
     pub fn set_position(&mut self, position: i64) -> bool {
         self.ctl.axis.set_position(position)

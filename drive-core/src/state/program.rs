@@ -26,7 +26,7 @@ use crate::motion::cubic::Table;
 use crate::motion::scurve::Limits;
 use crate::od::{Obj, ObjError, refuse};
 use crate::pdu::Words;
-use crate::units::{FULL_STEPS_PER_REV, Instant};
+use crate::units::Instant;
 use core::borrow::Borrow;
 
 /// Registers of the program (1024..=1536).
@@ -255,29 +255,24 @@ impl<P: Borrow<Table>> DriveState<P> {
         self.program.memory.then(|| self.table.borrow())
     }
 
-    /// Microsteps a revolution at the resolution in force.
-    fn per_rev(&self) -> u32 {
-        FULL_STEPS_PER_REV as u32 * self.param(Obj::Microsteps).max(1)
-    }
-
     /// Where segment `segment` (1-based) begins, once segments 1..=0x21CB check: the first
     /// segment in error otherwise.
     fn locate(&self, segment: u8) -> Result<Start, u8> {
         let count = self.param(Obj::ProgramSegments).clamp(1, u32::from(MAX_SEGMENTS)) as u8;
         let (mut at, mut index) = (0usize, 0u16);
         let mut found = Start { word: 0, index: 0 };
-        let table = self.table.borrow();
+        let (table, per_rev) = (self.table.borrow(), self.per_rev());
         for s in 1..=count {
             let start = Start { word: at as u16, index };
             if s == segment {
                 found = start;
             }
-            let mut speeds = default_speeds(self.per_rev()).ok_or(s)?;
+            let mut speeds = default_speeds(per_rev).ok_or(s)?;
             let (mut loops, mut lowest, mut highest) = (0, u16::MAX, 0);
             // Walk to the end code, checking each instruction; then the jumps' targets.
             loop {
                 let (i, len) = Instruction::decode(table, at).filter(|_| index < MAX_INSTRUCTIONS).ok_or(s)?;
-                speeds = speeds.after(i, self.per_rev()).ok_or(s)?;
+                speeds = speeds.after(i, per_rev).ok_or(s)?;
                 if let Instruction::WaitJump { to, .. } | Instruction::Loop { to, .. } = i {
                     (lowest, highest) = (lowest.min(to), highest.max(to));
                     loops += usize::from(matches!(i, Instruction::Loop { count, .. } if count != 0));
@@ -302,12 +297,12 @@ impl<P: Borrow<Table>> DriveState<P> {
     pub(crate) fn input_segment(&self) -> Option<u8> {
         let mut has = false;
         let mut bits = 0u8;
+        let active = self.active_inputs();
         for k in 0..super::control::INPUT_FUNCTION_OBJECTS.len() {
             let f = self.input_function(k);
             if let Some(bit) = f.checked_sub(INPUT_SELECT_BIT0).filter(|&b| b < 5) {
                 has = true;
-                let active = (self.ctl.status.inputs | self.param(Obj::PseudoInputs) as u8) & (1 << k) != 0;
-                bits |= u8::from(active) << bit;
+                bits |= u8::from(active & (1 << k) != 0) << bit;
             }
         }
         has.then_some(bits + 1)
