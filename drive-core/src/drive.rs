@@ -6,7 +6,7 @@ use crate::controller::handoff::{Handover, Lent, TickSide};
 use crate::crc;
 use crate::faults::{FaultLog, Inputs};
 use crate::ident::Identity;
-use crate::maps::{NativeMap, RegisterMap};
+use crate::maps::{NativeMap, RegisterMap, ec57};
 use crate::motion::cubic::Table;
 use crate::od::Obj;
 use crate::pdu::{Exception, MAX_READ, Request, Words};
@@ -173,6 +173,7 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
         };
         if let Some(a) = config.address {
             set(Obj::NodeId, u32::from(a.get()));
+            set(Obj::AddressSource, 1);
         }
         if let Some(b) = config.baud {
             set(Obj::BaudRate, b.get());
@@ -188,7 +189,9 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
         let values = &params.values;
         let get = |obj: Obj| values.get(obj as usize).copied().unwrap_or(0);
         // The serial settings in force are those of power-up; writes take effect at the next one.
-        let address = SlaveAddr::new(get(Obj::NodeId) as u8).unwrap_or(SlaveAddr::BROADCAST);
+        // The EC-57's serial port answers at 1 unless 0x2001 takes the node id.
+        let node = if map.sub_indexed() && get(Obj::AddressSource) == 0 { 1 } else { get(Obj::NodeId) };
+        let address = SlaveAddr::new(node as u8).unwrap_or(SlaveAddr::BROADCAST);
         let baud = Baud::new(get(Obj::BaudRate)).unwrap_or(Baud::FACTORY);
         Self {
             framer: Framer::new(baud),
@@ -358,10 +361,15 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
             Some(RxError::Gap { after_frame }) => {
                 c.bus_errors = c.bus_errors.wrapping_add(1);
                 if self.map.timing_exceptions() {
-                    self.timing_exception(if after_frame { TOO_CLOSE } else { GAP_INSIDE });
+                    self.frame_exception(if after_frame { TOO_CLOSE } else { GAP_INSIDE });
                 }
             }
-            None if !self.framer.crc_ok() => c.bus_errors = c.bus_errors.wrapping_add(1),
+            None if !self.framer.crc_ok() => {
+                c.bus_errors = c.bus_errors.wrapping_add(1);
+                if self.map.sub_indexed() && self.state.read(Obj::CrcErrorReply) == 1 {
+                    self.frame_exception(CRC_ERROR);
+                }
+            }
             None => {
                 self.serve();
                 if core::mem::take(&mut self.state.factory_restored) {
@@ -373,10 +381,11 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
         self.framer.clear();
     }
 
-    /// Answers a frame its timing spoilt with the exception `code`, from the address and the
-    /// function code it began with, if it began with this drive's address (a broadcast, another
-    /// drive's frame or one too short to say are not answered) and not in listen-only mode.
-    fn timing_exception(&mut self, code: u8) {
+    /// Answers a frame its timing or its CRC spoilt with the exception `code`, from the address
+    /// and the function code it began with, if it began with this drive's address (a broadcast,
+    /// another drive's frame or one too short to say are not answered) and not in listen-only
+    /// mode.
+    fn frame_exception(&mut self, code: u8) {
         let (frame, _) = self.framer.frame();
         let (Some(&to), Some(&function)) = (frame.first(), frame.get(1)) else { return };
         if to != self.address.get() || self.listen_only || function & 0x80 != 0 {
@@ -410,16 +419,12 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
             counters.no_responses = counters.no_responses.wrapping_add(1);
             return;
         }
-        let request = Request::parse(pdu);
+        // Seed 003's framing has the sub-index in its register functions only.
+        let request =
+            if map.sub_indexed() && !matches!(function, 0x08 | 0x2B) { ec57::parse(pdu) } else { Request::parse(pdu) };
         let mut server = Server { map, state, counters, listen_only };
-        if broadcast || *server.listen_only {
-            // Execute what may execute without an answer, and answer nothing.
-            if let Ok(req) = request
-                && server.silent_allowed(&req)
-            {
-                let mut scratch = [0u8; MAX_FRAME];
-                let _ = server.execute(&req, &mut scratch);
-            }
+        let silent = broadcast || *server.listen_only;
+        if silent && !request.as_ref().is_ok_and(|req| server.silent_allowed(req)) {
             counters.no_responses = counters.no_responses.wrapping_add(1);
             return;
         }
@@ -427,10 +432,25 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
             return;
         };
         let body = body.get_mut(..MAX_FRAME - 4).unwrap_or_default();
-        let len = match request.and_then(|req| server.execute(&req, body)) {
+        // One call of `execute` for both: what may execute without an answer executes, and its
+        // reply is dropped (a reply not yet taken with it).
+        let result = request.and_then(|req| server.execute(&req, body));
+        if silent {
+            *tx_len = 0;
+            counters.no_responses = counters.no_responses.wrapping_add(1);
+            return;
+        }
+        let len = match result {
             Ok(Outcome::Reply(n)) => {
                 *head = [address.get(), function];
-                n
+                match (map.sub_indexed(), function, pdu.get(1..6)) {
+                    // A write's reply echoes the index, the sub-index and the value or count.
+                    (true, 0x06 | 0x10, Some(echo)) => {
+                        put(body, 0, echo);
+                        echo.len()
+                    }
+                    _ => n,
+                }
             }
             Ok(Outcome::Silent) => {
                 counters.no_responses = counters.no_responses.wrapping_add(1);
@@ -451,6 +471,8 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
     }
 }
 
+/// Seed 003's exception for a frame whose CRC is wrong (if 0x21D2 asks for it).
+const CRC_ERROR: u8 = 0x01;
 /// Seed 002's exception for a silence over t1.5 inside a frame.
 const GAP_INSIDE: u8 = 0x0C;
 /// Seed 002's exception for a frame that followed a whole one before t3.5.

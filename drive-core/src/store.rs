@@ -107,7 +107,7 @@ pub const SAVED: usize = {
     while i < OBJECTS.len() {
         #[allow(clippy::indexing_slicing)]
         let d = &OBJECTS[i];
-        if matches!(d.storage, Storage::Rom) && matches!(d.access, Access::Rw) {
+        if matches!(d.storage(), Storage::Rom) && matches!(d.access(), Access::Rw) {
             n += 1;
         }
         i += 1;
@@ -545,9 +545,9 @@ mod tests {
     #[test]
     fn unknown_addresses_are_ignored_and_missing_ones_keep_their_values() {
         // An older or newer firmware's record: node id 9, an address we do not have, a value our
-        // range refuses (microsteps 3), and nothing else.
+        // range refuses (microsteps 257), and nothing else.
         let mut rec = [FORMAT, 0, 3, 0].to_vec();
-        for (addr, v) in [(0x2028u16, 9u32), (0x21FF, 77), (0x600C, 3)] {
+        for (addr, v) in [(0x2028u16, 9u32), (0x21FF, 77), (0x600C, 257)] {
             rec.extend(addr.to_le_bytes());
             rec.extend(v.to_le_bytes());
         }

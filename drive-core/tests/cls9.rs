@@ -307,7 +307,7 @@ fn the_map_is_a_saved_setting_and_switches_back() {
     assert_eq!(r.read(0x2190, 1), Ok(vec![0]));
     r.set(0x2190, 2).expect("this map");
     assert_eq!(r.read(0x2190, 1), Ok(vec![2]));
-    assert_eq!(r.set(0x2190, 3), Err(3));
+    assert_eq!(r.set(0x2190, 4), Err(3));
     r.set(0x2190, 0).expect("native");
     assert_eq!(r.drive.state().read(Obj::RegisterMap), 0);
 }

@@ -87,7 +87,7 @@ fn broadcast_writes_execute_and_are_not_answered() {
     let st = bus.drive.state();
     assert_eq!((st.read(Obj::Microsteps), st.read(Obj::StartSpeed), st.read(Obj::StopSpeed)), (16, 256, 512));
     // A broadcast that would be an exception is silent too, and changes nothing.
-    assert_eq!(bus.request(&[0x00, 0x06, 0x60, 0x0C, 0x00, 0x03]), None);
+    assert_eq!(bus.request(&[0x00, 0x06, 0x60, 0x0C, 0x01, 0x01]), None);
     assert_eq!(bus.drive.state().read(Obj::Microsteps), 16);
     assert_eq!(bus.drive.counters().no_responses, 3);
 }

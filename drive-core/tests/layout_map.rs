@@ -89,7 +89,7 @@ impl Rig {
 
     fn get(&self, obj: Obj) -> i64 {
         let v = self.drive.state().read(obj);
-        if obj.def().ty == drive_core::od::Type::S32 { i64::from(v as i32) } else { i64::from(v) }
+        if obj.def().ty() == drive_core::od::Type::S32 { i64::from(v as i32) } else { i64::from(v) }
     }
 
     /// Every object's value and the position: equal snapshots mean nothing changed.

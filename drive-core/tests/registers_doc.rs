@@ -25,37 +25,49 @@ fn every_object_is_in_the_reference() {
     assert!(drive_core::od::OBJECTS.len() >= 90, "seed 000 has about 100 objects");
 }
 
-/// `docs/registers-jmc.md`, the JMC map's reference, from its layout.
-#[test]
-fn jmc_reference_is_current() {
+/// `docs/NAME`, a map's reference generated from its layout, is current (rewritten with
+/// `UPDATE_DOCS`), and shows each entry's register as `number` writes it.
+fn check_map_reference(
+    name: &str,
+    layout: &drive_core::maps::layout::Layout,
+    reference: &drive_core::maps::doc::Reference,
+    number: fn(u16) -> String,
+) {
     let mut text = String::new();
-    let layout = &drive_core::maps::jmc::LAYOUT;
-    drive_core::maps::doc::write_layout(&mut text, layout, &drive_core::maps::jmc::REFERENCE).expect("formatting");
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/registers-jmc.md");
+    drive_core::maps::doc::write_layout(&mut text, layout, reference).expect("formatting");
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs").join(name);
     if std::env::var_os("UPDATE_DOCS").is_some() {
-        std::fs::write(&path, &text).expect("write docs/registers-jmc.md");
+        std::fs::write(&path, &text).unwrap_or_else(|e| panic!("write docs/{name}: {e}"));
     }
     let on_disk = std::fs::read_to_string(&path).unwrap_or_default();
-    assert!(on_disk == text, "docs/registers-jmc.md is stale: run `cargo xtask docs`");
+    assert!(on_disk == text, "docs/{name} is stale: run `cargo xtask docs`");
     for e in layout.entries {
-        assert!(text.contains(&format!("| 0x{:04X} |", e.addr)), "0x{:04X} missing", e.addr);
+        assert!(text.contains(&format!("| {} |", number(e.addr))), "{} missing", number(e.addr));
     }
 }
 
-/// `docs/registers-cls9.md`, the DS-CLS9 map's reference, from its layout.
+/// `docs/registers-jmc.md`, the JMC map's reference.
+#[test]
+fn jmc_reference_is_current() {
+    use drive_core::maps::jmc;
+    check_map_reference("registers-jmc.md", &jmc::LAYOUT, &jmc::REFERENCE, |a| format!("0x{a:04X}"));
+}
+
+/// `docs/registers-cls9.md`, the DS-CLS9 map's reference: decimal register numbers below 0x2000.
 #[test]
 fn cls9_reference_is_current() {
-    let mut text = String::new();
-    let layout = &drive_core::maps::cls9::LAYOUT;
-    drive_core::maps::doc::write_layout(&mut text, layout, &drive_core::maps::cls9::REFERENCE).expect("formatting");
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/registers-cls9.md");
-    if std::env::var_os("UPDATE_DOCS").is_some() {
-        std::fs::write(&path, &text).expect("write docs/registers-cls9.md");
-    }
-    let on_disk = std::fs::read_to_string(&path).unwrap_or_default();
-    assert!(on_disk == text, "docs/registers-cls9.md is stale: run `cargo xtask docs`");
-    for e in layout.entries {
-        let number = if e.addr < 0x2000 { format!("| {:04} |", e.addr) } else { format!("| 0x{:04X} |", e.addr) };
-        assert!(text.contains(&number), "{} missing", e.addr);
-    }
+    use drive_core::maps::cls9;
+    check_map_reference("registers-cls9.md", &cls9::LAYOUT, &cls9::REFERENCE, |a| {
+        if a < 0x2000 { format!("{a:04}") } else { format!("0x{a:04X}") }
+    });
+}
+
+/// `docs/registers-ec57.md`, the EC-57 map's reference: registers as index and sub-index.
+#[test]
+fn ec57_reference_is_current() {
+    use drive_core::maps::ec57;
+    check_map_reference("registers-ec57.md", &ec57::LAYOUT, &ec57::REFERENCE, |a| {
+        let (index, sub) = ec57::index_of(a);
+        format!("0x{index:04X}.{sub}")
+    });
 }

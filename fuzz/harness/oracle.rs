@@ -384,14 +384,16 @@ pub fn map_value(state: &drive_core::DriveState, e: &drive_core::maps::layout::E
     use drive_core::maps::layout::{FULL_STEPS_PER_REV, Scale};
     let d = e.obj.def();
     let raw = state.read_def(d);
-    let v = if d.ty == drive_core::od::Type::S32 { i64::from(raw as i32) } else { i64::from(raw) };
+    let v = if d.ty() == drive_core::od::Type::S32 { i64::from(raw as i32) } else { i64::from(raw) };
     let per_rev = FULL_STEPS_PER_REV * i64::from(state.read(drive_core::od::Obj::Microsteps).max(1));
     match *e.scale {
         Scale::One => v,
         Scale::Ratio(n, den) => round(v * i64::from(den), i64::from(n)),
         Scale::PerRev(n, den) => round(v * i64::from(den), i64::from(n) * per_rev),
         Scale::Table(choices) => choices.iter().find(|c| i64::from(c.drive) == v).map_or(v, |c| i64::from(c.lo)),
-        Scale::Bit(k) => (v >> k) & 1,
+        Scale::Field(k, w) => (v >> k) & ((1 << w) - 1),
+        Scale::Invert(mask) => v ^ i64::from(mask),
+        Scale::PulsesPerRev => v.max(1) * FULL_STEPS_PER_REV,
     }
 }
 

@@ -45,7 +45,7 @@ fn model(drive: &Drive<Maps>, addr: u16, qty: usize) -> Option<Vec<u16>> {
             let reg = u32::from(addr) + k;
             let e = ENTRIES.iter().find(|e| (u32::from(e.addr)..u32::from(e.addr) + e.words()).contains(&reg))?;
             let m = oracle::map_value(drive.state(), e);
-            Some(if e.is_narrow() && e.obj.def().ty == Type::S32 {
+            Some(if e.is_narrow() && e.obj.def().ty() == Type::S32 {
                 m.clamp(i64::from(i16::MIN), i64::from(i16::MAX)) as i16 as u16
             } else if e.is_narrow() {
                 (m as u32).min(0xFFFF) as u16

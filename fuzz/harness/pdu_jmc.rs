@@ -42,7 +42,7 @@ fn model(drive: &Drive<Maps>, addr: u16, qty: usize) -> Option<Vec<u16>> {
             return None;
         }
         let d = e.obj.def();
-        if let Type::Str(n) = d.ty {
+        if let Type::Str(n) = d.ty() {
             out.extend((0..usize::from(n).div_ceil(2)).map(|k| drive.state().text_word(e.obj, k)));
             continue;
         }

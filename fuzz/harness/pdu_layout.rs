@@ -45,12 +45,14 @@ pub static LAYOUT: Layout = Layout {
         write_only: Exception::IllegalDataAddress,
         split: Exception::IllegalDataAddress,
         byte_count: Exception::IllegalDataValue,
+        function: Exception::IllegalFunction,
     },
     walk: Walk::Address,
     halves: true,
     timing: false,
     defaults: &[],
     program: None,
+    sub_index: false,
 };
 
 /// Every code the layout answers, and the request-level ones.

@@ -48,7 +48,7 @@ fn declared(drive: &Drive, reg: usize) -> u16 {
     let Some(d) = OBJECTS.get(i).filter(|d| usize::from(d.addr) <= reg) else { return 0 };
     let k = reg - usize::from(d.addr);
     let v = drive.state().read_def(d);
-    match d.ty {
+    match d.ty() {
         Type::Str(_) => drive.state().text_word(d.obj, k),
         Type::U32 | Type::S32 if k == 0 => (v >> 16) as u16,
         _ => v as u16,
@@ -201,8 +201,8 @@ impl Harness {
         let covered: Vec<_> =
             OBJECTS.iter().filter(|d| usize::from(d.addr) >= addr && d.end() as usize <= end).collect();
         if let [d] = covered[..]
-            && d.access == Access::Rw
-            && matches!(d.storage, Storage::Ram | Storage::Rom)
+            && d.access() == Access::Rw
+            && matches!(d.storage(), Storage::Ram | Storage::Rom)
             && d.obj != Obj::SystemControl
         {
             let at = 2 * (usize::from(d.addr) - addr);

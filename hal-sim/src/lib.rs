@@ -451,7 +451,7 @@ fn drive_config(opts: &SimOptions) -> io::Result<DriveConfig> {
         None => None,
         Some(a) => {
             let node_id = Obj::NodeId.def();
-            let takes = node_id.range.accepts(node_id.ty, u32::from(a));
+            let takes = node_id.range.accepts(node_id.ty(), u32::from(a));
             let range = match *node_id.range {
                 Range::Span(lo, hi) => format!(" (the drive takes {lo}-{hi})"),
                 _ => String::new(),

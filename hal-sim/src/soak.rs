@@ -699,7 +699,7 @@ impl Soak {
         let d = obj.def();
         let words: Vec<u16> = if d.words() == 2 { vec![(v >> 16) as u16, v as u16] } else { vec![v as u16] };
         self.write(i, d.addr, &words)?;
-        if d.storage == Storage::Rom {
+        if d.storage() == Storage::Rom {
             self.axes[i].rom.set(obj, v);
         }
         Ok(())
@@ -1443,7 +1443,7 @@ const _: () = {
     let mut k = 0;
     while k < SETTINGS.len() {
         let d = &OBJECTS[SETTINGS[k].0 as usize];
-        assert!(matches!(d.access, Access::Rw) && matches!(d.storage, Storage::Rom));
+        assert!(matches!(d.access(), Access::Rw) && matches!(d.storage(), Storage::Rom));
         k += 1;
     }
     assert!(TICK_MICROS <= CHECK_US);

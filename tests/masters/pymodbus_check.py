@@ -41,7 +41,7 @@ rw = client.readwrite_registers(
 check("0x17 read/write", regs(rw) == [700, 800], regs(rw))
 
 # Exceptions, with the state read back unchanged.
-e = client.write_register(0x600C, 3, device_id=DEV)
+e = client.write_register(0x600C, 257, device_id=DEV)
 check("out of range -> 03", e.isError() and getattr(e, "exception_code", None) == 3)
 e = client.read_holding_registers(0x0000, count=1, device_id=DEV)
 check("unknown address -> 02", e.isError() and getattr(e, "exception_code", None) == 2)

@@ -89,7 +89,7 @@ async fn exception_matrix_leaves_state_unchanged() {
     assert_eq!(write(&mut ctx, 0x605F, 1).await, Err(ExceptionCode::IllegalDataAddress));
     assert_eq!(write(&mut ctx, 0x6012, 1).await, Err(ExceptionCode::IllegalDataAddress));
     // 03: out of range, and a multi-register write that is all or nothing.
-    assert_eq!(write(&mut ctx, 0x600C, 3).await, Err(ExceptionCode::IllegalDataValue));
+    assert_eq!(write(&mut ctx, 0x600C, 257).await, Err(ExceptionCode::IllegalDataValue));
     assert_eq!(write_many(&mut ctx, 0x6008, &[100, 200, 9]).await, Err(ExceptionCode::IllegalDataValue));
     assert_eq!(write_many(&mut ctx, 0x6003, &[0x0004, 0]).await, Err(ExceptionCode::IllegalDataValue));
     // 04: the boot loader, which the simulator does not have.

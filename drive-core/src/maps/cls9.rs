@@ -48,7 +48,7 @@ static ENCODER: &[Choice] = &[
 ];
 
 /// 0217: 0 open loop, 1 closed loop on the incremental encoder.
-static LOOP: &[Choice] = &[Choice { lo: 0, hi: 0, drive: 0 }, Choice { lo: 1, hi: 1, drive: 1 }];
+pub(super) static LOOP: &[Choice] = &[Choice { lo: 0, hi: 0, drive: 0 }, Choice { lo: 1, hi: 1, drive: 1 }];
 
 /// 0206: 1 parameter reset (0x200F = 3), 2 alarm clear (0x200F = 4), 3 restart (0x200F = 1,
 /// refused: the drive does not restart itself).
@@ -135,13 +135,13 @@ pub static ENTRIES: [Entry; 75] = [
     Entry::new(404, Obj::InputFunction5, &Scale::One),
     Entry::new(405, Obj::InputFunction6, &Scale::One),
     Entry::new(406, Obj::InputFunction7, &Scale::One),
-    Entry::new(410, Obj::PseudoInputs, &Scale::Bit(0)),
-    Entry::new(411, Obj::PseudoInputs, &Scale::Bit(1)),
-    Entry::new(412, Obj::PseudoInputs, &Scale::Bit(2)),
-    Entry::new(413, Obj::PseudoInputs, &Scale::Bit(3)),
-    Entry::new(414, Obj::PseudoInputs, &Scale::Bit(4)),
-    Entry::new(415, Obj::PseudoInputs, &Scale::Bit(5)),
-    Entry::new(416, Obj::PseudoInputs, &Scale::Bit(6)),
+    Entry::new(410, Obj::PseudoInputs, &Scale::Field(0, 1)),
+    Entry::new(411, Obj::PseudoInputs, &Scale::Field(1, 1)),
+    Entry::new(412, Obj::PseudoInputs, &Scale::Field(2, 1)),
+    Entry::new(413, Obj::PseudoInputs, &Scale::Field(3, 1)),
+    Entry::new(414, Obj::PseudoInputs, &Scale::Field(4, 1)),
+    Entry::new(415, Obj::PseudoInputs, &Scale::Field(5, 1)),
+    Entry::new(416, Obj::PseudoInputs, &Scale::Field(6, 1)),
     Entry::new(420, Obj::OutputFunction1, &Scale::Table(&OUTPUT_FUNCTIONS)),
     Entry::new(421, Obj::OutputFunction2, &Scale::Table(&OUTPUT_FUNCTIONS)),
     Entry::new(422, Obj::OutputFunction3, &Scale::Table(&OUTPUT_FUNCTIONS)),
@@ -172,6 +172,7 @@ pub static LAYOUT: Layout = Layout {
     timing: true,
     defaults: &DEFAULTS,
     program: Some(1024),
+    sub_index: false,
 };
 
 /// The manual's factory values (§九) where they differ from the drive's: start and stop
@@ -283,4 +284,5 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         (430, "Output logic: bit k set, OUT k+1 low when on."),
     ],
     decimal: true,
+    sub_indexed: false,
 };

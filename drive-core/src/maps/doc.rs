@@ -21,6 +21,8 @@ pub struct Reference {
     /// Whether the manual numbers its registers in decimal (below 0x2000: the drive's own
     /// registers keep their hexadecimal numbers).
     pub decimal: bool,
+    /// Whether the registers are (index, sub-index) keys (seed 003's, shown as `0x2003.1`).
+    pub sub_indexed: bool,
 }
 
 /// Writes the reference of `layout`.
@@ -96,12 +98,15 @@ fn program_row(out: &mut impl Write, first: u16) -> fmt::Result {
 
 fn row(out: &mut impl Write, e: &Entry, r: &Reference) -> fmt::Result {
     let d = e.obj.def();
-    let access = match (e.view(), d.access) {
+    let access = match (e.view(), d.access()) {
         (View::ReadOnly, _) | (_, Access::Ro) => "ro",
         (View::WriteOnly, _) => "wo",
         (View::Declared, a) => a.name(),
     };
-    if r.decimal && e.addr < 0x2000 {
+    if r.sub_indexed {
+        let (index, sub) = super::ec57::index_of(e.addr);
+        write!(out, "| 0x{index:04X}.{sub} ")?;
+    } else if r.decimal && e.addr < 0x2000 {
         write!(out, "| {:04} ", e.addr)?;
     } else {
         write!(out, "| 0x{:04X} ", e.addr)?;
@@ -109,10 +114,10 @@ fn row(out: &mut impl Write, e: &Entry, r: &Reference) -> fmt::Result {
     write!(out, "| {} | {} | {access} | ", e.words(), d.name)?;
     values(out, e)?;
     write!(out, " | ")?;
-    match d.ty {
+    match d.ty() {
         Type::Str(_) => write!(out, "-")?,
         _ => {
-            let v = if d.ty == Type::S32 { i64::from(d.default as i32) } else { i64::from(d.default) };
+            let v = if d.ty() == Type::S32 { i64::from(d.default as i32) } else { i64::from(d.default) };
             write!(out, "{}", e.scale.to_map(v, FACTORY_PER_REV).unwrap_or(v))?;
         }
     }
@@ -134,8 +139,12 @@ fn values(out: &mut impl Write, e: &Entry) -> fmt::Result {
         }
         return Ok(());
     }
-    if let Scale::Bit(k) = *e.scale {
-        return write!(out, "0, 1 (bit {k} of the drive object)");
+    match *e.scale {
+        Scale::Field(k, 1) => return write!(out, "0, 1 (bit {k} of the drive object)"),
+        Scale::Field(k, w) => return write!(out, "bits {k}-{} of the drive object", k + w - 1),
+        Scale::Invert(mask) => return write!(out, "bits 0x{mask:X}, the drive object's inverted"),
+        Scale::PulsesPerRev => return write!(out, "multiples of 200 to 51200"),
+        _ => {}
     }
     let map = |v: i64| match *e.scale {
         Scale::One => v,
@@ -167,7 +176,9 @@ fn unit(e: &Entry) -> &'static str {
         (Scale::PerRev(1, 1), Unit::Pps2) => "rev/s²",
         (Scale::Ratio(100, 1), Unit::MilliAmps) => "0.1 A",
         (Scale::Ratio(1000, 1), Unit::MilliVolts) => "V",
-        (Scale::One | Scale::Ratio(-1, 1) | Scale::Table(_) | Scale::Bit(_), u) => u.symbol(),
+        (Scale::PerRev(1, 60), Unit::Pps) => "r/min",
+        (Scale::PulsesPerRev, _) => "pulse/rev",
+        (Scale::One | Scale::Ratio(-1, 1) | Scale::Table(_) | Scale::Field(..) | Scale::Invert(_), u) => u.symbol(),
         _ => "see the description",
     }
 }

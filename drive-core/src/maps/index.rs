@@ -95,8 +95,8 @@ static INDEX: [u16; SPAN] = {
                 i += 1;
             }
             let d = &OBJECTS[i];
-            let stored = matches!(d.storage, Storage::Ram | Storage::Rom);
-            let entry = match d.ty {
+            let stored = matches!(d.storage(), Storage::Ram | Storage::Rom);
+            let entry = match d.ty() {
                 _ if d.addr as u32 > reg => (i as u16) << 8 | 32,
                 Type::U8 | Type::U16 if stored => (i as u16) << 8,
                 // High word first.

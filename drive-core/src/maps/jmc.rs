@@ -98,6 +98,7 @@ pub const EXCEPTIONS: Exceptions = Exceptions {
     write_only: Exception::Vendor(0x07),
     split: Exception::IllegalDataAddress,
     byte_count: Exception::Vendor(0x08),
+    function: Exception::IllegalFunction,
 };
 
 /// The JMC layout.
@@ -110,6 +111,7 @@ pub static LAYOUT: Layout = Layout {
     timing: false,
     defaults: &[],
     program: None,
+    sub_index: false,
 };
 
 /// What the reference says beside the table: the decisions where seed 001 is silent or
@@ -157,4 +159,5 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         (0x606C, "Velocity actual value."),
     ],
     decimal: false,
+    sub_indexed: false,
 };

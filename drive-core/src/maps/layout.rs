@@ -24,7 +24,7 @@
 //! assert_eq!(drive.state().read(Obj::PhaseCurrent), 1200);
 //! ```
 
-use super::native::{Op, RegisterMap, STAGE_SLOT, STAGE_SLOTS};
+use super::native::{NativeMap, Op, RegisterMap};
 use crate::motion::cubic::Table;
 use crate::od::{Access, Obj, ObjError, ObjectDef, Type};
 use crate::pdu::{Exception, Words};
@@ -93,9 +93,16 @@ pub enum Scale {
     /// of range). A reference to a static slice, so that a scale is 8 bytes and a layout's entry
     /// 16.
     Table(&'static &'static [Choice]),
-    /// One bit of the drive's value, 0 or 1 (a register a bit: seed 002's pseudo-inputs); a
-    /// write changes that bit alone.
-    Bit(u8),
+    /// A field of the drive's value: `width` bits from bit `shift` (a register a bit: seed
+    /// 002's pseudo-inputs; the alarm code in a fault history entry: seed 003's fault list); a
+    /// write changes that field alone.
+    Field(u8, u8),
+    /// The drive's bits `mask` inverted (an output's active level where the map's 1 is the
+    /// drive's 0: seed 003's output polarity); a value beyond `mask` is out of range.
+    Invert(u16),
+    /// The microsteps a full step as pulses a revolution of a 1.8° motor: a multiple of 200
+    /// (the drive's full stepping, 0, reads as 200).
+    PulsesPerRev,
 }
 
 /// `n / d` rounded to the nearest (halves away from zero); `None` for `d == 0` or overflow.
@@ -113,7 +120,7 @@ impl Scale {
     /// The factor as a fraction, given the microsteps a revolution.
     const fn fraction(self, per_rev: i64) -> (i64, i64) {
         match self {
-            Scale::One | Scale::Table(_) | Scale::Bit(_) => (1, 1),
+            Scale::One | Scale::Table(_) | Scale::Field(..) | Scale::Invert(_) | Scale::PulsesPerRev => (1, 1),
             Scale::Ratio(n, d) => (n as i64, d as i64),
             Scale::PerRev(n, d) => (n as i64 * per_rev, d as i64),
         }
@@ -121,11 +128,19 @@ impl Scale {
 
     /// The drive's value of the map's `v`.
     pub fn to_drive(self, v: i64, per_rev: i64) -> Option<i64> {
-        if let Scale::Table(choices) = self {
-            return choices
-                .iter()
-                .find(|c| (i64::from(c.lo)..=i64::from(c.hi)).contains(&v))
-                .map(|c| i64::from(c.drive));
+        match self {
+            Scale::Table(choices) => {
+                return choices
+                    .iter()
+                    .find(|c| (i64::from(c.lo)..=i64::from(c.hi)).contains(&v))
+                    .map(|c| i64::from(c.drive));
+            }
+            Scale::Invert(mask) => return (0..=i64::from(mask)).contains(&v).then_some(v ^ i64::from(mask)),
+            Scale::PulsesPerRev => {
+                let steps = FULL_STEPS_PER_REV;
+                return (v % steps == 0).then_some(v / steps);
+            }
+            _ => {}
         }
         let (n, d) = self.fraction(per_rev);
         div_round(v.checked_mul(n)?, d)
@@ -133,8 +148,13 @@ impl Scale {
 
     /// The map's value of the drive's `v`.
     pub fn to_map(self, v: i64, per_rev: i64) -> Option<i64> {
-        if let Scale::Table(choices) = self {
-            return choices.iter().find(|c| i64::from(c.drive) == v).map(|c| i64::from(c.lo));
+        match self {
+            Scale::Table(choices) => {
+                return choices.iter().find(|c| i64::from(c.drive) == v).map(|c| i64::from(c.lo));
+            }
+            Scale::Invert(mask) => return Some(v ^ i64::from(mask)),
+            Scale::PulsesPerRev => return Some(v.max(1) * FULL_STEPS_PER_REV),
+            _ => {}
         }
         let (n, d) = self.fraction(per_rev);
         div_round(v.checked_mul(d)?, n)
@@ -211,7 +231,7 @@ impl Entry {
 
     /// The register of a narrow entry whose map value is `v`.
     fn narrow_word(&self, v: u32) -> u16 {
-        match self.obj.def().ty {
+        match self.obj.def().ty() {
             Type::S32 => (v as i32).clamp(i32::from(i16::MIN), i32::from(i16::MAX)) as i16 as u16,
             _ => v.min(0xFFFF) as u16,
         }
@@ -255,6 +275,8 @@ pub struct Exceptions {
     pub split: Exception,
     /// A write whose byte count is not twice its quantity.
     pub byte_count: Exception,
+    /// A function the drive does not serve.
+    pub function: Exception,
 }
 
 impl Exceptions {
@@ -272,7 +294,19 @@ impl Exceptions {
         write_only: Exception::IllegalDataAddress,
         split: Exception::IllegalDataAddress,
         byte_count: Exception::IllegalDataValue,
+        function: Exception::IllegalFunction,
     };
+
+    /// The code for a native map's `e` (the window of a [`Layout::sub_index`] layout): no such
+    /// register, a value out of range, any refusal.
+    pub const fn native(&self, e: Exception) -> Exception {
+        match e {
+            Exception::IllegalFunction | Exception::Vendor(_) => e,
+            Exception::IllegalDataAddress => self.unknown,
+            Exception::IllegalDataValue | Exception::ByteCount => self.out_of_range,
+            Exception::ServerDeviceFailure => self.busy,
+        }
+    }
 
     /// The code for `e`.
     pub const fn of(&self, e: ObjError) -> Exception {
@@ -317,6 +351,11 @@ pub struct Layout {
     /// 002's 1024-1536): raw words the drive keeps as written, in the PVT table's memory (a map
     /// with a program has no PVT).
     pub program: Option<u16>,
+    /// Seed 003's framing: requests carry a sub-index byte after the register, which is a key
+    /// of `ec57::key` (below `ec57::WINDOW`), or with the sub-index 0xFF the native map's register
+    /// at the index (from `ec57::WINDOW` on: the window, answered in this layout's codes; the
+    /// [`Maps`](super::Maps) serve it, with the layout's staged halves).
+    pub sub_index: bool,
 }
 
 impl Layout {
@@ -331,6 +370,7 @@ impl Layout {
             timing: false,
             defaults: &[],
             program: None,
+            sub_index: false,
         }
     }
 
@@ -373,6 +413,14 @@ impl Layout {
     }
 }
 
+/// The low `width` bits set.
+const fn mask(width: u8) -> u32 {
+    match 1u32.checked_shl(width as u32) {
+        Some(b) => b - 1,
+        None => u32::MAX,
+    }
+}
+
 /// Whether register `k` (0 or 1) of a 32-bit object is its high half in `order`.
 fn is_high<P: Borrow<Table>>(order: WordOrder, drive: &DriveState<P>, k: u32) -> bool {
     let high_first = match order {
@@ -385,7 +433,7 @@ fn is_high<P: Borrow<Table>>(order: WordOrder, drive: &DriveState<P>, k: u32) ->
 
 /// The drive's raw value as a number: two's complement for a signed object.
 const fn signed(d: &ObjectDef, raw: u32) -> i64 {
-    match d.ty {
+    match d.ty() {
         Type::S32 => raw as i32 as i64,
         _ => raw as i64,
     }
@@ -393,7 +441,7 @@ const fn signed(d: &ObjectDef, raw: u32) -> i64 {
 
 /// The map's number as the object's raw bits, if it fits the object's type.
 fn raw_of(d: &ObjectDef, v: i64) -> Option<u32> {
-    match d.ty {
+    match d.ty() {
         Type::U8 => u8::try_from(v).ok().map(u32::from),
         Type::U16 => u16::try_from(v).ok().map(u32::from),
         Type::U32 => u32::try_from(v).ok(),
@@ -402,12 +450,13 @@ fn raw_of(d: &ObjectDef, v: i64) -> Option<u32> {
     }
 }
 
-/// A layout's map: the layout and the staged high halves.
+/// A layout's map: the layout and the staged high halves, which the native map of a
+/// [`Layout::sub_index`] layout's window shares (a half is the object's, whichever register
+/// staged it).
 #[derive(Clone, Debug)]
 pub struct LayoutMap {
     layout: &'static Layout,
-    /// The staged high half of each 32-bit object, by its place in the native map's slots.
-    staged: [Option<u16>; STAGE_SLOTS],
+    native: NativeMap,
 }
 
 /// The most objects one write can reach (123 registers).
@@ -416,7 +465,7 @@ const MAX_OBJECTS: usize = 123;
 impl LayoutMap {
     /// A map over `layout` with nothing staged.
     pub fn new(layout: &'static Layout) -> Self {
-        Self { layout, staged: [None; STAGE_SLOTS] }
+        Self { layout, native: NativeMap::new() }
     }
 
     /// The layout.
@@ -425,21 +474,29 @@ impl LayoutMap {
     }
 
     fn staged(&self, obj: Obj) -> Option<u16> {
-        let slot = STAGE_SLOT.get(obj as usize)?;
-        self.staged.get(usize::from(*slot)).copied().flatten()
+        self.native.staged(obj)
     }
 
     fn set_staged(&mut self, obj: Obj, v: Option<u16>) {
-        if let Some(s) = STAGE_SLOT.get(obj as usize).and_then(|&slot| self.staged.get_mut(usize::from(slot))) {
-            *s = v;
-        }
+        self.native.set_staged(obj, v);
+    }
+
+    /// The native map of the window, if `addr` is in it (a `sub_index` layout's), and the codes
+    /// its refusals take.
+    pub(super) fn window(&self, addr: u16) -> Option<(&NativeMap, &'static Exceptions)> {
+        (self.layout.sub_index && addr >= super::ec57::WINDOW).then_some((&self.native, &self.layout.exceptions))
+    }
+
+    /// [`LayoutMap::window`], to write through.
+    pub(super) fn window_mut(&mut self, addr: u16) -> Option<(&mut NativeMap, &'static Exceptions)> {
+        (self.layout.sub_index && addr >= super::ec57::WINDOW).then_some((&mut self.native, &self.layout.exceptions))
     }
 
     /// The map's value of `e` now, as register bits (32 at most).
     fn map_value<P: Borrow<Table>>(&self, drive: &DriveState<P>, e: &Entry) -> u32 {
         let d = e.obj.def();
-        if let Scale::Bit(k) = *e.scale {
-            return drive.read_def(d).checked_shr(u32::from(k)).unwrap_or(0) & 1;
+        if let Scale::Field(shift, width) = *e.scale {
+            return drive.read_def(d).checked_shr(u32::from(shift)).unwrap_or(0) & mask(width);
         }
         let v = signed(d, drive.read_def(d));
         // A drive value beyond the map's range reads as its low bits.
@@ -449,17 +506,16 @@ impl LayoutMap {
     /// The drive's raw value of the map's register bits `bits` for `e`.
     fn drive_value<P: Borrow<Table>>(&self, drive: &DriveState<P>, e: &Entry, bits: u32) -> Result<u32, ObjError> {
         let d = e.obj.def();
-        if let Scale::Bit(k) = *e.scale {
-            let bit = 1u32.checked_shl(u32::from(k)).unwrap_or(0);
+        if let Scale::Field(shift, width) = *e.scale {
+            let field = mask(width).checked_shl(u32::from(shift)).unwrap_or(0);
+            if bits & !mask(width) != 0 {
+                return Err(ObjError::OutOfRange);
+            }
             let old = drive.read_def(d);
-            return match bits {
-                0 => Ok(old & !bit),
-                1 => Ok(old | bit),
-                _ => Err(ObjError::OutOfRange),
-            };
+            return Ok(old & !field | bits.checked_shl(u32::from(shift)).unwrap_or(0));
         }
         // The map's register is signed as the object is.
-        let v = match d.ty {
+        let v = match d.ty() {
             Type::S32 if e.is_narrow() => i64::from(bits as u16 as i16),
             _ => signed(d, bits),
         };
@@ -488,7 +544,7 @@ impl LayoutMap {
                 at += 1;
                 values.get(at - 1).map_or(0, u32::from)
             };
-            let op = if d.access == Access::Ro || e.view() == View::ReadOnly || matches!(d.ty, Type::Str(_)) {
+            let op = if d.access() == Access::Ro || e.view() == View::ReadOnly || matches!(d.ty(), Type::Str(_)) {
                 Err(ex.read_only)
             } else if e.words() == 1 {
                 Ok(Op::Commit(word()))
@@ -545,7 +601,7 @@ impl RegisterMap for LayoutMap {
             let d = e.obj.def();
             let v = self.map_value(drive, e);
             for j in k..k + n {
-                let w = match d.ty {
+                let w = match d.ty() {
                     Type::Str(_) => drive.text_word(e.obj, j as usize),
                     _ if e.is_narrow() => e.narrow_word(v),
                     _ if d.words() == 1 && !e.is_wide() => v as u16,
@@ -620,14 +676,22 @@ impl RegisterMap for LayoutMap {
     }
 
     fn request_exception(&self, e: Exception) -> Exception {
+        let ex = &self.layout.exceptions;
         match e {
-            Exception::ByteCount => self.layout.exceptions.byte_count,
+            Exception::IllegalFunction => ex.function,
+            Exception::ByteCount => ex.byte_count,
+            // Seed 003's codes mean other things than Modbus's.
+            e if self.layout.sub_index => ex.native(e),
             e => e,
         }
     }
 
     fn has_program(&self) -> bool {
         self.layout.program.is_some()
+    }
+
+    fn sub_indexed(&self) -> bool {
+        self.layout.sub_index
     }
 
     fn factory_settings<P: Borrow<Table>>(&self, drive: &mut DriveState<P>) {

@@ -5,6 +5,7 @@
 pub mod cls9;
 #[cfg(feature = "docs")]
 pub mod doc;
+pub mod ec57;
 pub mod index;
 pub mod jmc;
 pub mod layout;
@@ -18,7 +19,7 @@ use layout::LayoutMap;
 pub use native::{NativeMap, RegisterMap};
 
 /// The maps' names, by their number in the register map object 0x2190.
-pub const NAMES: [&str; 3] = ["native", "jmc", "cls9"];
+pub const NAMES: [&str; 4] = ["native", "jmc", "cls9", "ec57"];
 
 /// The map the drive answers with: the native one or a layout, as 0x2190 chose at power-up.
 #[derive(Clone, Debug)]
@@ -38,6 +39,7 @@ impl Maps {
         match id {
             1 => Self::jmc(),
             2 => Self::cls9(),
+            3 => Self::ec57(),
             _ => Self::Native(NativeMap::new()),
         }
     }
@@ -62,21 +64,36 @@ impl Maps {
     pub fn cls9() -> Self {
         Self::Layout(LayoutMap::new(&cls9::LAYOUT))
     }
+
+    /// The EC-57 map (seed 003).
+    pub fn ec57() -> Self {
+        Self::Layout(LayoutMap::new(&ec57::LAYOUT))
+    }
 }
 
 impl RegisterMap for Maps {
+    // Each map's code has one call site, so that it is inlined once: the native map's serves
+    // the native map and a sub-indexed layout's window.
     fn read<P: Borrow<Table>>(&self, drive: &DriveState<P>, addr: u16, out: &mut [u8]) -> Result<(), Exception> {
-        match self {
-            Self::Native(m) => m.read(drive, addr, out),
-            Self::Layout(m) => m.read(drive, addr, out),
-        }
+        let (native, codes) = match self {
+            Self::Native(m) => (m, None),
+            Self::Layout(m) => match m.window(addr) {
+                Some((w, codes)) => (w, Some(codes)),
+                None => return m.read(drive, addr, out),
+            },
+        };
+        native.read(drive, addr, out).map_err(|e| codes.map_or(e, |c| c.native(e)))
     }
 
     fn check_read(&self, addr: u16, qty: u16) -> Result<(), Exception> {
-        match self {
-            Self::Native(m) => m.check_read(addr, qty),
-            Self::Layout(m) => m.check_read(addr, qty),
-        }
+        let (native, codes) = match self {
+            Self::Native(m) => (m, None),
+            Self::Layout(m) => match m.window(addr) {
+                Some((w, codes)) => (w, Some(codes)),
+                None => return m.check_read(addr, qty),
+            },
+        };
+        native.check_read(addr, qty).map_err(|e| codes.map_or(e, |c| c.native(e)))
     }
 
     fn write<P: Borrow<Table>>(
@@ -85,10 +102,19 @@ impl RegisterMap for Maps {
         addr: u16,
         values: Words<'_>,
     ) -> Result<(), Exception> {
-        match self {
-            Self::Native(m) => m.write(drive, addr, values),
-            Self::Layout(m) => m.write(drive, addr, values),
-        }
+        let (native, codes) = match self {
+            Self::Native(m) => (m, None),
+            Self::Layout(m) => {
+                if m.window(addr).is_none() {
+                    return m.write(drive, addr, values);
+                }
+                match m.window_mut(addr) {
+                    Some((w, codes)) => (w, Some(codes)),
+                    None => return Err(Exception::IllegalDataAddress),
+                }
+            }
+        };
+        native.write(drive, addr, values).map_err(|e| codes.map_or(e, |c| c.native(e)))
     }
 
     fn request_exception(&self, e: Exception) -> Exception {
@@ -123,7 +149,12 @@ impl RegisterMap for Maps {
             Self::Native(_) => None,
             Self::Layout(m) if core::ptr::eq(m.layout(), &jmc::LAYOUT) => Some("drive-core, JMC map (seed 001)"),
             Self::Layout(m) if core::ptr::eq(m.layout(), &cls9::LAYOUT) => Some("drive-core, DS-CLS9 map (seed 002)"),
+            Self::Layout(m) if core::ptr::eq(m.layout(), &ec57::LAYOUT) => Some("drive-core, EC-57 map (seed 003)"),
             Self::Layout(_) => Some("drive-core, layout map"),
         }
+    }
+
+    fn sub_indexed(&self) -> bool {
+        matches!(self, Self::Layout(m) if m.layout().sub_index)
     }
 }

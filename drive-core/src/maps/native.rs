@@ -47,6 +47,12 @@ pub trait RegisterMap {
     fn timing_exceptions(&self) -> bool {
         false
     }
+    /// Whether requests carry a sub-index byte after the register (seed 003's framing, decoded
+    /// by [`ec57::parse`](super::ec57::parse)), a write's reply echoes it, and a frame whose CRC
+    /// is wrong may be answered (0x21D2): [`Layout::sub_index`](super::layout::Layout::sub_index).
+    fn sub_indexed(&self) -> bool {
+        false
+    }
 }
 
 /// The drive's native map (seed 000): register numbers are object addresses, 32-bit objects are
@@ -79,7 +85,7 @@ impl Default for NativeMap {
 /// Whether the object `d` declares can be staged: a 32-bit one a master can write (a write to
 /// a read-only one is refused before anything is staged).
 const fn stageable(d: &ObjectDef) -> bool {
-    d.words() == 2 && !matches!(d.access, Access::Ro) && !matches!(d.storage, Storage::Const)
+    d.words() == 2 && !matches!(d.access(), Access::Ro) && !matches!(d.storage(), Storage::Const)
 }
 
 /// The objects that can be staged.
@@ -133,12 +139,14 @@ impl NativeMap {
         Self::default()
     }
 
-    fn staged(&self, obj: Obj) -> Option<u16> {
+    /// The staged high half of `obj`, if any.
+    pub(super) fn staged(&self, obj: Obj) -> Option<u16> {
         let slot = STAGE_SLOT.get(obj as usize)?;
         self.staged.get(usize::from(*slot)).copied().flatten()
     }
 
-    fn set_staged(&mut self, obj: Obj, v: Option<u16>) {
+    /// Stages `v` as the high half of `obj` (`None`: nothing staged).
+    pub(super) fn set_staged(&mut self, obj: Obj, v: Option<u16>) {
         if let Some(s) = STAGE_SLOT.get(obj as usize).and_then(|&slot| self.staged.get_mut(usize::from(slot))) {
             *s = v;
         }
@@ -184,11 +192,11 @@ impl NativeMap {
                 reg += 1;
                 continue;
             }
-            if d.access == Access::Ro {
+            if d.access() == Access::Ro {
                 return Err(ObjError::ReadOnly);
             }
             let mut word = || words.next().ok_or(ObjError::Unknown);
-            let op = match d.ty {
+            let op = match d.ty() {
                 Type::U8 | Type::U16 => Op::Commit(word()?),
                 Type::U32 | Type::S32 => {
                     if reg > u32::from(d.addr) {
@@ -293,7 +301,7 @@ static PLAIN: [(u16, u16); Obj::COUNT] = {
         {
             if DriveState::<Table>::plain(&OBJECTS[i])
                 && OBJECTS[i].words() == 1
-                && let Some(bounds) = interval(OBJECTS[i].ty, *OBJECTS[i].range)
+                && let Some(bounds) = interval(OBJECTS[i].ty(), *OBJECTS[i].range)
             {
                 table[i] = bounds;
             }
@@ -331,7 +339,7 @@ const fn interval(ty: Type, range: Range) -> Option<(u16, u16)> {
 fn other_word<P: Borrow<Table>>(drive: &DriveState<P>, i: usize, reg: u32) -> u16 {
     let Some(d) = OBJECTS.get(i) else { return 0 };
     let Some(k) = reg.checked_sub(u32::from(d.addr)) else { return 0 };
-    match d.ty {
+    match d.ty() {
         Type::U8 | Type::U16 => drive.read_def(d) as u16,
         // High word first.
         Type::U32 | Type::S32 => drive.read_def(d).wrapping_shr(16 * (1 - k.min(1))) as u16,
@@ -458,7 +466,8 @@ mod tests {
         // Every run of writable objects, planned whole with the values they hold.
         let contiguous = |a: &ObjectDef, b: &ObjectDef| u32::from(b.addr) == a.end();
         for run in OBJECTS.chunk_by(contiguous) {
-            for w in run.split(|d| d.access == Access::Ro || matches!(d.ty, Type::Str(_))).filter(|w| !w.is_empty()) {
+            for w in run.split(|d| d.access() == Access::Ro || matches!(d.ty(), Type::Str(_))).filter(|w| !w.is_empty())
+            {
                 let mut words: Vec<u8, 256> = Vec::new();
                 for d in w {
                     let v = drive.read_def(d);
@@ -493,7 +502,7 @@ mod tests {
             let edges = [lo.wrapping_sub(1), lo, lo.wrapping_add(1), hi.wrapping_sub(1), hi, hi.wrapping_add(1)];
             for v in probes.into_iter().chain(edges) {
                 let fast = (lo..=hi).contains(&v);
-                assert_eq!(fast, d.range.accepts(d.ty, v), "{} {v:#X}", d.name);
+                assert_eq!(fast, d.range.accepts(d.ty(), v), "{} {v:#X}", d.name);
                 assert_eq!(fast, drive.check_def(d, v).is_ok(), "{} {v:#X}", d.name);
             }
         }
@@ -504,7 +513,7 @@ mod tests {
     fn declared(drive: &DriveState, reg: u16) -> u16 {
         let Some(d) = OBJECTS.iter().find(|d| d.addr <= reg && u32::from(reg) < d.end()) else { return 0 };
         let k = reg - d.addr;
-        match d.ty {
+        match d.ty() {
             Type::Str(_) => drive.text_word(d.obj, usize::from(k)),
             Type::U32 | Type::S32 if k == 0 => (drive.read_def(d) >> 16) as u16,
             _ => drive.read_def(d) as u16,
@@ -588,7 +597,7 @@ mod tests {
                 let before = drive.params;
                 let bytes = v.to_be_bytes();
                 let result = map.write(&mut drive, d.addr, Words::new(&bytes));
-                if d.range.accepts(d.ty, u32::from(v)) {
+                if d.range.accepts(d.ty(), u32::from(v)) {
                     assert_eq!(result, Ok(()), "{} {v}", d.name);
                     assert_eq!(drive.read_def(d), u32::from(v), "{} {v}", d.name);
                 } else {

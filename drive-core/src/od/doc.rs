@@ -43,10 +43,10 @@ fn row(out: &mut impl Write, d: &ObjectDef) -> fmt::Result {
     } else {
         write!(out, "| 0x{:04X} ", d.addr)?;
     }
-    write!(out, "| {} | {} | {} | {} | ", d.name, d.ty.name(), d.access.name(), d.storage.name())?;
+    write!(out, "| {} | {} | {} | {} | ", d.name, d.ty().name(), d.access().name(), d.storage().name())?;
     range(out, d)?;
     write!(out, " | ")?;
-    match d.ty {
+    match d.ty() {
         Type::Str(_) => write!(out, "-")?,
         Type::S32 => write!(out, "{}", d.default as i32)?,
         _ => write!(out, "{}", d.default)?,
@@ -63,7 +63,7 @@ fn row(out: &mut impl Write, d: &ObjectDef) -> fmt::Result {
 
 fn range(out: &mut impl Write, d: &ObjectDef) -> fmt::Result {
     match *d.range {
-        Range::Any => match d.ty {
+        Range::Any => match d.ty() {
             Type::U8 => write!(out, "0..255"),
             Type::U16 => write!(out, "0..65535"),
             Type::U32 => write!(out, "0..4294967295"),

@@ -209,7 +209,8 @@ impl Unit {
     }
 }
 
-/// The declaration of one object.
+/// The declaration of one object: 12 bytes in the firmware (its type, access and storage in one
+/// byte; its name, unit and text only with the feature `docs`).
 #[derive(Clone, Copy, Debug)]
 pub struct ObjectDef {
     /// The object.
@@ -219,18 +220,15 @@ pub struct ObjectDef {
     /// Short name (feature `docs`).
     #[cfg(feature = "docs")]
     pub name: &'static str,
-    /// Encoding.
-    pub ty: Type,
-    /// Bus access.
-    pub access: Access,
-    /// Where the value lives.
-    pub storage: Storage,
-    /// Accepted values (a reference: an object table entry is 16 bytes rather than 24, and the
-    /// objects share their few distinct ranges).
+    /// [`ObjectDef::ty`] in bits 0-2, [`ObjectDef::access`] in bits 3-4, [`ObjectDef::storage`]
+    /// in bits 5-6.
+    kind: u8,
+    /// Accepted values (a reference: the objects share their few distinct ranges).
     pub range: &'static Range,
     /// Factory value (raw register bits; S32 as two's complement).
     pub default: u32,
-    /// Unit.
+    /// Unit (feature `docs`).
+    #[cfg(feature = "docs")]
     pub unit: Unit,
     /// What the object does, from the manual, with our decisions where it is silent (feature
     /// `docs`).
@@ -239,13 +237,62 @@ pub struct ObjectDef {
 }
 
 impl ObjectDef {
+    /// [`ObjectDef::kind`] of a type, an access and a storage. Texts are 4 or 16 bytes (any
+    /// other length reads as 16).
+    pub(crate) const fn kind(ty: Type, access: Access, storage: Storage) -> u8 {
+        let ty = match ty {
+            Type::U8 => 0,
+            Type::U16 => 1,
+            Type::U32 => 2,
+            Type::S32 => 3,
+            Type::Str(4) => 4,
+            Type::Str(_) => 5,
+        };
+        ty | (access as u8) << 3 | (storage as u8) << 5
+    }
+
+    /// Encoding.
+    #[inline(always)]
+    pub const fn ty(&self) -> Type {
+        match self.kind & 7 {
+            0 => Type::U8,
+            1 => Type::U16,
+            2 => Type::U32,
+            3 => Type::S32,
+            4 => Type::Str(4),
+            _ => Type::Str(16),
+        }
+    }
+
+    /// Bus access.
+    #[inline(always)]
+    pub const fn access(&self) -> Access {
+        match (self.kind >> 3) & 3 {
+            0 => Access::Ro,
+            1 => Access::Rw,
+            2 => Access::Cmd,
+            _ => Access::W1c,
+        }
+    }
+
+    /// Where the value lives.
+    #[inline(always)]
+    pub const fn storage(&self) -> Storage {
+        match (self.kind >> 5) & 3 {
+            0 => Storage::Ram,
+            1 => Storage::Rom,
+            2 => Storage::Live,
+            _ => Storage::Const,
+        }
+    }
+
     /// Registers the object occupies.
     pub const fn words(&self) -> u16 {
-        self.ty.words()
+        self.ty().words()
     }
     /// The register after the object's last one.
     pub const fn end(&self) -> u32 {
-        self.addr as u32 + self.ty.words() as u32
+        self.addr as u32 + self.ty().words() as u32
     }
 }
 

@@ -3,17 +3,16 @@
 //!
 //! Our own objects sit in the vendor range 0x2100..=0x21FF.
 
+#[cfg(feature = "docs")]
+use super::Unit;
 use super::{
     Access::*,
     ObjectDef, Range,
     Range::{Any, Bits, Magnitude, Set, Span},
     Storage::*,
     Type::*,
-    Unit,
 };
 
-/// Microstep resolutions of 0x600C.
-const MICROSTEPS: &[u32] = &[0, 2, 4, 8, 16, 32, 64, 128, 256];
 /// Encoder resolutions of 0x6054: counts per revolution, or 12 (bits) for the absolute encoder.
 const ENCODER_CPR: &[u32] = &[12, 200, 400, 500, 600, 800, 1000, 1200, 1600];
 /// Modes of 0x6007.
@@ -53,16 +52,18 @@ macro_rules! objects {
                 // firmware) they stay out of flash, fields and all.
                 #[cfg(feature = "docs")]
                 name: $name,
-                ty: $ty,
-                access: $acc,
-                storage: $sto,
+                kind: ObjectDef::kind($ty, $acc, $sto),
                 range: &$range,
                 default: ($def as i64) as u32,
+                #[cfg(feature = "docs")]
                 unit: Unit::$unit,
                 #[cfg(feature = "docs")]
                 doc: concat!($($doc, "\n"),*),
             }, )*
         ];
+
+        // Texts are 4 or 16 bytes (`ObjectDef::kind`).
+        const _: () = { $( assert!(!matches!($ty, Str(n) if n != 4 && n != 16)); )* };
 
         impl Obj {
             /// Every object, in register order.
@@ -108,9 +109,9 @@ objects! {
     /// on a platform without storage. The reply means the save started: 0x2120 bit 3 shows it
     /// running, bit 4 a failure. 1 (jump to the boot loader) is refused (04): the simulator has
     /// none, and the firmware does not jump. 4 (ours, seed 002's alarm clear) clears the latched
-    /// alarms as the motion command 13 does. The manual prints it read-only; its own examples
-    /// write it.
-    SystemControl @ 0x200F: U8, Cmd, Ram, Set(&[1, 2, 3, 4]), default 0, None, "system control";
+    /// alarms as the motion command 13 does; 0 does nothing (seed 003's "do not clear"). The
+    /// manual prints it read-only; its own examples write it.
+    SystemControl @ 0x200F: U8, Cmd, Ram, Set(&[0, 1, 2, 3, 4]), default 0, None, "system control";
     /// Node id (slave address). A write takes effect at the next power-up once saved (0x200F = 2),
     /// so a typo cannot lose the drive; until then the drive answers at the old id. The object
     /// table prints a default of 5; §5.3 and every example use 1.
@@ -320,9 +321,10 @@ objects! {
     ErrorRegister @ 0x2185: U8, Ro, Live, Any, default 0, None, "error register";
     /// Register map (our object): which vendor's registers the drive answers to, from the next
     /// power-up once saved (0x200F = 2): 0 native (seed 000), 1 JMC (seed 001), 2 DS-CLS9
-    /// (seed 002). Every map has it at this address, so a master can always switch back. A map
-    /// the platform does not carry is refused (04).
-    RegisterMap @ 0x2190: U8, Rw, Rom, Span(0, 2), default 0, None, "register map";
+    /// (seed 002), 3 EC-57 (seed 003). Every map has it at this address (the EC-57 map in its
+    /// window, index 0x2190 sub-index 0xFF), so a master can always switch back. A map the
+    /// platform does not carry is refused (04).
+    RegisterMap @ 0x2190: U8, Rw, Rom, Span(0, 3), default 0, None, "register map";
     /// Word order of the compatibility maps that make it a setting (our object; JMC's 0x6000):
     /// 0 high word first, 1 low word first.
     MapWordOrder @ 0x2191: U8, Rw, Rom, Span(0, 1), default 0, None, "map word order";
@@ -466,6 +468,19 @@ objects! {
     /// as beyond 0x605C, which it replaces while it is not 0 (converted at the resolution in
     /// force, rounded to the nearest microstep, one at least).
     PositionErrorLimit @ 0x21D0: U16, Rw, Rom, Span(0, 30_000), default 0, None, "position error limit";
+    /// Address source (our object; seed 003's 0x2001), read at power-up under the EC-57 map: 0
+    /// the serial port's fixed address 1 (the manual's: an EC-57's switches address its
+    /// fieldbus, not its serial port), 1 and 2 the node id 0x2028 (its register, kept in the
+    /// drive's flash: the manual's 2150h and EEPROM). The other maps answer at 0x2028.
+    AddressSource @ 0x21D1: U8, Rw, Rom, Span(0, 2), default 0, None, "address source";
+    /// CRC error answer (our object, the EC-57 map's): 0 a frame whose CRC is wrong is dropped
+    /// (seed 003 §1.3.4's text, and the Modbus serial line); 1 it is answered with exception 01
+    /// (the manual's example, `01 83 01`) if it began with this drive's address. The other maps
+    /// drop it whatever this holds.
+    CrcErrorReply @ 0x21D2: U8, Rw, Rom, Span(0, 1), default 0, None, "CRC error answer";
+    /// Input states (our object; seed 003's 0x2014): bit k set, IN k+1 is active (at 0x21C1's
+    /// level, or its pseudo-input 0x21C2 set).
+    InputStates @ 0x21D3: U8, Ro, Live, Bits(0x7F), default 0, None, "input states";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake
@@ -498,8 +513,10 @@ objects! {
     AccelLevel @ 0x600A: U8, Rw, Rom, Span(0, 8), default 8, None, "acceleration level";
     /// Deceleration level, as 0x600A.
     DecelLevel @ 0x600B: U8, Rw, Rom, Span(0, 8), default 8, None, "deceleration level";
-    /// Microstep resolution: microsteps per full step; 0 is full stepping, like 1.
-    Microsteps @ 0x600C: U16, Rw, Rom, Set(MICROSTEPS), default 0, None, "microstep resolution";
+    /// Microstep resolution: microsteps per full step; 0 is full stepping, like 1. The manual
+    /// lists 0, 2, 4, ..., 256; the drive runs any whole count up to 256 (seed 003's pulses a
+    /// revolution, any multiple of 200, needs them: 10 000 is 50).
+    Microsteps @ 0x600C: U16, Rw, Rom, Span(0, 256), default 0, None, "microstep resolution";
     /// Phase current (peak of a phase).
     PhaseCurrent @ 0x600D: U16, Rw, Rom, Span(0, 6000), default 658, MilliAmps, "phase current";
     /// Motor position. Writing it sets the current position without moving.

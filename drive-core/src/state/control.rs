@@ -629,6 +629,8 @@ impl Planner<'_> {
     }
 
     /// The trapezoid limits of the PP and PV modes at `speed`, and their start and stop speeds.
+    // Out of line: eight callers would each hold a copy.
+    #[inline(never)]
     pub(crate) fn pp_setpoint(&self, target: i64, speed: f32) -> SetPoint {
         let limits = Limits {
             v_max: libm::fabsf(speed),

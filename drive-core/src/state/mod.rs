@@ -77,7 +77,7 @@ impl Params {
     /// Whether a save (0x200F = 2) covers the object `d` declares: the ROM objects a master can
     /// write. 0x6055 (ROM, read only) has its own record, written at power loss.
     pub fn covers(d: &ObjectDef) -> bool {
-        d.storage == Storage::Rom && d.access == Access::Rw
+        d.storage() == Storage::Rom && d.access() == Access::Rw
     }
 
     /// Copies the values of the objects a save covers into `values` (indexed by object), and
@@ -108,7 +108,7 @@ impl Params {
     /// Sets `obj` to `value` if a save covers it and its range accepts the value; whether it did.
     pub fn set(&mut self, obj: Obj, value: u32) -> bool {
         let d = obj.def();
-        let ok = Self::covers(d) && d.range.accepts(d.ty, value);
+        let ok = Self::covers(d) && d.range.accepts(d.ty(), value);
         if ok && let Some(v) = self.values.get_mut(obj as usize) {
             *v = value;
         }
@@ -508,7 +508,7 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// The value of the object `d` declares: from the running status for live objects, else stored.
     #[inline]
     pub fn read_def(&self, d: &ObjectDef) -> u32 {
-        if d.storage == Storage::Live {
+        if d.storage() == Storage::Live {
             self.live(d.obj)
         } else {
             self.params.get(d.obj as usize).copied().unwrap_or(0)
@@ -547,6 +547,7 @@ impl<P: Borrow<Table>> DriveState<P> {
             Obj::SupplyVoltage => u32::from(s.supply_mv),
             Obj::MotorCurrent => u32::from(s.current_ma),
             Obj::ProgramInputSegment | Obj::ProgramErrorSegment | Obj::ProgramRunning => self.program_live(obj),
+            Obj::InputStates => u32::from(self.active_inputs()),
             // The ten entries are consecutive objects.
             h if (Obj::FaultHistory0 as usize..=Obj::FaultHistory9 as usize).contains(&(h as usize)) => {
                 self.ctl.history(h as usize - Obj::FaultHistory0 as usize)
@@ -583,8 +584,8 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// these against a precomputed interval (`maps::native`): an object with a check beyond its range
     /// must not be plain (a test compares the two).
     pub(crate) const fn plain(d: &ObjectDef) -> bool {
-        matches!(d.access, Access::Rw)
-            && matches!(d.storage, Storage::Ram | Storage::Rom)
+        matches!(d.access(), Access::Rw)
+            && matches!(d.storage(), Storage::Ram | Storage::Rom)
             && !has_effect(d.obj)
             && !runs_on(d.obj)
             && !matches!(d.obj, Obj::SystemControl | Obj::RegisterMap)
@@ -592,10 +593,10 @@ impl<P: Borrow<Table>> DriveState<P> {
 
     /// Whether the object `d` declares takes writes, and `value` is within its range.
     fn check_writable(d: &ObjectDef, value: u32) -> Result<(), ObjError> {
-        if d.access == Access::Ro || d.storage == Storage::Const {
+        if d.access() == Access::Ro || d.storage() == Storage::Const {
             return Err(ObjError::ReadOnly);
         }
-        if !d.range.accepts(d.ty, value) {
+        if !d.range.accepts(d.ty(), value) {
             return Err(ObjError::OutOfRange);
         }
         Ok(())
@@ -679,7 +680,7 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// Writes `value` to the object `d` declares, which [`DriveState::check`] accepted.
     #[inline(always)]
     pub fn apply_def(&mut self, d: &ObjectDef, value: u32) {
-        if d.access == Access::Rw && d.storage != Storage::Live && !is_command(d.obj) {
+        if d.access() == Access::Rw && d.storage() != Storage::Live && !is_command(d.obj) {
             // A setting: stored, and handed to the controller if it runs it.
             if let Some(p) = self.params.get_mut(d.obj as usize) {
                 *p = value;

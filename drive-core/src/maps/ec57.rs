@@ -1,0 +1,248 @@
+//! The EC-57 map (seed 003): registers addressed by an index and a sub-index byte (`01 03 20 00
+//! 00 00 01` reads 0x2000 sub-index 0), walked in (index, sub-index) order, at most 16 a request,
+//! with the manual's own exception codes; the drive's native registers in a window (sub-index
+//! 0xFF), since the EC-57's motion comes over a fieldbus this drive does not have.
+//!
+//! ```
+//! use drive_core::maps::Maps;
+//! use drive_core::od::Obj;
+//! use drive_core::{Drive, DriveConfig, Instant};
+//! let mut drive = Drive::with_map(DriveConfig::default(), Maps::ec57());
+//! // §1.3.2: 0x2005 (pulses a revolution) = 10 000: 50 microsteps a full step.
+//! drive.on_rx(Instant::from_micros(0), &[0x01, 0x06, 0x20, 0x05, 0x00, 0x27, 0x10, 0x90, 0x91]);
+//! drive.on_timer(Instant::from_micros(4_011));
+//! assert_eq!(drive.take_reply(), Some(&[0x01, 0x06, 0x20, 0x05, 0x00, 0x27, 0x10, 0x90, 0x91][..]));
+//! assert_eq!(drive.state().read(Obj::Microsteps), 50);
+//! ```
+
+use super::layout::{Choice, Entry, Exceptions, Layout, Scale, Walk, WordOrder};
+use crate::od::Obj;
+use crate::pdu::{Exception, Request, Words};
+
+/// The most registers a request reads or writes (§1.3.1).
+pub const MAX_REGISTERS: u16 = 16;
+/// The sub-index that addresses the drive's native register at the index (the window).
+pub const WINDOW_SUB: u8 = 0xFF;
+/// Below it a register number is a table entry's key; from it on, a native register.
+pub(crate) const WINDOW: u16 = 0x1000;
+
+/// Exception 02: a function other than 03, 06 and 16 (and 0x08 and 0x2B).
+const FUNCTION: Exception = Exception::Vendor(2);
+/// Exception 03: an index and sub-index outside the table.
+const ADDRESS: Exception = Exception::Vendor(3);
+/// Exception 04: more than 16 registers (or none).
+const COUNT: Exception = Exception::Vendor(4);
+/// Exception 05: a read of a write-only register, a write of a read-only one.
+const ACCESS: Exception = Exception::Vendor(5);
+/// Exception 06: a value out of range, or one the drive cannot take now.
+const VALUE: Exception = Exception::Vendor(6);
+
+/// The key of the table's (index, sub-index): 0x2000-0x20FF with sub-indices 0-15, below
+/// [`WINDOW`].
+pub const fn key(index: u16, sub: u8) -> u16 {
+    (index.wrapping_sub(0x2000) << 4) | sub as u16
+}
+
+/// The (index, sub-index) of a table key.
+pub const fn index_of(key: u16) -> (u16, u8) {
+    (0x2000 + (key >> 4), (key & 0xF) as u8)
+}
+
+/// The register number a request's (index, sub-index) names: a table key, or in the window the
+/// native register at the index.
+fn register(index: u16, sub: u8) -> Result<u16, Exception> {
+    match sub {
+        WINDOW_SUB if index >= WINDOW => Ok(index),
+        0..=15 if (0x2000..=0x20FF).contains(&index) => Ok(key(index, sub)),
+        _ => Err(ADDRESS),
+    }
+}
+
+/// Decodes an EC-57 register request PDU: 03, 06 and 16 with the sub-index byte after the index
+/// (their register numbers as [`register`] makes them); any other function is refused (the
+/// drive decodes 0x08 and 0x2B as Modbus has them, with [`Request::parse`]).
+///
+/// ```
+/// use drive_core::maps::ec57::parse;
+/// use drive_core::pdu::Request;
+/// use drive_core::Exception;
+/// assert_eq!(parse(&[0x03, 0x20, 0x03, 0x01, 0x00, 0x02]), Ok(Request::ReadHolding { addr: 0x31, qty: 2 }));
+/// assert_eq!(parse(&[0x03, 0x60, 0x0C, 0xFF, 0x00, 0x01]), Ok(Request::ReadHolding { addr: 0x600C, qty: 1 }));
+/// assert_eq!(parse(&[0x03, 0x20, 0x00, 0x00, 0x00, 0x20]), Err(Exception::Vendor(4)));
+/// assert_eq!(parse(&[0x03, 0x20, 0x31, 0x00, 0x00, 0x01]), Ok(Request::ReadHolding { addr: 0x310, qty: 1 }));
+/// assert_eq!(parse(&[0x02, 0x00, 0x00, 0x00, 0x00, 0x04]), Err(Exception::Vendor(2)));
+/// ```
+#[inline(never)]
+pub fn parse(pdu: &[u8]) -> Result<Request<'_>, Exception> {
+    let (&function, data) = pdu.split_first().ok_or(FUNCTION)?;
+    if !matches!(function, 0x03 | 0x06 | 0x10) {
+        return Err(FUNCTION);
+    }
+    let (&[ih, il, sub, wh, wl], rest) = data.split_first_chunk::<5>().ok_or(VALUE)?;
+    let word = u16::from_be_bytes([wh, wl]);
+    if function != 0x06 && !(1..=MAX_REGISTERS).contains(&word) {
+        return Err(COUNT);
+    }
+    let addr = register(u16::from_be_bytes([ih, il]), sub)?;
+    match (function, rest) {
+        (0x03, []) => Ok(Request::ReadHolding { addr, qty: word }),
+        (0x06, []) => Ok(Request::WriteSingle { addr, value: word }),
+        (0x10, [count, values @ ..])
+            if usize::from(*count) == 2 * usize::from(word) && values.len() == 2 * usize::from(word) =>
+        {
+            Ok(Request::WriteMultiple { addr, values: Words::new(values) })
+        }
+        _ => Err(VALUE),
+    }
+}
+
+/// 0x2002, 0x2006 style switches: 0 and 1.
+static SWITCH: &[Choice] = &[Choice { lo: 0, hi: 0, drive: 0 }, Choice { lo: 1, hi: 1, drive: 1 }];
+
+/// 0x2022.1-5: 1 origin (the homing's home switch, the drive's 11), 2 positive and 4 negative
+/// limit (9, 10), 8 quick stop (the motion command 7), 16 custom and 0 none (the drive's 0: the
+/// master reads the input in 0x2014).
+static INPUT_FUNCTIONS: &[Choice] = &[
+    Choice { lo: 0, hi: 0, drive: 0 },
+    Choice { lo: 1, hi: 1, drive: 11 },
+    Choice { lo: 2, hi: 2, drive: 9 },
+    Choice { lo: 4, hi: 4, drive: 10 },
+    Choice { lo: 8, hi: 8, drive: 7 },
+    Choice { lo: 16, hi: 16, drive: 0 },
+];
+
+/// 0x2025.1-3: 1 alarm output (the drive's 2), 2 in position (3), 16 master-controlled (1, the
+/// general output of 0x21C7), 0 none.
+static OUTPUT_FUNCTIONS: &[Choice] = &[
+    Choice { lo: 0, hi: 0, drive: 0 },
+    Choice { lo: 1, hi: 1, drive: 2 },
+    Choice { lo: 2, hi: 2, drive: 3 },
+    Choice { lo: 16, hi: 16, drive: 1 },
+];
+
+/// 0x201E: 1 clears the alarms (0x200F = 4), 0 does nothing.
+static ALARM_CLEAR: &[Choice] = &[Choice { lo: 0, hi: 0, drive: 0 }, Choice { lo: 1, hi: 1, drive: 4 }];
+
+/// 0x2030: bit 0 saves the parameters (0x200F = 2), bit 1 restores the factory ones and saves
+/// them (0x200F = 3), 0 does nothing.
+static SAVE: &[Choice] =
+    &[Choice { lo: 0, hi: 0, drive: 0 }, Choice { lo: 1, hi: 1, drive: 2 }, Choice { lo: 2, hi: 2, drive: 3 }];
+
+/// Speeds in r/min.
+const RPM: Scale = Scale::PerRev(1, 60);
+/// The fault list's code: the alarm code in bits 24-31 of a fault history entry.
+const FAULT_CODE: Scale = Scale::Field(24, 8);
+
+/// The table (§1.2), by (index, sub-index) as [`key`] makes them.
+pub static ENTRIES: [Entry; 36] = [
+    Entry::new(key(0x2000, 0), Obj::NodeId, &Scale::One),
+    Entry::new(key(0x2001, 0), Obj::AddressSource, &Scale::One),
+    Entry::new(key(0x2002, 0), Obj::MotorDirection, &Scale::Table(&SWITCH)),
+    Entry::new(key(0x2003, 1), Obj::IdleDelay, &Scale::One),
+    Entry::new(key(0x2003, 2), Obj::IdleCurrent, &Scale::One),
+    Entry::new(key(0x2004, 0), Obj::PhaseCurrent, &Scale::One),
+    Entry::new(key(0x2005, 0), Obj::Microsteps, &Scale::PulsesPerRev),
+    Entry::new(key(0x200D, 0), Obj::SupplyVoltage, &Scale::Ratio(1000, 1)),
+    Entry::new(key(0x2014, 0), Obj::InputStates, &Scale::One),
+    Entry::new(key(0x2017, 0), Obj::RealSpeed, &RPM).narrow(),
+    Entry::new(key(0x2018, 0), Obj::FollowingError, &Scale::One).narrow(),
+    Entry::new(key(0x2019, 0), Obj::Feedback, &Scale::Table(&SWITCH)),
+    Entry::new(key(0x201A, 1), Obj::SoftwareRevision, &Scale::One),
+    Entry::new(key(0x201A, 2), Obj::HardwareRevision, &Scale::One),
+    Entry::new(key(0x201A, 3), Obj::SoftwareRevision, &Scale::One),
+    Entry::new(key(0x201C, 1), Obj::FaultHistory0, &FAULT_CODE).narrow(),
+    Entry::new(key(0x201C, 2), Obj::FaultHistory1, &FAULT_CODE).narrow(),
+    Entry::new(key(0x201C, 3), Obj::FaultHistory2, &FAULT_CODE).narrow(),
+    Entry::new(key(0x201C, 4), Obj::FaultHistory3, &FAULT_CODE).narrow(),
+    Entry::new(key(0x201C, 5), Obj::FaultHistory4, &FAULT_CODE).narrow(),
+    Entry::new(key(0x201C, 6), Obj::FaultHistory5, &FAULT_CODE).narrow(),
+    Entry::new(key(0x201C, 7), Obj::FaultHistory6, &FAULT_CODE).narrow(),
+    Entry::new(key(0x201C, 8), Obj::FaultHistory7, &FAULT_CODE).narrow(),
+    Entry::new(key(0x201C, 9), Obj::FaultHistory8, &FAULT_CODE).narrow(),
+    Entry::new(key(0x201E, 0), Obj::SystemControl, &Scale::Table(&ALARM_CLEAR)),
+    Entry::new(key(0x2021, 0), Obj::InputLogic, &Scale::One),
+    Entry::new(key(0x2022, 1), Obj::InputFunction1, &Scale::Table(&INPUT_FUNCTIONS)),
+    Entry::new(key(0x2022, 2), Obj::InputFunction2, &Scale::Table(&INPUT_FUNCTIONS)),
+    Entry::new(key(0x2022, 3), Obj::InputFunction3, &Scale::Table(&INPUT_FUNCTIONS)),
+    Entry::new(key(0x2022, 4), Obj::InputFunction4, &Scale::Table(&INPUT_FUNCTIONS)),
+    Entry::new(key(0x2022, 5), Obj::InputFunction5, &Scale::Table(&INPUT_FUNCTIONS)),
+    Entry::new(key(0x2024, 0), Obj::OutputLogic, &Scale::Invert(0x7)),
+    Entry::new(key(0x2025, 1), Obj::OutputFunction1, &Scale::Table(&OUTPUT_FUNCTIONS)),
+    Entry::new(key(0x2025, 2), Obj::OutputFunction2, &Scale::Table(&OUTPUT_FUNCTIONS)),
+    Entry::new(key(0x2025, 3), Obj::OutputFunction3, &Scale::Table(&OUTPUT_FUNCTIONS)),
+    Entry::new(key(0x2030, 0), Obj::SystemControl, &Scale::Table(&SAVE)).write_only(),
+];
+
+/// The table's exception codes (§1.3.4, table 1.3): 03 no such register, 05 the wrong access,
+/// 06 a value out of range; the drive's refusals for its state (busy, disabled, faulted, not
+/// now), which the manual has no code for, are 06 as well: the value cannot be taken.
+pub const EXCEPTIONS: Exceptions = Exceptions {
+    unknown: ADDRESS,
+    read_only: ACCESS,
+    out_of_range: VALUE,
+    busy: VALUE,
+    disabled: VALUE,
+    faulted: VALUE,
+    not_now: VALUE,
+    infeasible: VALUE,
+    unsupported: VALUE,
+    write_only: ACCESS,
+    split: ADDRESS,
+    byte_count: VALUE,
+    function: FUNCTION,
+};
+
+/// The EC-57 layout: the table, and the native map in the window.
+pub static LAYOUT: Layout = Layout {
+    entries: &ENTRIES,
+    order: WordOrder::HighFirst,
+    exceptions: EXCEPTIONS,
+    walk: Walk::List,
+    halves: false,
+    timing: false,
+    defaults: &DEFAULTS,
+    program: None,
+    sub_index: true,
+};
+
+/// The manual's factory values where they differ from the drive's: the standstill current
+/// after 50 ms at 50 %, 1 A peak, 10 000 pulses a revolution (the table prints 1000, outside
+/// its own range 6400-51200; its example writes 10 000), IN2-IN5 origin, the limits and custom
+/// (IN1's probe is not offered), OUT1 and OUT2 the alarm output.
+static DEFAULTS: [(u16, i32); 10] = [
+    (key(0x2003, 1), 50),
+    (key(0x2003, 2), 50),
+    (key(0x2004, 0), 1000),
+    (key(0x2005, 0), 10_000),
+    (key(0x2022, 2), 1),
+    (key(0x2022, 3), 2),
+    (key(0x2022, 4), 4),
+    (key(0x2022, 5), 16),
+    (key(0x2025, 1), 1),
+    (key(0x2025, 2), 1),
+];
+
+/// What the reference says beside the table: the decisions where seed 003 is silent or
+/// contradicts itself.
+#[cfg(feature = "docs")]
+pub static REFERENCE: super::doc::Reference = super::doc::Reference {
+    title: "EC-57 map (seed 003)",
+    notes: &[
+        "Chosen with 0x2190 = 3 (in this map: index 0x2190, sub-index 0xFF), saved, from the next power-up; `hal-sim --map ec57` for one run. Writing 3 to the native map's 0x2190 and saving switches to it; 0x2190 sub-index 0xFF = 0 and a save (0x2030 = 1) switch back.",
+        "Requests carry a sub-index byte after the two-byte index (§1.3): `01 03 20 00 00 00 01` reads 0x2000 sub-index 0. Functions 03, 06 and 16; a multi-register request walks the table below in its (index, sub-index) order from the entry it names (0x2003 has sub-indices 1 and 2, no 0), 16 registers at most. Replies are the manual's: 03 returns the byte count and values, 06 echoes the request, 16 echoes index, sub-index and count. The Modbus diagnostics 0x08 and identification 0x2B are answered too.",
+        "Exception codes (§1.3.4, table 1.3): 02 a function other than 03, 06, 16 (and 0x08, 0x2B); 03 an index and sub-index outside the table; 04 more than 16 registers, or none; 05 a read of the write-only 0x2030 or a write of a read-only register; 06 a value out of range, a wrong length or byte count, and a value the drive cannot take in its state (writing 0x2005 while the motor moves, say), which the manual has no code for.",
+        "A frame whose CRC is wrong is dropped, as §1.3.4's text and the Modbus serial line say; 0x21D2 = 1 (in the window) answers it with exception 01 as the manual's example does (`01 83 01 80 F0`), if it began with this drive's address.",
+        "The window: sub-index 0xFF addresses the drive's native register at the index (seed 000's map, `registers.md`): `01 03 60 0C FF 00 01` reads the native 0x600C. The EC-57's motion comes over its fieldbus, which this drive does not have; the window is how a master moves it (0x21A0 motion commands, 0x6005 relative moves, ...), saves (0x200F), and switches maps (0x2190). Its refusals take this map's codes: 02 → 03, 03 and 04 → 06.",
+        "0x2000 is the node id and 0x2001 its source, from the next power-up once saved (0x2030 = 1): 0 (the factory value) the serial port's fixed address 1, as the manual says of the EC-57's serial port; 1 the address 0x2000 holds (1-127). A platform that sets the address (the simulator's `--address`, its `--axes`) overrides both.",
+        "0x2005 is the resolution as pulses a revolution of a 1.8° motor: any multiple of 200 up to 51 200 (the drive runs any whole number of microsteps a full step up to 256); others are refused (06). Where the manual's range is narrower than the drive's, the drive's applies: 0x2005 takes 200-6200 too, 0x2003.1 1-32 767 ms, and 0x2003.2 10-100 % (0-9 refused: below 10 % a stepper holds nothing).",
+        "0x2004 (peak current) is in mA (the drive's 0-6000), 0x200D the supply in volts, 0x2017 the speed in r/min (the encoder's in closed loop, the command's in open loop), 0x2018 the closed loop's following error in encoder counts (0 in open loop; read only, the manual's R/W/S and default 1000 being a misprint for a measurement), 0x2014 the inputs' states (bit 0 IN1).",
+        "0x201C.1-9 is the fault list, newest first: each entry the alarm code of the drive's fault history (10 over-current, 11 phase loss, 13 under-voltage, 14 over-voltage, 15 over-temperature, 25 position error, 26 overload); read only (the manual's R/W/S: a history is not written). 0x201E = 1 clears the latched alarms.",
+        "0x2021 bit k inverts IN k+1; 0x2022.1-5 give IN1-IN5 a function: 1 origin (the homing's home switch), 2 positive limit, 4 negative limit (a motion heading into an active limit stops at the stop deceleration, and a command towards it is refused), 8 quick stop (stops at the quick-stop deceleration), 16 custom and 0 none (the master reads it in 0x2014); both read back as 0. The touch probes 32 and 64 are refused (06). IN1-IN3 are the drive's EXT1-EXT3, IN4 and IN5 GPIO1 and GPIO2.",
+        "0x2024 bit k set: OUT k+1 is high when on (the drive's output logic inverted); 0x2025.1-3: 1 alarm output (on while no alarm is latched), 2 in position, 16 master-controlled (the drive's general output, 0x21C7 in the window), 0 none. OUT1-OUT3 are the drive's GPIO5-GPIO7.",
+        "0x2030 (write only): 1 saves the parameters, 2 restores the factory ones and saves them (both refused with 06 while the motor moves); 0 does nothing. Saved parameters are kept across power cycles; the drive saves nothing on its own.",
+        "Not in this map yet, answered 03: 0x2006, 0x2007-0x200C, 0x200E, 0x200F, 0x2010-0x2013, 0x2015, 0x2016, 0x201B, 0x201D, 0x201F, 0x2020 and 0x2023.1-5.",
+    ],
+    remarks: &[],
+    decimal: false,
+    sub_indexed: true,
+};

@@ -1,0 +1,238 @@
+//! The EC-57 map (seed 003) at the level of frames: every frame §1.3 prints, byte for byte; each
+//! exception of §1.3.4 with nothing changed; the (index, sub-index) walk; the native window;
+//! the address source at power-up; and the table's objects acting on the drive.
+
+mod common;
+
+use common::{MapRig, frame};
+use drive_core::maps::Maps;
+use drive_core::od::Obj;
+use drive_core::{Drive, DriveConfig, Params};
+
+/// A fresh EC-57 drive (nothing saved: the manual's factory values) that can save, 1 ms after
+/// power-up.
+fn rig() -> MapRig {
+    let config = DriveConfig { can_save: true, ..DriveConfig::default() };
+    let empty = drive_core::drive::STORAGE_EMPTY;
+    MapRig::with_drive(Drive::boot_with_map(config, Maps::ec57(), &Params::factory(), empty))
+}
+
+/// The frame the manual prints, as hex text, in bytes.
+fn hex(text: &str) -> Vec<u8> {
+    text.split_whitespace().map(|b| u8::from_str_radix(b, 16).expect("hex")).collect()
+}
+
+impl MapRig {
+    /// Sends the manual's request and returns the reply.
+    fn manual(&mut self, request: &str) -> Option<Vec<u8>> {
+        self.exchange(&hex(request))
+    }
+
+    /// Every object's value.
+    fn objects(&self) -> Vec<u32> {
+        let st = self.drive.state();
+        drive_core::od::OBJECTS.iter().map(|d| st.read(d.obj)).collect()
+    }
+
+    /// Reads `n` registers from (index, sub); the values or the exception code.
+    fn read_sub(&mut self, index: u16, sub: u8, n: u16) -> Result<Vec<u16>, u8> {
+        let [a, b] = index.to_be_bytes();
+        let [c, d] = n.to_be_bytes();
+        let pdu = self.request(&[1, 0x03, a, b, sub, c, d])?;
+        Ok(pdu[2..].chunks(2).map(|w| u16::from_be_bytes([w[0], w[1]])).collect())
+    }
+
+    /// Writes one register at (index, sub); the exception code if refused.
+    fn write_sub(&mut self, index: u16, sub: u8, v: u16) -> Result<(), u8> {
+        let [a, b] = index.to_be_bytes();
+        let [c, d] = v.to_be_bytes();
+        let pdu = self.request(&[1, 0x06, a, b, sub, c, d])?;
+        assert_eq!(pdu, [0x06, a, b, sub, c, d], "a write's reply echoes it");
+        Ok(())
+    }
+}
+
+#[test]
+fn every_printed_frame_byte_for_byte() {
+    let mut r = rig();
+    // §1.3.1 (1).
+    assert_eq!(r.manual("01 03 20 00 00 00 01 4B F4"), Some(hex("01 03 02 00 01 79 84")));
+    // §1.3.1 (2) reads 0x2000, 0x2001, 0x2002 and 0x2003.1 as 1, 2, 0 and 500: set them so.
+    r.write_sub(0x2001, 0, 2).expect("address source 2");
+    r.write_sub(0x2003, 1, 500).expect("standstill delay");
+    assert_eq!(r.manual("01 03 20 00 00 00 04 8B F7"), Some(hex("01 03 08 00 01 00 02 00 00 01 F4 FC C0")));
+    // §1.3.2: 0x2005 = 10 000 pulses a revolution.
+    assert_eq!(r.manual("01 06 20 05 00 27 10 90 91"), Some(hex("01 06 20 05 00 27 10 90 91")));
+    assert_eq!(r.drive.state().read(Obj::Microsteps), 50);
+    assert_eq!(r.read_sub(0x2005, 0, 1), Ok(vec![10_000]));
+    // 0x2003.1 = 50 ms.
+    assert_eq!(r.manual("01 06 20 03 01 00 32 5A 30"), Some(hex("01 06 20 03 01 00 32 5A 30")));
+    assert_eq!(r.drive.state().read(Obj::IdleDelay), 50);
+    // 0x2030 = 1 saves.
+    assert_eq!(r.manual("01 06 20 30 00 00 01 44 A1"), Some(hex("01 06 20 30 00 00 01 44 A1")));
+    assert_eq!(r.drive.take_system_request(), Some(drive_core::SystemRequest::Save));
+    r.drive.save_done(true);
+    // §1.3.3: 0x2000 = 1 and 0x2001 = 1 in one request.
+    assert_eq!(r.manual("01 10 20 00 00 00 02 04 00 01 00 01 AC 49"), Some(hex("01 10 20 00 00 00 02 09 56")));
+    assert_eq!(r.drive.state().read(Obj::AddressSource), 1);
+}
+
+#[test]
+fn each_exception_of_the_manual_changes_nothing() {
+    let mut r = rig();
+    let before = r.objects();
+    // (1) A wrong CRC is dropped (the text)...
+    assert_eq!(r.manual("01 03 20 00 00 00 01 4B F3"), None);
+    // (2)-(6) as printed.
+    assert_eq!(r.manual("01 02 00 00 00 00 04 0B E1"), Some(hex("01 82 02 C1 61")));
+    assert_eq!(r.manual("01 03 20 31 00 00 01 45 08"), Some(hex("01 83 03 01 31")));
+    assert_eq!(r.manual("01 03 20 00 00 00 20 8B EC"), Some(hex("01 83 04 40 F3")));
+    assert_eq!(r.manual("01 03 20 30 00 00 01 44 F4"), Some(hex("01 83 05 81 33")));
+    assert_eq!(r.manual("01 06 20 01 00 00 08 8A 5B"), Some(hex("01 86 06 C2 62")));
+    assert_eq!(r.objects(), before);
+    // ... or answered with 01 as the example does, once 0x21D2 (in the window) says so.
+    r.write_sub(0x21D2, 0xFF, 1).expect("CRC error answer");
+    assert_eq!(r.manual("01 03 20 00 00 00 01 4B F3"), Some(hex("01 83 01 80 F0")));
+    // Not for another drive's frame.
+    assert_eq!(r.exchange(&hex("02 03 20 00 00 00 01 4B F3")), None);
+}
+
+#[test]
+fn more_refusals_in_the_manuals_codes() {
+    let mut r = rig();
+    let before = r.objects();
+    // Read-only registers refuse writes (05), the bus voltage say.
+    assert_eq!(r.write_sub(0x200D, 0, 1), Err(5));
+    // 0x2003 has no sub-index 0; 0x2000 no 1; sub-indices beyond 15 do not exist.
+    assert_eq!(r.read_sub(0x2003, 0, 1), Err(3));
+    assert_eq!(r.read_sub(0x2000, 1, 1), Err(3));
+    assert_eq!(r.read_sub(0x2000, 0x10, 1), Err(3));
+    // None, or 17, registers: 04; a write of 17 too.
+    assert_eq!(r.read_sub(0x2000, 0, 0), Err(4));
+    assert_eq!(r.read_sub(0x2000, 0, 17), Err(4));
+    let mut body = vec![1, 0x10, 0x20, 0x00, 0x00, 0x00, 17, 34];
+    body.extend([0u8; 34]);
+    assert_eq!(r.request(&body), Err(4));
+    // A byte count that is not the quantity's: 06.
+    assert_eq!(r.request(&[1, 0x10, 0x20, 0x00, 0x00, 0x00, 0x01, 0x04, 0x00, 0x01]), Err(6));
+    // A run of the walk past the table's end: 03.
+    assert_eq!(r.read_sub(0x2030, 0, 1), Err(5));
+    assert_eq!(r.read_sub(0x2025, 3, 2), Err(5), "0x2030 follows 0x2025.3: write only");
+    // Not a multiple of 200 pulses a revolution, a function the drive has no such code for.
+    assert_eq!(r.write_sub(0x2005, 0, 10_001), Err(6));
+    assert_eq!(r.write_sub(0x2022, 1, 3), Err(6));
+    // All or nothing: 0x2000 = 7 and then 0x2001 = 9 (out of range) changes neither.
+    assert_eq!(r.request(&[1, 0x10, 0x20, 0x00, 0x00, 0x00, 0x02, 0x04, 0x00, 0x07, 0x00, 0x09]), Err(6));
+    // Functions the manual does not list: 02.
+    assert_eq!(r.request(&[1, 0x04, 0x20, 0x00, 0x00, 0x00, 0x01]), Err(2));
+    assert_eq!(r.request(&[1, 0x17, 0x20, 0x00, 0x00, 0x00, 0x01]), Err(2));
+    // A window refusal in this map's codes: no native register 0x6004 (02 → 03), a value out of
+    // range (03 → 06).
+    assert_eq!(r.read_sub(0x6000, 0xFF, 1).map(|_| ()), Ok(()));
+    assert_eq!(r.write_sub(0x600C, 0xFF, 257), Err(6));
+    assert_eq!(r.read_sub(0x2000, 0xFF, 1), Err(3), "the window holds native registers only");
+    assert_eq!(r.objects(), before);
+    // The saving refusal: 0x2030 while the motor runs.
+    r.write_sub(0x21A3, 0xFF, 0).expect("velocity high");
+    r.write_sub(0x21A4, 0xFF, 2000).expect("velocity low");
+    r.write_sub(0x21A0, 0xFF, 3).expect("run");
+    r.run(20_000);
+    assert_eq!(r.write_sub(0x2030, 0, 1), Err(6));
+    assert_eq!(r.drive.take_system_request(), None);
+}
+
+#[test]
+fn requests_walk_the_index_and_sub_index_order() {
+    let mut r = rig();
+    r.write_sub(0x2003, 2, 40).expect("standstill current");
+    // 0x2003.1, 0x2003.2, 0x2004, 0x2005: the factory 50 ms, 40 %, 1000 mA, 10 000 pulses.
+    assert_eq!(r.read_sub(0x2003, 1, 4), Ok(vec![50, 40, 1000, 10_000]));
+    // A write across sub-indices and indices: 0x2003.2 = 60, 0x2004 = 1500.
+    assert!(r.request(&[1, 0x10, 0x20, 0x03, 0x02, 0x00, 0x02, 0x04, 0x00, 60, 0x05, 0xDC]).is_ok());
+    assert_eq!(r.drive.state().read(Obj::IdleCurrent), 60);
+    assert_eq!(r.drive.state().read(Obj::PhaseCurrent), 1500);
+    // The versions, 0x201A.1-3.
+    let v = r.read_sub(0x201A, 1, 3).expect("versions");
+    assert_eq!(v[0], r.drive.state().read(Obj::SoftwareRevision) as u16);
+    assert_eq!(v[1], r.drive.state().read(Obj::HardwareRevision) as u16);
+}
+
+#[test]
+fn the_window_moves_the_motor() {
+    let mut r = rig();
+    // 0x21A1 (command target, two registers) = 3200, then command 2 (relative run).
+    let pdu = r.request(&[1, 0x10, 0x21, 0xA1, 0xFF, 0x00, 0x02, 0x04, 0x00, 0x00, 0x0C, 0x80]).expect("target");
+    assert_eq!(pdu, [0x10, 0x21, 0xA1, 0xFF, 0x00, 0x02]);
+    r.write_sub(0x21A0, 0xFF, 2).expect("relative run");
+    for _ in 0..400 {
+        r.run(10_000);
+    }
+    assert_eq!(r.drive.state().read_i32(Obj::Position), 3200);
+    // The native map's registers read back through the window.
+    assert_eq!(r.read_sub(0x600E, 0xFF, 2), Ok(vec![0, 3200]));
+    // The fault list is empty, and the speed at rest 0.
+    assert_eq!(r.read_sub(0x201C, 1, 9), Ok(vec![0; 9]));
+    assert_eq!(r.read_sub(0x2017, 0, 1), Ok(vec![0]));
+}
+
+#[test]
+fn an_over_voltage_lands_in_the_fault_list_and_0x201e_clears_it() {
+    let mut r = rig();
+    r.inputs.supply_mv = Some(70_000);
+    r.run(5_000);
+    r.inputs.supply_mv = Some(24_000);
+    r.run(5_000);
+    assert_eq!(r.read_sub(0x201C, 1, 2), Ok(vec![14, 0]), "over-voltage, alarm 14, newest first");
+    assert_ne!(r.drive.state().read(Obj::AlarmCode), 0);
+    assert_eq!(r.read_sub(0x200D, 0, 1), Ok(vec![24]), "bus voltage, V");
+    r.write_sub(0x201E, 0, 1).expect("clear the alarm");
+    assert_eq!(r.drive.state().read(Obj::AlarmCode), 0);
+    assert_eq!(r.read_sub(0x201C, 1, 1), Ok(vec![14]), "the list keeps it");
+}
+
+#[test]
+fn io_settings_act_in_the_drives_terms() {
+    let mut r = rig();
+    // IN1 a positive limit, IN2 quick stop, OUT1 in position, OUT1 high when on.
+    r.write_sub(0x2022, 1, 2).expect("IN1");
+    r.write_sub(0x2022, 2, 8).expect("IN2");
+    r.write_sub(0x2025, 1, 2).expect("OUT1");
+    r.write_sub(0x2024, 0, 1).expect("output polarity");
+    let st = r.drive.state();
+    assert_eq!((st.read(Obj::InputFunction1), st.read(Obj::InputFunction2)), (9, 7));
+    assert_eq!(st.read(Obj::OutputFunction1), 3);
+    assert_eq!(st.read(Obj::OutputLogic), 0b110, "OUT1 high when on: the drive's logic bit clear");
+    assert_eq!(r.read_sub(0x2024, 0, 1), Ok(vec![1]));
+    // The input states: IN1 active.
+    r.write_sub(0x21C2, 0xFF, 1).expect("pseudo-input IN1");
+    assert_eq!(r.read_sub(0x2014, 0, 1), Ok(vec![1]));
+    // The factory defaults of the manual: IN2 origin, IN3 and IN4 the limits, OUT2 alarm.
+    let r = rig();
+    let st = r.drive.state();
+    assert_eq!(
+        [Obj::InputFunction2, Obj::InputFunction3, Obj::InputFunction4, Obj::OutputFunction2].map(|o| st.read(o)),
+        [11, 9, 10, 2]
+    );
+}
+
+#[test]
+fn the_address_follows_its_source_at_power_up() {
+    let boot = |source: u32| {
+        let mut params = Params::factory();
+        params.set(Obj::NodeId, 5);
+        params.set(Obj::AddressSource, source);
+        let drive = Drive::boot_with_map(DriveConfig::default(), Maps::ec57(), &params, 0);
+        drive.address().get()
+    };
+    assert_eq!(boot(0), 1, "the serial port's fixed address");
+    assert_eq!(boot(1), 5);
+    assert_eq!(boot(2), 5);
+    // Other maps answer at the node id whatever the source.
+    let mut params = Params::factory();
+    params.set(Obj::NodeId, 5);
+    assert_eq!(Drive::boot_with_map(DriveConfig::default(), Maps::cls9(), &params, 0).address().get(), 5);
+    // The frame helper stays in use for a broadcast write: executed, not answered.
+    let mut r = rig();
+    assert_eq!(r.exchange(&frame(&[0, 0x06, 0x20, 0x03, 0x01, 0x00, 0x64])), None);
+    assert_eq!(r.drive.state().read(Obj::IdleDelay), 100);
+}
