@@ -165,6 +165,12 @@ impl FaultLog {
         log
     }
 
+    /// Empties the history (the count goes on: a master that polls it still sees new alarms).
+    /// The entries past `len` are never read: only the length goes.
+    pub(crate) fn clear_history(&mut self) {
+        (self.head, self.len) = (0, 0);
+    }
+
     /// History entry `k`, 0 the newest; 0 where there is none.
     pub(crate) fn entry(&self, k: usize) -> u32 {
         if k >= usize::from(self.len) {

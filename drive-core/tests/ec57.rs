@@ -170,6 +170,25 @@ fn the_window_moves_the_motor() {
     assert_eq!(r.drive.state().read_i32(Obj::Position), 3200);
     // The native map's registers read back through the window.
     assert_eq!(r.read_sub(0x600E, 0xFF, 2), Ok(vec![0, 3200]));
+    // The position commands received: 3200, high word first over 0x2010 and 0x2011.
+    assert_eq!(r.read_sub(0x2010, 0, 2), Ok(vec![0, 3200]));
+    // Back by 4200 (a relative run of -4200): -1000 over the two words.
+    let back = (-4200i32).to_be_bytes();
+    r.request(&[1, 0x10, 0x21, 0xA1, 0xFF, 0x00, 0x02, 0x04, back[0], back[1], back[2], back[3]]).expect("target");
+    r.write_sub(0x21A0, 0xFF, 2).expect("relative run");
+    for _ in 0..400 {
+        r.run(10_000);
+    }
+    assert_eq!(r.read_sub(0x2010, 0, 2), Ok(vec![0xFFFF, (-1000i16) as u16]));
+    // A preset of the position is no motion.
+    r.write_sub(0x6007, 0xFF, 0).expect("position mode");
+    r.request(&[1, 0x10, 0x60, 0x0E, 0xFF, 0x00, 0x02, 0x04, 0x00, 0x01, 0x00, 0x00]).expect("preset");
+    assert_eq!(r.read_sub(0x2010, 0, 2), Ok(vec![0xFFFF, (-1000i16) as u16]));
+    // Writing 1 to 0x2011 clears; other values and 0x2010 are refused.
+    assert_eq!(r.write_sub(0x2011, 0, 2), Err(6));
+    assert_eq!(r.write_sub(0x2010, 0, 0), Err(5));
+    r.write_sub(0x2011, 0, 1).expect("clear");
+    assert_eq!(r.read_sub(0x2010, 0, 2), Ok(vec![0, 0]));
     // The fault list is empty, and the speed at rest 0.
     assert_eq!(r.read_sub(0x201C, 1, 9), Ok(vec![0; 9]));
     assert_eq!(r.read_sub(0x2017, 0, 1), Ok(vec![0]));
@@ -188,6 +207,20 @@ fn an_over_voltage_lands_in_the_fault_list_and_0x201e_clears_it() {
     r.write_sub(0x201E, 0, 1).expect("clear the alarm");
     assert_eq!(r.drive.state().read(Obj::AlarmCode), 0);
     assert_eq!(r.read_sub(0x201C, 1, 1), Ok(vec![14]), "the list keeps it");
+    let count = r.drive.state().read(Obj::AlarmCount);
+    // 0x201D = 1 empties the list at once, and asks for its save.
+    while r.drive.take_system_request().is_some() {}
+    r.write_sub(0x201D, 0, 1).expect("clear the history");
+    assert_eq!(r.read_sub(0x201C, 1, 9), Ok(vec![0; 9]));
+    assert_eq!(r.drive.take_system_request(), Some(drive_core::SystemRequest::SaveFaults));
+    assert_eq!(r.drive.state().fault_history().entries, [0; 10]);
+    r.run(1_000);
+    assert_eq!(r.read_sub(0x201C, 1, 9), Ok(vec![0; 9]), "the tick's history is empty too");
+    assert_eq!(r.drive.state().read(Obj::AlarmCount), count, "the count goes on");
+    // A new alarm lands in the emptied list.
+    r.inputs.supply_mv = Some(70_000);
+    r.run(5_000);
+    assert_eq!(r.read_sub(0x201C, 1, 2), Ok(vec![14, 0]));
 }
 
 #[test]

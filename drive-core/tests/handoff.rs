@@ -238,3 +238,28 @@ fn a_buffered_set_point_appended_to_the_running_one_is_never_late() {
     let handovers = served(&requests, 20_000, 5);
     assert_eq!(handovers, [Handover::Planned, Handover::Planned]);
 }
+
+/// A fault history cleared on the bus side (0x200F = 5) is empty on the tick's side once it has
+/// synced, and reads empty from the request on; an alarm after it lands in the emptied history.
+#[test]
+fn a_cleared_fault_history_reaches_the_tick() {
+    let (mut d, mut tick) = split();
+    let over = Inputs { supply_mv: Some(70_000), ..Inputs::default() };
+    let fine = Inputs { supply_mv: Some(24_000), ..Inputs::default() };
+    for k in 0..10 {
+        tick_at(&mut d, &mut tick, k, true, if k < 5 { &over } else { &fine });
+    }
+    let code = |d: &Drive| d.state().read(drive_core::od::Obj::FaultHistory0) >> 24;
+    assert_eq!(code(&d), 14, "over-voltage in the history");
+    assert!(serve(&mut d, tick_time(10), &w16(0x200F, 5)));
+    assert_eq!(code(&d), 0, "empty from the request on");
+    tick_at(&mut d, &mut tick, 11, true, &fine);
+    tick_at(&mut d, &mut tick, 12, true, &fine);
+    assert_eq!(code(&d), 0, "the tick's history is empty too");
+    assert!(serve(&mut d, tick_time(13), &w16(0x200F, 4)));
+    for k in 14..20 {
+        tick_at(&mut d, &mut tick, k, true, &over);
+    }
+    assert_eq!(code(&d), 14, "a new alarm in the emptied history");
+    assert_eq!(d.state().read(drive_core::od::Obj::FaultHistory1), 0);
+}

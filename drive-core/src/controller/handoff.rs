@@ -94,6 +94,9 @@ impl Controller {
             return Handover::Waiting;
         }
         let Orders { stop, settings: _ } = core::mem::take(*orders);
+        if core::mem::take(&mut model.clear_history) {
+            self.faults.clear_history();
+        }
         // What the tick set in the settings (the zero offset at the closed loop's first reading)
         // goes up before the bus side's settings come down.
         if self.events.has(Events::ZERO_OFFSET) {
@@ -148,20 +151,29 @@ impl Controller {
             self.axis.take_plan(&model.axis);
             late.map_or(Handover::Planned, |n| Handover::Late(n as u32))
         };
-        // Up: the tick's state into the model (the track stays the model's: the tick's is the
-        // same, or a dropped plan's that nothing walks).
+        self.up(model);
+        (model_pvt.head, model_pvt.len, model_pvt.fault) = (pvt.head, pvt.len, pvt.fault);
+        **base = Base { status: self.status, run: self.run, pvt: **model_pvt, version: self.axis.version() };
+        handover
+    }
+}
+
+impl Controller {
+    /// The tick's state into the bus side's `model` (the track stays the model's: the tick's is
+    /// the same, or a dropped plan's that nothing walks). Out of line: as arguments the two are
+    /// known apart, and their fields copy as plain copies, not as moves of what may overlap.
+    #[inline(never)]
+    fn up(&mut self, model: &mut Controller) {
         model.axis.follow_walk_of(&self.axis);
         model.status = self.status;
         model.faults = self.faults;
+        model.commanded = self.commanded;
         model.servo = self.servo;
         model.run = self.run;
         model.still_since = self.still_since;
         model.watch = self.watch;
         model.caught = self.caught.take().or(model.caught);
         model.events = Events(model.events.0 | core::mem::take(&mut self.events).0);
-        (model_pvt.head, model_pvt.len, model_pvt.fault) = (pvt.head, pvt.len, pvt.fault);
-        **base = Base { status: self.status, run: self.run, pvt: **model_pvt, version: self.axis.version() };
-        handover
     }
 }
 

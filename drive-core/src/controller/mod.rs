@@ -231,6 +231,12 @@ pub struct Controller {
     pub(crate) status: Status,
     /// The fault history and the supervision's memory.
     pub(crate) faults: FaultLog,
+    /// The whole microsteps the setpoint has moved since power-up, signed and wrapping (what
+    /// 0x21D4 counts from its last clear).
+    pub(crate) commanded: u32,
+    /// The fault history is to be emptied (0x200F = 5): by the tick of a controller ticked
+    /// where it is kept, by the sync where the tick owns one of its own.
+    pub(crate) clear_history: bool,
     /// The closed loop and stall detection.
     pub(crate) servo: Servo,
     /// The PVT run, if one runs.
@@ -314,6 +320,8 @@ impl Controller {
             axis: Axis::new(0),
             status: Status::default(),
             faults,
+            commanded: 0,
+            clear_history: false,
             servo: Servo::new(feedback),
             run: None,
             ahead: None,
@@ -406,6 +414,7 @@ impl Controller {
         self.pvt_tick(now, pvt, table);
         self.count_pulses(now, inputs.pulses);
         let (setpoint, moved) = self.axis.tick(now);
+        self.commanded = self.commanded.wrapping_add(moved as u32);
         self.notify(setpoint.whole);
         if self.axis.take_joined() {
             self.events.set(Events::JOINED);

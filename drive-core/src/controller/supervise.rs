@@ -29,6 +29,9 @@ impl Controller {
         if let Some([a, b]) = inputs.phase_ma {
             self.status.current_ma = a.unsigned_abs().max(b.unsigned_abs()).min(u32::from(u16::MAX)) as u16;
         }
+        if core::mem::take(&mut self.clear_history) {
+            self.faults.clear_history();
+        }
         let (error, faults) = self.detect(now, inputs);
         self.latch(now, error, faults);
         self.power_loss(inputs);

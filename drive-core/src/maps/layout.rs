@@ -168,7 +168,8 @@ pub struct Entry {
     pub addr: u16,
     /// The object (numeric: one or two registers, as the drive declares it).
     pub obj: Obj,
-    /// [`Entry::view`] in bits 0-1, [`Entry::is_narrow`] bit 2, [`Entry::is_wide`] bit 3.
+    /// [`Entry::view`] in bits 0-1, [`Entry::is_narrow`] bit 2, [`Entry::is_wide`] bit 3,
+    /// [`Entry::is_clear`] bit 4.
     flags: u8,
     /// The map's unit against the drive's (a reference: the entries share their few scales).
     pub scale: &'static Scale,
@@ -180,6 +181,8 @@ const NARROW: u8 = 1 << 2;
 const WIDE: u8 = 1 << 3;
 /// [`Entry`]'s flags: the bits of its view.
 const VIEW: u8 = 3;
+/// [`Entry`]'s flags: a write of 1 clears.
+const CLEAR: u8 = 1 << 4;
 
 impl Entry {
     /// `obj` at `addr`, in the map's unit `scale`, with the object's own access.
@@ -197,6 +200,17 @@ impl Entry {
     /// The entry, two registers wide: a 16-bit object that the map gives 32 bits.
     pub const fn wide(self) -> Self {
         Self { flags: self.flags | WIDE, ..self }
+    }
+
+    /// The entry, a clear: a write of 1 writes the drive's 0 (a counter's clear: seed 003's
+    /// 0x2011), any other value is out of range; a read reads the object in the entry's scale.
+    pub const fn clear(self) -> Self {
+        Self { flags: self.flags | CLEAR, ..self }
+    }
+
+    /// Whether a write of 1 clears ([`Entry::clear`]).
+    pub const fn is_clear(&self) -> bool {
+        self.flags & CLEAR != 0
     }
 
     /// Whether the entry is one register for a 32-bit object ([`Entry::narrow`]).
@@ -505,6 +519,9 @@ impl LayoutMap {
 
     /// The drive's raw value of the map's register bits `bits` for `e`.
     fn drive_value<P: Borrow<Table>>(&self, drive: &DriveState<P>, e: &Entry, bits: u32) -> Result<u32, ObjError> {
+        if e.is_clear() {
+            return if bits == 1 { Ok(0) } else { Err(ObjError::OutOfRange) };
+        }
         let d = e.obj.def();
         if let Scale::Field(shift, width) = *e.scale {
             let field = mask(width).checked_shl(u32::from(shift)).unwrap_or(0);

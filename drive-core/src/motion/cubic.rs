@@ -157,7 +157,9 @@ pub struct Offset {
 }
 
 impl Cubic {
-    /// The segment from `(p0, v0)` to the point `to`, lasting `to.time_ms`.
+    /// The segment from `(p0, v0)` to the point `to`, lasting `to.time_ms`. Out of line: its
+    /// 64-bit clamp is in six callers, all planning.
+    #[inline(never)]
     pub fn new(p0: i64, v0: i32, to: Point) -> Self {
         let delta = i64::from(to.position).saturating_sub(p0).clamp(-DELTA_LIMIT, DELTA_LIMIT);
         Self { p0, delta, v0: i64::from(v0), v1: i64::from(to.velocity), n: u64::from(to.time_ms) * TICKS_PER_MS }

@@ -109,9 +109,11 @@ objects! {
     /// on a platform without storage. The reply means the save started: 0x2120 bit 3 shows it
     /// running, bit 4 a failure. 1 (jump to the boot loader) is refused (04): the simulator has
     /// none, and the firmware does not jump. 4 (ours, seed 002's alarm clear) clears the latched
-    /// alarms as the motion command 13 does; 0 does nothing (seed 003's "do not clear"). The
-    /// manual prints it read-only; its own examples write it.
-    SystemControl @ 0x200F: U8, Cmd, Ram, Set(&[0, 1, 2, 3, 4]), default 0, None, "system control";
+    /// alarms as the motion command 13 does; 5 (ours, seed 003's 0x201D) empties the fault
+    /// history 0x213C-0x214F (saved, where the platform saves it; 0x2136 counts on); 0 does
+    /// nothing (seed 003's "do not clear"). The manual prints it read-only; its own examples
+    /// write it.
+    SystemControl @ 0x200F: U8, Cmd, Ram, Set(&[0, 1, 2, 3, 4, 5]), default 0, None, "system control";
     /// Node id (slave address). A write takes effect at the next power-up once saved (0x200F = 2),
     /// so a typo cannot lose the drive; until then the drive answers at the old id. The object
     /// table prints a default of 5; §5.3 and every example use 1.
@@ -481,6 +483,11 @@ objects! {
     /// Input states (our object; seed 003's 0x2014): bit k set, IN k+1 is active (at 0x21C1's
     /// level, or its pseudo-input 0x21C2 set).
     InputStates @ 0x21D3: U8, Ro, Live, Bits(0x7F), default 0, None, "input states";
+    /// Position commanded (our object; seed 003's 0x2010/0x2011): the whole microsteps (encoder
+    /// counts in closed loop) the setpoint has moved since power-up or the last clear, signed
+    /// (two's complement) and wrapping; a position preset or a homing's new zero is no motion.
+    /// Writing 0 clears it.
+    CommandCount @ 0x21D4: U32, Rw, Live, Span(0, 0), default 0, Steps, "position commanded";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake

@@ -174,6 +174,10 @@ pub struct DriveState<P = Table> {
     /// The alarm count when the platform was last asked to save the history (changed only by
     /// taking requests, so kept out of [`Checkpoint`] too).
     faults_saved: u16,
+    /// The history was cleared (0x200F = 5) and not yet handed to the platform to save.
+    history_unsaved: bool,
+    /// 0x21D4's zero: the setpoint's count of moved microsteps at its last clear.
+    command_base: u32,
     /// What the tick's controller was at the last sync, where the tick owns one of its own
     /// ([`crate::controller::handoff`]); unused where `ctl` is ticked itself.
     base: Base,
@@ -235,6 +239,9 @@ pub struct Checkpoint {
     suspend: u16,
     device: crate::power::DeviceState,
     program: program::Program,
+    history_unsaved: bool,
+    command_base: u32,
+    clear_history: bool,
 }
 
 impl DriveState {
@@ -265,6 +272,8 @@ impl<P: Borrow<Table>> DriveState<P> {
         let feedback = Feedback::from_objects(get(Obj::Feedback), get(Obj::EncoderCpr));
         Self {
             faults_saved: faults.count,
+            history_unsaved: false,
+            command_base: 0,
             ctl: Controller::restored(settings_of(params), feedback, faults, get(Obj::MotorDirection) == 1),
             params: *params,
             storage,
@@ -308,6 +317,8 @@ impl<P: Borrow<Table>> DriveState<P> {
             table: _,
             ctl,
             faults_saved: _,
+            history_unsaved,
+            command_base,
             base: _,
             orders,
             homing,
@@ -336,6 +347,9 @@ impl<P: Borrow<Table>> DriveState<P> {
             suspend: ctl.suspend,
             device: *device,
             program: *program,
+            history_unsaved: *history_unsaved,
+            command_base: *command_base,
+            clear_history: ctl.clear_history,
         }
     }
 
@@ -379,11 +393,16 @@ impl<P: Borrow<Table>> DriveState<P> {
             suspend,
             device,
             program,
+            history_unsaved,
+            command_base,
+            clear_history,
         } = c;
         (self.params, self.storage, self.request, self.now, self.orders) = (params, storage, request, now, orders);
         (self.ctl.status, self.ctl.axis, self.ctl.run, self.pp, self.pvt) = (status, axis, run, pp, pvt);
         (self.homing, self.ctl.watch, self.ctl.suspend, self.device) = (homing, watch, suspend, device);
         self.program = program;
+        (self.history_unsaved, self.command_base, self.ctl.clear_history) =
+            (history_unsaved, command_base, clear_history);
         self.refresh_settings();
     }
 
@@ -470,7 +489,7 @@ impl<P: Borrow<Table>> DriveState<P> {
 
     /// Whether an alarm was recorded since the history was last handed to a platform that saves.
     fn fault_save_due(&self) -> bool {
-        self.can_save && self.ctl.faults.count != self.faults_saved
+        self.can_save && (self.ctl.faults.count != self.faults_saved || self.history_unsaved)
     }
 
     /// [`SystemRequest::SaveFaults`] if [due](DriveState::fault_save_due); the history counts as
@@ -478,6 +497,7 @@ impl<P: Borrow<Table>> DriveState<P> {
     pub(crate) fn take_fault_save(&mut self) -> Option<SystemRequest> {
         let due = self.fault_save_due();
         self.faults_saved = self.ctl.faults.count;
+        self.history_unsaved = false;
         due.then_some(SystemRequest::SaveFaults)
     }
 
@@ -490,7 +510,7 @@ impl<P: Borrow<Table>> DriveState<P> {
     pub fn fault_history(&self) -> FaultHistory {
         let mut history = FaultHistory { count: self.ctl.faults.count, ..FaultHistory::default() };
         for (k, e) in history.entries.iter_mut().enumerate() {
-            *e = self.ctl.history(k);
+            *e = self.history(k);
         }
         history
     }
@@ -548,12 +568,19 @@ impl<P: Borrow<Table>> DriveState<P> {
             Obj::MotorCurrent => u32::from(s.current_ma),
             Obj::ProgramInputSegment | Obj::ProgramErrorSegment | Obj::ProgramRunning => self.program_live(obj),
             Obj::InputStates => u32::from(self.active_inputs()),
+            Obj::CommandCount => self.ctl.commanded.wrapping_sub(self.command_base),
             // The ten entries are consecutive objects.
             h if (Obj::FaultHistory0 as usize..=Obj::FaultHistory9 as usize).contains(&(h as usize)) => {
-                self.ctl.history(h as usize - Obj::FaultHistory0 as usize)
+                self.history(h as usize - Obj::FaultHistory0 as usize)
             }
             _ => self.params.get(obj as usize).copied().unwrap_or(0),
         }
+    }
+
+    /// Fault history entry `k` (0 the newest), as the tick will have it once it has taken a
+    /// clear ordered since the last sync.
+    fn history(&self, k: usize) -> u32 {
+        if self.ctl.clear_history { 0 } else { self.ctl.history(k) }
     }
 
     /// `obj` read as a signed value.
@@ -715,6 +742,7 @@ impl<P: Borrow<Table>> DriveState<P> {
                 }
             }
             Obj::CommStatus => s.comm &= !(value as u8),
+            Obj::CommandCount => self.command_base = self.ctl.commanded,
             Obj::PvtFault => self.pvt.fault &= !(value as u8),
             Obj::GpioValue => {
                 // Only outputs take the written level (§5.7.2).
@@ -744,6 +772,10 @@ impl<P: Borrow<Table>> DriveState<P> {
                 if obj == Obj::SystemControl {
                     if value == 4 {
                         self.clear_alarms();
+                    }
+                    if value == 5 {
+                        self.ctl.clear_history = true;
+                        self.history_unsaved = true;
                     }
                     if value == 3 {
                         self.restore_factory();
