@@ -269,3 +269,36 @@ fn the_address_follows_its_source_at_power_up() {
     assert_eq!(r.exchange(&frame(&[0, 0x06, 0x20, 0x03, 0x01, 0x00, 0x64])), None);
     assert_eq!(r.drive.state().read(Obj::IdleDelay), 100);
 }
+
+/// 0x2013 = 1, saved: at power-up the motor turns 30° forward, then 15° back, and stands; with a
+/// 10 000-pulse revolution that is 833 then back to 417. A drive powered up with it off stands.
+#[test]
+fn the_power_up_jog() {
+    let boot = |jog: u32| {
+        let mut params = Params::factory();
+        assert!(params.set(Obj::PowerUpJog, jog));
+        assert!(params.set(Obj::Microsteps, 50));
+        MapRig::with_drive(Drive::boot_with_map(DriveConfig::default(), Maps::ec57(), &params, 0))
+    };
+    let mut r = boot(1);
+    let mut farthest = 0;
+    for _ in 0..60_000 {
+        r.run(50);
+        farthest = farthest.max(r.drive.state().read_i32(Obj::Position));
+    }
+    assert_eq!(farthest, 10_000 / 12, "30° forward");
+    assert_eq!(r.drive.state().read_i32(Obj::Position), 10_000 / 12 - 10_000 / 24, "15° back");
+    assert_eq!(r.read_sub(0x2013, 0, 1), Ok(vec![1]));
+    let mut r = boot(0);
+    r.run(1_000_000);
+    assert_eq!(r.drive.state().read_i32(Obj::Position), 0);
+    // A stop during the first move ends the jog: no move back.
+    let mut r = boot(1);
+    r.run(100_000);
+    r.write_sub(0x21A0, 0xFF, 6).expect("stop");
+    r.run(500_000);
+    let stopped = r.drive.state().read_i32(Obj::Position);
+    assert!((1..10_000 / 12).contains(&stopped), "stopped on the way: {stopped}");
+    r.run(1_000_000);
+    assert_eq!(r.drive.state().read_i32(Obj::Position), stopped);
+}

@@ -6,6 +6,7 @@
 
 pub mod oracle;
 pub mod pdu_cls9;
+pub mod pdu_ec57;
 pub mod pdu_jmc;
 pub mod pdu_layout;
 pub mod pdu_native;
@@ -16,11 +17,12 @@ pub mod rtu_stream;
 pub type Run = fn(&[u8]);
 
 /// The targets and their entry points, for the replay.
-pub const TARGETS: [(&str, Run); 6] = [
+pub const TARGETS: [(&str, Run); 7] = [
     ("rtu_stream", rtu_stream::run),
     ("rtu_frame", rtu_frame::run),
     ("pdu_native", pdu_native::run),
     ("pdu_layout", pdu_layout::run),
     ("pdu_jmc", pdu_jmc::run),
     ("pdu_cls9", pdu_cls9::run),
+    ("pdu_ec57", pdu_ec57::run),
 ];

@@ -306,6 +306,24 @@ impl Plant {
         self.drive.state_mut().write_def(obj.def(), value)
     }
 
+    /// Sends the request `body` (its CRC appended) at the next tick and runs until the drive
+    /// answers it (10 ms at most): the reply, or `None`.
+    pub fn request(&mut self, body: &[u8]) -> Option<Vec<u8>> {
+        let mut frame = body.to_vec();
+        frame.extend(drive_core::crc::crc16(body).to_le_bytes());
+        let now = self.next_tick();
+        self.drive.on_rx(now, &frame);
+        for _ in 0..200 {
+            let t = self.next_tick();
+            self.advance_to(t);
+            self.drive.on_timer(t);
+            if let Some(reply) = self.drive.take_reply() {
+                return Some(reply.to_vec());
+            }
+        }
+        None
+    }
+
     /// Runs the control ticks of the next `secs` of simulated time.
     pub fn run_for(&mut self, secs: f64) {
         let end = self.next_tick.plus_micros((secs * 1e6) as u64);

@@ -152,6 +152,25 @@ fn a_blocked_rotor_latches_the_position_error() {
     }
 }
 
+/// A move at 4000 microsteps a second for half a second, then the rotor blocked.
+fn move_then_block(p: &mut Plant) {
+    set(p, Obj::MaxSpeed, 4000);
+    set(p, Obj::RelativeMove, 400_000);
+    run(p, 0.5);
+    p.inject(Change::Blocked(true));
+}
+
+/// The rotor freed and the position error cleared, `obj` set to `value`, then
+/// [`move_then_block`] again.
+fn clear_then_block_again(p: &mut Plant, obj: Obj, value: u32) {
+    p.inject(Change::Blocked(false));
+    set(p, obj, value);
+    set(p, Obj::DriveFaults, 0x0F);
+    set(p, Obj::ControllerStatus, 0xFF);
+    run(p, 0.1);
+    move_then_block(p);
+}
+
 /// Seed 002's 0258 (our 0x21D0): a position error limit in encoder counts replaces 0x605C's
 /// microsteps while it is not 0.
 #[test]
@@ -159,10 +178,7 @@ fn a_position_error_limit_in_encoder_counts_replaces_the_stall_length() {
     let mut p = plant(1, 0);
     // 4000 counts: a turn, 3 200 microsteps; 0x605C's 255 microsteps no longer count.
     set(&mut p, Obj::PositionErrorLimit, 4000);
-    set(&mut p, Obj::MaxSpeed, 4000);
-    set(&mut p, Obj::RelativeMove, 400_000);
-    run(&mut p, 0.5);
-    p.inject(Change::Blocked(true));
+    move_then_block(&mut p);
     // 0.3 s blocked at 4 000 microsteps a second: about 1 200 microsteps behind, past 255.
     run(&mut p, 0.3);
     assert_eq!(read(&p, Obj::DriveFaults), 0, "within a turn");
@@ -170,14 +186,7 @@ fn a_position_error_limit_in_encoder_counts_replaces_the_stall_length() {
     assert_eq!(read(&p, Obj::AlarmCode), 25, "a turn behind");
     assert_eq!(read(&p, Obj::DriveFaults), 1 << 2);
     // Back to 0: 0x605C's 255 microsteps again.
-    p.inject(Change::Blocked(false));
-    set(&mut p, Obj::PositionErrorLimit, 0);
-    set(&mut p, Obj::DriveFaults, 0x0F);
-    set(&mut p, Obj::ControllerStatus, 0xFF);
-    run(&mut p, 0.1);
-    set(&mut p, Obj::RelativeMove, 400_000);
-    run(&mut p, 0.5);
-    p.inject(Change::Blocked(true));
+    clear_then_block_again(&mut p, Obj::PositionErrorLimit, 0);
     run(&mut p, 0.2);
     assert_eq!(read(&p, Obj::AlarmCode), 25, "0x605C's 255 microsteps");
 }
@@ -191,4 +200,62 @@ fn a_lost_encoder_latches_alarm_27() {
     assert_eq!(read(&p, Obj::DriveFaults), 1 << 3);
     assert_eq!(read(&p, Obj::AlarmCode), 27);
     assert!(!p.outputs().expect("ticked").enabled);
+}
+
+/// Seed 003's 0x200F (our 0x21D6): a position error angle in degrees of the shaft replaces the
+/// other limits while it is not 0; its 0x200E (0x21D7) = 0 lets the loop follow without the
+/// alarm. Through the EC-57 map, the alarm lands in its fault list 0x201C.1.
+#[test]
+fn a_position_error_angle_in_degrees_and_its_alarm_switch() {
+    let mut p = plant(1, 0);
+    // 90°: 800 microsteps at 1/16; 0x605C's 255 no longer count.
+    set(&mut p, Obj::PositionErrorAngle, 90);
+    move_then_block(&mut p);
+    // 0.15 s blocked at 4 000 microsteps a second: about 600 behind, within 90°.
+    run(&mut p, 0.15);
+    assert_eq!(read(&p, Obj::DriveFaults), 0, "within 90°");
+    run(&mut p, 0.3);
+    assert_eq!(read(&p, Obj::AlarmCode), 25, "beyond 90°");
+    // The alarm off: two turns behind and no alarm.
+    clear_then_block_again(&mut p, Obj::PositionErrorAlarm, 0);
+    run(&mut p, 2.0);
+    assert_eq!(read(&p, Obj::DriveFaults), 0, "no alarm with 0x21D7 = 0");
+    assert!(read(&p, Obj::FollowingError).abs() > 4000, "a turn behind and more");
+}
+
+/// The same through the EC-57 map's registers: 0x200E = 1 and 0x200F = 45° written as the
+/// manual has them (sub-indexed frames), an overload stops the rotor, the alarm is in the fault
+/// list 0x201C.1.
+#[test]
+fn the_ec57_position_error_alarm_lands_in_its_fault_list() {
+    let mut params = Params::factory();
+    for (obj, v) in [
+        (Obj::RegisterMap, 3),
+        (Obj::Feedback, 1),
+        (Obj::EncoderCpr, 1000),
+        (Obj::Microsteps, 16),
+        (Obj::PhaseCurrent, 1000),
+    ] {
+        assert!(params.set(obj, v), "{obj:?}");
+    }
+    let motor = MotorCatalog::builtin().get(DEFAULT_MOTOR).cloned().expect("catalogue motor");
+    let drive = Drive::boot_with_map(DriveConfig::default(), drive_core::maps::Maps::ec57(), &params, 0);
+    let mut p = Plant::new(drive, Motor::new(motor, MotorInputs::default()));
+    let request = |p: &mut Plant, body: &[u8]| {
+        let reply = p.request(body).unwrap_or_else(|| panic!("no reply to {body:02X?}"));
+        assert_eq!(reply[1] & 0x80, 0, "{body:02X?} refused: {reply:02X?}");
+        reply
+    };
+    // 0x200E = 1, 0x200F = 45: 400 microsteps at 1/16.
+    request(&mut p, &[1, 0x06, 0x20, 0x0E, 0, 0, 1]);
+    request(&mut p, &[1, 0x06, 0x20, 0x0F, 0, 0, 45]);
+    // A run at 4000 microsteps a second through the window: 0x21A3 velocity, 0x21A0 = 3.
+    request(&mut p, &[1, 0x10, 0x21, 0xA3, 0xFF, 0, 2, 4, 0, 0, 0x0F, 0xA0]);
+    request(&mut p, &[1, 0x06, 0x21, 0xA0, 0xFF, 0, 3]);
+    run(&mut p, 0.5);
+    p.inject(Change::Blocked(true));
+    run(&mut p, 0.5);
+    assert_eq!(read(&p, Obj::AlarmCode), 25);
+    let list = request(&mut p, &[1, 0x03, 0x20, 0x1C, 1, 0, 2]);
+    assert_eq!(&list[2..7], &[4, 0, 25, 0, 0], "the fault list: 25 newest, nothing before");
 }

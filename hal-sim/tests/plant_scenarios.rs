@@ -1,7 +1,8 @@
 //! The drive driving the physical motor model in simulated time: the seed examples lose no step
 //! with the defaults and the NEMA 17; a load or an acceleration beyond the motor's torque does.
 
-use drive_core::{Drive, Instant, crc};
+use drive_core::od::Obj;
+use drive_core::{Drive, Instant};
 use hal_sim::DEFAULT_MOTOR;
 use hal_sim::motor::{Motor, MotorCatalog, MotorInputs};
 use hal_sim::plant::Plant;
@@ -13,19 +14,7 @@ fn plant(inputs: MotorInputs) -> Plant {
 
 /// Sends a request (CRC appended) at the plant's time and runs until it is answered.
 fn send(plant: &mut Plant, body: &[u8]) -> Vec<u8> {
-    let mut frame = body.to_vec();
-    frame.extend(crc::crc16(body).to_le_bytes());
-    let now = plant.next_tick();
-    plant.drive_mut().on_rx(now, &frame);
-    for _ in 0..200 {
-        let t = plant.next_tick();
-        plant.advance_to(t);
-        plant.drive_mut().on_timer(t);
-        if let Some(r) = plant.drive_mut().take_reply() {
-            return r.to_vec();
-        }
-    }
-    panic!("no reply to {body:02X?}");
+    plant.request(body).unwrap_or_else(|| panic!("no reply to {body:02X?}"))
 }
 
 fn write(plant: &mut Plant, reg: u16, value: u16) {
@@ -187,4 +176,26 @@ fn section_9_4_4_common_settings() {
     write(&mut p, 0x6006, 0x7D00);
     let worst = run(&mut p, 6.0);
     assert!((p.rotor_microsteps() - 32000.0).abs() < 3.2 && worst < 64.0);
+}
+
+/// Seed 003's power-up jog (0x2013, our 0x21D8) on the simulated rotor: saved on, the drive on
+/// the EC-57 map turns the shaft 30° forward, then 15° back, and stands.
+#[test]
+fn the_power_up_jog_turns_the_rotor_30_degrees_and_back_15() {
+    let mut params = drive_core::Params::factory();
+    for (obj, v) in [(Obj::RegisterMap, 3), (Obj::PowerUpJog, 1), (Obj::Microsteps, 16), (Obj::PhaseCurrent, 1000)] {
+        assert!(params.set(obj, v), "{obj:?}");
+    }
+    let drive = Drive::boot_with_map(drive_core::DriveConfig::default(), drive_core::maps::Maps::ec57(), &params, 0);
+    let motor = MotorCatalog::builtin().get(DEFAULT_MOTOR).cloned().expect("catalogue motor");
+    let mut plant = Plant::new(drive, Motor::new(motor, MotorInputs::default()));
+    // Degrees of the shaft from the rotor's full steps (200 a turn).
+    let degrees = |p: &Plant| p.motor().rotor_full_steps() * 360.0 / 200.0;
+    let mut farthest = f64::MIN;
+    for _ in 0..300 {
+        plant.run_for(0.005);
+        farthest = farthest.max(degrees(&plant));
+    }
+    assert!((farthest - 30.0).abs() < 1.0, "30° forward: {farthest:.2}°");
+    assert!((degrees(&plant) - 15.0).abs() < 0.5, "15° back: {:.2}°", degrees(&plant));
 }

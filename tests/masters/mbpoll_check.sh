@@ -17,7 +17,7 @@ check "write 0x6008 = 900" "Written 1 references" mbpoll "${common[@]}" -t 4 -r 
 check "read back 0x6008" $'\\[24584\\]:[[:space:]]+900' mbpoll "${common[@]}" -t 4 -r 24584 -c 1 "$pty"
 check "32-bit speed, two registers" "Written 2 references" mbpoll "${common[@]}" -t 4 -r 24579 "$pty" 1 30000
 check "read back speed 96000 = 0x0001_7530" $'\\[24579\\]:[[:space:]]+1\n\\[24580\\]:[[:space:]]+30000' mbpoll "${common[@]}" -t 4 -r 24579 -c 2 "$pty"
-check "out of range -> exception" "Illegal data value" mbpoll "${common[@]}" -t 4 -r 24588 "$pty" 3
+check "out of range -> exception" "Illegal data value" mbpoll "${common[@]}" -t 4 -r 24588 "$pty" 257
 check "unknown address -> exception" "Illegal data address" mbpoll "${common[@]}" -t 4 -r 0 -c 1 "$pty"
 check "other slave -> timeout" "timeout|Connection timed out" mbpoll -m rtu -a 9 -b 9600 -P none -0 -1 -o 1 -t 4 -r 24588 "$pty"
 echo "mbpoll: $passed passed, $failed failed"

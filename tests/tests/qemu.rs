@@ -119,13 +119,15 @@ async fn tokio_modbus_drives_the_firmware_under_qemu() {
     rtts.sort();
     println!("QEMU read round trip: median {:?}, max {:?} (20 reads)", rtts[10], rtts[19]);
 
-    // The firmware carries every map: 0x2190 takes the JMC and the DS-CLS9 maps (for the next
-    // power-up) and refuses a map there is none of.
+    // The firmware carries every map: 0x2190 takes the JMC, DS-CLS9 and EC-57 maps (for the
+    // next power-up) and refuses a map there is none of.
     write(&mut ctx, 0x2190, 1).await.expect("the JMC map is carried");
     assert_eq!(read(&mut ctx, 0x2190, 1).await, vec![1]);
     write(&mut ctx, 0x2190, 2).await.expect("the DS-CLS9 map is carried");
     assert_eq!(read(&mut ctx, 0x2190, 1).await, vec![2]);
-    assert_eq!(write(&mut ctx, 0x2190, 3).await, Err(ExceptionCode::IllegalDataValue));
+    write(&mut ctx, 0x2190, 3).await.expect("the EC-57 map is carried");
+    assert_eq!(read(&mut ctx, 0x2190, 1).await, vec![3]);
+    assert_eq!(write(&mut ctx, 0x2190, 4).await, Err(ExceptionCode::IllegalDataValue));
     write(&mut ctx, 0x2190, 0).await.expect("back to the native map");
 
     // A write that is out of range changes nothing.

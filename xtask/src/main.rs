@@ -879,5 +879,12 @@ fn masters() -> Result<(), String> {
     // The DS-CLS9 map, with a home cam and two limit switches for its homing.
     let switches = ["--switch", "ext1:pnp:40:to=44", "--switch", "ext2:pnp:-120:below", "--switch", "ext3:pnp:120"];
     let sim = start_sim(&[&["--map", "cls9"][..], &switches[..]].concat())?;
-    run(Command::new(&python).arg(script.join("pymodbus_cls9.py")).arg(&sim.1))
+    run(Command::new(&python).arg(script.join("pymodbus_cls9.py")).arg(&sim.1))?;
+    drop(sim);
+    // The EC-57 map, over the pseudo-terminal and over TCP.
+    let sim = start_sim(&["--map", "ec57"])?;
+    run(Command::new(&python).arg(script.join("pymodbus_ec57.py")).arg(&sim.1))?;
+    drop(sim);
+    let sim = start_sim(&["--map", "ec57", "--tcp", "127.0.0.1:0"])?;
+    run(Command::new(&python).arg(script.join("pymodbus_ec57.py")).arg(&sim.1))
 }

@@ -213,7 +213,9 @@ impl Cubic {
         [n * (v0 + v1) - 2 * r * d, 3 * r * d * n - n * n * (2 * v0 + v1), n * n * n * v0]
     }
 
-    /// The denominator of the position, `R·N³` (positive for a segment of some time).
+    /// The denominator of the position, `R·N³` (positive for a segment of some time). Out of
+    /// line: a 128-bit product in four callers, each once a segment.
+    #[inline(never)]
     fn den(&self) -> i128 {
         let n = i128::from(self.n);
         i128::from(TICK_HZ) * n * n * n

@@ -99,7 +99,9 @@ impl Eq for Track {}
 /// 1/6, a multiplication where a division would be a library call on the Cortex-M4.
 const SIXTH: f32 = 1.0 / 6.0;
 
-/// `x` in fixed point: times `scale` (a power of two), truncated, saturating.
+/// `x` in fixed point: times `scale` (a power of two), truncated, saturating. Out of line: a
+/// library conversion in four places of the planning.
+#[inline(never)]
 fn fixed(x: f32, scale: f32) -> i64 {
     (x * scale) as i64
 }

@@ -185,6 +185,8 @@ pub enum Unit {
     MilliOhms,
     /// Microhenries.
     MicroHenries,
+    /// Degrees of the motor shaft.
+    Degrees,
 }
 
 impl Unit {
@@ -205,6 +207,7 @@ impl Unit {
             Unit::DeciSeconds => "100 ms",
             Unit::MilliOhms => "mΩ",
             Unit::MicroHenries => "µH",
+            Unit::Degrees => "°",
         }
     }
 }

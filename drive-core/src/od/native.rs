@@ -488,6 +488,19 @@ objects! {
     /// (two's complement) and wrapping; a position preset or a homing's new zero is no motion.
     /// Writing 0 clears it.
     CommandCount @ 0x21D4: U32, Rw, Live, Span(0, 0), default 0, Steps, "position commanded";
+    /// Position error angle (our object; seed 003's 0x200F), degrees of the motor shaft: in
+    /// closed loop a following error beyond it is the position error alarm (25); while not 0 it
+    /// replaces 0x21D0 and 0x605C (converted at the resolution in force, a microstep at least;
+    /// 0x21D7 = 0 turns the alarm off).
+    PositionErrorAngle @ 0x21D6: U16, Rw, Rom, Span(0, 360), default 0, Degrees, "position error angle";
+    /// Position error alarm (our object; seed 003's 0x200E): 0 turns the closed loop's position
+    /// error alarm off (the loop still follows; a stall bit is never set by it), 1 on.
+    PositionErrorAlarm @ 0x21D7: U8, Rw, Rom, Span(0, 1), default 1, None, "position error alarm";
+    /// Power-up jog (our object; seed 003's 0x2013): 1 turns the motor 30° forward, then 15°
+    /// back, once after power-up, at the jog speed 0x21A5 and the PP ramps (0x6067, 0x6069),
+    /// then it stands; a motion command, a stop or an alarm before it is done ends it, and a
+    /// drive that cannot move at power-up (power stage off, an alarm) does not jog.
+    PowerUpJog @ 0x21D8: U8, Rw, Rom, Span(0, 1), default 0, None, "power-up jog";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake

@@ -6,6 +6,9 @@
 //! motion command goes beyond it: a target beyond it stops on it, and a run or a jog towards it
 //! is a move to it at the run's speed. An axis already beyond a limit moves back freely and no
 //! further out.
+//!
+//! Here too the power-up jog (0x21D8, seed 003's 0x2013): two moves at the jog speed once the
+//! drive has powered up.
 
 use super::DriveState;
 use super::control::{Planner, Pp, SetPoint};
@@ -20,6 +23,18 @@ use core::borrow::Borrow;
 const LIMIT_POSITIVE: u32 = 1 << 0;
 /// 0x21AD: the negative soft limit on.
 const LIMIT_NEGATIVE: u32 = 1 << 1;
+
+/// Seed 003's power-up jog (0x21D8): the move that comes next.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) enum Jog {
+    /// None: done, ended, or not asked for.
+    #[default]
+    Done,
+    /// The first move, 30° forward, at the first service.
+    Start,
+    /// The move back, once the axis stands on the first one's target.
+    Back(i64),
+}
 
 impl<P: Borrow<Table>> DriveState<P> {
     /// Checks a motion command that does not plan (set position, home, clear the alarms).
@@ -63,6 +78,42 @@ impl<P: Borrow<Table>> DriveState<P> {
             self.apply(obj, 0xFF);
         }
         self.apply(Obj::ControllerStatus, u32::from(STATUS_EXT | STATUS_STALL));
+    }
+
+    /// When the power-up jog's next move is due: now, with the axis standing.
+    pub(crate) fn jog_due(&self) -> Option<crate::units::Instant> {
+        (self.jog != Jog::Done && self.ctl.axis.is_still()).then_some(self.now)
+    }
+
+    /// The power-up jog's next move, if due: 30° forward, then 15° back from where the first
+    /// ended (in encoder counts in closed loop). A move refused, or an axis standing anywhere but
+    /// where the jog took it, ends the jog.
+    pub(crate) fn jog_service(&mut self) {
+        if self.jog_due().is_none() {
+            return;
+        }
+        let here = self.ctl.axis.setpoint().whole;
+        let turn = match self.ctl.servo.feedback.encoder() {
+            Some(e) => i64::from(e.counts_per_rev()),
+            None => i64::from(self.per_rev()),
+        };
+        let target = match self.jog {
+            Jog::Start => here + turn / 12,
+            Jog::Back(t) if t == here => here - turn / 24,
+            _ => {
+                self.jog = Jog::Done;
+                return;
+            }
+        };
+        let sp = self.planner().pp_setpoint(target, self.param(Obj::JogSpeed) as f32);
+        let planned = self.plan_program_move(&sp);
+        if planned.is_ok() {
+            self.pp = Pp::default();
+        }
+        self.jog = match (self.jog, planned) {
+            (Jog::Start, Ok(t)) => Jog::Back(t),
+            _ => Jog::Done,
+        };
     }
 
     /// 0x21AE: 1 the power stage off, 2 energised and standing, 3 moving.

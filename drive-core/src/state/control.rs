@@ -152,6 +152,8 @@ pub(crate) const fn runs_on(obj: Obj) -> bool {
             | Obj::OutputLogic
             | Obj::InPositionWindow
             | Obj::PositionErrorLimit
+            | Obj::PositionErrorAngle
+            | Obj::PositionErrorAlarm
     )
 }
 
@@ -201,6 +203,8 @@ pub(crate) fn settings_of(params: &[u32; Obj::COUNT]) -> Settings {
             get(Obj::PositionErrorLimit),
             get(Obj::Microsteps),
             get(Obj::EncoderCpr),
+            get(Obj::PositionErrorAngle),
+            get(Obj::PositionErrorAlarm) == 1,
         ),
         servo_loop: get(Obj::TorqueLoop) == 1,
         gains: Gains::from_objects(get(Obj::Kp), get(Obj::Ki), get(Obj::Kd), get(Obj::PreFilter)),
@@ -218,16 +222,24 @@ pub(crate) fn settings_of(params: &[u32; Obj::COUNT]) -> Settings {
     }
 }
 
-/// The closed loop's following-error limit, microsteps: `counts` encoder counts (0x21D0, at
+/// The closed loop's following-error limit, microsteps: none without the `alarm` (0x21D7);
+/// `degrees` of the shaft (0x21D6) while not 0; else `counts` encoder counts (0x21D0, at
 /// `lines` × 4 a revolution) at `microsteps` (0x600C), or 0x605C's `steps` while `counts` is 0
-/// (4 000 counts of a 1000-line encoder at 1/16 are 3 200 microsteps).
-fn following_limit(steps: u32, counts: u32, microsteps: u32, lines: u32) -> u32 {
+/// (4 000 counts of a 1000-line encoder at 1/16 are 3 200 microsteps, 90° are 800).
+fn following_limit(steps: u32, counts: u32, microsteps: u32, lines: u32, degrees: u32, alarm: bool) -> u32 {
+    let per_rev = crate::units::FULL_STEPS_PER_REV as u32 * microsteps.max(1);
+    if !alarm {
+        return u32::MAX;
+    }
+    if degrees != 0 {
+        // At most 360° × 51 200 microsteps a revolution: within 32 bits.
+        return ((degrees * per_rev + 180) / 360).max(1);
+    }
     if counts == 0 {
         return steps;
     }
     // At most 30 000 counts × 51 200 microsteps a revolution: within 32 bits.
     let lines = lines.max(1);
-    let per_rev = crate::units::FULL_STEPS_PER_REV as u32 * microsteps.max(1);
     ((counts * per_rev + 2 * lines) / (4 * lines)).max(1)
 }
 
@@ -345,8 +357,8 @@ impl<P: Borrow<Table>> DriveState<P> {
         planner.plan_motion(obj, value, &mut self.ctl.axis, &mut self.pp)
     }
 
-    /// Plans a program's move to `sp.target` on the drive's own axis: the target it heads for
-    /// (within the soft limits), or why it is refused.
+    /// Plans a program's (or the power-up jog's) move to `sp.target` on the drive's own axis:
+    /// the target it heads for (within the soft limits), or why it is refused.
     pub(super) fn plan_program_move(&mut self, sp: &SetPoint) -> Result<i64, ObjError> {
         let (may_move, encoder, limits) = (self.may_move(), self.encoder_position(), self.active_limits());
         let planner = Planner { params: &self.params, now: self.plan_time(), may_move, encoder, limits, program: true };
@@ -478,6 +490,7 @@ impl<P: Borrow<Table>> DriveState<P> {
         self.follow_service();
         self.inputs_service();
         self.program_service();
+        self.jog_service();
         self.quick_stop_settle();
     }
 
@@ -485,7 +498,8 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// next reading.
     pub fn service_due(&self) -> Option<Instant> {
         let due = self.homing_due().into_iter().chain(self.analog_due()).chain(self.device_due());
-        due.chain(self.follow_due()).chain(self.inputs_due()).chain(self.program_due()).min()
+        let due = due.chain(self.follow_due()).chain(self.inputs_due()).chain(self.program_due());
+        due.chain(self.jog_due()).min()
     }
 
     /// Whether [`DriveState::service`] has something to do at `now`: for a platform that must
@@ -563,6 +577,8 @@ impl<P: Borrow<Table>> DriveState<P> {
 
     /// The time the motion a request commands starts at (the plan's first tick is the first
     /// at or after it): the request's time, and the margin where the tick runs apart.
+    // Out of line: eleven callers.
+    #[inline(never)]
     pub(crate) fn plan_time(&self) -> Instant {
         self.now.plus_micros(self.margin)
     }

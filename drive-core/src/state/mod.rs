@@ -203,6 +203,8 @@ pub struct DriveState<P = Table> {
     quick_check: Instant,
     /// The register maps the platform carries (bit n: 0x2190 = n).
     maps: u8,
+    /// The power-up jog's next move (0x21D8).
+    jog: command::Jog,
 }
 
 /// Whether the motion command `value` (0x21A0) plans a motion; the others act at once.
@@ -299,6 +301,7 @@ impl<P: Borrow<Table>> DriveState<P> {
             },
             quick_check: Instant::from_micros(0),
             maps: u8::MAX,
+            jog: if get(Obj::PowerUpJog) == 1 { command::Jog::Start } else { command::Jog::Done },
         }
     }
 
@@ -330,6 +333,7 @@ impl<P: Borrow<Table>> DriveState<P> {
             device,
             quick_check: _,
             maps: _,
+            jog: _,
         } = self;
         Checkpoint {
             params: *params,
