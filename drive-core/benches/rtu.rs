@@ -310,6 +310,10 @@ fn setup_cls9(frame: &'static [u8]) -> MapCase {
     setup_map(drive_core::maps::Maps::cls9(), frame)
 }
 
+fn setup_ec57(frame: &'static [u8]) -> MapCase {
+    setup_map(drive_core::maps::Maps::ec57(), frame)
+}
+
 /// The last byte, then the reply at t3.5.
 fn map_reply(mut case: MapCase) -> usize {
     let t0 = black_box(T0);
@@ -333,9 +337,18 @@ fn cls9(case: MapCase) -> usize {
     map_reply(case)
 }
 
+// ec57: the EC-57 map (seed 003), its sub-indexed requests: §1.3.1's read of 4 registers from
+// 0x2000 and §1.3.2's write of 0x2005 (pulses a revolution: the resolution).
+#[library_benchmark]
+#[bench::read_4(args = (&[SLAVE, 0x03, 0x20, 0x00, 0x00, 0x00, 0x04]), setup = setup_ec57)]
+#[bench::write_1(args = (&[SLAVE, 0x06, 0x20, 0x05, 0x00, 0x27, 0x10]), setup = setup_ec57)]
+fn ec57(case: MapCase) -> usize {
+    map_reply(case)
+}
+
 library_benchmark_group!(
     name = rtu;
-    benchmarks = drive, drive_whole, crc_floor, rmodbus, jmc, cls9
+    benchmarks = drive, drive_whole, crc_floor, rmodbus, jmc, cls9, ec57
 );
 
 main!(library_benchmark_groups = rtu);

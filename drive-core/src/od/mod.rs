@@ -144,6 +144,12 @@ impl Range {
             Type::S32 => i64::from(raw as i32),
             _ => i64::from(raw),
         };
+        self.contains(v, raw)
+    }
+
+    /// Whether the value `v` (its raw bits `raw`) is within the range.
+    #[inline(always)]
+    fn contains(self, v: i64, raw: u32) -> bool {
         match self {
             Range::Any => true,
             Range::Span(min, max) => i64::from(min) <= v && v <= i64::from(max),
@@ -267,6 +273,12 @@ impl ObjectDef {
         }
     }
 
+    /// Whether the value is the drive's running state ([`Storage::Live`]), on the raw bits.
+    #[inline(always)]
+    pub const fn is_live(&self) -> bool {
+        (self.kind >> 5) & 3 == Storage::Live as u8
+    }
+
     /// Bus access.
     #[inline(always)]
     pub const fn access(&self) -> Access {
@@ -287,6 +299,27 @@ impl ObjectDef {
             2 => Storage::Live,
             _ => Storage::Const,
         }
+    }
+
+    /// Whether a master cannot write it (read only, or a constant): on the raw bits, as the
+    /// request path asks it.
+    #[inline(always)]
+    pub const fn is_read_only(&self) -> bool {
+        (self.kind >> 3) & 3 == 0 || (self.kind >> 5) & 3 == 3
+    }
+
+    /// Whether `raw` (as read from the registers) is a value of its type within its range
+    /// ([`Range::accepts`] with [`ObjectDef::ty`]), on the raw bits.
+    #[inline(always)]
+    pub fn accepts(&self, raw: u32) -> bool {
+        let (fits, v) = match self.kind & 7 {
+            0 => (raw <= 0xFF, i64::from(raw)),
+            1 => (raw <= 0xFFFF, i64::from(raw)),
+            2 => (true, i64::from(raw)),
+            3 => (true, i64::from(raw as i32)),
+            _ => (false, 0),
+        };
+        fits && self.range.contains(v, raw)
     }
 
     /// Registers the object occupies.

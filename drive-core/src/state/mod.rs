@@ -108,7 +108,7 @@ impl Params {
     /// Sets `obj` to `value` if a save covers it and its range accepts the value; whether it did.
     pub fn set(&mut self, obj: Obj, value: u32) -> bool {
         let d = obj.def();
-        let ok = Self::covers(d) && d.range.accepts(d.ty(), value);
+        let ok = Self::covers(d) && d.accepts(value);
         if ok && let Some(v) = self.values.get_mut(obj as usize) {
             *v = value;
         }
@@ -532,11 +532,7 @@ impl<P: Borrow<Table>> DriveState<P> {
     /// The value of the object `d` declares: from the running status for live objects, else stored.
     #[inline]
     pub fn read_def(&self, d: &ObjectDef) -> u32 {
-        if d.storage() == Storage::Live {
-            self.live(d.obj)
-        } else {
-            self.params.get(d.obj as usize).copied().unwrap_or(0)
-        }
+        if d.is_live() { self.live(d.obj) } else { self.params.get(d.obj as usize).copied().unwrap_or(0) }
     }
 
     fn live(&self, obj: Obj) -> u32 {
@@ -624,10 +620,10 @@ impl<P: Borrow<Table>> DriveState<P> {
 
     /// Whether the object `d` declares takes writes, and `value` is within its range.
     fn check_writable(d: &ObjectDef, value: u32) -> Result<(), ObjError> {
-        if d.access() == Access::Ro || d.storage() == Storage::Const {
+        if d.is_read_only() {
             return Err(ObjError::ReadOnly);
         }
-        if !d.range.accepts(d.ty(), value) {
+        if !d.accepts(value) {
             return Err(ObjError::OutOfRange);
         }
         Ok(())
