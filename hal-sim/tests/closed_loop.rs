@@ -259,3 +259,26 @@ fn the_ec57_position_error_alarm_lands_in_its_fault_list() {
     let list = request(&mut p, &[1, 0x03, 0x20, 0x1C, 1, 0, 2]);
     assert_eq!(&list[2..7], &[4, 0, 25, 0, 0], "the fault list: 25 newest, nothing before");
 }
+
+/// Seed 003's 0x2020 (our 0x21D9): the in-position output (OUT1, function 3) from the drive's
+/// encoder window (1) or from the plan's end (0). A blocked rotor with the position error alarm
+/// off: the plan ends, the encoder is far behind.
+#[test]
+fn the_in_position_output_from_the_encoder_or_from_the_plan() {
+    /// OUT1, GPIO5.
+    const OUT1: u16 = 1 << 4;
+    let mut p = plant(1, 0);
+    set(&mut p, Obj::OutputFunction1, 3);
+    set(&mut p, Obj::PositionErrorAlarm, 0);
+    set(&mut p, Obj::MaxSpeed, 4000);
+    p.inject(Change::Blocked(true));
+    set(&mut p, Obj::RelativeMove, 2000);
+    run(&mut p, 1.5);
+    assert!(p.drive().state().controller().axis().is_still(), "the plan has ended");
+    assert!(read(&p, Obj::FollowingError).abs() > 1000, "the rotor far behind");
+    let gpio = |p: &Plant| p.outputs().expect("ticked").gpio;
+    assert_eq!(gpio(&p) & OUT1, 0, "not in position by the encoder");
+    set(&mut p, Obj::InPositionSource, 0);
+    run(&mut p, 0.01);
+    assert_eq!(gpio(&p) & OUT1, OUT1, "in position by the plan");
+}

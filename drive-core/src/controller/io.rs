@@ -85,8 +85,9 @@ pub struct IoFunctions {
     pub general: u8,
     /// The outputs active low (0x21C8).
     pub output_low: u8,
-    /// The in-position window (0x21C9): counts of the encoder in closed loop.
-    pub in_position: u16,
+    /// The in-position window (0x21C9): counts of the encoder in closed loop; `u32::MAX` where
+    /// the plan's end is the position (0x21D9 = 0).
+    pub in_position: u32,
 }
 
 /// The three external stops: their pin, their bit in 0x6013/0x6014, their bit in 0x6001.

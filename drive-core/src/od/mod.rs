@@ -309,8 +309,9 @@ impl ObjectDef {
     }
 
     /// Whether `raw` (as read from the registers) is a value of its type within its range
-    /// ([`Range::accepts`] with [`ObjectDef::ty`]), on the raw bits.
-    #[inline(always)]
+    /// ([`Range::accepts`] with [`ObjectDef::ty`]), on the raw bits. Out of line: the write
+    /// path and power-up each had a copy.
+    #[inline(never)]
     pub fn accepts(&self, raw: u32) -> bool {
         let (fits, v) = match self.kind & 7 {
             0 => (raw <= 0xFF, i64::from(raw)),

@@ -501,6 +501,11 @@ objects! {
     /// then it stands; a motion command, a stop or an alarm before it is done ends it, and a
     /// drive that cannot move at power-up (power stage off, an alarm) does not jog.
     PowerUpJog @ 0x21D8: U8, Rw, Rom, Span(0, 1), default 0, None, "power-up jog";
+    /// In-position source (our object; seed 003's 0x2020): 1 the in-position output (0x21C3
+    /// function 3) is on while the axis stands on its target within 0x21C9 encoder counts in
+    /// closed loop, the drive's own measure; 0 once the plan has ended, whatever the encoder
+    /// says.
+    InPositionSource @ 0x21D9: U8, Rw, Rom, Span(0, 1), default 1, None, "in-position source";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake

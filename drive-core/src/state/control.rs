@@ -151,6 +151,7 @@ pub(crate) const fn runs_on(obj: Obj) -> bool {
             | Obj::GeneralOutputs
             | Obj::OutputLogic
             | Obj::InPositionWindow
+            | Obj::InPositionSource
             | Obj::PositionErrorLimit
             | Obj::PositionErrorAngle
             | Obj::PositionErrorAlarm
@@ -259,7 +260,8 @@ fn io_functions(get: &impl Fn(Obj) -> u32) -> IoFunctions {
         outputs,
         general: get(Obj::GeneralOutputs) as u8,
         output_low: get(Obj::OutputLogic) as u8,
-        in_position: get(Obj::InPositionWindow) as u16,
+        // Without the encoder's say (0x21D9 = 0) every following error is within the window.
+        in_position: if get(Obj::InPositionSource) == 0 { u32::MAX } else { get(Obj::InPositionWindow) },
     }
 }
 
