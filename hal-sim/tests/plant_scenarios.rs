@@ -199,3 +199,35 @@ fn the_power_up_jog_turns_the_rotor_30_degrees_and_back_15() {
     assert!((farthest - 30.0).abs() < 1.0, "30° forward: {farthest:.2}°");
     assert!((degrees(&plant) - 15.0).abs() < 0.5, "15° back: {:.2}°", degrees(&plant));
 }
+
+/// Seed 003's 0x2006 (our 0x21DA): disabled, the motor is held where it stands at the standstill
+/// current, against a load that turns a freed rotor; a fault frees it all the same.
+#[test]
+fn a_disabled_drive_holds_the_rotor_when_asked_to() {
+    let motor = || MotorCatalog::builtin().get(DEFAULT_MOTOR).cloned().expect("catalogue motor");
+    let run = |hold: u32| {
+        let mut params = drive_core::Params::factory();
+        for (obj, v) in [(Obj::DisabledHold, hold), (Obj::PhaseCurrent, 1000), (Obj::IdleCurrent, 50)] {
+            assert!(params.set(obj, v), "{obj:?}");
+        }
+        let drive = Drive::boot(drive_core::DriveConfig::default(), &params, 0);
+        let mut plant = Plant::new(drive, Motor::new(motor(), MotorInputs::default()));
+        plant.run_for(0.1);
+        assert_eq!(plant.write(Obj::Enable, 0), Ok(()));
+        plant.inject(hal_sim::inject::Change::LoadTorque(0.05));
+        plant.run_for(1.0);
+        let out = plant.outputs().expect("ticked");
+        let at = (plant.motor().rotor_full_steps(), out.enabled, out.current_ma);
+        // An over-voltage latches a fault: the stage off, held or not.
+        plant.inject(hal_sim::inject::Change::Supply(70.0));
+        plant.run_for(0.05);
+        assert!(!plant.outputs().expect("ticked").enabled, "a fault frees the motor");
+        at
+    };
+    let (held, on, current) = run(1);
+    assert!(held.abs() < 0.5, "held within half a step: {held:.2}");
+    assert!(on && current == 500, "the stage on at the standstill current: {current} mA");
+    let (freed, on, _) = run(0);
+    assert!(!on, "freed");
+    assert!(freed.abs() > 1.0, "a freed rotor turns under the load: {freed:.2} steps");
+}

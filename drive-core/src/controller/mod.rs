@@ -106,6 +106,8 @@ pub struct Status {
 pub struct Settings {
     /// The master enabled the power stage (0x6011 = 1).
     pub enabled: bool,
+    /// Disabled, the motor is held at the standstill current (0x21DA).
+    pub hold_disabled: bool,
     /// The deceleration of a stop the controller starts on its own (watchdog, PVT FIFO dry, PVT
     /// stop), pps²; 0 stops at once.
     pub stop_decel: u32,
@@ -429,10 +431,13 @@ impl Controller {
         if !still {
             self.still_since = None;
         }
-        let idle = still && now.since(since) >= s.idle_delay_us;
+        let state = self.power_state();
+        // Held while disabled (0x21DA): at the standstill current, where it stands.
+        let held = state == PowerState::Disabled && s.hold_disabled;
+        let idle = held || (still && now.since(since) >= s.idle_delay_us);
         let full = s.phase_current_ma * if idle { s.idle_current_pct } else { 100 } / 100;
         let current = (full as f32 * share.clamp(0.0, 1.0)) as u32;
-        let enabled = self.power_stage_on();
+        let enabled = state == PowerState::On || held;
         let gpio = self.output_levels();
         let function_pins = self.settings.io.output_pins;
         if function_pins != 0 {

@@ -141,7 +141,7 @@ const RPM: Scale = Scale::PerRev(1, 60);
 const FAULT_CODE: Scale = Scale::Field(24, 8);
 
 /// The table (§1.2), by (index, sub-index) as [`key`] makes them.
-pub static ENTRIES: [Entry; 43] = [
+pub static ENTRIES: [Entry; 44] = [
     Entry::new(key(0x2000, 0), Obj::NodeId, &Scale::One),
     Entry::new(key(0x2001, 0), Obj::AddressSource, &Scale::One),
     Entry::new(key(0x2002, 0), Obj::MotorDirection, &Scale::Table(&SWITCH)),
@@ -149,6 +149,7 @@ pub static ENTRIES: [Entry; 43] = [
     Entry::new(key(0x2003, 2), Obj::IdleCurrent, &Scale::One),
     Entry::new(key(0x2004, 0), Obj::PhaseCurrent, &Scale::One),
     Entry::new(key(0x2005, 0), Obj::Microsteps, &Scale::PulsesPerRev),
+    Entry::new(key(0x2006, 0), Obj::DisabledHold, &Scale::Table(&SWITCH)),
     Entry::new(key(0x200D, 0), Obj::SupplyVoltage, &Scale::Ratio(1000, 1)),
     Entry::new(key(0x200E, 0), Obj::PositionErrorAlarm, &Scale::Table(&SWITCH)),
     Entry::new(key(0x200F, 0), Obj::PositionErrorAngle, &Scale::One),
@@ -254,13 +255,14 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         "0x2004 (peak current) is in mA (the drive's 0-6000), 0x200D the supply in volts, 0x2017 the speed in r/min (the encoder's in closed loop, the command's in open loop), 0x2018 the closed loop's following error in encoder counts (0 in open loop; read only, the manual's R/W/S and default 1000 being a misprint for a measurement), 0x2014 the inputs' states (bit 0 IN1).",
         "0x201C.1-9 is the fault list, newest first: each entry the alarm code of the drive's fault history (10 over-current, 11 phase loss, 13 under-voltage, 14 over-voltage, 15 over-temperature, 25 position error, 26 overload); read only (the manual's R/W/S: a history is not written). 0x201D = 1 empties it (saved at once: it stays empty after a power cycle), 0x201E = 1 clears the latched alarms; 0 does nothing for either.",
         "0x2010 and 0x2011 are the high and low words of the position commands received: the microsteps the drive's setpoint has moved since power-up or the last clear, signed (two's complement over the two words) and wrapping; a position preset or a homing's new zero is no motion. Writing 1 to 0x2011 clears it; other values are refused (06), and 0x2010 is read only.",
+        "0x2006 = 1 holds the motor where it stands, at the standstill current (0x2003.2 of 0x2004), while the drive is disabled (the native 0x6011 = 0 in the window); a fault or a power loss frees it all the same; 0 frees it.",
         "0x200E and 0x200F are the closed loop's position error alarm (25) and its angle in degrees of the shaft: 0x200E = 1 latches the alarm when the following error goes beyond 0x200F's angle (converted to microsteps at the resolution in force); 0x200F = 0 leaves the drive's own limit (0x21D0 in encoder counts, or 0x605C's 64 microsteps); 0x200E = 0, the manual's factory value, lets the loop follow without the alarm. Open loop has no following error: 0x2019 = 1 (closed loop, from the next power-up) needs the encoder the drive's 0x6054 describes.",
         "0x2013 = 1 (saved) jogs the motor at power-up: 30° forward, then 15° back, at the drive's jog speed (0x21A5, 2 000 microsteps/s from the factory) and its PP ramps (0x6067, 0x6069), then it stands; a motion command, a stop or an alarm before it is done ends it, and a drive that cannot move at power-up does not jog.",
         "0x2020 says when the in-position output is on: 0 (the manual's factory value) once the plan has ended, 10 while the axis stands on its target within the drive's window (0x21C9, encoder counts) in closed loop; in open loop both are the plan's end.",
         "0x2021 bit k inverts IN k+1; 0x2022.1-5 give IN1-IN5 a function: 1 origin (the homing's home switch), 2 positive limit, 4 negative limit (a motion heading into an active limit stops at the stop deceleration, and a command towards it is refused), 8 quick stop (stops at the quick-stop deceleration), 16 custom and 0 none (the master reads it in 0x2014); both read back as 0. The touch probes 32 and 64 are refused (06). IN1-IN3 are the drive's EXT1-EXT3, IN4 and IN5 GPIO1 and GPIO2.",
         "0x2024 bit k set: OUT k+1 is high when on (the drive's output logic inverted); 0x2025.1-3: 1 alarm output (on while no alarm is latched), 2 in position, 16 master-controlled (the drive's general output, 0x21C7 in the window), 0 none. OUT1-OUT3 are the drive's GPIO5-GPIO7.",
         "0x2030 (write only): 1 saves the parameters, 2 restores the factory ones and saves them (both refused with 06 while the motor moves); 0 does nothing. Saved parameters are kept across power cycles; the drive saves nothing on its own.",
-        "Not in this map yet, answered 03: 0x2006, 0x2007-0x200C, 0x2012, 0x2015, 0x2016, 0x201B, 0x201F and 0x2023.1-5.",
+        "Not in this map yet, answered 03: 0x2007-0x200C, 0x2012, 0x2015, 0x2016, 0x201B, 0x201F and 0x2023.1-5.",
     ],
     remarks: &[],
     decimal: false,

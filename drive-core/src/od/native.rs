@@ -506,6 +506,11 @@ objects! {
     /// closed loop, the drive's own measure; 0 once the plan has ended, whatever the encoder
     /// says.
     InPositionSource @ 0x21D9: U8, Rw, Rom, Span(0, 1), default 1, None, "in-position source";
+    /// Hold when disabled (our object; seed 003's 0x2006): 1 keeps the motor held where it
+    /// stands, at the standstill current (0x2102 of 0x600D), while the power stage is disabled
+    /// (0x6011 = 0, the power state machine's disabled states); a fault or a power loss frees it
+    /// all the same. 0 frees it.
+    DisabledHold @ 0x21DA: U8, Rw, Rom, Span(0, 1), default 0, None, "hold when disabled";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake

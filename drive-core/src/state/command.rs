@@ -32,8 +32,9 @@ pub(crate) enum Jog {
     Done,
     /// The first move, 30° forward, at the first service.
     Start,
-    /// The move back, once the axis stands on the first one's target.
-    Back(i64),
+    /// The move back, once the axis stands on the first one's target (its low 32 bits: a
+    /// jog's targets are a turn apart at most).
+    Back(i32),
 }
 
 impl<P: Borrow<Table>> DriveState<P> {
@@ -99,7 +100,7 @@ impl<P: Borrow<Table>> DriveState<P> {
         };
         let target = match self.jog {
             Jog::Start => here + turn / 12,
-            Jog::Back(t) if t == here => here - turn / 24,
+            Jog::Back(t) if t == here as i32 => here - turn / 24,
             _ => {
                 self.jog = Jog::Done;
                 return;
@@ -111,7 +112,7 @@ impl<P: Borrow<Table>> DriveState<P> {
             self.pp = Pp::default();
         }
         self.jog = match (self.jog, planned) {
-            (Jog::Start, Ok(t)) => Jog::Back(t),
+            (Jog::Start, Ok(t)) => Jog::Back(t as i32),
             _ => Jog::Done,
         };
     }

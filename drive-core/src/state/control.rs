@@ -152,6 +152,7 @@ pub(crate) const fn runs_on(obj: Obj) -> bool {
             | Obj::OutputLogic
             | Obj::InPositionWindow
             | Obj::InPositionSource
+            | Obj::DisabledHold
             | Obj::PositionErrorLimit
             | Obj::PositionErrorAngle
             | Obj::PositionErrorAlarm
@@ -167,6 +168,7 @@ pub(crate) fn settings_of(params: &[u32; Obj::COUNT]) -> Settings {
     let io = io_functions(&get);
     Settings {
         enabled: get(Obj::Enable) == 1,
+        hold_disabled: get(Obj::DisabledHold) == 1,
         stop_decel: stop_deceleration(mode, get(Obj::PpDecel), get(Obj::DecelLevel)),
         phase_current_ma: get(Obj::PhaseCurrent),
         idle_current_pct: get(Obj::IdleCurrent),

@@ -630,7 +630,7 @@ impl<P: Borrow<Table>> DriveState<P> {
     }
 
     /// [`DriveState::check`] for the object `d` declares.
-    #[inline(always)]
+    #[inline(never)]
     pub fn check_def(&self, d: &ObjectDef, value: u32) -> Result<(), ObjError> {
         Self::check_writable(d, value)?;
         match (d.obj, value) {
