@@ -239,12 +239,18 @@ fn io_settings_act_in_the_drives_terms() {
     // The input states: IN1 active.
     r.write_sub(0x21C2, 0xFF, 1).expect("pseudo-input IN1");
     assert_eq!(r.read_sub(0x2014, 0, 1), Ok(vec![1]));
-    // The factory defaults of the manual: IN2 origin, IN3 and IN4 the limits, OUT2 alarm.
+    // Touch probe 2 on IN3 (64: the drive's 22).
+    r.write_sub(0x2022, 3, 64).expect("IN3 probe 2");
+    assert_eq!(r.drive.state().read(Obj::InputFunction3), 22);
+    assert_eq!(r.read_sub(0x2022, 3, 1), Ok(vec![64]));
+    // The factory defaults of the manual: IN1 probe 1, IN2 origin, IN3 and IN4 the limits, OUT2
+    // alarm.
     let r = rig();
     let st = r.drive.state();
     assert_eq!(
-        [Obj::InputFunction2, Obj::InputFunction3, Obj::InputFunction4, Obj::OutputFunction2].map(|o| st.read(o)),
-        [11, 9, 10, 2]
+        [Obj::InputFunction1, Obj::InputFunction2, Obj::InputFunction3, Obj::InputFunction4, Obj::OutputFunction2]
+            .map(|o| st.read(o)),
+        [21, 11, 9, 10, 2]
     );
 }
 

@@ -282,3 +282,27 @@ fn the_in_position_output_from_the_encoder_or_from_the_plan() {
     run(&mut p, 0.01);
     assert_eq!(gpio(&p) & OUT1, OUT1, "in position by the plan");
 }
+
+/// A touch probe in closed loop captures the encoder's position (counts) at the input's edge:
+/// within a count of the rotor's.
+#[test]
+fn a_touch_probe_captures_the_encoder_in_closed_loop() {
+    let mut p = plant(1, 0);
+    let cam = hal_sim::machine::Switch::parse("ext1:pnp:100").expect("switch");
+    *p.machine_mut() = hal_sim::machine::Machine::new(vec![cam], None);
+    set(&mut p, Obj::InputFunction1, 22);
+    set(&mut p, Obj::MaxSpeed, 4000);
+    set(&mut p, Obj::RelativeMove, 4000);
+    let mut rotor_at_edge = None;
+    for _ in 0..40_000 {
+        run(&mut p, 0.00005);
+        if rotor_at_edge.is_none() && read(&p, Obj::ProbeStatus) & 2 != 0 {
+            rotor_at_edge = Some(rotor(&p, true));
+        }
+    }
+    let rotor = rotor_at_edge.expect("probe 2 fired");
+    let captured = f64::from(read(&p, Obj::ProbePosition2));
+    // 100 full steps: half a turn, 2000 counts.
+    assert!((captured - 2000.0).abs() <= 2.0, "captured {captured} at the cam's 2000 counts");
+    assert!((captured - rotor).abs() <= 1.0, "captured {captured}, the rotor at {rotor:.2} counts");
+}

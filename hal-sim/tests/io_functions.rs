@@ -194,3 +194,44 @@ fn outputs_show_their_functions_at_their_logic() {
     assert_eq!(outputs(&p) & OUT[0], 0, "an alarm turns the alarm output off");
     assert_eq!(outputs(&p) & OUT[3], OUT[3], "and the drive is not ready");
 }
+
+/// Touch probes (input functions 21 and 22; seed 003's 0x2022 = 32, 64): the position at the
+/// input's activation, within a microstep of the rotor's at the edge (open loop: the setpoint,
+/// crossed at a steady speed; in a ramp the open-loop rotor swings a few microsteps about it),
+/// kept until the status bit is cleared, then taken again at the next activation.
+#[test]
+fn a_touch_probe_captures_the_position_at_its_edge() {
+    // A PNP cam from 100 full steps up on EXT1 (IN1): 1600 microsteps at 1/16, crossed at the
+    // cruise of a move to 3200.
+    let mut p = plant(&["ext1:pnp:100"]);
+    set(&mut p, Obj::InputFunction1, 21);
+    set(&mut p, Obj::RelativeMove, 3200);
+    // The rotor where the input first reads active, tick by tick.
+    let mut rotor_at_edge = None;
+    for _ in 0..40_000 {
+        p.run_for(0.00005);
+        if rotor_at_edge.is_none() && p.drive().state().read(Obj::ProbeStatus) & 1 != 0 {
+            rotor_at_edge = Some(p.rotor_microsteps());
+        }
+    }
+    let captured = p.drive().state().read_i32(Obj::ProbePosition1);
+    let rotor = rotor_at_edge.expect("the probe fired");
+    assert!((captured - 1600).abs() <= 1, "captured {captured} at the cam's 1600");
+    assert!((f64::from(captured) - rotor).abs() <= 1.0, "captured {captured}, the rotor at {rotor:.2}");
+    assert_eq!(position(&p), 3200);
+    // Back below the cam and up again: no new capture while the bit is set...
+    set(&mut p, Obj::RelativeMove, (-3200i32) as u32);
+    p.run_for(2.0);
+    set(&mut p, Obj::RelativeMove, 2000);
+    p.run_for(2.0);
+    assert_eq!(p.drive().state().read_i32(Obj::ProbePosition1), captured);
+    // ... and after a clear, the next activation captures again.
+    set(&mut p, Obj::ProbeStatus, 1);
+    assert_eq!(p.drive().state().read(Obj::ProbeStatus), 0);
+    set(&mut p, Obj::RelativeMove, (-2000i32) as u32);
+    p.run_for(2.0);
+    set(&mut p, Obj::RelativeMove, 3200);
+    p.run_for(2.0);
+    assert_eq!(p.drive().state().read(Obj::ProbeStatus), 1, "probe 1 again; probe 2 not wired");
+    assert!((p.drive().state().read_i32(Obj::ProbePosition1) - 1600).abs() <= 1);
+}

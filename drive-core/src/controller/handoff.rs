@@ -117,6 +117,7 @@ impl Controller {
         s.faults = merge(s.faults, b.faults, m.faults);
         s.comm = merge(s.comm, b.comm, m.comm);
         s.input_edges = merge(s.input_edges, b.input_edges, m.input_edges);
+        s.probes = merge(s.probes, b.probes, m.probes);
         if m.analog_in != b.analog_in {
             s.analog_in = m.analog_in;
         }
@@ -168,6 +169,7 @@ impl Controller {
         model.status = self.status;
         model.faults = self.faults;
         model.commanded = self.commanded;
+        model.probe = self.probe;
         model.servo = self.servo;
         model.run = self.run;
         model.still_since = self.still_since;

@@ -79,6 +79,8 @@ pub struct IoFunctions {
     pub limit_positive: u8,
     /// The inputs that are negative limit switches (function 10).
     pub limit_negative: u8,
+    /// The inputs that are touch probes 1 and 2 (functions 21, 22).
+    pub probes: [u8; 2],
     /// OUT1-OUT4's functions.
     pub outputs: [OutputFunction; 4],
     /// The general outputs on (bit k: OUT k+1; 0x21C7).
@@ -267,6 +269,20 @@ impl Controller {
 }
 
 impl Controller {
+    /// The touch probes among the inputs that `rose`: each not yet captured takes the position
+    /// (the encoder's in closed loop, the setpoint's in open loop). Out of line: an edge's work.
+    #[inline(never)]
+    fn probe(&mut self, rose: u8) {
+        let at = if self.servo.feedback.encoder().is_some() { self.measured() } else { self.axis.setpoint().whole };
+        for (k, (&inputs, slot)) in self.settings.io.probes.iter().zip(self.probe.iter_mut()).enumerate() {
+            let bit = 1 << k;
+            if rose & inputs != 0 && self.status.probes & bit == 0 {
+                *slot = at as i32;
+                self.status.probes |= bit;
+            }
+        }
+    }
+
     /// The input pins at `now`: 0x6031's input levels and the external stops.
     #[inline]
     pub(crate) fn pins(&mut self, now: Instant, levels: u16) {
@@ -283,20 +299,22 @@ impl Controller {
     /// there), and the limit switches, which stop a motion heading into them.
     #[inline]
     fn functions(&mut self, levels: u16) {
-        let io = &self.settings.io;
-        if io.inputs == 0 {
+        let (inputs, input_low) = (self.settings.io.inputs, self.settings.io.input_low);
+        if inputs == 0 {
             return;
         }
         // IN1-IN3 are 0x6031's bits 7-9, IN4-IN7 its bits 0-3 (`IN_PINS`).
         let high = ((levels >> 7) & 0b111) as u8 | (((levels & 0b1111) as u8) << 3);
-        let active = (high ^ io.input_low) & io.inputs;
+        let active = (high ^ input_low) & inputs;
         let rose = if self.io.inputs_read { active & !self.status.inputs } else { 0 };
         (self.status.inputs, self.io.inputs_read) = (active, true);
         if rose != 0 {
             self.status.input_edges |= rose;
             self.events.set(super::Events::INPUT);
+            self.probe(rose);
         }
         let v = self.axis.setpoint().velocity;
+        let io = &self.settings.io;
         let into = (v > 0.0 && active & io.limit_positive != 0) || (v < 0.0 && active & io.limit_negative != 0);
         // The pulse following drops the pulses heading into a limit instead (`count_pulses`).
         if self.axis.is_still() {

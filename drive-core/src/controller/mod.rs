@@ -99,6 +99,8 @@ pub struct Status {
     pub inputs: u8,
     /// The inputs that turned active since the bus side last took them.
     pub input_edges: u8,
+    /// Touch probes captured (0x21DF: bit 0 probe 1, bit 1 probe 2).
+    pub probes: u8,
 }
 
 /// The settings the controller runs, checked and converted from the dictionary's values.
@@ -239,6 +241,8 @@ pub struct Controller {
     /// The fault history is to be emptied (0x200F = 5): by the tick of a controller ticked
     /// where it is kept, by the sync where the tick owns one of its own.
     pub(crate) clear_history: bool,
+    /// The touch probes' captured positions (0x21DB, 0x21DD).
+    pub(crate) probe: [i32; 2],
     /// The closed loop and stall detection.
     pub(crate) servo: Servo,
     /// The PVT run, if one runs.
@@ -324,6 +328,7 @@ impl Controller {
             faults,
             commanded: 0,
             clear_history: false,
+            probe: [0; 2],
             servo: Servo::new(feedback),
             run: None,
             ahead: None,

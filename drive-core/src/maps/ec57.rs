@@ -101,7 +101,7 @@ static SWITCH: &[Choice] = &[Choice { lo: 0, hi: 0, drive: 0 }, Choice { lo: 1, 
 
 /// 0x2022.1-5: 1 origin (the homing's home switch, the drive's 11), 2 positive and 4 negative
 /// limit (9, 10), 8 quick stop (the motion command 7), 16 custom and 0 none (the drive's 0: the
-/// master reads the input in 0x2014).
+/// master reads the input in 0x2014), 32 and 64 touch probes 1 and 2 (21, 22).
 static INPUT_FUNCTIONS: &[Choice] = &[
     Choice { lo: 0, hi: 0, drive: 0 },
     Choice { lo: 1, hi: 1, drive: 11 },
@@ -109,6 +109,8 @@ static INPUT_FUNCTIONS: &[Choice] = &[
     Choice { lo: 4, hi: 4, drive: 10 },
     Choice { lo: 8, hi: 8, drive: 7 },
     Choice { lo: 16, hi: 16, drive: 0 },
+    Choice { lo: 32, hi: 32, drive: 21 },
+    Choice { lo: 64, hi: 64, drive: 22 },
 ];
 
 /// 0x2025.1-3: 1 alarm output (the drive's 2), 2 in position (3), 16 master-controlled (1, the
@@ -222,9 +224,10 @@ pub static LAYOUT: Layout = Layout {
 
 /// The manual's factory values where they differ from the drive's: no position error alarm,
 /// the standstill current after 50 ms at 50 %, 1 A peak, 10 000 pulses a revolution (the table prints 1000, outside
-/// its own range 6400-51200; its example writes 10 000), IN2-IN5 origin, the limits and custom
-/// (IN1's probe is not offered), OUT1 and OUT2 the alarm output.
-static DEFAULTS: [(u16, i32); 12] = [
+/// its own range 6400-51200; its example writes 10 000), IN1 touch probe 1, IN2-IN5 origin, the
+/// limits and custom, OUT1 and OUT2 the alarm output.
+static DEFAULTS: [(u16, i32); 13] = [
+    (key(0x2022, 1), 32),
     (key(0x200E, 0), 0),
     (key(0x2020, 0), 0),
     (key(0x2003, 1), 50),
@@ -259,7 +262,7 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         "0x200E and 0x200F are the closed loop's position error alarm (25) and its angle in degrees of the shaft: 0x200E = 1 latches the alarm when the following error goes beyond 0x200F's angle (converted to microsteps at the resolution in force); 0x200F = 0 leaves the drive's own limit (0x21D0 in encoder counts, or 0x605C's 64 microsteps); 0x200E = 0, the manual's factory value, lets the loop follow without the alarm. Open loop has no following error: 0x2019 = 1 (closed loop, from the next power-up) needs the encoder the drive's 0x6054 describes.",
         "0x2013 = 1 (saved) jogs the motor at power-up: 30° forward, then 15° back, at the drive's jog speed (0x21A5, 2 000 microsteps/s from the factory) and its PP ramps (0x6067, 0x6069), then it stands; a motion command, a stop or an alarm before it is done ends it, and a drive that cannot move at power-up does not jog.",
         "0x2020 says when the in-position output is on: 0 (the manual's factory value) once the plan has ended, 10 while the axis stands on its target within the drive's window (0x21C9, encoder counts) in closed loop; in open loop both are the plan's end.",
-        "0x2021 bit k inverts IN k+1; 0x2022.1-5 give IN1-IN5 a function: 1 origin (the homing's home switch), 2 positive limit, 4 negative limit (a motion heading into an active limit stops at the stop deceleration, and a command towards it is refused), 8 quick stop (stops at the quick-stop deceleration), 16 custom and 0 none (the master reads it in 0x2014); both read back as 0. The touch probes 32 and 64 are refused (06). IN1-IN3 are the drive's EXT1-EXT3, IN4 and IN5 GPIO1 and GPIO2.",
+        "0x2021 bit k inverts IN k+1; 0x2022.1-5 give IN1-IN5 a function: 1 origin (the homing's home switch), 2 positive limit, 4 negative limit (a motion heading into an active limit stops at the stop deceleration, and a command towards it is refused), 8 quick stop (stops at the quick-stop deceleration), 16 custom and 0 none (the master reads it in 0x2014); both read back as 0; 32 and 64 touch probes 1 and 2 (any input may be either; the manual offers probe 2 on IN1 and IN2): at the input's first activation after its status bit was cleared, the control tick captures the position (the encoder's in closed loop, the setpoint's in open loop) into the drive's 0x21DB (probe 1) or 0x21DD (probe 2), with 0x21DF bits 0 and 1 saying a capture is there (write 1 to re-arm): through the window, as the EC-57 has them on its fieldbus. IN1-IN3 are the drive's EXT1-EXT3, IN4 and IN5 GPIO1 and GPIO2.",
         "0x2024 bit k set: OUT k+1 is high when on (the drive's output logic inverted); 0x2025.1-3: 1 alarm output (on while no alarm is latched), 2 in position, 16 master-controlled (the drive's general output, 0x21C7 in the window), 0 none. OUT1-OUT3 are the drive's GPIO5-GPIO7.",
         "0x2030 (write only): 1 saves the parameters, 2 restores the factory ones and saves them (both refused with 06 while the motor moves); 0 does nothing. Saved parameters are kept across power cycles; the drive saves nothing on its own.",
         "Not in this map yet, answered 03: 0x2007-0x200C, 0x2012, 0x2015, 0x2016, 0x201B, 0x201F and 0x2023.1-5.",

@@ -543,6 +543,7 @@ mod tests {
             current_ma: 1_500,
             inputs: 0,
             input_edges: 0,
+            probes: 2,
         };
         let map = NativeMap::new();
         for d in OBJECTS.iter() {

@@ -25,7 +25,7 @@ const HOMING_METHODS: [u32; 26] = [
 /// The functions an input takes (0x21BA-0x21C0): the motion commands, the limit and home
 /// switches, enable.
 const INPUT_FUNCTIONS: &[u32] =
-    &[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 20, 25, 26, 27, 28, 29];
+    &[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 20, 21, 22, 25, 26, 27, 28, 29];
 /// A PVT table index or count.
 const PVT_INDEX: Range = Span(0, 1000);
 /// Full signed 32-bit range.
@@ -405,8 +405,10 @@ objects! {
     /// positive / negative limit switch: a motion heading into an active one stops at the stop
     /// deceleration and a command towards it is refused (04); 11 the home switch of the homing
     /// (9 and 10 its limits too), over 0x216C; 20 enable: 0x6011 takes the input's level when
-    /// it changes; 14-18 the program commands of 0x21A0; 25-29 bits 0-4 of the program segment
-    /// a start runs (0x21CD). IN1-IN3 are EXT1-EXT3, IN4-IN7 GPIO1-GPIO4.
+    /// it changes; 14-18 the program commands of 0x21A0; 21 / 22 touch probe 1 / 2: the control
+    /// tick captures the position at the input's activation (0x21DB-0x21DF; a pseudo-input
+    /// captures nothing); 25-29 bits 0-4 of the program segment a start runs (0x21CD). IN1-IN3
+    /// are EXT1-EXT3, IN4-IN7 GPIO1-GPIO4.
     InputFunction1 @ 0x21BA: U8, Rw, Rom, Set(INPUT_FUNCTIONS), default 0, None, "IN1 function";
     /// IN2 function (our object; seed 002's 0401): as 0x21BA.
     InputFunction2 @ 0x21BB: U8, Rw, Rom, Set(INPUT_FUNCTIONS), default 0, None, "IN2 function";
@@ -511,6 +513,16 @@ objects! {
     /// (0x6011 = 0, the power state machine's disabled states); a fault or a power loss frees it
     /// all the same. 0 frees it.
     DisabledHold @ 0x21DA: U8, Rw, Rom, Span(0, 1), default 0, None, "hold when disabled";
+    /// Touch probe 1's position (our object; seed 003's probe function of 0x2022): where the
+    /// axis was at the tick that saw the input with function 21 turn active, in the position's
+    /// unit (the encoder's, counts, in closed loop; the setpoint's microsteps in open loop).
+    ProbePosition1 @ 0x21DB: S32, Ro, Live, S32_ANY, default 0, Steps, "touch probe 1 position";
+    /// Touch probe 2's position (our object): as 0x21DB, for the input with function 22.
+    ProbePosition2 @ 0x21DD: S32, Ro, Live, S32_ANY, default 0, Steps, "touch probe 2 position";
+    /// Touch probe status (our object), write 1 to clear: bit 0 probe 1 captured (0x21DB holds
+    /// it), bit 1 probe 2. A probe captures at its first activation after its bit was cleared
+    /// (armed from power-up); later ones leave the capture as it is.
+    ProbeStatus @ 0x21DF: U8, W1c, Live, Bits(0x03), default 0, None, "touch probe status";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake

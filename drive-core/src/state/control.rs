@@ -259,6 +259,7 @@ fn io_functions(get: &impl Fn(Obj) -> u32) -> IoFunctions {
         input_low: get(Obj::InputLogic) as u8,
         limit_positive: with(super::inputs::INPUT_LIMIT_POSITIVE),
         limit_negative: with(super::inputs::INPUT_LIMIT_NEGATIVE),
+        probes: [with(super::inputs::INPUT_PROBE_1), with(super::inputs::INPUT_PROBE_2)],
         outputs,
         general: get(Obj::GeneralOutputs) as u8,
         output_low: get(Obj::OutputLogic) as u8,

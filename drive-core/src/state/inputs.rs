@@ -29,6 +29,10 @@ pub(crate) const INPUT_LIMIT_NEGATIVE: u32 = 10;
 pub(crate) const INPUT_HOME: u32 = 11;
 /// Input function 20: enable.
 const INPUT_ENABLE: u32 = 20;
+/// Input function 21: touch probe 1 (the tick captures the position into 0x21DB).
+pub(crate) const INPUT_PROBE_1: u32 = 21;
+/// Input function 22: touch probe 2 (0x21DD).
+pub(crate) const INPUT_PROBE_2: u32 = 22;
 
 /// The bus side's memory of the inputs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

@@ -569,6 +569,9 @@ impl<P: Borrow<Table>> DriveState<P> {
             Obj::ProgramInputSegment | Obj::ProgramErrorSegment | Obj::ProgramRunning => self.program_live(obj),
             Obj::InputStates => u32::from(self.active_inputs()),
             Obj::CommandCount => self.ctl.commanded.wrapping_sub(self.command_base),
+            Obj::ProbePosition1 => self.ctl.probe[0] as u32,
+            Obj::ProbePosition2 => self.ctl.probe[1] as u32,
+            Obj::ProbeStatus => u32::from(s.probes),
             // The ten entries are consecutive objects.
             h if (Obj::FaultHistory0 as usize..=Obj::FaultHistory9 as usize).contains(&(h as usize)) => {
                 self.history(h as usize - Obj::FaultHistory0 as usize)
@@ -743,6 +746,7 @@ impl<P: Borrow<Table>> DriveState<P> {
             }
             Obj::CommStatus => s.comm &= !(value as u8),
             Obj::CommandCount => self.command_base = self.ctl.commanded,
+            Obj::ProbeStatus => s.probes &= !(value as u8),
             Obj::PvtFault => self.pvt.fault &= !(value as u8),
             Obj::GpioValue => {
                 // Only outputs take the written level (§5.7.2).

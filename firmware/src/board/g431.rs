@@ -87,14 +87,15 @@ const CURRENT_PWM_PERIOD: u32 = TIMER_HZ / 100_000;
 /// Phase current at 100 % reference duty (3.3 V on VREF).
 const FULL_SCALE_MA: u32 = 3000;
 
-/// Receive ring: half a frame. The task takes bytes as they come; the longest it is away
-/// serving a request is about 1.5 ms (planning a move), 17 bytes at 115 200 baud, and a master
-/// sends no new request before the reply. (A flash erase stalls the receive interrupt too: no
-/// ring helps there.)
-const RX_BUF: usize = 128;
-/// Transmit ring: half a frame. The task sends from its own copy of the reply and `write_all`
-/// refills the ring as it drains, so a longer ring would only hold a second copy (RAM budget).
-const TX_BUF: usize = 128;
+/// Receive ring: a quarter of a frame. The task takes bytes as they come; the longest it is
+/// away serving a request is about 1.5 ms (planning a move), 17 bytes at 115 200 baud, and a
+/// master sends no new request before the reply. (A flash erase stalls the receive interrupt
+/// too: no ring helps there.)
+const RX_BUF: usize = 64;
+/// Transmit ring: a quarter of a frame. The task sends from its own copy of the reply and
+/// `write_all` refills the ring as it drains, so a longer ring would only hold a second copy
+/// (RAM budget).
+const TX_BUF: usize = 64;
 
 /// The RS-485 port.
 pub type Serial = BufferedUart<'static>;
