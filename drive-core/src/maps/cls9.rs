@@ -47,7 +47,7 @@ static ENCODER: &[Choice] = &[
     Choice { lo: 6400, hi: 6400, drive: 1600 },
 ];
 
-/// 0217: 0 open loop, 1 closed loop on the incremental encoder.
+/// 0217 (and seed 003's 0x2019): 0 open loop, 1 closed loop on the incremental encoder.
 pub(super) static LOOP: &[Choice] = &[Choice { lo: 0, hi: 0, drive: 0 }, Choice { lo: 1, hi: 1, drive: 1 }];
 
 /// 0206: 1 parameter reset (0x200F = 3), 2 alarm clear (0x200F = 4), 3 restart (0x200F = 1,

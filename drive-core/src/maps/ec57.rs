@@ -96,9 +96,6 @@ pub fn parse(pdu: &[u8]) -> Result<Request<'_>, Exception> {
     }
 }
 
-/// 0x2002, 0x2006 style switches: 0 and 1.
-static SWITCH: &[Choice] = &[Choice { lo: 0, hi: 0, drive: 0 }, Choice { lo: 1, hi: 1, drive: 1 }];
-
 /// 0x2022.1-5: 1 origin (the homing's home switch, the drive's 11), 2 positive and 4 negative
 /// limit (9, 10), 8 quick stop (the motion command 7), 16 custom and 0 none (the drive's 0: the
 /// master reads the input in 0x2014), 32 and 64 touch probes 1 and 2 (21, 22).
@@ -146,22 +143,22 @@ const FAULT_CODE: Scale = Scale::Field(24, 8);
 pub static ENTRIES: [Entry; 44] = [
     Entry::new(key(0x2000, 0), Obj::NodeId, &Scale::One),
     Entry::new(key(0x2001, 0), Obj::AddressSource, &Scale::One),
-    Entry::new(key(0x2002, 0), Obj::MotorDirection, &Scale::Table(&SWITCH)),
+    Entry::new(key(0x2002, 0), Obj::MotorDirection, &Scale::One),
     Entry::new(key(0x2003, 1), Obj::IdleDelay, &Scale::One),
     Entry::new(key(0x2003, 2), Obj::IdleCurrent, &Scale::One),
     Entry::new(key(0x2004, 0), Obj::PhaseCurrent, &Scale::One),
     Entry::new(key(0x2005, 0), Obj::Microsteps, &Scale::PulsesPerRev),
-    Entry::new(key(0x2006, 0), Obj::DisabledHold, &Scale::Table(&SWITCH)),
+    Entry::new(key(0x2006, 0), Obj::DisabledHold, &Scale::One),
     Entry::new(key(0x200D, 0), Obj::SupplyVoltage, &Scale::Ratio(1000, 1)),
-    Entry::new(key(0x200E, 0), Obj::PositionErrorAlarm, &Scale::Table(&SWITCH)),
+    Entry::new(key(0x200E, 0), Obj::PositionErrorAlarm, &Scale::One),
     Entry::new(key(0x200F, 0), Obj::PositionErrorAngle, &Scale::One),
     Entry::new(key(0x2010, 0), Obj::CommandCount, &Scale::Field(16, 16)).narrow().read_only(),
     Entry::new(key(0x2011, 0), Obj::CommandCount, &Scale::Field(0, 16)).narrow().clear(),
-    Entry::new(key(0x2013, 0), Obj::PowerUpJog, &Scale::Table(&SWITCH)),
+    Entry::new(key(0x2013, 0), Obj::PowerUpJog, &Scale::One),
     Entry::new(key(0x2014, 0), Obj::InputStates, &Scale::One),
     Entry::new(key(0x2017, 0), Obj::RealSpeed, &RPM).narrow(),
     Entry::new(key(0x2018, 0), Obj::FollowingError, &Scale::One).narrow(),
-    Entry::new(key(0x2019, 0), Obj::Feedback, &Scale::Table(&SWITCH)),
+    Entry::new(key(0x2019, 0), Obj::Feedback, &Scale::Table(&super::cls9::LOOP)),
     Entry::new(key(0x201A, 1), Obj::SoftwareRevision, &Scale::One),
     Entry::new(key(0x201A, 2), Obj::HardwareRevision, &Scale::One),
     Entry::new(key(0x201A, 3), Obj::SoftwareRevision, &Scale::One),
@@ -222,18 +219,19 @@ pub static LAYOUT: Layout = Layout {
     sub_index: true,
 };
 
-/// The manual's factory values where they differ from the drive's: no position error alarm,
-/// the standstill current after 50 ms at 50 %, 1 A peak, 10 000 pulses a revolution (the table prints 1000, outside
-/// its own range 6400-51200; its example writes 10 000), IN1 touch probe 1, IN2-IN5 origin, the
-/// limits and custom, OUT1 and OUT2 the alarm output.
+/// The manual's factory values where they differ from the drive's: the standstill current after
+/// 50 ms at 50 %, 1 A peak, 10 000 pulses a revolution (the table prints 1000, outside its own
+/// range 6400-51200; its example writes 10 000), no position error alarm, in position at the
+/// plan's end, IN1 touch probe 1, IN2-IN5 origin, the limits and custom, OUT1 and OUT2 the
+/// alarm output.
 static DEFAULTS: [(u16, i32); 13] = [
-    (key(0x2022, 1), 32),
-    (key(0x200E, 0), 0),
-    (key(0x2020, 0), 0),
     (key(0x2003, 1), 50),
     (key(0x2003, 2), 50),
     (key(0x2004, 0), 1000),
     (key(0x2005, 0), 10_000),
+    (key(0x200E, 0), 0),
+    (key(0x2020, 0), 0),
+    (key(0x2022, 1), 32),
     (key(0x2022, 2), 1),
     (key(0x2022, 3), 2),
     (key(0x2022, 4), 4),

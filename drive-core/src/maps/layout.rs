@@ -90,8 +90,7 @@ pub enum Scale {
     /// revolution follows the microstep resolution 0x600C.
     PerRev(i16, i16),
     /// An enumeration: the map's values and the drive's, one by one (a value not listed is out
-    /// of range). A reference to a static slice, so that a scale is 8 bytes and a layout's entry
-    /// 16.
+    /// of range). A reference to a static slice, so that a scale is 8 bytes.
     Table(&'static &'static [Choice]),
     /// A field of the drive's value: `width` bits from bit `shift` (a register a bit: seed
     /// 002's pseudo-inputs; the alarm code in a fault history entry: seed 003's fault list); a
