@@ -101,3 +101,61 @@ pub async fn master(sim: &hal_sim::PowerSwitch) -> Context {
     let stream = tokio::net::TcpStream::connect(sim.endpoint()).await.expect("connect");
     tokio_modbus::client::rtu::attach_slave(stream, tokio_modbus::prelude::Slave(1))
 }
+
+/// The firmware under QEMU (`cargo xtask qemu`), for the tests that talk to it.
+pub mod qemu {
+    use std::io::{BufRead, BufReader};
+    use std::path::Path;
+    use std::process::{Child, ChildStdout, Command, Stdio};
+    use std::time::{Duration, Instant};
+
+    /// Whether QEMU 10's `qemu-system-arm` is installed.
+    pub fn qemu_10() -> bool {
+        Command::new("qemu-system-arm")
+            .arg("--version")
+            .output()
+            .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).starts_with("QEMU emulator version 10."))
+    }
+
+    /// `cargo xtask qemu` and its stdout, stopped when dropped (its stdin closes, then it is killed).
+    pub struct Firmware(
+        Child,
+        #[allow(dead_code, reason = "held open for the child's later output")] BufReader<ChildStdout>,
+    );
+
+    impl Drop for Firmware {
+        fn drop(&mut self) {
+            drop(self.0.stdin.take());
+            let end = Instant::now() + Duration::from_secs(5);
+            while Instant::now() < end {
+                if let Ok(Some(_)) = self.0.try_wait() {
+                    return;
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+
+    /// Builds and boots the QEMU firmware; returns it and the endpoint it listens on.
+    ///
+    /// # Panics
+    /// If `cargo xtask qemu` does not start or does not say where it listens.
+    pub fn boot() -> (Firmware, String) {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("workspace root");
+        let mut child = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()))
+            .args(["run", "-q", "-p", "xtask", "--", "qemu", "--tcp", "127.0.0.1:0", "--exit-on-eof"])
+            .current_dir(root)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .spawn()
+            .expect("cargo xtask qemu");
+        let mut stdout = BufReader::new(child.stdout.take().expect("piped stdout"));
+        let mut line = String::new();
+        stdout.read_line(&mut line).expect("first line of cargo xtask qemu");
+        let fw = Firmware(child, stdout);
+        let at = line.trim().strip_prefix("listening on ").unwrap_or_else(|| panic!("unexpected line {line:?}"));
+        (fw, at.to_string())
+    }
+}

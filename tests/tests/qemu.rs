@@ -4,59 +4,14 @@
 //! carried out at rest. Skipped, with a message, when QEMU 10's
 //! `qemu-system-arm` is not installed (`.ci/install` installs it).
 
-use std::io::{BufRead, BufReader};
-use std::path::Path;
-use std::process::{Child, ChildStdout, Command, Stdio};
 use std::time::{Duration, Instant};
 
+use drive_tests::qemu::{boot, qemu_10};
 use drive_tests::{read_values as read, vendor_name, write};
 use tokio::net::TcpStream;
 use tokio::time::timeout;
 use tokio_modbus::client::rtu;
 use tokio_modbus::prelude::{ExceptionCode, Slave};
-
-fn qemu_10() -> bool {
-    Command::new("qemu-system-arm")
-        .arg("--version")
-        .output()
-        .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).starts_with("QEMU emulator version 10."))
-}
-
-/// `cargo xtask qemu` and its stdout, stopped when dropped (its stdin closes, then it is killed).
-struct Firmware(Child, #[allow(dead_code, reason = "held open for the child's later output")] BufReader<ChildStdout>);
-
-impl Drop for Firmware {
-    fn drop(&mut self) {
-        drop(self.0.stdin.take());
-        let end = Instant::now() + Duration::from_secs(5);
-        while Instant::now() < end {
-            if let Ok(Some(_)) = self.0.try_wait() {
-                return;
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-/// Builds and boots the QEMU firmware; returns it and the endpoint it listens on.
-fn boot() -> (Firmware, String) {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("workspace root");
-    let mut child = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()))
-        .args(["run", "-q", "-p", "xtask", "--", "qemu", "--tcp", "127.0.0.1:0", "--exit-on-eof"])
-        .current_dir(root)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .spawn()
-        .expect("cargo xtask qemu");
-    let mut stdout = BufReader::new(child.stdout.take().expect("piped stdout"));
-    let mut line = String::new();
-    stdout.read_line(&mut line).expect("first line of cargo xtask qemu");
-    let fw = Firmware(child, stdout);
-    let at = line.trim().strip_prefix("listening on ").unwrap_or_else(|| panic!("unexpected line {line:?}"));
-    (fw, at.to_string())
-}
 
 /// The line as a serial port with a read timeout (VTIME) hands it to a master: bytes gathered
 /// until a 3 ms gap. QEMU emits a reply byte by byte, and tokio-modbus 0.17's RTU decoder fails

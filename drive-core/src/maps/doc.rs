@@ -168,7 +168,7 @@ fn values(out: &mut impl Write, e: &Entry) -> fmt::Result {
 }
 
 /// The map's unit of `e`.
-fn unit(e: &Entry) -> &'static str {
+pub fn unit(e: &Entry) -> &'static str {
     match (*e.scale, e.obj.def().unit) {
         (Scale::PerRev(1, 10), Unit::Pps) => "0.1 rev/s",
         (Scale::PerRev(1, 10), Unit::Pps2) => "0.1 rev/s²",

@@ -35,8 +35,11 @@ static QUICK_STOP: &[Choice] = &[
 
 /// 0x6098: §6.3's methods 1-8 are the homing engine's -3 to -10 (left, CW, is the negative
 /// direction; the CW limit is the negative limit switch, the CCW limit the positive one).
-/// (As 0x2160 holds them: a 16-bit register, -3 is 0xFFFD.)
+/// (As 0x2160 holds them: a 16-bit register, -3 is 0xFFFD.) 0, the manual's default, is no
+/// search: the present position becomes home (the engine's 35), so that the factory value
+/// reads as 0 and writes back.
 static HOMING_METHODS: &[Choice] = &[
+    Choice { lo: 0, hi: 0, drive: 35 },
     Choice { lo: 1, hi: 1, drive: 0xFFFD },
     Choice { lo: 2, hi: 2, drive: 0xFFFC },
     Choice { lo: 3, hi: 3, drive: 0xFFFB },
@@ -151,7 +154,7 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         (0x6061, "Modes of operation display."),
         (0x6081, "Target velocity: the speed of a set-point (PP), the speed to run at (PV)."),
         (0x607C, "Home offset: the zero is this far from the home found (see the notes)."),
-        (0x6098, "Homing method, §6.3's 1-8."),
+        (0x6098, "Homing method, §6.3's 1-8; 0 (the manual's default) takes the present position as home."),
         (0x6099, "Homing speed: the search for the switch."),
         (0x609A, "Homing acceleration and deceleration."),
         (0x609B, "Zero offset speed: the move from the home to the zero."),

@@ -1,0 +1,389 @@
+//! `drivectl`: commissioning OpenStep drives over their Modbus link, in any register map.
+//!
+//! Every name the tool takes is a drive object's, looked up in the tables the drive itself serves
+//! ([`dict`]); values are in the map's own units, as a master of that map reads them.
+
+pub mod dict;
+pub mod link;
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use drive_core::od::Obj;
+use serde::{Deserialize, Serialize};
+
+use dict::{Dictionary, Map, Register, parse_int};
+use link::{Error, Link};
+
+/// A register's value: a number, or a text.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Value {
+    /// A number, sign as the register's.
+    Number(i64),
+    /// ASCII text (identification strings).
+    Text(String),
+}
+
+impl std::fmt::Display for Value {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Value::Number(v) => write!(f, "{v}"),
+            Value::Text(s) => write!(f, "{s:?}"),
+        }
+    }
+}
+
+/// A drive on the link, with the registers of its map.
+pub struct Drive {
+    /// The connection.
+    pub link: Link,
+    /// The map's registers.
+    pub dict: Dictionary,
+    low_first: bool,
+}
+
+/// The words of `v` for `r`, in the map's order; `None` if it does not fit.
+fn encode(r: &Register, v: i64, low_first: bool) -> Option<Vec<u16>> {
+    match r.words {
+        1 => {
+            let ok = if r.signed { i16::try_from(v).is_ok() } else { u16::try_from(v).is_ok() };
+            ok.then(|| vec![v as u16])
+        }
+        2 => {
+            let ok = if r.signed { i32::try_from(v).is_ok() } else { u32::try_from(v).is_ok() };
+            let (hi, lo) = ((v as u32 >> 16) as u16, v as u16);
+            ok.then(|| if low_first { vec![lo, hi] } else { vec![hi, lo] })
+        }
+        _ => None,
+    }
+}
+
+/// The value of `r` from its words.
+fn decode(r: &Register, words: &[u16], low_first: bool) -> Value {
+    if r.text {
+        let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_be_bytes()).take_while(|b| *b != 0).collect();
+        return Value::Text(String::from_utf8_lossy(&bytes).into_owned());
+    }
+    match (words, r.signed) {
+        ([w], false) => Value::Number(i64::from(*w)),
+        ([w], true) => Value::Number(i64::from(*w as i16)),
+        ([a, b], signed) => {
+            let (hi, lo) = if low_first { (*b, *a) } else { (*a, *b) };
+            let raw = u32::from(hi) << 16 | u32::from(lo);
+            Value::Number(if signed { i64::from(raw as i32) } else { i64::from(raw) })
+        }
+        _ => Value::Number(0),
+    }
+}
+
+impl Drive {
+    /// The drive behind `link`, its word order read where its map makes it a setting.
+    pub async fn new(mut link: Link) -> Result<Self, Error> {
+        let dict = Dictionary::of(link.map);
+        let setting = match dict.of_object(Obj::MapWordOrder) {
+            Some(r) if dict.map.layout().is_some() => link.read(r.at, 1).await?.first().copied().unwrap_or(0),
+            _ => 0,
+        };
+        let low_first = dict.low_first(setting);
+        Ok(Self { link, dict, low_first })
+    }
+
+    /// The register named (or at) `key`.
+    pub fn register(&self, key: &str) -> Result<Register, Error> {
+        self.dict.find(key).cloned().ok_or_else(|| {
+            Error::Usage(format!(
+                "the {} map has no register {key:?} (`drivectl list` names them)",
+                self.dict.map.name()
+            ))
+        })
+    }
+
+    /// The register of object `obj`, which a command needs.
+    fn needs(&self, obj: Obj, what: &str) -> Result<Register, Error> {
+        self.dict.of_object(obj).cloned().ok_or_else(|| {
+            Error::Usage(format!(
+                "the {} map has no register for {what}: switch the drive to the native map (register-map = 0, save, restart)",
+                self.dict.map.name()
+            ))
+        })
+    }
+
+    /// Reads register `r`.
+    pub async fn get(&mut self, r: &Register) -> Result<Value, Error> {
+        if !r.readable {
+            return Err(Error::Usage(format!("{} is write-only", r.name)));
+        }
+        let words = self.link.read(r.at, r.words).await?;
+        Ok(decode(r, &words, self.low_first))
+    }
+
+    /// Writes `v` to register `r` (both words at once for a pair).
+    pub async fn set(&mut self, r: &Register, v: i64) -> Result<(), Error> {
+        if !r.writable {
+            return Err(Error::Usage(format!("{} is read-only", r.name)));
+        }
+        let words = encode(r, v, self.low_first).ok_or_else(|| {
+            Error::Usage(format!(
+                "{v} does not fit {} ({} register(s), {})",
+                r.name,
+                r.words,
+                if r.signed { "signed" } else { "unsigned" }
+            ))
+        })?;
+        self.link.write(r.at, &words).await?;
+        if r.obj == Obj::MapWordOrder {
+            // The pairs after it are in the new order.
+            self.low_first = self.dict.low_first(v as u16);
+        }
+        Ok(())
+    }
+
+    /// Writes `v` to object `obj`'s register.
+    async fn set_obj(&mut self, obj: Obj, what: &str, v: i64) -> Result<(), Error> {
+        let r = self.needs(obj, what)?;
+        self.set(&r, v).await
+    }
+
+    /// Reads object `obj`'s number.
+    async fn get_obj(&mut self, obj: Obj, what: &str) -> Result<i64, Error> {
+        let r = self.needs(obj, what)?;
+        match self.get(&r).await? {
+            Value::Number(v) => Ok(v),
+            Value::Text(_) => Ok(0),
+        }
+    }
+
+    /// Every saved setting (writable, kept once saved) and its value.
+    pub async fn dump(&mut self) -> Result<Settings, Error> {
+        let mut values = BTreeMap::new();
+        for r in self.dict.registers.clone().iter().filter(|r| r.saved) {
+            if let Value::Number(v) = self.get(r).await? {
+                values.insert(r.name.clone(), v);
+            }
+        }
+        Ok(Settings { map: self.dict.map.name().to_string(), settings: values })
+    }
+
+    /// Writes every value of `settings` (for this drive's map), in the map's register order so
+    /// that a setting others depend on (the microstep resolution) comes first. Returns how many
+    /// were written; stops at the first refusal, naming it.
+    pub async fn load(&mut self, settings: &Settings) -> Result<usize, Error> {
+        if settings.map != self.dict.map.name() {
+            return Err(Error::Usage(format!(
+                "the settings are the {} map's, the drive answers with the {} map",
+                settings.map,
+                self.dict.map.name()
+            )));
+        }
+        for name in settings.settings.keys() {
+            let r = self.register(name)?;
+            if !r.saved {
+                return Err(Error::Usage(format!("{name} is not a saved setting")));
+            }
+        }
+        let mut n = 0;
+        for r in self.dict.registers.clone().iter() {
+            if let Some(&v) = settings.settings.get(&r.name) {
+                self.set(r, v).await.map_err(|e| Error::Usage(format!("{} = {v}: {e}", r.name)))?;
+                n += 1;
+            }
+        }
+        Ok(n)
+    }
+
+    /// Saves the settings to the drive's flash (0x200F = 2) and waits for the save to end.
+    pub async fn save(&mut self) -> Result<(), Error> {
+        self.set_obj(Obj::SystemControl, "system control", 2).await?;
+        self.storage_done().await
+    }
+
+    /// Restores the factory settings and saves them (0x200F = 3).
+    pub async fn factory_reset(&mut self) -> Result<(), Error> {
+        self.set_obj(Obj::SystemControl, "system control", 3).await?;
+        self.storage_done().await
+    }
+
+    async fn storage_done(&mut self) -> Result<(), Error> {
+        let Ok(r) = self.needs(Obj::StorageStatus, "storage status") else { return Ok(()) };
+        for _ in 0..100 {
+            if let Value::Number(s) = self.get(&r).await?
+                && s & 0x08 == 0
+            {
+                return match s & 0x10 {
+                    0 => Ok(()),
+                    _ => Err(Error::Usage("the save failed (storage status bit 4)".into())),
+                };
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        Err(Error::Timeout)
+    }
+
+    /// Starts a run to `target` (absolute) or by it (relative), at `speed` if given (the map's
+    /// unit of the command speed).
+    pub async fn move_to(&mut self, target: i64, relative: bool, speed: Option<i64>) -> Result<(), Error> {
+        if let Some(s) = speed {
+            self.set_obj(Obj::CommandSpeed, "the run speed", s).await?;
+        }
+        self.set_obj(Obj::CommandTarget, "the run target", target).await?;
+        self.set_obj(Obj::MotionCommand, "motion commands", if relative { 2 } else { 1 }).await
+    }
+
+    /// Jogs forward or backward until a stop, at `speed` if given.
+    pub async fn jog(&mut self, forward: bool, speed: Option<i64>) -> Result<(), Error> {
+        if let Some(s) = speed {
+            self.set_obj(Obj::JogSpeed, "the jog speed", s).await?;
+        }
+        self.set_obj(Obj::MotionCommand, "motion commands", if forward { 4 } else { 5 }).await
+    }
+
+    /// Stops at the deceleration, or at once (`quick`: the emergency deceleration).
+    pub async fn stop(&mut self, quick: bool) -> Result<(), Error> {
+        self.set_obj(Obj::MotionCommand, "motion commands", if quick { 7 } else { 6 }).await
+    }
+
+    /// Starts the homing (method `method` if given).
+    pub async fn home(&mut self, method: Option<i64>) -> Result<(), Error> {
+        if let Some(m) = method {
+            self.set_obj(Obj::HomingMethod, "the homing method", m).await?;
+        }
+        self.set_obj(Obj::HomingControl, "homing", 1).await
+    }
+
+    /// Energises (`true`) or frees the motor.
+    pub async fn enable(&mut self, on: bool) -> Result<(), Error> {
+        self.set_obj(Obj::Enable, "the motor enable", i64::from(on)).await
+    }
+
+    /// Clears the latched alarms.
+    pub async fn clear(&mut self) -> Result<(), Error> {
+        self.set_obj(Obj::MotionCommand, "motion commands", 13).await
+    }
+
+    /// Waits until the axis stands (run state 0x21AE is not 3), up to `limit`; the position.
+    pub async fn wait_standing(&mut self, limit: Duration) -> Result<i64, Error> {
+        let end = tokio::time::Instant::now() + limit;
+        loop {
+            if self.get_obj(Obj::RunState, "the run state").await? != 3 {
+                return self.get_obj(Obj::Position, "the position").await;
+            }
+            if tokio::time::Instant::now() > end {
+                return Err(Error::Timeout);
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    }
+
+    /// Waits for the homing to end, up to `limit`: its result (2 homed).
+    pub async fn wait_homed(&mut self, limit: Duration) -> Result<i64, Error> {
+        let end = tokio::time::Instant::now() + limit;
+        loop {
+            let r = self.get_obj(Obj::HomingResult, "the homing result").await?;
+            if r != 1 {
+                return Ok(r);
+            }
+            if tokio::time::Instant::now() > end {
+                return Err(Error::Timeout);
+            }
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    }
+
+    /// The status screen: each of [`STATUS`] the map has, with its value and unit.
+    pub async fn status(&mut self) -> Result<Vec<(Register, Value)>, Error> {
+        let mut out = Vec::new();
+        for obj in STATUS {
+            if let Some(r) = self.dict.of_object(obj).filter(|r| r.readable).cloned() {
+                let v = self.get(&r).await?;
+                out.push((r, v));
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// The objects the status screen shows, where the map has them.
+pub const STATUS: [Obj; 16] = [
+    Obj::Position,
+    Obj::TargetPosition,
+    Obj::RealSpeed,
+    Obj::FollowingError,
+    Obj::RunState,
+    Obj::Enable,
+    Obj::Mode,
+    Obj::ErrorStatus,
+    Obj::ControllerStatus,
+    Obj::AlarmCode,
+    Obj::HomingResult,
+    Obj::SupplyVoltage,
+    Obj::MotorCurrent,
+    Obj::StatusWord,
+    Obj::DeviceStatus,
+    Obj::ErrorRegister,
+];
+
+/// A drive's saved settings, as `dump` writes them and `load` reads them (TOML).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Settings {
+    /// The map the names and values are in.
+    pub map: String,
+    /// Each setting by name, in the map's unit.
+    pub settings: BTreeMap<String, i64>,
+}
+
+impl Settings {
+    /// The TOML text.
+    pub fn to_toml(&self) -> String {
+        toml::to_string(self).unwrap_or_default()
+    }
+
+    /// From TOML text.
+    pub fn from_toml(text: &str) -> Result<Self, Error> {
+        toml::from_str(text).map_err(|e| Error::Usage(format!("settings file: {e}")))
+    }
+}
+
+/// A `NAME=VALUE` argument.
+pub fn parse_assignment(s: &str) -> Result<(String, i64), Error> {
+    let (name, value) = s.split_once('=').ok_or_else(|| Error::Usage(format!("{s:?}: expected NAME=VALUE")))?;
+    let v = parse_int(value.trim()).ok_or_else(|| Error::Usage(format!("{value:?} is not a whole number")))?;
+    Ok((name.trim().to_string(), v))
+}
+
+/// One drive found by [`scan`].
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Found {
+    /// Its slave address.
+    pub address: u8,
+    /// The map it answers with.
+    pub map: Map,
+    /// Its identification.
+    pub identity: link::Identity,
+}
+
+/// Asks every address of `addresses` for its identification; calls `progress` after each.
+pub async fn scan(
+    link: &mut Link,
+    addresses: impl IntoIterator<Item = u8>,
+    mut progress: impl FnMut(u8),
+) -> Result<Vec<Found>, Error> {
+    let mut found = Vec::new();
+    for address in addresses {
+        link.set_slave(address);
+        match link.identify().await {
+            Ok(identity) => {
+                let map = Map::from_application_name(identity.object(6));
+                found.push(Found { address, map, identity });
+            }
+            // Nobody there, or a reply spoilt by a collision: nothing to list.
+            Err(Error::Timeout | Error::Link(_)) => {}
+            // A drive that refuses identification still answers.
+            Err(Error::Refused { .. }) => {
+                found.push(Found { address, map: Map::Native, identity: link::Identity::default() })
+            }
+            Err(e) => return Err(e),
+        }
+        progress(address);
+    }
+    Ok(found)
+}

@@ -1,0 +1,327 @@
+//! `drivectl`: the commissioning tool for OpenStep drives on a Modbus-RTU bus.
+
+use std::process::ExitCode;
+use std::time::Duration;
+
+use clap::{Parser, Subcommand};
+use drivectl::dict::{Dictionary, Map};
+use drivectl::link::{Error, Link, Target};
+use drivectl::{Drive, Settings, Value, parse_assignment, scan};
+use indicatif::{ProgressBar, ProgressStyle};
+
+/// Commission OpenStep drives over their Modbus link: find them, read and write their settings
+/// by name, keep the settings in a file, move, jog, home and watch them. Works with every
+/// register map the drive answers with (native, jmc, cls9, ec57); values are in the map's units.
+#[derive(Parser)]
+#[command(version)]
+struct Cli {
+    /// Serial port of the RS-485 adapter (8N1).
+    #[arg(long, conflicts_with = "tcp", global = true)]
+    port: Option<String>,
+    /// Baud rate on the serial port.
+    #[arg(long, default_value_t = 9600, global = true)]
+    baud: u32,
+    /// The simulator's TCP endpoint (raw RTU frames): `hal-sim --tcp HOST:PORT`.
+    #[arg(long, global = true)]
+    tcp: Option<String>,
+    /// Slave address of the drive.
+    #[arg(long, short = 'a', default_value_t = 1, global = true)]
+    address: u8,
+    /// The drive's register map, if not the one its identification names (native, jmc, cls9,
+    /// ec57).
+    #[arg(long, global = true)]
+    map: Option<String>,
+    /// How long one request may take, ms.
+    #[arg(long, default_value_t = 1000, global = true)]
+    timeout: u64,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Every drive on the bus: address, map, identification.
+    Scan {
+        /// First address asked.
+        #[arg(long, default_value_t = 1)]
+        from: u8,
+        /// Last address asked.
+        #[arg(long, default_value_t = 247)]
+        to: u8,
+    },
+    /// The registers of a map (`--map`, default native): name, address, registers, access, unit.
+    List,
+    /// Reads registers by name or address.
+    Get {
+        /// Names (`max-speed`) or addresses (`0x6003`, seed 003: `0x2003.1`).
+        #[arg(required = true)]
+        keys: Vec<String>,
+    },
+    /// Writes registers: NAME=VALUE (or ADDR=VALUE), in the map's units.
+    Set {
+        /// Assignments, written in order.
+        #[arg(required = true)]
+        assignments: Vec<String>,
+    },
+    /// Writes every saved setting to a TOML file (`-`: standard output).
+    Dump {
+        /// The file.
+        #[arg(default_value = "-")]
+        file: String,
+    },
+    /// Writes the settings of a TOML file (from `dump`) to the drive.
+    Load {
+        /// The file.
+        file: String,
+        /// Save them to the drive's flash afterwards.
+        #[arg(long)]
+        save: bool,
+    },
+    /// Runs to a position (microsteps, or the map's unit).
+    Move {
+        /// Target position, or distance with --relative.
+        #[arg(allow_hyphen_values = true)]
+        target: String,
+        /// A distance from where the axis stands.
+        #[arg(long)]
+        relative: bool,
+        /// Run speed (the map's unit of the command speed).
+        #[arg(long)]
+        speed: Option<i64>,
+        /// Wait for the axis to stand and print where it stands.
+        #[arg(long)]
+        wait: bool,
+    },
+    /// Jogs until `stop`.
+    Jog {
+        /// `+` forward, `-` backward.
+        #[arg(allow_hyphen_values = true, value_parser = ["+", "-"])]
+        direction: String,
+        /// Jog speed (the map's unit).
+        #[arg(long)]
+        speed: Option<i64>,
+    },
+    /// Runs the homing.
+    Home {
+        /// Homing method (0x2160's numbers).
+        #[arg(long, allow_hyphen_values = true)]
+        method: Option<i64>,
+        /// Wait for the result.
+        #[arg(long)]
+        wait: bool,
+    },
+    /// Stops the axis at its deceleration (--quick: the emergency deceleration).
+    Stop {
+        /// Stop at the emergency deceleration.
+        #[arg(long)]
+        quick: bool,
+        /// Wait for the axis to stand and print where it stands.
+        #[arg(long)]
+        wait: bool,
+    },
+    /// Energises the motor (`on`) or frees it (`off`).
+    Enable {
+        /// `on` or `off`.
+        #[arg(value_parser = ["on", "off"], default_value = "on")]
+        state: String,
+    },
+    /// Clears the latched alarms.
+    Clear,
+    /// Saves the settings to the drive's flash.
+    Save,
+    /// Restores the factory settings and saves them.
+    FactoryReset,
+    /// The drive's state on one screen, refreshed until Ctrl-C (--once: printed once).
+    Status {
+        /// Print once and exit.
+        #[arg(long)]
+        once: bool,
+        /// Refresh period, ms.
+        #[arg(long, default_value_t = 250)]
+        every: u64,
+    },
+}
+
+fn target(cli: &Cli) -> Result<Target, Error> {
+    match (&cli.port, &cli.tcp) {
+        (Some(port), _) => Ok(Target::Serial { port: port.clone(), baud: cli.baud }),
+        (None, Some(at)) => Ok(Target::Tcp(at.clone())),
+        (None, None) => Err(Error::Usage("say where the bus is: --port DEVICE [--baud B] or --tcp HOST:PORT".into())),
+    }
+}
+
+fn map_arg(cli: &Cli) -> Result<Option<Map>, Error> {
+    match &cli.map {
+        None => Ok(None),
+        Some(name) => Map::from_name(name)
+            .map(Some)
+            .ok_or_else(|| Error::Usage(format!("no map {name:?}: native, jmc, cls9 or ec57"))),
+    }
+}
+
+/// Prints a line; a closed pipe (`drivectl list | head`) ends the program quietly.
+macro_rules! say {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        if let Err(e) = writeln!(std::io::stdout(), $($arg)*) {
+            if e.kind() == std::io::ErrorKind::BrokenPipe {
+                std::process::exit(0);
+            }
+        }
+    }};
+}
+
+fn show(v: &Value, unit: &str) -> String {
+    if unit.is_empty() { v.to_string() } else { format!("{v} {unit}") }
+}
+
+async fn run(cli: Cli) -> Result<(), Error> {
+    let limit = Duration::from_millis(cli.timeout);
+    if let Command::List = cli.command {
+        let dict = Dictionary::of(map_arg(&cli)?.unwrap_or(Map::Native));
+        for r in &dict.registers {
+            let access = match (r.readable, r.writable) {
+                (true, true) => "rw",
+                (true, false) => "ro",
+                _ => "wo",
+            };
+            say!(
+                "{:<28} {:<10} {} {access} {:<4} {:<10} {}",
+                r.name,
+                r.at.to_string(),
+                r.words,
+                if r.saved { "save" } else { "" },
+                r.unit,
+                r.about
+            );
+        }
+        return Ok(());
+    }
+    if let Command::Scan { from, to } = cli.command {
+        let mut link = Link::connect(target(&cli)?, from, Some(Map::Native), limit).await?;
+        let bar = ProgressBar::new(u64::from(to.saturating_sub(from)) + 1);
+        bar.set_style(
+            ProgressStyle::with_template("scanning {bar:40} {pos}/{len} addresses, {msg}")
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        let mut n = 0;
+        let found = scan(&mut link, from..=to, |_| {
+            bar.inc(1);
+        })
+        .await?;
+        bar.finish_and_clear();
+        for f in &found {
+            n += 1;
+            let id = &f.identity;
+            say!(
+                "{:>3}  {:<6}  {} {} {} ({})",
+                f.address,
+                f.map.name(),
+                id.object(0),
+                id.object(1),
+                id.object(2),
+                id.object(5)
+            );
+        }
+        say!("{n} drive(s)");
+        return if n == 0 { Err(Error::Usage("no drive answered".into())) } else { Ok(()) };
+    }
+    let link = Link::connect(target(&cli)?, cli.address, map_arg(&cli)?, limit).await?;
+    let mut drive = Drive::new(link).await?;
+    match cli.command {
+        Command::Scan { .. } | Command::List => {}
+        Command::Get { keys } => {
+            for key in keys {
+                let r = drive.register(&key)?;
+                let v = drive.get(&r).await?;
+                say!("{} = {}", r.name, show(&v, r.unit));
+            }
+        }
+        Command::Set { assignments } => {
+            for a in assignments {
+                let (key, v) = parse_assignment(&a)?;
+                let r = drive.register(&key)?;
+                drive.set(&r, v).await.map_err(|e| Error::Usage(format!("{} = {v}: {e}", r.name)))?;
+                say!("{} = {}", r.name, show(&Value::Number(v), r.unit));
+            }
+        }
+        Command::Dump { file } => {
+            let text = drive.dump().await?.to_toml();
+            if file == "-" {
+                print!("{text}");
+            } else {
+                std::fs::write(&file, text).map_err(|e| Error::Usage(format!("{file}: {e}")))?;
+            }
+        }
+        Command::Load { file, save } => {
+            let text = std::fs::read_to_string(&file).map_err(|e| Error::Usage(format!("{file}: {e}")))?;
+            let n = drive.load(&Settings::from_toml(&text)?).await?;
+            if save {
+                drive.save().await?;
+            }
+            say!("{n} setting(s) written{}", if save { " and saved" } else { "" });
+        }
+        Command::Move { target, relative, speed, wait } => {
+            let t = drivectl::dict::parse_int(&target)
+                .ok_or_else(|| Error::Usage(format!("{target:?} is not a whole number")))?;
+            drive.move_to(t, relative, speed).await?;
+            if wait {
+                say!("standing at {}", drive.wait_standing(Duration::from_secs(600)).await?);
+            }
+        }
+        Command::Jog { direction, speed } => drive.jog(direction == "+", speed).await?,
+        Command::Home { method, wait } => {
+            drive.home(method).await?;
+            if wait {
+                match drive.wait_homed(Duration::from_secs(600)).await? {
+                    2 => say!("homed"),
+                    r => return Err(Error::Usage(format!("the homing ended without a home (result {r})"))),
+                }
+            }
+        }
+        Command::Stop { quick, wait } => {
+            drive.stop(quick).await?;
+            if wait {
+                say!("standing at {}", drive.wait_standing(Duration::from_secs(60)).await?);
+            }
+        }
+        Command::Enable { state } => drive.enable(state == "on").await?,
+        Command::Clear => drive.clear().await?,
+        Command::Save => drive.save().await?,
+        Command::FactoryReset => drive.factory_reset().await?,
+        Command::Status { once, every } => loop {
+            let rows = drive.status().await?;
+            if !once {
+                // Clear the screen and go home: one screen, refreshed.
+                print!("\x1b[2J\x1b[H");
+            }
+            say!("drive {} ({} map)", drive.link.slave(), drive.dict.map.name());
+            for (r, v) in rows {
+                say!("  {:<20} {}", r.name, show(&v, r.unit));
+            }
+            if once {
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(every)).await;
+        },
+    }
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let runtime = match tokio::runtime::Builder::new_current_thread().enable_all().build() {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("drivectl: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    match runtime.block_on(run(cli)) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("drivectl: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,286 @@
+//! `drivectl` against the simulated drive over TCP: the binary as a user runs it, and its
+//! library for the bulk checks.
+
+use std::process::{Command, Output};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use drive_core::od::{Access, OBJECTS, Obj, Range, Type};
+use drivectl::dict::{Dictionary, Map};
+use drivectl::link::{Error, Link, Target};
+use drivectl::{Drive, Settings, Value};
+use hal_sim::{Endpoint, PowerSwitch, SimOptions, Simulator, Snapshot};
+
+/// A simulated drive (or several on one bus) on a free TCP port, with `map` if given.
+fn power_on(axes: Vec<u8>, map: Option<u8>) -> (PowerSwitch, Arc<Mutex<Snapshot>>) {
+    let opts = SimOptions { endpoint: Endpoint::Tcp("127.0.0.1:0".into()), axes, map, ..Default::default() };
+    let sim = Simulator::bind(opts).expect("bind simulator");
+    let snapshot = sim.snapshot();
+    (sim.power_on(), snapshot)
+}
+
+/// Runs the binary against `sim` with `args`.
+fn drivectl(sim: &PowerSwitch, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_drivectl"))
+        .args(["--tcp", sim.endpoint()])
+        .args(args)
+        .output()
+        .expect("run drivectl")
+}
+
+fn stdout(o: &Output) -> String {
+    assert!(o.status.success(), "drivectl failed: {}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+async fn drive(sim: &PowerSwitch) -> Drive {
+    let link =
+        Link::connect(Target::Tcp(sim.endpoint().into()), 1, None, Duration::from_secs(2)).await.expect("connect");
+    Drive::new(link).await.expect("drive")
+}
+
+#[test]
+fn scan_finds_every_drive_of_the_bus() {
+    let (sim, _) = power_on((1..=8).collect(), None);
+    let out = stdout(&drivectl(&sim, &["--timeout", "150", "scan", "--to", "12"]));
+    let addresses: Vec<u8> = out
+        .lines()
+        .filter(|l| l.contains("OpenStep"))
+        .filter_map(|l| l.split_whitespace().next()?.parse().ok())
+        .collect();
+    assert_eq!(addresses, (1..=8).collect::<Vec<_>>(), "{out}");
+    assert!(out.contains("8 drive(s)"), "{out}");
+    assert!(out.lines().take(8).all(|l| l.contains("native") && l.contains("OpenStep Motion")), "{out}");
+}
+
+/// A value of `ty` within `range` other than `default`, if there is one.
+fn other_value(ty: Type, range: Range, default: u32) -> Option<i64> {
+    let signed = ty == Type::S32;
+    let default = if signed { i64::from(default as i32) } else { i64::from(default) };
+    let max = match ty {
+        Type::U8 => 0xFF,
+        Type::U16 => 0xFFFF,
+        Type::U32 | Type::S32 => i64::from(i32::MAX),
+        Type::Str(_) => return None,
+    };
+    let candidates: Vec<i64> = match range {
+        Range::Any => vec![max.min(1234), 1],
+        Range::Span(lo, hi) => vec![
+            i64::from(hi).min(max),
+            i64::from(lo).max(0).max(if signed { i64::from(lo) } else { 0 }),
+            (i64::from(lo) + i64::from(hi)) / 2,
+        ],
+        Range::Set(set) => set.iter().map(|v| if signed { i64::from(*v as i32) } else { i64::from(*v) }).collect(),
+        Range::Bits(mask) => vec![i64::from(mask) & max, 1],
+        Range::Magnitude(_, hi) => vec![i64::from(hi)],
+    };
+    candidates.into_iter().find(|v| *v != default && *v <= max)
+}
+
+/// Every writable object of the native map takes a value by name and reads it back by name.
+#[tokio::test(flavor = "current_thread")]
+async fn set_and_get_round_trip_by_name_for_every_writable_native_object() {
+    let (sim, _) = power_on(Vec::new(), None);
+    let mut d = drive(&sim).await;
+    let mut checked = 0;
+    let mut refused = Vec::new();
+    let enable = d.register("enable").expect("enable");
+    let mode = d.register("mode").expect("mode");
+    let outputs = match d.get(&d.register("gpio-direction").expect("named")).await.expect("read") {
+        Value::Number(v) => v,
+        Value::Text(_) => 0,
+    };
+    for def in OBJECTS.iter().filter(|d| d.access() == Access::Rw) {
+        let r = d.dict.of_object(def.obj).expect("named").clone();
+        let Some(v) = other_value(def.ty(), *def.range, def.default) else { continue };
+        // Each object from the factory state: its old value is written back after the check.
+        let old = d.get(&r).await.expect("read");
+        match d.set(&r, v).await {
+            Ok(()) => {
+                let back = d.get(&r).await.expect("read back");
+                // The GPIO value's inputs read their pins: its outputs hold what was written.
+                let (back, v) = match (def.obj, back) {
+                    (Obj::GpioValue, Value::Number(b)) => (Value::Number(b & outputs), v & outputs),
+                    (_, back) => (back, v),
+                };
+                if back != Value::Number(v) {
+                    refused.push(format!("{} = {v}: reads {back}", r.name));
+                }
+                checked += 1;
+            }
+            Err(e) => refused.push(format!("{} = {v}: {e}", r.name)),
+        }
+        if let Value::Number(old) = old {
+            let _ = d.set(&r, old).await;
+        }
+        // Leave the drive able to take the next write: energised, standing, in position mode.
+        let _ = d.set(&enable, 1).await;
+        let _ = d.set(&mode, 0).await;
+    }
+    assert!(refused.is_empty(), "refused: {refused:#?}");
+    assert!(checked > 100, "{checked}");
+}
+
+/// A dump loaded into a factory-fresh drive makes the two drives' settings identical.
+#[test]
+fn a_dump_loaded_into_a_fresh_drive_clones_its_settings() {
+    for map in [None, Some(1), Some(2), Some(3)] {
+        let (a, _) = power_on(Vec::new(), map);
+        let (b, _) = power_on(Vec::new(), map);
+        let changes: &[&str] = match map {
+            None => &["microsteps=32", "phase-current=1200", "pp-accel=40000", "idle-current=30", "homing-method=17"],
+            Some(1) => &["pp-accel=500", "map-word-order=1", "homing-search-speed=30", "homing-offset=-1234"],
+            Some(2) => &["idle-current=30", "phase-current=1500", "jog-speed=500"],
+            _ => &["microsteps=10000", "idle-current=70", "position-error-angle=90"],
+        };
+        let mut args = vec!["set"];
+        args.extend_from_slice(changes);
+        stdout(&drivectl(&a, &args));
+        let dir = tempfile::tempdir().expect("tempdir");
+        let file = dir.path().join("a.toml");
+        let file = file.to_str().expect("path");
+        stdout(&drivectl(&a, &["dump", file]));
+        let dumped = Settings::from_toml(&std::fs::read_to_string(file).expect("dump file")).expect("parses");
+        let fresh = stdout(&drivectl(&b, &["dump"]));
+        assert_ne!(Settings::from_toml(&fresh).expect("parses"), dumped, "{map:?}: the changes show");
+        let loaded = stdout(&drivectl(&b, &["load", file]));
+        assert!(loaded.contains(&format!("{} setting(s) written", dumped.settings.len())), "{loaded}");
+        let after = stdout(&drivectl(&b, &["dump"]));
+        assert_eq!(Settings::from_toml(&after).expect("parses"), dumped, "{map:?}");
+    }
+}
+
+/// A move by drivectl turns the simulated rotor, and `--wait` reports where it stands.
+#[test]
+fn a_move_turns_the_rotor() {
+    let (sim, snapshot) = power_on(Vec::new(), None);
+    let out = stdout(&drivectl(&sim, &["move", "1600", "--relative", "--speed", "4000", "--wait"]));
+    assert_eq!(out.trim(), "standing at 1600");
+    let rotor = snapshot.lock().expect("snapshot").rotor_microsteps;
+    assert!((rotor - 1600.0).abs() < 1.0, "rotor at {rotor}");
+    let out = stdout(&drivectl(&sim, &["move", "-800", "--wait"]));
+    assert_eq!(out.trim(), "standing at -800");
+    let status = stdout(&drivectl(&sim, &["status", "--once"]));
+    assert!(status.contains("position             -800 step"), "{status}");
+}
+
+/// A refused request: the exception's meaning in words and a failing exit status; nothing changed.
+#[test]
+fn a_refused_request_says_why_and_fails() {
+    let (sim, _) = power_on(Vec::new(), None);
+    let out = drivectl(&sim, &["set", "microsteps=300"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("exception 03") && err.contains("value out of range"), "{err}");
+    assert_eq!(stdout(&drivectl(&sim, &["get", "microsteps"])).trim(), "microsteps = 0");
+    let out = drivectl(&sim, &["get", "no-such-register"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("drivectl list"));
+}
+
+/// The EC-57 map: found by its identification, its sub-indexed registers by name, the native
+/// objects through its window.
+#[test]
+fn the_ec57_map_speaks_sub_indices() {
+    let (sim, _) = power_on(Vec::new(), Some(3));
+    stdout(&drivectl(&sim, &["set", "microsteps=10000", "0x2003.2=70", "register-map=3"]));
+    let out = stdout(&drivectl(&sim, &["get", "microsteps", "idle-current", "register-map", "0x2000.0"]));
+    assert_eq!(
+        out.lines().collect::<Vec<_>>(),
+        ["microsteps = 10000 pulse/rev", "idle-current = 70 %", "register-map = 3", "node-id = 1"]
+    );
+    let out = drivectl(&sim, &["set", "microsteps=10001"]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("exception 06"), "{out:?}");
+}
+
+#[tokio::test(flavor = "current_thread")]
+async fn library_errors_name_the_map() {
+    let (sim, _) = power_on(Vec::new(), Some(1));
+    let mut d = drive(&sim).await;
+    assert_eq!(d.dict.map, Map::Jmc);
+    let err = d.move_to(100, true, None).await.expect_err("no motion command in the JMC map");
+    assert!(matches!(err, Error::Usage(ref m) if m.contains("jmc map")), "{err}");
+    assert_eq!(Dictionary::of(Map::Jmc).map, Map::Jmc);
+}
+
+/// Runs the binary on the serial port `port` at 9600 baud.
+fn on_port(port: &str, args: &[&str]) -> String {
+    let o = Command::new(env!("CARGO_BIN_EXE_drivectl"))
+        .args(["--port", port, "--baud", "9600"])
+        .args(args)
+        .output()
+        .expect("run drivectl");
+    stdout(&o)
+}
+
+/// Over a serial port: the simulator's pseudo-terminal at 9600 baud, in the native map and in
+/// the EC-57's (found by its identification, then framed with sub-indices on the same port).
+#[test]
+fn drivectl_over_a_serial_port() {
+    let opts = SimOptions { endpoint: Endpoint::Pty { link: None }, ..Default::default() };
+    let sim = Simulator::bind(opts).expect("bind simulator").power_on();
+    let ec57 = SimOptions { endpoint: Endpoint::Pty { link: None }, map: Some(3), ..Default::default() };
+    let ec57 = Simulator::bind(ec57).expect("bind simulator").power_on();
+    assert_eq!(on_port(ec57.endpoint(), &["set", "0x2003.2=60"]), "idle-current = 60 %\n");
+    assert_eq!(on_port(ec57.endpoint(), &["get", "idle-current"]), "idle-current = 60 %\n");
+    let run = |args: &[&str]| on_port(sim.endpoint(), args);
+    assert_eq!(run(&["get", "device-name", "phase-current"]), "device-name = \"OSD-42\"\nphase-current = 658 mA\n");
+    run(&["set", "phase-current=900"]);
+    assert_eq!(run(&["get", "phase-current"]), "phase-current = 900 mA\n");
+    assert_eq!(run(&["move", "400", "--relative", "--wait"]), "standing at 400\n");
+    assert!(run(&["--timeout", "200", "scan", "--to", "2"]).contains("1 drive(s)"));
+}
+
+/// Jog, stop, home, enable and clear act on the simulated drive.
+#[test]
+fn jog_stop_home_enable_and_clear() {
+    let (sim, snapshot) = power_on(Vec::new(), None);
+    stdout(&drivectl(&sim, &["jog", "-", "--speed", "2000"]));
+    std::thread::sleep(Duration::from_millis(300));
+    assert!(stdout(&drivectl(&sim, &["get", "run-state"])).contains("run-state = 3"), "jogging");
+    let out = stdout(&drivectl(&sim, &["stop", "--wait"]));
+    let stood: i64 = out.trim().strip_prefix("standing at ").and_then(|p| p.parse().ok()).expect("a position");
+    assert!(stood < -100, "jogged backward: {out}");
+    let rotor = snapshot.lock().expect("snapshot").rotor_microsteps;
+    assert!((rotor - stood as f64).abs() < 1.0, "rotor {rotor}, drive {stood}");
+    // The factory method 35: the present position is home.
+    assert_eq!(stdout(&drivectl(&sim, &["home", "--wait"])).trim(), "homed");
+    assert!(stdout(&drivectl(&sim, &["get", "position"])).contains("position = 0 step"));
+    stdout(&drivectl(&sim, &["enable", "off"]));
+    assert!(!snapshot_enabled(&snapshot), "the stage is off");
+    let out = drivectl(&sim, &["move", "100", "--relative"]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("the power stage is off"), "{out:?}");
+    stdout(&drivectl(&sim, &["enable", "on"]));
+    stdout(&drivectl(&sim, &["clear"]));
+    assert_eq!(stdout(&drivectl(&sim, &["move", "100", "--relative", "--wait"])).trim(), "standing at 100");
+}
+
+fn snapshot_enabled(snapshot: &Arc<Mutex<Snapshot>>) -> bool {
+    std::thread::sleep(Duration::from_millis(50));
+    snapshot.lock().expect("snapshot").enabled
+}
+
+/// Save keeps the settings across a restart; factory-reset brings back the factory ones.
+#[test]
+fn save_and_factory_reset_survive_a_restart() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let flash = dir.path().join("flash.bin");
+    let on = || {
+        let opts = SimOptions {
+            endpoint: Endpoint::Tcp("127.0.0.1:0".into()),
+            flash: Some(flash.clone()),
+            ..Default::default()
+        };
+        Simulator::bind(opts).expect("bind simulator").power_on()
+    };
+    let sim = on();
+    stdout(&drivectl(&sim, &["set", "phase-current=1000"]));
+    stdout(&drivectl(&sim, &["save"]));
+    drop(sim);
+    let sim = on();
+    assert_eq!(stdout(&drivectl(&sim, &["get", "phase-current"])), "phase-current = 1000 mA\n");
+    stdout(&drivectl(&sim, &["factory-reset"]));
+    drop(sim);
+    let sim = on();
+    assert_eq!(stdout(&drivectl(&sim, &["get", "phase-current"])), "phase-current = 658 mA\n");
+}
