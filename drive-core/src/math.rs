@@ -26,6 +26,23 @@ pub fn sqrt(x: f32) -> f32 {
     r
 }
 
+/// The cosine of `x` rad for `x` in `[0, π]`, within 1e-6: `-sin(x - π/2)` by its Taylor
+/// series to the eleventh power, a few multiplications where `libm::cosf` reduces its argument in
+/// software.
+///
+/// ```
+/// use drive_core::math::cos;
+/// assert!((cos(0.0) - 1.0).abs() < 1e-6);
+/// assert!(cos(core::f32::consts::FRAC_PI_2).abs() < 1e-6);
+/// assert!((cos(core::f32::consts::PI) + 1.0).abs() < 1e-6);
+/// ```
+pub fn cos(x: f32) -> f32 {
+    let u = x - core::f32::consts::FRAC_PI_2;
+    let u2 = u * u;
+    let sin = u * (1.0 - u2 / 6.0 * (1.0 - u2 / 20.0 * (1.0 - u2 / 42.0 * (1.0 - u2 / 72.0 * (1.0 - u2 / 110.0)))));
+    -sin
+}
+
 #[cfg(test)]
 mod tests {
     #[test]
@@ -41,6 +58,15 @@ mod tests {
         }
         for v in [1.0f32, 4.0, 9.0, 1e6, 2.5e11] {
             assert_eq!(super::sqrt(v), libm::sqrtf(v), "{v}: exact squares");
+        }
+    }
+
+    #[test]
+    fn the_cosine_is_within_a_millionth_over_half_a_turn() {
+        for k in 0..=10_000 {
+            let x = core::f32::consts::PI * k as f32 / 10_000.0;
+            let (got, want) = (super::cos(x), libm::cosf(x));
+            assert!((got - want).abs() < 1e-6, "cos({x}) = {got}, not {want}");
         }
     }
 }

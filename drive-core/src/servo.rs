@@ -185,8 +185,9 @@ pub(crate) struct Sensorless {
     count: u8,
     /// Seconds with a weak back-EMF, less those without (not below 0).
     held: f32,
-    /// The last estimated load angle, rad (for tests and traces).
-    pub(crate) load_angle: f32,
+    /// The direction of the last tick's motion, 1 or -1 ([`Sensorless::load_angle`] is in the
+    /// direction of motion).
+    sign: f32,
 }
 
 /// What the sensorless detector is told at one tick.
@@ -203,8 +204,8 @@ pub(crate) struct SensorlessInput {
     pub speed: f32,
     /// The minimum speed for detection, full steps per second.
     pub min_speed: f32,
-    /// The load angle beyond which the rotor has pulled out, rad.
-    pub limit: f32,
+    /// The cosine of the load angle beyond which the rotor has pulled out.
+    pub limit_cos: f32,
 }
 
 /// Bounds of the detector's low-pass weight per tick (the weight is the share of a full step
@@ -240,8 +241,7 @@ impl Sensorless {
         self.dot += (dot - self.dot) * alpha;
         self.cross += (cross - self.cross) * alpha;
         self.emf += (crate::math::sqrt(ea * ea + eb * eb) - self.emf) * alpha;
-        let s = if x.speed < 0.0 { -1.0 } else { 1.0 };
-        self.load_angle = libm::atan2f(s * self.dot, -s * self.cross);
+        self.sign = if x.speed < 0.0 { -1.0 } else { 1.0 };
         if speed < x.min_speed || x.min_speed <= 0.0 {
             (self.fast_since, self.count, self.held, self.per_speed) = (None, 0, 0.0, 0.0);
             return false;
@@ -256,7 +256,9 @@ impl Sensorless {
         }
         // Too little back-EMF for the speed: the rotor is held or slipping; else the load angle.
         let weak = per_speed < self.per_speed * EMF_SHARE;
-        let pulled_out = libm::fabsf(self.load_angle) > x.limit;
+        // |atan2(y, x)| beyond the limit, without the arctangent: x below r·cos(limit).
+        let [y, c] = self.pull();
+        let pulled_out = c < x.limit_cos * crate::math::sqrt(y * y + c * c);
         let stalled = weak || pulled_out;
         if !stalled {
             self.per_speed += (per_speed - self.per_speed) * PER_SPEED_ALPHA;
@@ -267,6 +269,18 @@ impl Sensorless {
         self.held = if weak { self.held + TICK_S } else { (self.held - TICK_S).max(0.0) };
         self.count = if stalled { self.count.saturating_add(1) } else { 0 };
         self.count >= STALL_TICKS && (pulled_out || self.held >= STALL_WEAK_S || self.held * speed >= STALL_WEAK_STEPS)
+    }
+
+    /// The load angle's sine and cosine, each times the same magnitude, in the direction of
+    /// motion.
+    fn pull(&self) -> [f32; 2] {
+        [self.sign * self.dot, -self.sign * self.cross]
+    }
+
+    /// The last estimated load angle, rad, in the direction of motion (for tests and traces).
+    pub(crate) fn load_angle(&self) -> f32 {
+        let [y, x] = self.pull();
+        libm::atan2f(y, x)
     }
 
     /// Forgets the motion: the next detection starts afresh.
@@ -362,7 +376,7 @@ impl Servo {
                 fast_since: None,
                 count: 0,
                 held: 0.0,
-                load_angle: 0.0,
+                sign: 1.0,
             },
             last_angle: 0,
             last_per_step: 1,

@@ -41,7 +41,7 @@ impl Controller {
     /// The sensorless detector's present estimates: the load angle (rad, in the direction of
     /// motion) and the back-EMF magnitude (V), both low-passed. For traces and tuning.
     pub fn stall_estimate(&self) -> (f32, f32) {
-        (self.servo.sensorless.load_angle, self.servo.sensorless.emf)
+        (self.servo.sensorless.load_angle(), self.servo.sensorless.emf)
     }
 
     /// The measured position (closed loop): encoder position + zero offset 0x6087.
@@ -130,7 +130,7 @@ impl Controller {
             l: s.motor_l,
             speed: sp.velocity / per_step as f32,
             min_speed: s.stall_min_speed,
-            limit: s.stall_limit,
+            limit_cos: s.stall_limit_cos,
         };
         if self.servo.sensorless.update(now, &x) && self.status.controller & STATUS_STALL == 0 {
             self.status.controller |= STATUS_STALL;

@@ -177,8 +177,9 @@ pub struct Settings {
     pub motor_l: f32,
     /// Minimum speed for stall detection, full steps per second.
     pub stall_min_speed: f32,
-    /// The load angle beyond which the rotor has pulled out, rad.
-    pub stall_limit: f32,
+    /// The cosine of the load angle beyond which the rotor has pulled out (the angle is within
+    /// 45°-175°: beyond it is a cosine below this).
+    pub stall_limit_cos: f32,
     /// The pulse input's format and filter (0x21B7, 0x21B8).
     pub pulse: io::PulseInput,
     /// The inputs' and outputs' functions (0x21BA-0x21C9).

@@ -216,7 +216,7 @@ pub(crate) fn settings_of(params: &[u32; Obj::COUNT]) -> Settings {
         motor_r: get(Obj::MotorResistance) as f32 * 1e-3,
         motor_l: get(Obj::MotorInductance) as f32 * 1e-6,
         stall_min_speed: get(Obj::StallMinSpeed) as f32,
-        stall_limit: stall_limit(get(Obj::StallParams)),
+        stall_limit_cos: crate::math::cos(stall_limit(get(Obj::StallParams))),
         pulse: PulseInput {
             format: PulseFormat::from_raw(get(Obj::PulseFormat)).unwrap_or_default(),
             filter: get(Obj::PulseFilter) as u8,
