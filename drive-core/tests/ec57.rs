@@ -308,3 +308,36 @@ fn the_power_up_jog() {
     r.run(1_000_000);
     assert_eq!(r.drive.state().read_i32(Obj::Position), stopped);
 }
+
+/// 0x200B/0x200C: the soft start's time and switch, in the manual's range (10-3000 ms), on the
+/// drive's 0x21E0/0x21E1; the output stage's current rises over the time at the next enable.
+#[test]
+fn the_soft_start_registers() {
+    let mut r = rig();
+    assert_eq!(r.read_sub(0x200B, 0, 2), Ok(vec![100, 0]), "0x200B then 0x200C");
+    assert_eq!(r.write_sub(0x200B, 0, 5), Err(0x06), "below the manual's 10 ms");
+    assert_eq!(r.write_sub(0x200C, 0, 2), Err(0x06));
+    r.write_sub(0x200B, 0, 400).expect("400 ms");
+    r.write_sub(0x200C, 0, 1).expect("on");
+    let st = r.drive.state();
+    assert_eq!((st.read(Obj::SoftStartTime), st.read(Obj::SoftStart)), (400, 1));
+    // The current the output stage drives at the next tick.
+    let current = |r: &mut MapRig| {
+        r.now += 50;
+        let out = r.drive.tick_with(drive_core::Instant::from_micros(r.now), &r.inputs);
+        u32::from(out.current_ma)
+    };
+    // The standing motor's current: 0x2003.2's half of 0x2004's.
+    let standing = current(&mut r);
+    assert_eq!(standing, 500);
+    // Freed, then energised again: the enable acts at its frame's t3.5 (4 ms at 9600 baud) of
+    // the 10 ms an exchange runs; 94 ms more are a quarter of the ramp.
+    r.write_sub(0x6011, 0xFF, 0).expect("free");
+    assert_eq!(current(&mut r), 0);
+    r.write_sub(0x6011, 0xFF, 1).expect("enable");
+    r.run(94_000);
+    let quarter = current(&mut r);
+    assert!(quarter.abs_diff(standing / 4) <= standing / 50, "{quarter} of {standing} mA");
+    r.run(300_000);
+    assert_eq!(current(&mut r), standing);
+}

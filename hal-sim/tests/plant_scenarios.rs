@@ -231,3 +231,40 @@ fn a_disabled_drive_holds_the_rotor_when_asked_to() {
     assert!(!on, "freed");
     assert!(freed.abs() > 1.0, "a freed rotor turns under the load: {freed:.2} steps");
 }
+
+/// Seed 003's soft start (0x200B/0x200C, our 0x21E0/0x21E1): energised with it on, the motor's
+/// phase current rises over the set time instead of at once, at power-up and at each enable.
+#[test]
+fn a_soft_start_ramps_the_motor_current_up() {
+    let motor = || MotorCatalog::builtin().get(DEFAULT_MOTOR).cloned().expect("catalogue motor");
+    // The larger phase current's magnitude, mA, as the drive measures it, after `secs` more.
+    let current_after = |plant: &mut Plant, secs: f64| {
+        plant.run_for(secs);
+        let [a, b] = plant.measurements().phase_ma.expect("measured");
+        a.unsigned_abs().max(b.unsigned_abs())
+    };
+    let power_up = |soft: u32| {
+        let mut params = drive_core::Params::factory();
+        for (obj, v) in [(Obj::SoftStart, soft), (Obj::SoftStartTime, 400), (Obj::PhaseCurrent, 1000)] {
+            assert!(params.set(obj, v), "{obj:?}");
+        }
+        let drive = Drive::boot(drive_core::DriveConfig::default(), &params, 0);
+        Plant::new(drive, Motor::new(motor(), MotorInputs::default()))
+    };
+    // At once: the full current (the motor stands at its full step: one phase carries it all)
+    // within a few of the winding's time constants.
+    let mut plant = power_up(0);
+    assert!(current_after(&mut plant, 0.02) > 950);
+    // Ramped over 400 ms: a quarter after 100 ms, half after 200, all of it after 400.
+    let mut plant = power_up(1);
+    let at = [0.1, 0.1, 0.2, 0.1].map(|dt| current_after(&mut plant, dt));
+    for (got, want) in at.iter().zip([250, 500, 1000, 1000]) {
+        assert!(got.abs_diff(want) < 60, "currents {at:?} mA");
+    }
+    // Freed and energised again: the ramp starts over.
+    assert_eq!(plant.write(Obj::Enable, 0), Ok(()));
+    assert!(current_after(&mut plant, 0.05) < 30, "freed");
+    assert_eq!(plant.write(Obj::Enable, 1), Ok(()));
+    let again = current_after(&mut plant, 0.1);
+    assert!(again.abs_diff(250) < 60, "{again} mA 100 ms after the enable");
+}

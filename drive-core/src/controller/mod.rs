@@ -110,6 +110,9 @@ pub struct Settings {
     pub enabled: bool,
     /// Disabled, the motor is held at the standstill current (0x21DA).
     pub hold_disabled: bool,
+    /// Ticks the current takes to rise to its setting after the stage is energised (0x21E0 and
+    /// 0x21E1); 0: at once.
+    pub soft_start_ticks: u16,
     /// The deceleration of a stop the controller starts on its own (watchdog, PVT FIFO dry, PVT
     /// stop), pps²; 0 stops at once.
     pub stop_decel: u32,
@@ -254,6 +257,8 @@ pub struct Controller {
     pub(crate) io: io::Pins,
     /// Since when the axis has stood still (for the standstill current).
     still_since: Option<Instant>,
+    /// Ticks since the power stage was energised (saturating).
+    energised: u16,
     /// What happened since the bus side last took the events.
     pub(crate) events: Events,
     /// A frame for this drive arrived since the last tick (the watchdog restarts).
@@ -335,6 +340,7 @@ impl Controller {
             ahead: None,
             io: io::Pins::default(),
             still_since: None,
+            energised: 0,
             watch: None,
             suspend: 0,
             caught: None,
@@ -442,8 +448,20 @@ impl Controller {
         let held = state == PowerState::Disabled && s.hold_disabled;
         let idle = held || (still && now.since(since) >= s.idle_delay_us);
         let full = s.phase_current_ma * if idle { s.idle_current_pct } else { 100 } / 100;
-        let current = (full as f32 * share.clamp(0.0, 1.0)) as u32;
         let enabled = state == PowerState::On || held;
+        let mut current = (full as f32 * share.clamp(0.0, 1.0)) as u32;
+        // Soft start (0x21E1): the current rises from 0 over its time after the stage is energised.
+        if !enabled {
+            self.energised = 0;
+        } else {
+            if self.energised < s.soft_start_ticks {
+                // At most 7 A of 60 000 ticks: within 32 bits.
+                current = current * u32::from(self.energised) / u32::from(s.soft_start_ticks);
+            }
+            // Energised without a soft start counts as ramped: one switched on later does not
+            // dip the current.
+            self.energised = if s.soft_start_ticks == 0 { u16::MAX } else { self.energised.saturating_add(1) };
+        }
         let gpio = self.output_levels();
         let function_pins = self.settings.io.output_pins;
         if function_pins != 0 {

@@ -523,6 +523,14 @@ objects! {
     /// it), bit 1 probe 2. A probe captures at its first activation after its bit was cleared
     /// (armed from power-up); later ones leave the capture as it is.
     ProbeStatus @ 0x21DF: U8, W1c, Live, Bits(0x03), default 0, None, "touch probe status";
+    /// Soft start time (our object; seed 003's 0x200B): with 0x21E1 on, the phase current rises
+    /// from 0 to its setting over this long each time the power stage is energised (power-up,
+    /// enable, a fault cleared), so that the rotor eases onto its step instead of jumping to it.
+    /// (The manual's factory value 0 is outside its own range, 10-3000: 100 ms here.)
+    SoftStartTime @ 0x21E0: U16, Rw, Rom, Span(10, 3000), default 100, Millis, "soft start time";
+    /// Soft start (our object; seed 003's 0x200C): 1 ramps the current up over 0x21E0 when the
+    /// stage is energised; 0 energises it at once.
+    SoftStart @ 0x21E1: U8, Rw, Rom, Span(0, 1), default 0, None, "soft start";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake

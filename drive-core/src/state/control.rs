@@ -153,6 +153,8 @@ pub(crate) const fn runs_on(obj: Obj) -> bool {
             | Obj::InPositionWindow
             | Obj::InPositionSource
             | Obj::DisabledHold
+            | Obj::SoftStartTime
+            | Obj::SoftStart
             | Obj::PositionErrorLimit
             | Obj::PositionErrorAngle
             | Obj::PositionErrorAlarm
@@ -169,6 +171,11 @@ pub(crate) fn settings_of(params: &[u32; Obj::COUNT]) -> Settings {
     Settings {
         enabled: get(Obj::Enable) == 1,
         hold_disabled: get(Obj::DisabledHold) == 1,
+        soft_start_ticks: if get(Obj::SoftStart) == 1 {
+            (get(Obj::SoftStartTime) * (crate::units::TICK_HZ / 1000)) as u16
+        } else {
+            0
+        },
         stop_decel: stop_deceleration(mode, get(Obj::PpDecel), get(Obj::DecelLevel)),
         phase_current_ma: get(Obj::PhaseCurrent),
         idle_current_pct: get(Obj::IdleCurrent),
