@@ -279,8 +279,10 @@ impl Sensorless {
 
     /// The last estimated load angle, rad, in the direction of motion (for tests and traces).
     pub(crate) fn load_angle(&self) -> f32 {
-        let [y, x] = self.pull();
-        libm::atan2f(y, x)
+        match self.pull() {
+            [y, x] if y == 0.0 && x == 0.0 => 0.0,
+            [y, x] => libm::atan2f(y, x),
+        }
     }
 
     /// Forgets the motion: the next detection starts afresh.

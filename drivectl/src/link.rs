@@ -7,8 +7,8 @@ use std::time::Duration;
 
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::time::{Instant, timeout, timeout_at};
-use tokio_modbus::client::{Client, Context, Reader, Writer, rtu};
-use tokio_modbus::prelude::{ExceptionCode, ReadCode, Request, Response, Slave, SlaveContext};
+use tokio_modbus::client::{Context, Reader, Writer, rtu};
+use tokio_modbus::prelude::{ExceptionCode, ReadCode, Slave, SlaveContext};
 
 use crate::dict::{Address, Map};
 
@@ -341,23 +341,9 @@ impl Link {
             Target::Serial { baud, .. } => *baud,
             Target::Tcp(_) => 115_200,
         };
-        let stream: &mut Box<dyn Stream> = match &mut self.io {
-            Io::Raw(s) => s,
-            Io::Modbus(ctx) => {
-                // A standard request on tokio-modbus's framing (identification before the map
-                // is known).
-                let request =
-                    Request::Custom(*pdu.first().unwrap_or(&0), pdu.get(1..).unwrap_or_default().to_vec().into());
-                let answer = timeout(limit, ctx.call(request))
-                    .await
-                    .map_err(|_| Error::Timeout)?
-                    .map_err(|e| Error::Link(e.to_string()))?;
-                return match answer {
-                    Ok(Response::Custom(f, data)) => Ok([&[f][..], &data].concat()),
-                    Ok(other) => Err(Error::Link(format!("unexpected reply {other:?}"))),
-                    Err(e) => Err(Error::Refused { code: u8::from(e), meaning: meaning(map, u8::from(e)) }),
-                };
-            }
+        // Sub-indexed requests only: a link to such a map is opened raw (`Link::connect`).
+        let Io::Raw(stream) = &mut self.io else {
+            return Err(Error::Usage("a sub-indexed address on a map without sub-indices".into()));
         };
         let mut frame = vec![slave];
         frame.extend_from_slice(pdu);
