@@ -3,7 +3,7 @@
 
 use drive_core::maps::layout::{Layout, View, WordOrder};
 use drive_core::maps::{Maps, NAMES, RegisterMap, cls9, doc, ec57, jmc};
-use drive_core::od::{Access, OBJECTS, Obj, Storage, Type};
+use drive_core::od::{Access, OBJECTS, Obj, ObjectDef, Storage, Type};
 
 /// A register map the drive can answer with (0x2190).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -128,24 +128,30 @@ fn kebab(obj: Obj) -> String {
     out
 }
 
+/// Object `d` at its native register (seed 003's window: with sub-index `sub`, where its
+/// settings are not `dump`'s: the map's own registers carry those).
+fn native(d: &ObjectDef, sub: Option<u8>) -> Register {
+    Register {
+        name: kebab(d.obj),
+        obj: d.obj,
+        at: Address { register: d.addr, sub },
+        words: d.words(),
+        signed: d.ty() == Type::S32,
+        text: matches!(d.ty(), Type::Str(_)),
+        readable: true,
+        writable: d.access() != Access::Ro,
+        saved: sub.is_none() && d.storage() == Storage::Rom && d.access() == Access::Rw,
+        unit: d.unit.symbol(),
+        about: d.name,
+    }
+}
+
 impl Dictionary {
     /// The registers of `map`.
     pub fn of(map: Map) -> Self {
         let mut registers: Vec<Register> = Vec::new();
         match map.layout() {
-            None => registers.extend(OBJECTS.iter().map(|d| Register {
-                name: kebab(d.obj),
-                obj: d.obj,
-                at: Address { register: d.addr, sub: None },
-                words: d.words(),
-                signed: d.ty() == Type::S32,
-                text: matches!(d.ty(), Type::Str(_)),
-                readable: true,
-                writable: d.access() != Access::Ro,
-                saved: d.storage() == Storage::Rom && d.access() == Access::Rw,
-                unit: d.unit.symbol(),
-                about: d.name,
-            })),
+            None => registers.extend(OBJECTS.iter().map(|d| native(d, None))),
             Some(layout) => {
                 for e in layout.entries {
                     let d = e.obj.def();
@@ -181,19 +187,7 @@ impl Dictionary {
                         if registers.iter().any(|r| r.obj == d.obj) {
                             continue;
                         }
-                        registers.push(Register {
-                            name: kebab(d.obj),
-                            obj: d.obj,
-                            at: Address { register: d.addr, sub: Some(0xFF) },
-                            words: d.words(),
-                            signed: d.ty() == Type::S32,
-                            text: matches!(d.ty(), Type::Str(_)),
-                            readable: true,
-                            writable: d.access() != Access::Ro,
-                            saved: false,
-                            unit: d.unit.symbol(),
-                            about: d.name,
-                        });
+                        registers.push(native(d, Some(0xFF)));
                     }
                 }
             }

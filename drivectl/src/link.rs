@@ -194,6 +194,19 @@ fn t35(baud: u32) -> Duration {
     chars.max(Duration::from_micros(1750)) + Duration::from_millis(2)
 }
 
+/// A tokio-modbus request's answer within `limit`, an exception in `map`'s words.
+async fn answered<T>(
+    limit: Duration,
+    map: Map,
+    request: impl std::future::Future<Output = tokio_modbus::Result<T>>,
+) -> Result<T, Error> {
+    let answer = timeout(limit, request).await.map_err(|_| Error::Timeout)?.map_err(|e| Error::Link(e.to_string()))?;
+    answer.map_err(|e: ExceptionCode| {
+        let code = u8::from(e);
+        Error::Refused { code, meaning: meaning(map, code) }
+    })
+}
+
 impl Link {
     /// Connects to slave `slave` on `target`, answering with `map` (or, if `None`, the map its
     /// identification names).
@@ -236,22 +249,13 @@ impl Link {
         }
     }
 
-    fn refused(&self, e: ExceptionCode) -> Error {
-        let code = u8::from(e);
-        Error::Refused { code, meaning: meaning(self.map, code) }
-    }
-
     /// The device identification (0x2B / 0x0E, regular category, from object 0).
     pub async fn identify(&mut self) -> Result<Identity, Error> {
         let limit = self.limit;
         let Io::Modbus(ctx) = &mut self.io else {
             return self.identify_raw().await;
         };
-        let answer = timeout(limit, ctx.read_device_identification(ReadCode::Regular, 0))
-            .await
-            .map_err(|_| Error::Timeout)?
-            .map_err(|e| Error::Link(e.to_string()))?;
-        let id = answer.map_err(|e| self.refused(e))?;
+        let id = answered(limit, self.map, ctx.read_device_identification(ReadCode::Regular, 0)).await?;
         Ok(Identity {
             objects: id
                 .device_id_objects
@@ -277,15 +281,9 @@ impl Link {
 
     /// Reads `n` registers at `at`.
     pub async fn read(&mut self, at: Address, n: u16) -> Result<Vec<u16>, Error> {
-        let limit = self.limit;
+        let (limit, map) = (self.limit, self.map);
         match (&mut self.io, at.sub) {
-            (Io::Modbus(ctx), None) => {
-                let answer = timeout(limit, ctx.read_holding_registers(at.register, n))
-                    .await
-                    .map_err(|_| Error::Timeout)?
-                    .map_err(|e| Error::Link(e.to_string()))?;
-                answer.map_err(|e| self.refused(e))
-            }
+            (Io::Modbus(ctx), None) => answered(limit, map, ctx.read_holding_registers(at.register, n)).await,
             (_, sub) => {
                 let [hi, lo] = at.register.to_be_bytes();
                 let [nh, nl] = n.to_be_bytes();
@@ -301,22 +299,10 @@ impl Link {
 
     /// Writes `values` from `at`: one register with 0x06, more with 0x10.
     pub async fn write(&mut self, at: Address, values: &[u16]) -> Result<(), Error> {
-        let limit = self.limit;
+        let (limit, map) = (self.limit, self.map);
         match (&mut self.io, at.sub, values) {
-            (Io::Modbus(ctx), None, [v]) => {
-                let answer = timeout(limit, ctx.write_single_register(at.register, *v))
-                    .await
-                    .map_err(|_| Error::Timeout)?
-                    .map_err(|e| Error::Link(e.to_string()))?;
-                answer.map_err(|e| self.refused(e))
-            }
-            (Io::Modbus(ctx), None, _) => {
-                let answer = timeout(limit, ctx.write_multiple_registers(at.register, values))
-                    .await
-                    .map_err(|_| Error::Timeout)?
-                    .map_err(|e| Error::Link(e.to_string()))?;
-                answer.map_err(|e| self.refused(e))
-            }
+            (Io::Modbus(ctx), None, [v]) => answered(limit, map, ctx.write_single_register(at.register, *v)).await,
+            (Io::Modbus(ctx), None, _) => answered(limit, map, ctx.write_multiple_registers(at.register, values)).await,
             (_, sub, values) => {
                 let [hi, lo] = at.register.to_be_bytes();
                 let mut pdu = match values {
