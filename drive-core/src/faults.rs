@@ -17,7 +17,6 @@
 //!   power loss below 0x6084 it is 0 (applied). As a general output (0x2141 = 1) it is the duty
 //!   written, cut only while a fault is latched.
 
-use crate::od::Obj;
 use crate::units::Instant;
 
 /// 0x6000 bit 0: driver over-temperature.
@@ -180,20 +179,6 @@ impl FaultLog {
         self.entries.get(at).copied().unwrap_or(0)
     }
 }
-
-/// The fault history objects, newest entry first.
-pub(crate) const HISTORY_OBJECTS: [Obj; HISTORY_LEN] = [
-    Obj::FaultHistory0,
-    Obj::FaultHistory1,
-    Obj::FaultHistory2,
-    Obj::FaultHistory3,
-    Obj::FaultHistory4,
-    Obj::FaultHistory5,
-    Obj::FaultHistory6,
-    Obj::FaultHistory7,
-    Obj::FaultHistory8,
-    Obj::FaultHistory9,
-];
 
 /// The fault history as the flash keeps it.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

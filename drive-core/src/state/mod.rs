@@ -14,7 +14,7 @@ pub mod pvt;
 use crate::controller::handoff::{Base, Orders};
 use crate::controller::{Controller, Pvt};
 use crate::faults::{FAULT_POSITION, FaultLog};
-use crate::faults::{FaultHistory, HISTORY_OBJECTS};
+use crate::faults::{FaultHistory, HISTORY_LEN};
 use crate::ident::Identity;
 use crate::motion::cubic::Table;
 use crate::od::has_effect;
@@ -53,6 +53,20 @@ pub enum SystemRequest {
     /// 0x2136) as they are now, so that they survive a power cycle.
     SaveFaults,
 }
+
+/// The fault history objects, newest entry first.
+const HISTORY_OBJECTS: [Obj; HISTORY_LEN] = [
+    Obj::FaultHistory0,
+    Obj::FaultHistory1,
+    Obj::FaultHistory2,
+    Obj::FaultHistory3,
+    Obj::FaultHistory4,
+    Obj::FaultHistory5,
+    Obj::FaultHistory6,
+    Obj::FaultHistory7,
+    Obj::FaultHistory8,
+    Obj::FaultHistory9,
+];
 
 /// The values of the saved objects: what a save writes and what power-up loads.
 ///
