@@ -20,6 +20,7 @@
 //! PVT (0x6007 = 2), synchronous positioning and group starts are in [`super::pvt`].
 
 use super::DriveState;
+use super::inputs::{INPUT_FUNCTION_OBJECTS, INPUT_LIMIT_NEGATIVE, INPUT_LIMIT_POSITIVE, INPUT_PROBE_1, INPUT_PROBE_2};
 use crate::controller::handoff::{Lent, Orders, TickSide};
 use crate::controller::io::{IoFunctions, NotifyOutput, OUT_PINS, OutputFunction, PinConfig, PulseInput};
 use crate::controller::{DECAY, Events, STATUS_EXT, STATUS_STALL, Settings};
@@ -264,9 +265,9 @@ fn io_functions(get: &impl Fn(Obj) -> u32) -> IoFunctions {
         inputs: inputs.iter().enumerate().fold(0u8, |m, (k, &f)| m | (u8::from(f != 0) << k)),
         output_pins,
         input_low: get(Obj::InputLogic) as u8,
-        limit_positive: with(super::inputs::INPUT_LIMIT_POSITIVE),
-        limit_negative: with(super::inputs::INPUT_LIMIT_NEGATIVE),
-        probes: [with(super::inputs::INPUT_PROBE_1), with(super::inputs::INPUT_PROBE_2)],
+        limit_positive: with(INPUT_LIMIT_POSITIVE),
+        limit_negative: with(INPUT_LIMIT_NEGATIVE),
+        probes: [with(INPUT_PROBE_1), with(INPUT_PROBE_2)],
         outputs,
         general: get(Obj::GeneralOutputs) as u8,
         output_low: get(Obj::OutputLogic) as u8,
@@ -278,16 +279,6 @@ fn io_functions(get: &impl Fn(Obj) -> u32) -> IoFunctions {
 /// OUT1-OUT4's function objects.
 pub(crate) const OUTPUT_FUNCTION_OBJECTS: [Obj; 4] =
     [Obj::OutputFunction1, Obj::OutputFunction2, Obj::OutputFunction3, Obj::OutputFunction4];
-/// IN1-IN7's function objects.
-pub(crate) const INPUT_FUNCTION_OBJECTS: [Obj; 7] = [
-    Obj::InputFunction1,
-    Obj::InputFunction2,
-    Obj::InputFunction3,
-    Obj::InputFunction4,
-    Obj::InputFunction5,
-    Obj::InputFunction6,
-    Obj::InputFunction7,
-];
 
 /// The deceleration of a stop in `mode`, pps²: `pp_decel` (0x6068) in the profile modes, else
 /// the level `level` of 0x600B; 0 (stop at once) for level 0, which has no ramp.

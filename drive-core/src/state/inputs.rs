@@ -14,13 +14,22 @@
 //! in between stands until the next change.
 
 use super::DriveState;
-use super::control::INPUT_FUNCTION_OBJECTS;
 use crate::modes::Command;
 use crate::motion::cubic::Table;
 use crate::od::Obj;
 use crate::units::Instant;
 use core::borrow::Borrow;
 
+/// IN1-IN7's function objects.
+pub(crate) const INPUT_FUNCTION_OBJECTS: [Obj; 7] = [
+    Obj::InputFunction1,
+    Obj::InputFunction2,
+    Obj::InputFunction3,
+    Obj::InputFunction4,
+    Obj::InputFunction5,
+    Obj::InputFunction6,
+    Obj::InputFunction7,
+];
 /// Input function 9: the positive limit switch.
 pub(crate) const INPUT_LIMIT_POSITIVE: u32 = 9;
 /// Input function 10: the negative limit switch.

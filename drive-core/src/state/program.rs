@@ -298,7 +298,7 @@ impl<P: Borrow<Table>> DriveState<P> {
         let mut has = false;
         let mut bits = 0u8;
         let active = self.active_inputs();
-        for k in 0..super::control::INPUT_FUNCTION_OBJECTS.len() {
+        for k in 0..super::inputs::INPUT_FUNCTION_OBJECTS.len() {
             let f = self.input_function(k);
             if let Some(bit) = f.checked_sub(INPUT_SELECT_BIT0).filter(|&b| b < 5) {
                 has = true;
