@@ -1,16 +1,18 @@
-//! Puts the chip's memory description, the workspace's `memory.x` (STM32G431CB), on the linker
-//! search path for the microcontroller build; `cortex-m-rt`'s `link.x` includes it.
+//! Puts the chip's memory description, the workspace's `memory.x` (STM32G474CE, its flash map in
+//! `src/flash_map.rs`), on the linker search path for the microcontroller build; `cortex-m-rt`'s
+//! `link.x` includes it.
 //!
 //! The QEMU build (`qemu` feature, QEMU's STM32L475VG) links with the same layout: the linker
 //! looks for an included script in its working directory, the workspace root, before the search
-//! path, so a second description could not take over anyway. The G431's 120 KiB of flash and
-//! 32 KiB of RAM from 0x08000000 / 0x20000000 lie inside the L475's 1 MiB and 96 KiB, and the
-//! emulated build then has the stack the board has.
+//! path, so a second description could not take over anyway. The program's slot (ACTIVE, from
+//! 0x08008000) and its 96 KiB of RAM from 0x20000000 lie inside the L475's 1 MiB of flash and
+//! its 96 KiB SRAM1, so the emulated build has the board's layout and stack.
 
 use std::{env, fs, path::PathBuf};
 
 fn main() {
     println!("cargo:rerun-if-changed=../memory.x");
+    println!("cargo:rerun-if-changed=src/flash_map.rs");
     // embedded-test's macro tests this cfg.
     println!("cargo::rustc-check-cfg=cfg(rust_analyzer)");
     // The host stub links like any host program.

@@ -2,7 +2,7 @@
 //!
 //! All the drive's logic lives in `drive-core`; this crate only moves bytes and time into it,
 //! replies out, and the control tick's outputs to the power stage. Two boards share the
-//! application (`app`): the STM32G431CB drive (feature `g431`, the default, `board::g431`) and
+//! application (`app`): the STM32G474CE drive (feature `g474`, the default, `board::g474`) and
 //! QEMU's b-l475e-iot01a (feature `qemu`, `board::qemu`), which has no timers and no baud timing
 //! and so gets its own small board layer on the PAC.
 //!
@@ -17,6 +17,9 @@ fn main() {}
 #[cfg_attr(not(feature = "qemu"), allow(dead_code, reason = "used by the QEMU build and the host tests"))]
 mod frames;
 
+#[allow(dead_code, reason = "the table is read whole by the tests; the board uses its store's region")]
+mod flash_map;
+
 #[cfg(target_os = "none")]
 mod app;
 #[cfg(target_os = "none")]
@@ -24,33 +27,32 @@ mod power;
 #[cfg(target_os = "none")]
 mod stack;
 
-#[cfg(all(target_os = "none", feature = "g431", feature = "qemu"))]
-compile_error!("features `g431` and `qemu` select different chips: build with `--no-default-features --features qemu`");
+#[cfg(all(target_os = "none", feature = "g474", feature = "qemu"))]
+compile_error!("features `g474` and `qemu` select different chips: build with `--no-default-features --features qemu`");
 
 #[cfg(target_os = "none")]
 mod board {
-    #[cfg(feature = "g431")]
-    mod g431;
-    #[cfg(feature = "g431")]
-    pub use g431::*;
+    #[cfg(feature = "g474")]
+    mod g474;
+    #[cfg(feature = "g474")]
+    pub use g474::*;
     #[cfg(feature = "qemu")]
     mod qemu;
     #[cfg(feature = "qemu")]
     pub use qemu::*;
 }
 
-/// Panics and faults: the power stage goes off before anything else, then the core halts until
-/// the independent watchdog (or, under QEMU, nothing) restarts it. A panic logs no location: the
-/// file names and lines of every possible panic, and the formatting they pull in, are 8.6 KB of
-/// flash; a debugger attached to the halted core (`probe-rs attach`) shows the backtrace.
+/// Panics and faults: the power stage goes off before anything else, then the panic is logged
+/// with where it happened (file, line and message), and the core halts until the independent
+/// watchdog (or, under QEMU, nothing) restarts it.
 #[cfg(target_os = "none")]
 mod fault {
     use crate::board;
 
     #[panic_handler]
-    fn panic(_: &core::panic::PanicInfo) -> ! {
+    fn panic(info: &core::panic::PanicInfo) -> ! {
         board::power_off();
-        defmt::error!("panic");
+        defmt::error!("{}", defmt::Display2Format(info));
         halt()
     }
 
@@ -61,9 +63,9 @@ mod fault {
     }
 
     #[cortex_m_rt::exception]
-    unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
         board::power_off();
-        defmt::error!("hard fault");
+        defmt::error!("hard fault at pc {=u32:#x} (lr {=u32:#x})", frame.pc(), frame.lr());
         halt()
     }
 
@@ -75,7 +77,7 @@ mod fault {
     }
 }
 
-#[cfg(all(target_os = "none", feature = "g431"))]
+#[cfg(all(target_os = "none", feature = "g474"))]
 mod run {
     use core::sync::atomic::Ordering;
 

@@ -4,7 +4,7 @@
 //! With flip-link the stack is the RAM below the statics, from `_stack_start` (the initial
 //! stack pointer) down to `_stack_end` (the start of RAM); the budget's RAM figure is the
 //! statics plus what this measures, not an allowance. `cargo xtask tick-cost` reads the
-//! painted region of the QEMU build through QEMU's monitor; the G431 logs [`peak`].
+//! painted region of the QEMU build through QEMU's monitor; the G474 logs [`peak`].
 
 /// The paint: "STK!" as a little-endian word, unlikely as a saved register or a local.
 pub const PAINT: u32 = 0x214B_5453;

@@ -1,4 +1,4 @@
-//! Hardware-in-the-loop tests on a real STM32G431CB board, run by probe-rs (embedded-test
+//! Hardware-in-the-loop tests on a real STM32G474CE board, run by probe-rs (embedded-test
 //! harness; every test starts from a reset):
 //!
 //! ```sh
@@ -19,9 +19,13 @@ fn main() {}
 #[allow(dead_code, reason = "the suite uses part of the application")]
 mod app;
 #[cfg(target_os = "none")]
-#[path = "../src/board/g431.rs"]
+#[path = "../src/board/g474.rs"]
 #[allow(dead_code, reason = "the suite uses part of the board")]
 mod board;
+#[cfg(target_os = "none")]
+#[path = "../src/flash_map.rs"]
+#[allow(dead_code, reason = "the suite uses the store's region")]
+mod flash_map;
 #[cfg(target_os = "none")]
 #[path = "../src/frames.rs"]
 #[allow(dead_code, reason = "only its frame size is used")]

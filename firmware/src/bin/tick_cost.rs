@@ -1,6 +1,6 @@
 //! The control tick's cost on the Cortex-M4 instruction set, with the closed loops and the stall
 //! detection running: `cargo xtask tick-cost` builds this (feature `tick-cost`) for QEMU's
-//! STM32L475 (Cortex-M4F, as the G431) and runs it under `-icount shift=8`, where every
+//! STM32L475 (Cortex-M4F, as the G474) and runs it under `-icount shift=8`, where every
 //! instruction takes 256 virtual ns and SysTick counts every 250 ns (the 4 MHz reset clock): one
 //! count is 0.98 instructions.
 //!
@@ -180,7 +180,7 @@ const SYST_MASK: u32 = 0x00FF_FFFF;
 /// The drive's address (factory).
 const SLAVE: u8 = 1;
 
-/// How long after a request its motion starts, as on the G431 (`board::g431::PLAN_MARGIN_US`).
+/// How long after a request its motion starts, as on the G474 (`board::g474::PLAN_MARGIN_US`).
 const PLAN_MARGIN_US: u64 = 2_000;
 
 /// A drive (the bus side), the tick's side, their clock and the outputs of the last tick.

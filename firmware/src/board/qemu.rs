@@ -1,16 +1,17 @@
-//! QEMU's b-l475e-iot01a (STM32L475VG), on the PAC: the same application as the G431 board
+//! QEMU's b-l475e-iot01a (STM32L475VG), on the PAC: the same application as the G474 board
 //! over what QEMU 10 models.
 //!
 //! QEMU models RCC, GPIO, EXTI and the USARTs of this chip but not its timers, DMA or PWR, and
 //! its USART takes 32-bit accesses only; embassy-stm32's `init` and UART driver do not run there
-//! (see docs/board-g431.md). So this layer is small and direct:
+//! (see docs/board-g474.md). So this layer is small and direct:
 //! - USART1 (QEMU's first serial port) with 32-bit register access, the RXNE interrupt filling
 //!   a pipe, and transmission by polling TXE;
 //! - SysTick at 1 kHz from the 4 MHz MSI reset clock: the embassy-time driver (microseconds,
 //!   interpolated from the SysTick counter) and the control tick. `drive-core` evaluates the
 //!   motion at the time it is given, so a slower tick only batches more steps per tick;
 //! - no step timer: the drive core counts the steps (the position advances as on the board);
-//! - no flash controller: the parameter store runs on RAM that behaves as flash ([`RamFlash`]).
+//! - no flash controller: the parameter store runs on RAM that behaves as flash ([`RamFlash`]),
+//!   kept across a reset of the emulated chip (QEMU's `system_reset` leaves RAM as it was).
 
 use core::cell::{Cell, RefCell};
 use core::convert::Infallible;
@@ -111,33 +112,48 @@ pub fn init() -> Serial {
 /// Nothing to cut under QEMU: no power stage.
 pub fn power_off() {}
 
-/// The parameter store's range in [`RamFlash`]: the size of the G431's (four 2 KiB pages).
+/// The parameter store's range in [`RamFlash`]: the size of the board's ([`crate::flash_map::PARAMS`]).
 pub const STORE: core::ops::Range<u32> = 0..STORE_BYTES;
 /// Bytes of [`RamFlash`].
-const STORE_BYTES: u32 = 8 * 1024;
-/// Where [`RamFlash`] lives: the L475's SRAM1 just above the 32 KiB that `memory.x` (the
-/// G431's) gives the program, so the emulated build keeps the board's statics and stack.
-const STORE_RAM: usize = 0x2000_8000;
+const STORE_BYTES: u32 = crate::flash_map::PARAMS.len;
+/// Where [`RamFlash`] lives: the L475's SRAM2 (32 KiB at 0x10000000), outside the RAM that
+/// `memory.x` gives the program (its SRAM1), where the G474 has its CCM SRAM.
+const STORE_RAM: usize = 0x1000_0000;
+/// Written after the store's bytes once they are erased: RAM that holds it has held a store
+/// since QEMU started (QEMU's RAM starts zero, and a reset keeps it).
+const FORMATTED: u32 = 0x5354_4F52;
 
 /// QEMU does not model this chip's flash controller, so the parameter store runs on RAM that
 /// behaves as NOR flash does (a write only clears bits, an erase sets a page to 0xFF, the
-/// G431's write and page sizes): the same store and save path as the board, lost at power-off.
+/// G474's write and page sizes): the same store and save path as the board. It lasts while QEMU
+/// runs, across resets of the emulated chip, as flash lasts across the board's power cycles.
 pub struct RamFlash(&'static mut [u8]);
 
 /// The parameter store on [`RamFlash`], behind the adapter the board's flash uses.
 pub type ParamStore = drive_core::store::Store<embassy_embedded_hal::adapter::BlockingAsync<RamFlash>>;
 
-/// The store's RAM, erased (the first call only; `None` after).
+/// The store's RAM (the first call only; `None` after): as the last run left it, or erased if
+/// this is QEMU's first boot.
 pub fn param_flash() -> Option<RamFlash> {
     static TAKEN: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
     if TAKEN.swap(true, Ordering::AcqRel) {
         return None;
     }
-    // SAFETY: STORE_RAM..+STORE_BYTES is SRAM1 of the STM32L475 (96 KiB from 0x20000000),
-    // outside the linker's RAM region (memory.x: 32 KiB), so nothing else uses it; the flag
-    // above hands it out once.
-    let bytes = unsafe { core::slice::from_raw_parts_mut(STORE_RAM as *mut u8, STORE_BYTES as usize) };
-    bytes.fill(0xFF);
+    let marker = (STORE_RAM + STORE_BYTES as usize) as *mut u32;
+    // SAFETY: STORE_RAM..+STORE_BYTES and the marker word after it are SRAM2 of the STM32L475,
+    // outside the linker's RAM region (memory.x), so nothing else uses them; the flag above
+    // hands them out once.
+    let (bytes, formatted) = unsafe {
+        (
+            core::slice::from_raw_parts_mut(STORE_RAM as *mut u8, STORE_BYTES as usize),
+            core::ptr::read_volatile(marker) == FORMATTED,
+        )
+    };
+    if !formatted {
+        bytes.fill(0xFF);
+        // SAFETY: as above.
+        unsafe { core::ptr::write_volatile(marker, FORMATTED) };
+    }
     Some(RamFlash(bytes))
 }
 
@@ -181,9 +197,9 @@ impl embedded_storage::nor_flash::ReadNorFlash for RamFlash {
 }
 
 impl embedded_storage::nor_flash::NorFlash for RamFlash {
-    /// The G431's: a double word.
+    /// The G474's: a double word.
     const WRITE_SIZE: usize = 8;
-    /// The G431's page.
+    /// The G474's page in dual-bank mode.
     const ERASE_SIZE: usize = 2048;
 
     fn erase(&mut self, from: u32, to: u32) -> Result<(), RamFlashError> {

@@ -1,4 +1,6 @@
-//! The STM32G431CB board: clocks, pin map and peripheral setup. Nothing else knows a pin name.
+//! The STM32G474CE board (LQFP48): clocks, pin map and peripheral setup. Nothing else knows a
+//! pin name. The pins are those of the G431CB board it replaces (the same package and pinout);
+//! `tests/tests/board.rs` checks each alternate function against the chip's data.
 //!
 //! | signal          | pin         | peripheral                  | notes                                      |
 //! |-----------------|-------------|-----------------------------|--------------------------------------------|
@@ -22,9 +24,10 @@
 //! | DIR / CCW / B   | PB4         | TIM3_CH1 (AF2), counter     | its direction or second line               |
 //! | SWDIO / SWCLK   | PA13 / PA14 | debug                       | left alone for the probe (RTT logs)        |
 //!
-//! Flash: the last four 2 KiB pages ([`STORE`], 0x0801E000..0x08020000) hold the parameter
-//! store; `memory.x` keeps the program below them. A page erase stalls code fetches for ~22 ms
-//! (one bank, and the handlers run from flash): the drive refuses saves while the axis moves.
+//! Flash: two banks ([`crate::flash_map`]); the program runs from bank 1 behind the boot
+//! loader, and the parameter store ([`STORE`]) is in bank 2, so a save's page erase does not
+//! stall the code. [`init`] checks first that the option bytes set the dual-bank mode this
+//! layout needs.
 //!
 //! Clock: HSI16 / 4 × 85 / 2 = 170 MHz SYSCLK from the PLL, range-1 boost mode; AHB, APB1 and
 //! APB2 undivided, so USART1 and every timer count at 170 MHz.
@@ -61,6 +64,7 @@ use embassy_stm32::usart::{self, BufferedUart};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Peri, bind_interrupts, peripherals};
 
+use crate::flash_map;
 use crate::power::PowerStage;
 
 bind_interrupts!(struct Irqs {
@@ -70,7 +74,7 @@ bind_interrupts!(struct Irqs {
 });
 
 /// What the 0x1022 hardware version says.
-pub const HARDWARE: &str = "G431";
+pub const HARDWARE: &str = "G474";
 /// How long after a request its motion starts, µs: serving a move takes up to 0.9 ms of the
 /// 170 MHz core (`cargo xtask tick-cost`), and the plan is handed over at the next tick.
 pub const PLAN_MARGIN_US: u64 = 2_000;
@@ -87,21 +91,19 @@ const CURRENT_PWM_PERIOD: u32 = TIMER_HZ / 100_000;
 /// Phase current at 100 % reference duty (3.3 V on VREF).
 const FULL_SCALE_MA: u32 = 3000;
 
-/// Receive ring: a quarter of a frame. The task takes bytes as they come; the longest it is
-/// away serving a request is about 1.5 ms (planning a move), 17 bytes at 115 200 baud, and a
-/// master sends no new request before the reply. (A flash erase stalls the receive interrupt
-/// too: no ring helps there.)
-const RX_BUF: usize = 64;
-/// Transmit ring: a quarter of a frame. The task sends from its own copy of the reply and
-/// `write_all` refills the ring as it drains, so a longer ring would only hold a second copy
-/// (RAM budget).
-const TX_BUF: usize = 64;
+/// Receive ring: two frames of the longest (256 bytes), so that frames sent back to back (to
+/// other drives on the bus, broadcasts) are all held while the task serves one of them.
+const RX_BUF: usize = 2 * drive_core::rtu::MAX_FRAME;
+/// Transmit ring: the longest reply whole, so that the task hands it over at once.
+const TX_BUF: usize = drive_core::rtu::MAX_FRAME;
 
 /// The RS-485 port.
 pub type Serial = BufferedUart<'static>;
 
-/// The parameter store's pages, as offsets from the start of flash: the last 8 KiB of the 128.
-pub const STORE: Range<u32> = 0x1E000..0x2_0000;
+/// The parameter store's pages, as offsets from the start of flash (the flash driver's
+/// addressing): [`flash_map::PARAMS`], in bank 2.
+pub const STORE: Range<u32> =
+    flash_map::PARAMS.start - flash_map::FLASH_START..flash_map::PARAMS.end() - flash_map::FLASH_START;
 
 /// The parameter store on the flash. The blocking driver's `NorFlash` programs and erases
 /// without a critical section, so interrupts (the control tick) stay enabled during a save.
@@ -459,6 +461,7 @@ pub fn init() -> Board {
     });
     rcc.sys = Sysclk::PLL1_R;
     rcc.boost = true; // required above 150 MHz
+    check_option_bytes();
     let p = embassy_stm32::init(config);
 
     // The tick's cost is measured with the cycle counter.
@@ -511,6 +514,18 @@ pub fn init() -> Board {
     let sense = Sense { adc, bus_voltage: p.PB12, analog_in: p.PB14, temperature };
     let watchdog = IndependentWatchdog::new(p.IWDG, 500_000);
     Board { flash: Flash::new_blocking(p.FLASH), uart, stage, inputs, encoder, sense, watchdog }
+}
+
+/// Halts, before any peripheral is set up (the power stage off), unless the option bytes put
+/// the flash in the dual-bank mode that [`flash_map`] is laid out for (DBANK = 1, the G474CE's
+/// factory setting). In single-bank mode the pages are 4 KiB and bank 2's addresses are not
+/// where the parameter store and the update slot are: nothing would be where the build says.
+fn check_option_bytes() {
+    if !pac::FLASH.optr().read().dbank() {
+        defmt::panic!(
+            "the flash is in single-bank mode (option bit DBANK = 0): this firmware needs DBANK = 1 (docs/board-g474.md)"
+        );
+    }
 }
 
 /// The UART settings for `baud` and `parity` (object 0x2100: 0 none, 1 even, 2 odd).
