@@ -2,7 +2,8 @@
 //! external Modbus masters.
 //!
 //! - `ci`: everything CI runs (format, lints, host tests, firmware build and size, real masters).
-//! - `docs`: regenerate `docs/registers.md` from the object declarations.
+//! - `docs`: regenerate the register references from the declarations and the board doc's pin and
+//!   flash tables from the firmware's.
 //! - `masters`: run pymodbus and mbpoll against the simulator (native and DS-CLS9 maps).
 //! - `firmware`: cross-build the firmware, print its size and its stack by the call graph against
 //!   the budgets, fail if it does not fit the chip or if the tick reaches software floating
@@ -53,6 +54,9 @@ fn main() -> ExitCode {
         "ci" => ci(),
         "docs" => {
             run(cargo().args(["test", "-q", "-p", "drive-core", "--test", "registers_doc"]).env("UPDATE_DOCS", "1"))
+                .and_then(|()| {
+                    run(cargo().args(["test", "-q", "-p", "drive-tests", "--test", "board"]).env("UPDATE_DOCS", "1"))
+                })
         }
         "masters" => masters(),
         "firmware" => firmware(),

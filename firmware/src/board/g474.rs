@@ -2,27 +2,7 @@
 //! pin name. The pins are those of the G431CB board it replaces (the same package and pinout);
 //! `tests/tests/board.rs` checks each alternate function against the chip's data.
 //!
-//! | signal          | pin         | peripheral                  | notes                                      |
-//! |-----------------|-------------|-----------------------------|--------------------------------------------|
-//! | RS-485 TX       | PA9         | USART1_TX (AF7)             |                                            |
-//! | RS-485 RX       | PA10        | USART1_RX (AF7)             |                                            |
-//! | RS-485 DE       | PA12        | USART1_DE (AF7)             | driven by the USART; /RE tied to DE        |
-//! | STEP            | PB0         | TIM1_CH2N (AF6)             | pulses from the timer, idle low            |
-//! | DIR             | PB1         | GPIO out, push-pull         | idle low                                   |
-//! | ENABLE          | PB2         | GPIO out, push-pull         | active low on the usual drivers: high = off|
-//! | current ref     | PB6         | TIM4_CH1 (AF2), 100 kHz PWM | RC-filtered to the driver's VREF           |
-//! | encoder A / B   | PA0 / PA1   | TIM2_CH1 / CH2 (AF1)        | quadrature, ×4                             |
-//! | encoder Z       | PA2         | TIM2_CH3 (AF1), capture     | the index pulse, for homing                |
-//! | bus voltage     | PB12        | ADC1_IN11                   | 100 kΩ / 4.7 kΩ divider from the supply    |
-//! | analog in       | PB14        | ADC1_IN5                    | 0..3.3 V, 0x605F                           |
-//! | temperature     | (internal)  | ADC1 temperature sensor     | the die's, for the power stage's           |
-//! | EXT1 / 2 / 3    | PA4 / 5 / 6 | GPIO in, pulls as 0x6015    | 0x6031 bits 7-9, sampled every tick        |
-//! | GPIO8           | PB7         | GPIO in or out (0x602E/2F)  | 0x6031 bit 11; GPIO1-7 are not brought out |
-//! | Coil+ / Coil-   | PA7         | TIM17_CH1 (AF1), 20 kHz PWM | gate of the coil's low-side switch, 0x6038 |
-//! | FSET            | PC13        | GPIO in, pull-up, EXTI13    | factory-settings button to ground          |
-//! | STEP / CW / A   | PB5         | TIM3_CH2 (AF2), counter     | the pulse input's clock (work mode 3)      |
-//! | DIR / CCW / B   | PB4         | TIM3_CH1 (AF2), counter     | its direction or second line               |
-//! | SWDIO / SWCLK   | PA13 / PA14 | debug                       | left alone for the probe (RTT logs)        |
+//! The pin map is [`pins`]: every signal, its pin, peripheral and alternate function.
 //!
 //! Flash: two banks ([`crate::flash_map`]); the program runs from bank 1 behind the boot
 //! loader, and the parameter store ([`STORE`]) is in bank 2, so a save's page erase does not
@@ -65,6 +45,8 @@ use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Peri, bind_interrupts, peripherals};
 
 use crate::flash_map;
+#[path = "pins.rs"]
+pub mod pins;
 use crate::power::PowerStage;
 
 bind_interrupts!(struct Irqs {
@@ -376,7 +358,7 @@ const COIL_PWM_PERIOD: u32 = 8500;
 /// Cuts the power stage with raw register writes, whatever state the drivers are in: ENABLE
 /// high (off), pulse timer stopped, current reference 0. For the panic and fault handlers.
 pub fn power_off() {
-    pac::GPIOB.bsrr().write(|w| w.set_bs(2, true));
+    pac::GPIOB.bsrr().write(|w| w.set_bs(pins::ENABLE.number(), true));
     pac::TIM1.cr1().modify(|w| w.set_cen(false));
     pac::TIM4.ccr(0).write(|w| w.set_ccr(0));
     // The coil off too: a brake applies, a valve or magnet drops.
@@ -509,8 +491,9 @@ pub fn init() -> Board {
     let _ = p.PA2;
     pac::TIM2.ccmr_input(1).modify(|w| w.set_ccs(0, pac::timer::vals::CcmrInputCcs::TI4));
     pac::TIM2.ccer().modify(|w| w.set_cce(2, true));
-    pac::GPIOA.afr(0).modify(|w| w.set_afr(2, 1));
-    pac::GPIOA.moder().modify(|w| w.set_moder(2, pac::gpio::vals::Moder::ALTERNATE));
+    let z = pins::ENCODER_Z.number();
+    pac::GPIOA.afr(z / 8).modify(|w| w.set_afr(z % 8, pins::ENCODER_Z.af_number()));
+    pac::GPIOA.moder().modify(|w| w.set_moder(z, pac::gpio::vals::Moder::ALTERNATE));
     let sense = Sense { adc, bus_voltage: p.PB12, analog_in: p.PB14, temperature };
     let watchdog = IndependentWatchdog::new(p.IWDG, 500_000);
     Board { flash: Flash::new_blocking(p.FLASH), uart, stage, inputs, encoder, sense, watchdog }
@@ -574,7 +557,7 @@ fn setup_step_timer() {
     // Only the N output enabled: it follows OC2REF uninverted.
     t.ccer().modify(|w| w.set_ccne(1, true));
     t.bdtr().modify(|w| w.set_moe(true));
-    gpiob_af(0, 6);
+    gpiob_af(pins::STEP.number(), pins::STEP.af_number());
 }
 
 /// TIM3 on PB4 (CH1) and PB5 (CH2): the pulse input's counter, both channels inputs on their
@@ -588,9 +571,10 @@ fn setup_pulse_input() {
         w.set_ccs(0, pac::timer::vals::CcmrInputCcs::TI4);
         w.set_ccs(1, pac::timer::vals::CcmrInputCcs::TI4);
     });
-    for pin in [4, 5] {
-        pac::GPIOB.afr(0).modify(|w| w.set_afr(pin, 2));
-        pac::GPIOB.moder().modify(|w| w.set_moder(pin, pac::gpio::vals::Moder::ALTERNATE));
+    for pin in [pins::PULSE_B, pins::PULSE_A] {
+        let n = pin.number();
+        pac::GPIOB.afr(n / 8).modify(|w| w.set_afr(n % 8, pin.af_number()));
+        pac::GPIOB.moder().modify(|w| w.set_moder(n, pac::gpio::vals::Moder::ALTERNATE));
     }
 }
 
@@ -610,8 +594,9 @@ fn setup_coil_pwm() {
     t.egr().write(|w| w.set_ug(true));
     t.cr1().modify(|w| w.set_cen(true));
     let g = pac::GPIOA;
-    g.afr(0).modify(|w| w.set_afr(7, 1));
-    g.moder().modify(|w| w.set_moder(7, pac::gpio::vals::Moder::ALTERNATE));
+    let n = pins::COIL.number();
+    g.afr(n / 8).modify(|w| w.set_afr(n % 8, pins::COIL.af_number()));
+    g.moder().modify(|w| w.set_moder(n, pac::gpio::vals::Moder::ALTERNATE));
 }
 
 /// TIM4 channel 1 on PB6: 100 kHz PWM, duty 0 until the drive asks for current.
@@ -628,5 +613,5 @@ fn setup_current_pwm() {
     t.ccer().modify(|w| w.set_cce(0, true));
     t.egr().write(|w| w.set_ug(true));
     t.cr1().modify(|w| w.set_cen(true));
-    gpiob_af(6, 2);
+    gpiob_af(pins::CURRENT_REF.number(), pins::CURRENT_REF.af_number());
 }
