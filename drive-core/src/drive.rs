@@ -6,7 +6,7 @@ use crate::controller::handoff::{Handover, Lent, TickSide};
 use crate::crc;
 use crate::faults::{FaultLog, Inputs};
 use crate::ident::Identity;
-use crate::maps::{NativeMap, RegisterMap, ec57};
+use crate::maps::{NativeMap, RegisterMap, Spoilt};
 use crate::motion::cubic::Table;
 use crate::od::Obj;
 use crate::pdu::{Exception, MAX_READ, Request, Words};
@@ -189,8 +189,11 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
         let values = &params.values;
         let get = |obj: Obj| values.get(obj as usize).copied().unwrap_or(0);
         // The serial settings in force are those of power-up; writes take effect at the next one.
-        // The EC-57's serial port answers at 1 unless 0x2001 takes the node id.
-        let node = if map.sub_indexed() && get(Obj::AddressSource) == 0 { 1 } else { get(Obj::NodeId) };
+        // A serial port with an address of its own answers at it unless 0x21D1 takes the node id.
+        let node = match map.fixed_address() {
+            Some(a) if get(Obj::AddressSource) == 0 => u32::from(a),
+            _ => get(Obj::NodeId),
+        };
         let address = SlaveAddr::new(node as u8).unwrap_or(SlaveAddr::BROADCAST);
         let baud = Baud::new(get(Obj::BaudRate)).unwrap_or(Baud::FACTORY);
         Self {
@@ -230,6 +233,11 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
     /// The baud rate the framing is timed for.
     pub fn baud(&self) -> Baud {
         self.baud
+    }
+
+    /// The register map the drive answers through.
+    pub fn map(&self) -> &M {
+        &self.map
     }
 
     /// The drive state behind the registers.
@@ -360,15 +368,11 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
             Some(RxError::Overrun) => c.overruns = c.overruns.wrapping_add(1),
             Some(RxError::Gap { after_frame }) => {
                 c.bus_errors = c.bus_errors.wrapping_add(1);
-                if self.map.timing_exceptions() {
-                    self.frame_exception(if after_frame { TOO_CLOSE } else { GAP_INSIDE });
-                }
+                self.frame_exception(if after_frame { Spoilt::Early } else { Spoilt::Gap });
             }
             None if !self.framer.crc_ok() => {
                 c.bus_errors = c.bus_errors.wrapping_add(1);
-                if self.map.sub_indexed() && self.state.read(Obj::CrcErrorReply) == 1 {
-                    self.frame_exception(CRC_ERROR);
-                }
+                self.frame_exception(Spoilt::Crc);
             }
             None => {
                 self.serve();
@@ -381,11 +385,12 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
         self.framer.clear();
     }
 
-    /// Answers a frame its timing or its CRC spoilt with the exception `code`, from the address
-    /// and the function code it began with, if it began with this drive's address (a broadcast,
-    /// another drive's frame or one too short to say are not answered) and not in listen-only
-    /// mode.
-    fn frame_exception(&mut self, code: u8) {
+    /// Answers a frame `spoilt` with the exception code the map has for it, if it has one, from
+    /// the address and the function code the frame began with, if it began with this drive's
+    /// address (a broadcast, another drive's frame or one too short to say are not answered) and
+    /// not in listen-only mode.
+    fn frame_exception(&mut self, spoilt: Spoilt) {
+        let Some(code) = self.map.spoilt_frame(&self.state, spoilt) else { return };
         let (frame, _) = self.framer.frame();
         let (Some(&to), Some(&function)) = (frame.first(), frame.get(1)) else { return };
         if to != self.address.get() || self.listen_only || function & 0x80 != 0 {
@@ -419,9 +424,7 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
             counters.no_responses = counters.no_responses.wrapping_add(1);
             return;
         }
-        // Seed 003's framing has the sub-index in its register functions only.
-        let request =
-            if map.sub_indexed() && !matches!(function, 0x08 | 0x2B) { ec57::parse(pdu) } else { Request::parse(pdu) };
+        let request = map.parse(pdu);
         let mut server = Server { map, state, counters, listen_only };
         let silent = broadcast || *server.listen_only;
         if silent && !request.as_ref().is_ok_and(|req| server.silent_allowed(req)) {
@@ -443,14 +446,14 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
         let len = match result {
             Ok(Outcome::Reply(n)) => {
                 *head = [address.get(), function];
-                match (map.sub_indexed(), function, pdu.get(1..6)) {
-                    // A write's reply echoes the index, the sub-index and the value or count.
-                    (true, 0x06 | 0x10, Some(echo)) => {
-                        put(body, 0, echo);
-                        echo.len()
-                    }
-                    _ => n,
-                }
+                n
+            }
+            Ok(Outcome::Echo) => {
+                // The request's register (with what the map puts after it) and value or count.
+                let echo = pdu.get(1..5 + map.address_extra()).unwrap_or_default();
+                *head = [address.get(), function];
+                put(body, 0, echo);
+                echo.len()
             }
             Ok(Outcome::Silent) => {
                 counters.no_responses = counters.no_responses.wrapping_add(1);
@@ -471,13 +474,6 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
     }
 }
 
-/// Seed 003's exception for a frame whose CRC is wrong (if 0x21D2 asks for it).
-const CRC_ERROR: u8 = 0x01;
-/// Seed 002's exception for a silence over t1.5 inside a frame.
-const GAP_INSIDE: u8 = 0x0C;
-/// Seed 002's exception for a frame that followed a whole one before t3.5.
-const TOO_CLOSE: u8 = 0x0D;
-
 /// Appends the CRC to the first `n` bytes of `buf`; the frame's length, or 0 if it does not fit.
 #[inline(always)]
 fn seal(buf: &mut [u8], n: usize) -> usize {
@@ -495,6 +491,9 @@ fn seal(buf: &mut [u8], n: usize) -> usize {
 enum Outcome {
     /// A normal reply with this many bytes after the function code.
     Reply(usize),
+    /// A write's reply: the request's register, with the map's [`RegisterMap::address_extra`]
+    /// bytes after it, and its value or count.
+    Echo,
     /// No reply (force listen-only mode, restart from listen-only mode).
     Silent,
 }
@@ -529,17 +528,12 @@ impl<M: RegisterMap, P: Borrow<Table>> Server<'_, M, P> {
         match *req {
             Request::ReadHolding { addr, qty } | Request::ReadInput { addr, qty } => self.read(addr, qty, out),
             Request::WriteSingle { addr, value } => {
-                let bytes = value.to_be_bytes();
-                self.map.write(self.state, addr, Words::new(&bytes))?;
-                put(out, 0, &addr.to_be_bytes());
-                put(out, 2, &bytes);
-                Ok(Outcome::Reply(4))
+                self.map.write(self.state, addr, Words::new(&value.to_be_bytes()))?;
+                Ok(Outcome::Echo)
             }
             Request::WriteMultiple { addr, values } => {
                 self.map.write(self.state, addr, values)?;
-                put(out, 0, &addr.to_be_bytes());
-                put(out, 2, &(values.len() as u16).to_be_bytes());
-                Ok(Outcome::Reply(4))
+                Ok(Outcome::Echo)
             }
             Request::ReadWrite { read_addr, read_qty, write_addr, values } => {
                 self.map.check_read(read_addr, read_qty)?;

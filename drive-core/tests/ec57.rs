@@ -341,3 +341,14 @@ fn the_soft_start_registers() {
     r.run(300_000);
     assert_eq!(current(&mut r), standing);
 }
+
+/// What a platform that ends requests by their length asks of the drive's map: the sub-index
+/// byte after the register, in this map alone.
+#[test]
+fn the_sub_index_is_one_byte_after_the_register() {
+    use drive_core::maps::{NAMES, RegisterMap};
+    for (id, name) in NAMES.iter().enumerate() {
+        assert_eq!(Maps::by_id(id as u32).address_extra(), usize::from(*name == "ec57"), "{name}");
+    }
+    assert_eq!(rig().drive.map().address_extra(), 1);
+}

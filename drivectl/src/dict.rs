@@ -53,7 +53,7 @@ impl Map {
 
     /// Whether requests carry a sub-index after the register (seed 003).
     pub fn sub_indexed(self) -> bool {
-        self.layout().is_some_and(|l| l.sub_index)
+        self.layout().is_some_and(|l| l.sub_index.is_some())
     }
 }
 
@@ -155,11 +155,12 @@ impl Dictionary {
             Some(layout) => {
                 for e in layout.entries {
                     let d = e.obj.def();
-                    let at = if layout.sub_index {
-                        let (register, sub) = ec57::index_of(e.addr);
-                        Address { register, sub: Some(sub) }
-                    } else {
-                        Address { register: e.addr, sub: None }
+                    let at = match layout.sub_index {
+                        Some(s) => {
+                            let (register, sub) = (s.index_of)(e.addr);
+                            Address { register, sub: Some(sub) }
+                        }
+                        None => Address { register: e.addr, sub: None },
                     };
                     let writable = e.view() != View::ReadOnly && d.access() != Access::Ro;
                     let name = match registers.iter().any(|r| r.obj == e.obj) {
@@ -182,7 +183,7 @@ impl Dictionary {
                 }
                 // Seed 003's window: every other native object at its native register, sub-index
                 // 0xFF (motion, the map switch 0x2190).
-                if layout.sub_index {
+                if layout.sub_index.is_some() {
                     for d in OBJECTS.iter() {
                         if registers.iter().any(|r| r.obj == d.obj) {
                             continue;

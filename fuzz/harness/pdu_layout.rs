@@ -9,7 +9,7 @@
 //! layout's model of that register says (the object's value scaled, in the layout's word order).
 
 use super::oracle;
-use drive_core::maps::layout::{Entry, Exceptions, Layout, LayoutMap, Scale, Walk, WordOrder};
+use drive_core::maps::layout::{Entry, Exceptions, Layout, LayoutMap, Scale, SpoiltCodes, Walk, WordOrder};
 use drive_core::od::{OBJECTS, Obj};
 use drive_core::pdu::Exception;
 use drive_core::{Drive, DriveConfig};
@@ -49,10 +49,11 @@ pub static LAYOUT: Layout = Layout {
     },
     walk: Walk::Address,
     halves: true,
-    timing: false,
+    spoilt: SpoiltCodes::DROPPED,
     defaults: &[],
     program: None,
-    sub_index: false,
+    sub_index: None,
+    address: None,
 };
 
 /// Every code the layout answers, and the request-level ones.

@@ -14,7 +14,7 @@
 //! assert_eq!(drive.state().read(Obj::CommandSpeed), 1_000);
 //! ```
 
-use super::layout::{Choice, Entry, Exceptions, Layout, Scale, Walk, WordOrder};
+use super::layout::{Choice, Entry, Exceptions, Layout, Scale, SpoiltCodes, Walk, WordOrder, ZERO_ONE};
 use crate::od::Obj;
 
 /// 0.01 rev/s in the drive's microsteps a second.
@@ -46,9 +46,6 @@ static ENCODER: &[Choice] = &[
     Choice { lo: 4800, hi: 4800, drive: 1200 },
     Choice { lo: 6400, hi: 6400, drive: 1600 },
 ];
-
-/// 0217 (and seed 003's 0x2019): 0 open loop, 1 closed loop on the incremental encoder.
-pub(super) static LOOP: &[Choice] = &[Choice { lo: 0, hi: 0, drive: 0 }, Choice { lo: 1, hi: 1, drive: 1 }];
 
 /// 0206: 1 parameter reset (0x200F = 3), 2 alarm clear (0x200F = 4), 3 restart (0x200F = 1,
 /// refused: the drive does not restart itself).
@@ -97,7 +94,7 @@ pub static ENTRIES: [Entry; 75] = [
     Entry::new(201, Obj::MotorDirection, &Scale::One),
     Entry::new(206, Obj::SystemControl, &Scale::Table(&USER_COMMAND)),
     Entry::new(213, Obj::IdleCurrent, &Scale::One),
-    Entry::new(217, Obj::Feedback, &Scale::Table(&LOOP)),
+    Entry::new(217, Obj::Feedback, &Scale::Table(&ZERO_ONE)),
     Entry::new(234, Obj::PulseFilter, &Scale::One),
     Entry::new(241, Obj::PhaseCurrent, &Scale::One),
     Entry::new(242, Obj::Microsteps, &Scale::Table(&RESOLUTIONS)).wide(),
@@ -158,9 +155,12 @@ pub static ENTRIES: [Entry; 75] = [
 ];
 
 /// The manual's codes (§十三): 02 no such register, 03 a value out of range, 04 any refusal of
-/// the drive's (busy, disabled, faulted, not now); 0C and 0D for a frame's timing (the layout's
-/// `timing`).
+/// the drive's (busy, disabled, faulted, not now); 0C and 0D for a frame's timing ([`SPOILT`]).
 pub const EXCEPTIONS: Exceptions = Exceptions::MODBUS;
+
+/// §十三's answers to a frame its timing spoilt: 0C for a silence over t1.5 inside it, 0D for a
+/// frame that came before t3.5; a wrong CRC is dropped.
+pub const SPOILT: SpoiltCodes = SpoiltCodes { gap: Some(0x0C), early: Some(0x0D), crc: None };
 
 /// The DS-CLS9 layout.
 pub static LAYOUT: Layout = Layout {
@@ -169,10 +169,11 @@ pub static LAYOUT: Layout = Layout {
     exceptions: EXCEPTIONS,
     walk: Walk::Address,
     halves: false,
-    timing: true,
+    spoilt: SPOILT,
     defaults: &DEFAULTS,
     program: Some(1024),
-    sub_index: false,
+    sub_index: None,
+    address: None,
 };
 
 /// The manual's factory values (§九) where they differ from the drive's: start and stop
@@ -284,5 +285,4 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         (430, "Output logic: bit k set, OUT k+1 low when on."),
     ],
     decimal: true,
-    sub_indexed: false,
 };

@@ -19,10 +19,9 @@ pub struct Reference {
     /// Remarks by register, in place of the object's own text.
     pub remarks: &'static [(u16, &'static str)],
     /// Whether the manual numbers its registers in decimal (below 0x2000: the drive's own
-    /// registers keep their hexadecimal numbers).
+    /// registers keep their hexadecimal numbers). A sub-indexed layout's registers show as
+    /// their index and sub-index (`0x2003.1`).
     pub decimal: bool,
-    /// Whether the registers are (index, sub-index) keys (seed 003's, shown as `0x2003.1`).
-    pub sub_indexed: bool,
 }
 
 /// Writes the reference of `layout`.
@@ -78,7 +77,7 @@ pub fn write_layout(out: &mut impl Write, layout: &Layout, r: &Reference) -> fmt
             program_row(out, first)?;
             program = None;
         }
-        row(out, entry, r)?;
+        row(out, layout, entry, r)?;
     }
     if let Some(first) = program {
         program_row(out, first)?;
@@ -96,15 +95,15 @@ fn program_row(out: &mut impl Write, first: u16) -> fmt::Result {
     )
 }
 
-fn row(out: &mut impl Write, e: &Entry, r: &Reference) -> fmt::Result {
+fn row(out: &mut impl Write, layout: &Layout, e: &Entry, r: &Reference) -> fmt::Result {
     let d = e.obj.def();
     let access = match (e.view(), d.access()) {
         (View::ReadOnly, _) | (_, Access::Ro) => "ro",
         (View::WriteOnly, _) => "wo",
         (View::Declared, a) => a.name(),
     };
-    if r.sub_indexed {
-        let (index, sub) = super::ec57::index_of(e.addr);
+    if let Some(s) = layout.sub_index {
+        let (index, sub) = (s.index_of)(e.addr);
         write!(out, "| 0x{index:04X}.{sub} ")?;
     } else if r.decimal && e.addr < 0x2000 {
         write!(out, "| {:04} ", e.addr)?;

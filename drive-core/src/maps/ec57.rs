@@ -15,7 +15,7 @@
 //! assert_eq!(drive.state().read(Obj::Microsteps), 50);
 //! ```
 
-use super::layout::{Choice, Entry, Exceptions, Layout, Scale, Walk, WordOrder};
+use super::layout::{Choice, Entry, Exceptions, Layout, Scale, SpoiltCodes, SubIndex, Walk, WordOrder, ZERO_ONE};
 use crate::od::Obj;
 use crate::pdu::{Exception, Request, Words};
 
@@ -24,7 +24,9 @@ pub const MAX_REGISTERS: u16 = 16;
 /// The sub-index that addresses the drive's native register at the index (the window).
 pub const WINDOW_SUB: u8 = 0xFF;
 /// Below it a register number is a table entry's key; from it on, a native register.
-pub(crate) const WINDOW: u16 = 0x1000;
+const WINDOW: u16 = 0x1000;
+/// The answer to a frame whose CRC is wrong, while 0x21D2 asks for one (§1.3.4's example).
+const CRC_ERROR: u8 = 0x01;
 
 /// Exception 02: a function other than 03, 06 and 16 (and 0x08 and 0x2B).
 const FUNCTION: Exception = Exception::Vendor(2);
@@ -58,9 +60,9 @@ fn register(index: u16, sub: u8) -> Result<u16, Exception> {
     }
 }
 
-/// Decodes an EC-57 register request PDU: 03, 06 and 16 with the sub-index byte after the index
-/// (their register numbers as [`register`] makes them); any other function is refused (the
-/// drive decodes 0x08 and 0x2B as Modbus has them, with [`Request::parse`]).
+/// Decodes an EC-57 request PDU: 03, 06 and 16 with the sub-index byte after the index (their
+/// register numbers as [`register`] makes them), the Modbus diagnostics 0x08 and identification
+/// 0x2B as Modbus has them ([`Request::parse`]); any other function is refused.
 ///
 /// ```
 /// use drive_core::maps::ec57::parse;
@@ -71,12 +73,15 @@ fn register(index: u16, sub: u8) -> Result<u16, Exception> {
 /// assert_eq!(parse(&[0x03, 0x20, 0x00, 0x00, 0x00, 0x20]), Err(Exception::Vendor(4)));
 /// assert_eq!(parse(&[0x03, 0x20, 0x31, 0x00, 0x00, 0x01]), Ok(Request::ReadHolding { addr: 0x310, qty: 1 }));
 /// assert_eq!(parse(&[0x02, 0x00, 0x00, 0x00, 0x00, 0x04]), Err(Exception::Vendor(2)));
+/// assert_eq!(parse(&[0x08, 0x00, 0x00, 0x12, 0x34]), Ok(Request::Diagnostics { sub: 0, data: &[0x12, 0x34] }));
 /// ```
 #[inline(never)]
 pub fn parse(pdu: &[u8]) -> Result<Request<'_>, Exception> {
     let (&function, data) = pdu.split_first().ok_or(FUNCTION)?;
-    if !matches!(function, 0x03 | 0x06 | 0x10) {
-        return Err(FUNCTION);
+    match function {
+        0x03 | 0x06 | 0x10 => {}
+        0x08 | 0x2B => return Request::parse(pdu),
+        _ => return Err(FUNCTION),
     }
     let (&[ih, il, sub, wh, wl], rest) = data.split_first_chunk::<5>().ok_or(VALUE)?;
     let word = u16::from_be_bytes([wh, wl]);
@@ -160,7 +165,7 @@ pub static ENTRIES: [Entry; 46] = [
     Entry::new(key(0x2014, 0), Obj::InputStates, &Scale::One),
     Entry::new(key(0x2017, 0), Obj::RealSpeed, &RPM).narrow(),
     Entry::new(key(0x2018, 0), Obj::FollowingError, &Scale::One).narrow(),
-    Entry::new(key(0x2019, 0), Obj::Feedback, &Scale::Table(&super::cls9::LOOP)),
+    Entry::new(key(0x2019, 0), Obj::Feedback, &Scale::Table(&ZERO_ONE)),
     Entry::new(key(0x201A, 1), Obj::SoftwareRevision, &Scale::One),
     Entry::new(key(0x201A, 2), Obj::HardwareRevision, &Scale::One),
     Entry::new(key(0x201A, 3), Obj::SoftwareRevision, &Scale::One),
@@ -215,11 +220,16 @@ pub static LAYOUT: Layout = Layout {
     exceptions: EXCEPTIONS,
     walk: Walk::List,
     halves: false,
-    timing: false,
+    spoilt: SpoiltCodes { gap: None, early: None, crc: Some(CRC_ERROR) },
     defaults: &DEFAULTS,
     program: None,
-    sub_index: true,
+    sub_index: Some(&SUB_INDEX),
+    // The serial port's address (§1.3): an EC-57's switches address its fieldbus.
+    address: Some(1),
 };
+
+/// The requests' index and sub-index (§1.3), and the window from [`WINDOW`] on.
+static SUB_INDEX: SubIndex = SubIndex { parse, index_of, window: WINDOW };
 
 /// The manual's factory values where they differ from the drive's: the standstill current after
 /// 50 ms at 50 %, 1 A peak, 10 000 pulses a revolution (the table prints 1000, outside its own
@@ -269,5 +279,4 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
     ],
     remarks: &[],
     decimal: false,
-    sub_indexed: true,
 };

@@ -13,7 +13,7 @@
 //! assert_eq!(drive.take_reply(), Some(&[0x01, 0x86, 0x0B, 0x03, 0xA7][..]));
 //! ```
 
-use super::layout::{Choice, Entry, Exceptions, Layout, Scale, Walk, WordOrder};
+use super::layout::{Choice, Entry, Exceptions, Layout, Scale, SpoiltCodes, Walk, WordOrder};
 use crate::od::Obj;
 use crate::pdu::Exception;
 
@@ -111,10 +111,11 @@ pub static LAYOUT: Layout = Layout {
     exceptions: EXCEPTIONS,
     walk: Walk::List,
     halves: false,
-    timing: false,
+    spoilt: SpoiltCodes::DROPPED,
     defaults: &[],
     program: None,
-    sub_index: false,
+    sub_index: None,
+    address: None,
 };
 
 /// What the reference says beside the table: the decisions where seed 001 is silent or
@@ -162,5 +163,4 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         (0x606C, "Velocity actual value."),
     ],
     decimal: false,
-    sub_indexed: false,
 };

@@ -24,13 +24,14 @@
 //! assert_eq!(drive.state().read(Obj::PhaseCurrent), 1200);
 //! ```
 
-use super::native::{NativeMap, Op, RegisterMap};
+use super::native::{NativeMap, Op, RegisterMap, Spoilt};
 use crate::motion::cubic::Table;
 use crate::od::{Access, Obj, ObjError, ObjectDef, Type};
-use crate::pdu::{Exception, Words};
+use crate::pdu::{Exception, Request, Words};
 use crate::state::DriveState;
 use core::borrow::Borrow;
 
+pub use super::exceptions::Exceptions;
 pub use crate::units::FULL_STEPS_PER_REV;
 
 /// The order of a 32-bit object's two registers.
@@ -261,82 +262,6 @@ impl Entry {
     }
 }
 
-/// The exception code a layout answers to each reason a request is refused.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Exceptions {
-    /// No object at a register.
-    pub unknown: Exception,
-    /// A write to a read-only object.
-    pub read_only: Exception,
-    /// A value out of range (or beyond the map's scale).
-    pub out_of_range: Exception,
-    /// The axis moves, a run goes or a save is under way.
-    pub busy: Exception,
-    /// The power stage is off.
-    pub disabled: Exception,
-    /// A latched fault.
-    pub faulted: Exception,
-    /// Not in this mode or state.
-    pub not_now: Exception,
-    /// No trajectory within the limits.
-    pub infeasible: Exception,
-    /// The drive does not do this.
-    pub unsupported: Exception,
-    /// A read of a write-only entry.
-    pub write_only: Exception,
-    /// One half of a 32-bit object written alone, where the layout takes whole ones only.
-    pub split: Exception,
-    /// A write whose byte count is not twice its quantity.
-    pub byte_count: Exception,
-    /// A function the drive does not serve.
-    pub function: Exception,
-}
-
-impl Exceptions {
-    /// The Modbus convention: 02 address, 03 value, 04 any refusal.
-    pub const MODBUS: Self = Self {
-        unknown: Exception::IllegalDataAddress,
-        read_only: Exception::IllegalDataAddress,
-        out_of_range: Exception::IllegalDataValue,
-        busy: Exception::ServerDeviceFailure,
-        disabled: Exception::ServerDeviceFailure,
-        faulted: Exception::ServerDeviceFailure,
-        not_now: Exception::ServerDeviceFailure,
-        infeasible: Exception::ServerDeviceFailure,
-        unsupported: Exception::ServerDeviceFailure,
-        write_only: Exception::IllegalDataAddress,
-        split: Exception::IllegalDataAddress,
-        byte_count: Exception::IllegalDataValue,
-        function: Exception::IllegalFunction,
-    };
-
-    /// The code for a native map's `e` (the window of a [`Layout::sub_index`] layout): no such
-    /// register, a value out of range, any refusal.
-    pub const fn native(&self, e: Exception) -> Exception {
-        match e {
-            Exception::IllegalFunction | Exception::Vendor(_) => e,
-            Exception::IllegalDataAddress => self.unknown,
-            Exception::IllegalDataValue | Exception::ByteCount => self.out_of_range,
-            Exception::ServerDeviceFailure => self.busy,
-        }
-    }
-
-    /// The code for `e`.
-    pub const fn of(&self, e: ObjError) -> Exception {
-        match e {
-            ObjError::Unknown => self.unknown,
-            ObjError::ReadOnly => self.read_only,
-            ObjError::OutOfRange => self.out_of_range,
-            ObjError::Busy => self.busy,
-            ObjError::Disabled => self.disabled,
-            ObjError::Faulted => self.faulted,
-            ObjError::NotNow => self.not_now,
-            ObjError::Infeasible => self.infeasible,
-            ObjError::Unsupported => self.unsupported,
-        }
-    }
-}
-
 /// A register layout: its entries, how requests walk them, and the codes of its refusals.
 #[derive(Clone, Copy, Debug)]
 pub struct Layout {
@@ -352,24 +277,59 @@ pub struct Layout {
     /// Whether a 32-bit object may be written one half at a time (staged); if not, such a
     /// write is refused with [`Exceptions::split`].
     pub halves: bool,
-    /// Whether a frame spoilt by its timing is answered once the line has been quiet for t3.5:
-    /// 0x0C for a silence over t1.5 inside a frame, 0x0D for a next frame that came before t3.5
-    /// (seed 002). Without it such a frame is dropped, as the Modbus serial line has it.
-    pub timing: bool,
+    /// The exception codes of frames spoilt by their timing or CRC, where the map answers them.
+    pub spoilt: SpoiltCodes,
     /// The map's factory settings where its manual's differ from the drive's: register values
     /// in the map's units, set after the drive's factory values (a drive with nothing saved, a
     /// factory reset).
     pub defaults: &'static [(u16, i32)],
     /// The first register of the multi-segment program's window, if the map has one (seed
-    /// 002's 1024-1536): raw words the drive keeps as written, in the PVT table's memory (a map
-    /// with a program has no PVT).
+    /// 002's 1024-1536): raw words the drive keeps as written, in its program memory.
     pub program: Option<u16>,
-    /// Seed 003's framing: requests carry a sub-index byte after the register, which is a key
-    /// of `ec57::key` (below `ec57::WINDOW`), or with the sub-index 0xFF the native map's register
-    /// at the index (from `ec57::WINDOW` on: the window, answered in this layout's codes; the
-    /// [`Maps`](super::Maps) serve it, with the layout's staged halves).
-    pub sub_index: bool,
+    /// Requests that name a register by an index and a sub-index (seed 003), if the map's are
+    /// such; `None`: Modbus's requests.
+    pub sub_index: Option<&'static SubIndex>,
+    /// The serial port's own address, which the drive answers to from power-up while the
+    /// address source 0x21D1 is 0 (seed 003's, 1); `None`: the node id 0x2028 always.
+    pub address: Option<u8>,
 }
+
+/// How a map's requests name a register by an index and a sub-index byte after it (seed 003):
+/// the layout's register numbers are keys of the two below [`SubIndex::window`]; from it on they
+/// are the native map's registers (a sub-index the map gives them), answered in the layout's
+/// codes with its staged halves ([`Maps`](super::Maps) serves them).
+#[derive(Clone, Copy, Debug)]
+pub struct SubIndex {
+    /// Decodes a request PDU, its register as the layout's register number.
+    pub parse: fn(&[u8]) -> Result<Request<'_>, Exception>,
+    /// The index and sub-index of a layout's register number below the window.
+    pub index_of: fn(u16) -> (u16, u8),
+    /// The first register number that is the native map's.
+    pub window: u16,
+}
+
+/// The exception codes a map answers a frame with that its timing or CRC spoilt, if the frame
+/// began with this drive's address; `None` drops such a frame, as the Modbus serial line has it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SpoiltCodes {
+    /// A silence over t1.5 inside the frame (seed 002: 0x0C), answered once the line has been
+    /// quiet for t3.5.
+    pub gap: Option<u8>,
+    /// A frame that followed a whole one before t3.5 (seed 002: 0x0D).
+    pub early: Option<u8>,
+    /// A wrong CRC, answered while 0x21D2 asks for it (seed 003: 0x01).
+    pub crc: Option<u8>,
+}
+
+impl SpoiltCodes {
+    /// Every spoilt frame dropped.
+    pub const DROPPED: Self = Self { gap: None, early: None, crc: None };
+}
+
+/// The values 0 and 1 as themselves: a map's switch over an object whose range is wider (the
+/// feedback 0x2104, open or closed loop without the multi-turn encoder's 2: seed 002's 0217, seed
+/// 003's 0x2019).
+pub static ZERO_ONE: &[Choice] = &[Choice { lo: 0, hi: 0, drive: 0 }, Choice { lo: 1, hi: 1, drive: 1 }];
 
 impl Layout {
     /// A layout walked by address that stages halves.
@@ -380,10 +340,11 @@ impl Layout {
             exceptions,
             walk: Walk::Address,
             halves: true,
-            timing: false,
+            spoilt: SpoiltCodes::DROPPED,
             defaults: &[],
             program: None,
-            sub_index: false,
+            sub_index: None,
+            address: None,
         }
     }
 
@@ -494,15 +455,19 @@ impl LayoutMap {
         self.native.set_staged(obj, v);
     }
 
-    /// The native map of the window, if `addr` is in it (a `sub_index` layout's), and the codes
-    /// its refusals take.
+    /// Whether `addr` is in the window onto the native map (a [`Layout::sub_index`] layout's).
+    fn in_window(&self, addr: u16) -> bool {
+        self.layout.sub_index.is_some_and(|s| addr >= s.window)
+    }
+
+    /// The native map of the window, if `addr` is in it, and the codes its refusals take.
     pub(super) fn window(&self, addr: u16) -> Option<(&NativeMap, &'static Exceptions)> {
-        (self.layout.sub_index && addr >= super::ec57::WINDOW).then_some((&self.native, &self.layout.exceptions))
+        self.in_window(addr).then_some((&self.native, &self.layout.exceptions))
     }
 
     /// [`LayoutMap::window`], to write through.
     pub(super) fn window_mut(&mut self, addr: u16) -> Option<(&mut NativeMap, &'static Exceptions)> {
-        (self.layout.sub_index && addr >= super::ec57::WINDOW).then_some((&mut self.native, &self.layout.exceptions))
+        self.in_window(addr).then_some((&mut self.native, &self.layout.exceptions))
     }
 
     /// The map's value of `e` now, as register bits (32 at most).
@@ -697,7 +662,7 @@ impl RegisterMap for LayoutMap {
             Exception::IllegalFunction => ex.function,
             Exception::ByteCount => ex.byte_count,
             // Seed 003's codes mean other things than Modbus's.
-            e if self.layout.sub_index => ex.native(e),
+            e if self.layout.sub_index.is_some() => ex.native(e),
             e => e,
         }
     }
@@ -706,8 +671,28 @@ impl RegisterMap for LayoutMap {
         self.layout.program.is_some()
     }
 
-    fn sub_indexed(&self) -> bool {
-        self.layout.sub_index
+    fn parse<'a>(&self, pdu: &'a [u8]) -> Result<Request<'a>, Exception> {
+        match self.layout.sub_index {
+            Some(s) => (s.parse)(pdu),
+            None => Request::parse(pdu),
+        }
+    }
+
+    fn address_extra(&self) -> usize {
+        usize::from(self.layout.sub_index.is_some())
+    }
+
+    fn spoilt_frame<P: Borrow<Table>>(&self, drive: &DriveState<P>, spoilt: Spoilt) -> Option<u8> {
+        let codes = self.layout.spoilt;
+        match spoilt {
+            Spoilt::Gap => codes.gap,
+            Spoilt::Early => codes.early,
+            Spoilt::Crc => codes.crc.filter(|_| drive.read(Obj::CrcErrorReply) == 1),
+        }
+    }
+
+    fn fixed_address(&self) -> Option<u8> {
+        self.layout.address
     }
 
     fn factory_settings<P: Borrow<Table>>(&self, drive: &mut DriveState<P>) {

@@ -6,17 +6,18 @@ pub mod cls9;
 #[cfg(feature = "docs")]
 pub mod doc;
 pub mod ec57;
+pub mod exceptions;
 pub mod index;
 pub mod jmc;
 pub mod layout;
 pub mod native;
 
 use crate::motion::cubic::Table;
-use crate::pdu::{Exception, Words};
+use crate::pdu::{Exception, Request, Words};
 use crate::state::DriveState;
 use core::borrow::Borrow;
 use layout::LayoutMap;
-pub use native::{NativeMap, RegisterMap};
+pub use native::{NativeMap, RegisterMap, Spoilt};
 
 /// The maps' names, by their number in the register map object 0x2190.
 pub const NAMES: [&str; 4] = ["native", "jmc", "cls9", "ec57"];
@@ -134,10 +135,6 @@ impl RegisterMap for Maps {
         matches!(self, Self::Layout(m) if m.has_program())
     }
 
-    fn timing_exceptions(&self) -> bool {
-        matches!(self, Self::Layout(m) if m.layout().timing)
-    }
-
     fn factory_settings<P: Borrow<Table>>(&self, drive: &mut DriveState<P>) {
         if let Self::Layout(m) = self {
             m.factory_settings(drive);
@@ -154,7 +151,31 @@ impl RegisterMap for Maps {
         }
     }
 
-    fn sub_indexed(&self) -> bool {
-        matches!(self, Self::Layout(m) if m.layout().sub_index)
+    fn parse<'a>(&self, pdu: &'a [u8]) -> Result<Request<'a>, Exception> {
+        match self {
+            Self::Native(m) => m.parse(pdu),
+            Self::Layout(m) => m.parse(pdu),
+        }
+    }
+
+    fn address_extra(&self) -> usize {
+        match self {
+            Self::Native(m) => m.address_extra(),
+            Self::Layout(m) => m.address_extra(),
+        }
+    }
+
+    fn spoilt_frame<P: Borrow<Table>>(&self, drive: &DriveState<P>, spoilt: Spoilt) -> Option<u8> {
+        match self {
+            Self::Native(m) => m.spoilt_frame(drive, spoilt),
+            Self::Layout(m) => m.spoilt_frame(drive, spoilt),
+        }
+    }
+
+    fn fixed_address(&self) -> Option<u8> {
+        match self {
+            Self::Native(m) => m.fixed_address(),
+            Self::Layout(m) => m.fixed_address(),
+        }
     }
 }

@@ -1,9 +1,10 @@
 //! Register maps: how the registers of a vendor's protocol reach the drive's objects.
 
+use super::exceptions::Exceptions;
 use super::index;
 use crate::motion::cubic::Table;
 use crate::od::{Access, OBJECTS, Obj, ObjError, ObjectDef, Range, Storage, Type, is_command};
-use crate::pdu::{Exception, MAX_WRITE, Words};
+use crate::pdu::{Exception, MAX_WRITE, Request, Words};
 use crate::state::DriveState;
 use core::borrow::Borrow;
 use heapless::Vec;
@@ -42,17 +43,38 @@ pub trait RegisterMap {
     fn has_program(&self) -> bool {
         false
     }
-    /// Whether a frame spoilt by its timing is answered (seed 002's exceptions 0x0C and 0x0D)
-    /// rather than dropped.
-    fn timing_exceptions(&self) -> bool {
-        false
+    /// Decodes a request PDU into the map's register numbers: Modbus's PDU by default; a map
+    /// whose requests carry more (seed 003's sub-index byte after the register) decodes its own.
+    fn parse<'a>(&self, pdu: &'a [u8]) -> Result<Request<'a>, Exception> {
+        Request::parse(pdu)
     }
-    /// Whether requests carry a sub-index byte after the register (seed 003's framing, decoded
-    /// by [`ec57::parse`](super::ec57::parse)), a write's reply echoes it, and a frame whose CRC
-    /// is wrong may be answered (0x21D2): [`Layout::sub_index`](super::layout::Layout::sub_index).
-    fn sub_indexed(&self) -> bool {
-        false
+    /// The bytes a register request (0x03, 0x06, 0x10) carries after its register address, which
+    /// a write's reply echoes with it: none in Modbus's requests, seed 003's sub-index 1. (A
+    /// platform that ends requests by their length, not by the line's silence, counts them.)
+    fn address_extra(&self) -> usize {
+        0
     }
+    /// The exception code a frame `spoilt` is answered with, if it began with this drive's
+    /// address; `None` drops it, as the Modbus serial line has it.
+    fn spoilt_frame<P: Borrow<Table>>(&self, _drive: &DriveState<P>, _spoilt: Spoilt) -> Option<u8> {
+        None
+    }
+    /// The serial port's own address, which the drive answers to from power-up while the
+    /// address source 0x21D1 is 0 (seed 003's, 1); `None`: the node id 0x2028 always.
+    fn fixed_address(&self) -> Option<u8> {
+        None
+    }
+}
+
+/// What spoilt a frame the framing dropped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Spoilt {
+    /// A silence over t1.5 inside it.
+    Gap,
+    /// It followed a whole frame before t3.5.
+    Early,
+    /// Its CRC is wrong.
+    Crc,
 }
 
 /// The drive's native map (seed 000): register numbers are object addresses, 32-bit objects are
@@ -130,7 +152,7 @@ pub(crate) enum Op {
 /// The native exception for an object error: the Modbus convention (02 address, 03 value, 04
 /// any refusal).
 pub const fn native_exception(e: ObjError) -> Exception {
-    super::layout::Exceptions::MODBUS.of(e)
+    Exceptions::MODBUS.of(e)
 }
 
 impl NativeMap {
@@ -290,7 +312,7 @@ impl NativeMap {
 }
 
 /// The raw values a plain object ([`DriveState::plain`]) of one register accepts, as `lo..=hi`:
-/// the same as its [`Range::accepts`](super::Range::accepts) for its type, in two comparisons
+/// the same as its [`Range::accepts`](crate::od::Range::accepts) for its type, in two comparisons
 /// instead of two matches on its type and range. Empty ([`NOT_PLAIN`]) for other objects, and
 /// where the values are not one interval (sets, bit masks, magnitudes).
 static PLAIN: [(u16, u16); Obj::COUNT] = {
