@@ -2,10 +2,12 @@
 //! (an [`Axis`] walking a plan or a PVT run), supervision (faults, power loss, the communication
 //! watchdog), the closed loop with stall detection, and the output stage's orders.
 //!
-//! The controller plans nothing and reads no register: it runs [`Settings`], an immutable
-//! struct of checked values the bus side builds from the dictionary whenever one of them
-//! changes, and what it measures ([`Inputs`]). What it decides on its own and the bus side must
-//! know (a stop it started, a set-point it joined, power failing) it reports as [`Events`].
+//! The controller plans nothing and reads no register: it runs [`Settings`], checked values the
+//! bus side builds from the dictionary whenever one of them changes and hands over whole (the
+//! tick sets one itself, the closed loop's zero offset at its first reading, and reports it as
+//! [`Events::ZERO_OFFSET`]), and what it measures ([`Inputs`]). What it decides on its own and
+//! the bus side must know (a stop it started, a set-point it joined, power failing) it reports
+//! as [`Events`].
 
 pub mod handoff;
 pub mod io;
