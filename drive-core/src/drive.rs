@@ -11,6 +11,7 @@ use crate::motion::cubic::Table;
 use crate::od::Obj;
 use crate::pdu::{Exception, MAX_READ, Request, Words};
 use crate::rtu::{Framer, MAX_FRAME, RxError};
+use crate::state::ProgramMemory;
 use crate::units::{Baud, Instant, SlaveAddr};
 use core::borrow::Borrow;
 
@@ -61,9 +62,10 @@ pub struct Counters {
     pub overruns: u16,
 }
 
-/// A drive on a serial line: the RTU slave and the drive state behind it.
+/// A drive on a serial line: the RTU slave and the drive state behind it, with its PVT point
+/// table (`P`) and its programs' memory (`G`), owned or lent ([`DriveState`]).
 #[derive(Clone, Debug)]
-pub struct Drive<M: RegisterMap = NativeMap, P = Table> {
+pub struct Drive<M: RegisterMap = NativeMap, P = Table, G = ProgramMemory> {
     framer: Framer,
     address: SlaveAddr,
     baud: Baud,
@@ -72,7 +74,7 @@ pub struct Drive<M: RegisterMap = NativeMap, P = Table> {
     tx: [u8; MAX_FRAME],
     tx_len: usize,
     map: M,
-    state: DriveState<P>,
+    state: DriveState<P, G>,
 }
 
 impl Drive<NativeMap> {
@@ -109,31 +111,12 @@ impl<M: RegisterMap> Drive<M> {
 
 impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
     /// [`Drive::boot_with_map`] with the PVT point table `table` (its points are not read: the
-    /// table starts empty). A microcontroller passes a `&'static mut Table` from a static of
-    /// its own, so the drive it builds is about 3 KB instead of 12 KB:
-    ///
-    /// ```
-    /// use drive_core::{Drive, DriveConfig, Params};
-    /// use drive_core::motion::cubic::Table;
-    /// use drive_core::maps::NativeMap;
-    /// let mut table = Table::new();
-    /// let d = Drive::boot_with_table(DriveConfig::default(), NativeMap::new(), &Params::factory(), 0, &mut table);
-    /// assert!(core::mem::size_of_val(&d) < 4 * 1024);
-    /// ```
-    #[inline(never)]
+    /// table starts empty), and a programs' memory of its own.
     pub fn boot_with_table(config: DriveConfig, map: M, params: &Params, storage: u8, table: P) -> Self {
-        let mut params = params.clone();
-        let faults = FaultLog::restored(&params.fault_history());
-        params.keep_saved();
-        let mut drive = Self::assemble(config, map, &mut params, faults, storage, table);
-        drive.map_power_up(storage);
-        drive
+        Self::boot_with_memory(config, map, params, storage, table, ProgramMemory::new())
     }
 
-    /// [`Drive::boot_with_table`] built in `slot`, where a microcontroller keeps its drive, from
-    /// `params` (settled in place: the objects a save does not cover take their factory values,
-    /// and the config's overrides are applied), so that no copy of them is on the stack.
-    #[inline(never)]
+    /// [`Drive::boot_in_with_memory`] with a programs' memory of the drive's own.
     pub fn boot_in<'a>(
         slot: &'a mut core::mem::MaybeUninit<Self>,
         config: DriveConfig,
@@ -142,26 +125,77 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
         storage: u8,
         table: P,
     ) -> &'a mut Self {
+        Self::boot_in_with_memory(slot, config, map, params, storage, table, ProgramMemory::new())
+    }
+}
+
+impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> {
+    /// [`Drive::boot_with_map`] with the PVT point table `table` (its points are not read: the
+    /// table starts empty) and the programs' memory `programs` (its program is kept: power-up
+    /// may have loaded it). A microcontroller lends both from statics of its own
+    /// (`&'static Table`, `&'static ProgramMemory`), so the drive it builds is about 3 KB
+    /// instead of 13 KB:
+    ///
+    /// ```
+    /// use drive_core::{Drive, DriveConfig, Params};
+    /// use drive_core::motion::cubic::Table;
+    /// use drive_core::maps::NativeMap;
+    /// use drive_core::state::ProgramMemory;
+    /// let (table, programs) = (Table::new(), ProgramMemory::new());
+    /// let d = Drive::boot_with_memory(DriveConfig::default(), NativeMap::new(), &Params::factory(), 0, &table, &programs);
+    /// assert!(core::mem::size_of_val(&d) < 4 * 1024);
+    /// ```
+    #[inline(never)]
+    pub fn boot_with_memory(config: DriveConfig, map: M, params: &Params, storage: u8, table: P, programs: G) -> Self {
+        let mut params = params.clone();
         let faults = FaultLog::restored(&params.fault_history());
         params.keep_saved();
-        let drive = slot.write(Self::assemble(config, map, params, faults, storage, table));
+        let mut drive = Self::assemble(config, map, &mut params, faults, storage, table, programs);
         drive.map_power_up(storage);
         drive
     }
 
-    /// The register map's part of power-up: the program's memory if it has a program, and with
-    /// nothing saved (`storage`) its own factory settings over the drive's.
+    /// [`Drive::boot_with_memory`] built in `slot`, where a microcontroller keeps its drive, from
+    /// `params` (settled in place: the objects a save does not cover take their factory values,
+    /// and the config's overrides are applied), so that no copy of them is on the stack.
+    #[inline(never)]
+    pub fn boot_in_with_memory<'a>(
+        slot: &'a mut core::mem::MaybeUninit<Self>,
+        config: DriveConfig,
+        map: M,
+        params: &mut Params,
+        storage: u8,
+        table: P,
+        programs: G,
+    ) -> &'a mut Self {
+        let faults = FaultLog::restored(&params.fault_history());
+        params.keep_saved();
+        let drive = slot.write(Self::assemble(config, map, params, faults, storage, table, programs));
+        drive.map_power_up(storage);
+        drive
+    }
+
+    /// The register map's part of power-up: whether it offers programs, and with nothing saved
+    /// (`storage`) its own factory settings over the drive's.
     fn map_power_up(&mut self, storage: u8) {
-        self.state.program.memory = self.map.has_program();
+        self.state.program.offered = self.map.has_program();
         if storage & (STORAGE_EMPTY | STORAGE_CORRUPT | STORAGE_FSET) != 0 {
             self.map.factory_settings(&mut self.state);
         }
     }
 
-    /// The drive [`Drive::boot_with_table`] builds from `params` (what a save covers, and the
+    /// The drive [`Drive::boot_with_memory`] builds from `params` (what a save covers, and the
     /// power-down position), with `faults` the history loaded; inlined into each caller.
     #[inline(always)]
-    fn assemble(config: DriveConfig, map: M, params: &mut Params, faults: FaultLog, storage: u8, table: P) -> Self {
+    fn assemble(
+        config: DriveConfig,
+        map: M,
+        params: &mut Params,
+        faults: FaultLog,
+        storage: u8,
+        table: P,
+        programs: G,
+    ) -> Self {
         // The values are settled first and the drive is one struct expression (as the state is,
         // `DriveState::booted`), so that the drive is not built aside and copied once more.
         let pulses = params.get(Obj::PulseAtPowerUp) == 1;
@@ -212,16 +246,17 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
                 storage & !STORAGE_SAVING,
                 faults,
                 table,
+                programs,
             ),
         }
     }
 
     /// The same drive answering through the map `f` makes of its own (the native map into
     /// [`Maps`](crate::maps::Maps), say).
-    pub fn map_into<N: RegisterMap>(self, f: impl FnOnce(M) -> N) -> Drive<N, P> {
+    pub fn map_into<N: RegisterMap>(self, f: impl FnOnce(M) -> N) -> Drive<N, P, G> {
         let Self { framer, address, baud, listen_only, counters, tx, tx_len, map, mut state } = self;
         let map = f(map);
-        state.program.memory = map.has_program();
+        state.program.offered = map.has_program();
         Drive { framer, address, baud, listen_only, counters, tx, tx_len, map, state }
     }
 
@@ -241,12 +276,12 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
     }
 
     /// The drive state behind the registers.
-    pub fn state(&self) -> &DriveState<P> {
+    pub fn state(&self) -> &DriveState<P, G> {
         &self.state
     }
 
     /// The drive state, for the platform (inputs, motion).
-    pub fn state_mut(&mut self) -> &mut DriveState<P> {
+    pub fn state_mut(&mut self) -> &mut DriveState<P, G> {
         &mut self.state
     }
 
@@ -499,9 +534,9 @@ enum Outcome {
 }
 
 /// The parts of a drive that execute a request.
-struct Server<'a, M, P> {
+struct Server<'a, M, P, G> {
     map: &'a mut M,
-    state: &'a mut DriveState<P>,
+    state: &'a mut DriveState<P, G>,
     counters: &'a mut Counters,
     listen_only: &'a mut bool,
 }
@@ -509,7 +544,7 @@ struct Server<'a, M, P> {
 /// Conformity level of device identification: regular, stream and individual access.
 const CONFORMITY: u8 = 0x82;
 
-impl<M: RegisterMap, P: Borrow<Table>> Server<'_, M, P> {
+impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Server<'_, M, P, G> {
     /// Whether a request executes when it gets no answer (broadcast, listen-only mode).
     fn silent_allowed(&self, req: &Request<'_>) -> bool {
         match *req {

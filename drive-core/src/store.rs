@@ -15,8 +15,8 @@
 //!   ([`FaultHistory`]), saved whenever an alarm is recorded ([`SystemRequest::SaveFaults`]):
 //!   `[format, 0, count (u16), 10 entries (u32), newest first]`, little endian, 44 bytes. A record
 //!   of another [`FAULTS_FORMAT`] or length is not read (the history starts empty).
-//! - [`PROGRAM_KEYS`]: the multi-segment program of a map that has one (seed 002's registers
-//!   1024-1536, kept in the PVT table's memory), saved with the parameters in
+//! - [`PROGRAM_KEYS`]: the multi-segment program of a map that offers one (seed 002's registers
+//!   1024-1536, the drive's [`ProgramMemory`]), saved with the parameters in
 //!   [`PROGRAM_CHUNKS`] records of up to 256 bytes (the store's buffer holds one),
 //!   `[format, chunk, crc (u16)]` and the chunk's words high byte first, in one of two banks of
 //!   keys: a save writes the bank the last one did not, then the commit record
@@ -44,7 +44,8 @@ use crate::faults::HISTORY_LEN;
 use crate::maps::RegisterMap;
 use crate::motion::cubic::Table;
 use crate::od::{Access, OBJECTS, Storage};
-use crate::state::program::WORDS as PROGRAM_WORDS;
+use crate::state::ProgramMemory;
+use crate::state::memory::WORDS as PROGRAM_WORDS;
 
 /// Map key of the parameter record.
 pub const PARAMS_KEY: u8 = 0;
@@ -264,9 +265,9 @@ impl<S: NorFlash> Store<S> {
     /// and [`Job::finish`] in one call, for a platform that can lend the drive for the flash
     /// operation. Returns the request and how it went; [`SystemRequest::BootLoader`] is the
     /// platform's to act on. Call it outside the control tick, after the reply has been sent.
-    pub async fn serve<M: RegisterMap, P: Borrow<Table>>(
+    pub async fn serve<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>>(
         &mut self,
-        drive: &mut Drive<M, P>,
+        drive: &mut Drive<M, P, G>,
     ) -> Option<(SystemRequest, Result<(), Error<S>>)> {
         let job = Job::take(drive)?;
         let done = self.run(&job, drive.state().program_memory()).await;
@@ -275,16 +276,16 @@ impl<S: NorFlash> Store<S> {
     }
 
     /// Carries out `job` on the flash, without the drive; report the result with [`Job::finish`].
-    /// A parameter save saves the program too where the drive keeps one (`program`: its
+    /// A parameter save saves the program too where the drive's map offers one (`program`: its
     /// [`DriveState::program_memory`](crate::state::DriveState::program_memory), which the
     /// drive leaves unchanged while the save is under way). A boot loader request has nothing to
     /// write here.
-    pub async fn run(&mut self, job: &Job, program: Option<&Table>) -> Result<(), Error<S>> {
+    pub async fn run(&mut self, job: &Job, program: Option<&ProgramMemory>) -> Result<(), Error<S>> {
         match job {
             Job::Save(params) => {
                 self.save(params).await?;
                 match program {
-                    Some(table) => self.save_program(table).await,
+                    Some(memory) => self.save_program(memory).await,
                     None => Ok(()),
                 }
             }
@@ -314,11 +315,11 @@ impl<S: NorFlash> Store<S> {
         self.write(Record::Params(params)).await
     }
 
-    /// Saves the program kept in `table` into the bank the last save did not use, then commits
-    /// it (see the module documentation).
-    pub async fn save_program(&mut self, table: &Table) -> Result<(), Error<S>> {
+    /// Saves the program in `memory` into the bank the last save did not use, then commits it
+    /// (see the module documentation).
+    pub async fn save_program(&mut self, memory: &ProgramMemory) -> Result<(), Error<S>> {
         let bank = self.program_commit().await.map_or(0, |(bank, _)| bank ^ 1);
-        self.write(Record::Program { table, bank, crc: program_crc(table) }).await
+        self.write(Record::Program { memory, bank, crc: program_crc(memory) }).await
     }
 
     /// The bank and CRC of the program saved last, if a commit record says.
@@ -346,9 +347,9 @@ impl<S: NorFlash> Store<S> {
         Ok(())
     }
 
-    /// Loads the saved program into `table`, where a map with a program keeps it: whether a
-    /// whole one was found (else `table` reads as an empty program, all zero).
-    pub async fn load_program(&mut self, table: &Table) -> bool {
+    /// Loads the saved program into `memory`: whether a whole one was found (else `memory` reads
+    /// as an empty program, all zero).
+    pub async fn load_program(&mut self, memory: &ProgramMemory) -> bool {
         let bytes = 2 * PROGRAM_WORDS;
         let Some((bank, crc)) = self.program_commit().await else { return false };
         let first = PROGRAM_KEYS.start + bank * PROGRAM_CHUNKS as u8;
@@ -361,19 +362,17 @@ impl<S: NorFlash> Store<S> {
                 Some((&[PROGRAM_FORMAT, k, lo, hi], body))
                     if usize::from(k) == chunk && body.len() == n && [lo, hi] == crc =>
                 {
-                    for (i, &b) in body.iter().enumerate() {
-                        table.set_byte(start + i, b);
+                    for (k, &[hi, lo]) in body.as_chunks::<2>().0.iter().enumerate() {
+                        memory.set_word(start / 2 + k, u16::from_be_bytes([hi, lo]));
                     }
                 }
                 _ => torn = true,
             }
         })
         .await;
-        let whole = !torn && u16::from_le_bytes(crc) == program_crc(table);
+        let whole = !torn && u16::from_le_bytes(crc) == program_crc(memory);
         if !whole {
-            for i in 0..bytes {
-                table.set_byte(i, 0);
-            }
+            memory.clear();
         }
         whole
     }
@@ -436,7 +435,9 @@ pub enum Job {
 impl Job {
     /// Takes the drive's pending request, if any, with a copy of its parameters for a save. The
     /// drive shows the save in progress (0x2120 bit 3) and refuses another until [`Job::finish`].
-    pub fn take<M: RegisterMap, P: Borrow<Table>>(drive: &mut Drive<M, P>) -> Option<Self> {
+    pub fn take<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+        drive: &mut Drive<M, P, G>,
+    ) -> Option<Self> {
         Some(match drive.take_system_request()? {
             SystemRequest::Save => Job::Save(drive.state().params()),
             SystemRequest::SavePosition(position) => Job::SavePosition(position),
@@ -457,16 +458,26 @@ impl Job {
 
     /// Tells the drive how the job went (`ok`: the flash holds what it was asked to hold). Only a
     /// parameter save has a status in the drive (0x2120 bits 3 and 4).
-    pub fn finish<M: RegisterMap, P: Borrow<Table>>(&self, drive: &mut Drive<M, P>, ok: bool) {
+    pub fn finish<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+        &self,
+        drive: &mut Drive<M, P, G>,
+        ok: bool,
+    ) {
         if matches!(self, Job::Save(_)) {
             drive.save_done(ok);
         }
     }
 }
 
-/// The CRC-16 of the program kept in `table`.
-fn program_crc(table: &Table) -> u16 {
-    (0..2 * PROGRAM_WORDS).fold(crate::crc::INIT, |c, i| crate::crc::update(c, table.byte(i).unwrap_or(0)))
+/// Byte `i` of the program in `memory` as a record holds it: its words high byte first.
+fn program_byte(memory: &ProgramMemory, i: usize) -> u8 {
+    let [hi, lo] = memory.word(i / 2).unwrap_or(0).to_be_bytes();
+    if i.is_multiple_of(2) { hi } else { lo }
+}
+
+/// The CRC-16 of the program in `memory`, over its bytes as the records hold them.
+fn program_crc(memory: &ProgramMemory) -> u16 {
+    (0..2 * PROGRAM_WORDS).fold(crate::crc::INIT, |c, i| crate::crc::update(c, program_byte(memory, i)))
 }
 
 /// What a save writes: its records, built one at a time into the store's buffer-sized scratch.
@@ -474,9 +485,9 @@ enum Record<'a> {
     Params(&'a Params),
     Position(i32),
     Faults(&'a FaultHistory),
-    /// The program in a table, into a bank (0 or 1), then its commit; its CRC, in each.
+    /// The program, into a bank (0 or 1), then its commit; its CRC, in each.
     Program {
-        table: &'a Table,
+        memory: &'a ProgramMemory,
         bank: u8,
         crc: u16,
     },
@@ -495,7 +506,7 @@ impl Record<'_> {
             // An `i32`, little endian, as the crate stores one.
             (Self::Position(position), 0) => Some((POSITION_KEY, first(&position.to_le_bytes(), out)?)),
             (Self::Faults(history), 0) => Some((FAULTS_KEY, first(&history.encode(), out)?)),
-            (&Self::Program { table, bank, crc }, k) if k <= PROGRAM_CHUNKS => {
+            (&Self::Program { memory, bank, crc }, k) if k <= PROGRAM_CHUNKS => {
                 let bytes = 2 * PROGRAM_WORDS;
                 let [lo, hi] = crc.to_le_bytes();
                 let (head, body) = out.split_first_chunk_mut::<4>()?;
@@ -508,7 +519,7 @@ impl Record<'_> {
                 let n = PROGRAM_CHUNK.min(bytes - start);
                 *head = [PROGRAM_FORMAT, k as u8, lo, hi];
                 for (i, b) in body.iter_mut().take(n).enumerate() {
-                    *b = table.byte(start + i).unwrap_or(0);
+                    *b = program_byte(memory, start + i);
                 }
                 Some((PROGRAM_KEYS.start + bank * PROGRAM_CHUNKS as u8 + k as u8, 4 + n))
             }
@@ -650,6 +661,33 @@ mod tests {
         assert_eq!(shown, FaultHistory { entries, count: 3 });
         assert!(!drive.has_system_request());
         assert_eq!(drive.take_system_request(), None);
+    }
+
+    /// A program's records hold its words high byte first, 256 bytes a chunk, each with the
+    /// CRC-16 of all of them, as a program kept in the PVT table's bytes was saved: a program
+    /// saved before it had a memory of its own loads unchanged.
+    #[test]
+    fn a_program_record_holds_its_words_high_byte_first() {
+        let memory = ProgramMemory::new();
+        for k in 0..PROGRAM_WORDS {
+            memory.set_word(k, (k as u16).wrapping_mul(0x0101).wrapping_add(0x1234));
+        }
+        let bytes: heapless::Vec<u8, { 2 * PROGRAM_WORDS }> =
+            (0..PROGRAM_WORDS).flat_map(|k| memory.word(k).unwrap_or(0).to_be_bytes()).collect();
+        let crc = crate::crc::crc16(&bytes);
+        let record = Record::Program { memory: &memory, bank: 1, crc: program_crc(&memory) };
+        assert_eq!(program_crc(&memory), crc);
+        let mut out = [0u8; RECORD];
+        for k in 0..PROGRAM_CHUNKS {
+            let start = k * PROGRAM_CHUNK;
+            let n = PROGRAM_CHUNK.min(bytes.len() - start);
+            let key = PROGRAM_KEYS.start + PROGRAM_CHUNKS as u8 + k as u8;
+            assert_eq!(record.encode(k, &mut out), Some((key, 4 + n)));
+            let [lo, hi] = crc.to_le_bytes();
+            assert_eq!(out[..4], [PROGRAM_FORMAT, k as u8, lo, hi]);
+            assert_eq!(out.get(4..4 + n), bytes.get(start..start + n));
+        }
+        assert_eq!(record.encode(PROGRAM_CHUNKS, &mut out), Some((PROGRAM_COMMIT_KEY, 4)));
     }
 
     #[test]

@@ -1,7 +1,8 @@
 //! Seed 002's multi-segment programs (§7) at the level of frames: a program written to
 //! 1024-1536 runs its moves, speeds, waits and loops on the axis; the check and a refused start
 //! name the segment in error; inputs select the segment; pause, resume, end and stop; the
-//! registers refuse writes while a program runs; the native map has no program.
+//! registers refuse writes while a program runs; PVT points leave the program whole; the native
+//! map has no program.
 
 mod common;
 
@@ -290,6 +291,36 @@ fn a_start_is_refused_with_the_power_stage_off_and_requests_past_the_end_are_ref
     r.run(200_000);
     assert_eq!(r.position(), 0);
     assert_eq!(r.reg(178), 0);
+}
+
+/// The program has a memory of its own beside the PVT point table: points that fill the table
+/// over where a program kept in its bytes would lie leave the program whole, and it runs.
+#[test]
+fn pvt_points_leave_the_program_whole() {
+    let program = vec![speed(500), abs(3200), END.to_vec()];
+    let mut r = rig(&program);
+    let words: Vec<u16> = program.concat();
+    let set = |r: &mut Rig, obj: Obj, v: u32| {
+        let st = r.drive.state_mut();
+        st.check(obj, v).unwrap_or_else(|e| panic!("{obj:?} = {v}: {e:?}"));
+        st.apply(obj, v);
+    };
+    set(&mut r, Obj::Mode, 2);
+    // 200 points of 9 bytes: past the program's 1 KB.
+    for k in 0..200u32 {
+        set(&mut r, Obj::PvtPosition, 10 * k);
+        set(&mut r, Obj::PvtVelocity, 0);
+        set(&mut r, Obj::PvtTime, 10);
+        set(&mut r, Obj::PvtControl, 2);
+    }
+    assert_eq!(r.drive.state().read(Obj::PvtCount), 200);
+    assert_eq!(r.read(1024, words.len() as u16), Ok(words));
+    set(&mut r, Obj::Mode, 0);
+    assert_eq!(r.write(323, 14), Ok(()));
+    assert_eq!(r.reg(176), 0, "no segment in error");
+    assert_eq!(r.write(323, 16), Ok(()));
+    r.finish(5);
+    assert_eq!(r.position(), 3200);
 }
 
 #[test]

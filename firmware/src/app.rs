@@ -12,7 +12,8 @@
 //! `drive_core::controller::handoff`.
 //!
 //! The PVT point table is shared: the task stores points in slots the tick does not read yet,
-//! and a sync tells the tick they are there.
+//! and a sync tells the tick they are there. The multi-segment programs have a memory of their
+//! own, which only the task uses.
 
 use core::future::poll_fn;
 use core::mem::MaybeUninit;
@@ -25,6 +26,7 @@ use drive_core::controller::handoff::{Handover, Lent, TickSide};
 use drive_core::ident::Identity;
 use drive_core::maps::Maps;
 use drive_core::motion::cubic::Table;
+use drive_core::state::ProgramMemory;
 use drive_core::{Baud, DriveConfig, Instant, Params};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::signal::Signal;
@@ -35,11 +37,14 @@ use crate::board::Serial;
 use crate::power::PowerStage;
 
 /// The drive of the firmware: every register map (0x2190 chooses one at power-up), and the PVT
-/// point table in a static of its own.
-pub type Drive = drive_core::Drive<Maps, &'static Table>;
+/// point table and the programs' memory in statics of their own.
+pub type Drive = drive_core::Drive<Maps, &'static Table, &'static ProgramMemory>;
 
 /// The PVT points (9 KB), shared by the task (stores) and the tick (reads).
 static TABLE: Table = Table::new();
+
+/// The multi-segment programs (1 KB): loaded at power-up, then the task's.
+static PROGRAMS: ProgramMemory = ProgramMemory::new();
 
 /// The tick's own, once `start` has built it: only the tick interrupt takes it after that.
 static TICK: critical_section::Mutex<core::cell::RefCell<Option<&'static mut TickSide>>> =
@@ -90,14 +95,13 @@ pub fn start(params: &mut Params, status: u8, can_save: bool) -> (&'static mut D
     (drive, baud, parity)
 }
 
-/// Where the map `params` choose keeps its multi-segment program, if it has one: the PVT table,
-/// which such a map does not use for points. Power-up loads the saved program into it before the
-/// drive is built.
-pub fn program_memory(params: &Params) -> Option<&'static Table> {
-    Maps::has_program_id(params.get(drive_core::od::Obj::RegisterMap)).then_some(&TABLE)
+/// The programs' memory, if the map `params` choose offers programs: power-up loads the saved
+/// program into it before the drive is built.
+pub fn program_memory(params: &Params) -> Option<&'static ProgramMemory> {
+    Maps::has_program_id(params.get(drive_core::od::Obj::RegisterMap)).then_some(&PROGRAMS)
 }
 
-/// Builds the drive in `slot`, lending it the table.
+/// Builds the drive in `slot`, lending it the table and the programs' memory.
 fn boot_into(
     slot: &'static mut MaybeUninit<Drive>,
     config: DriveConfig,
@@ -105,7 +109,7 @@ fn boot_into(
     status: u8,
 ) -> &'static mut Drive {
     let map = Maps::by_id(params.get(drive_core::od::Obj::RegisterMap));
-    Drive::boot_in(slot, config, map, params, status, &TABLE)
+    Drive::boot_in_with_memory(slot, config, map, params, status, &TABLE, &PROGRAMS)
 }
 
 /// The tick's side of `drive` in `slot`; out of line as [`boot_into`].

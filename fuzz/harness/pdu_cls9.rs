@@ -16,7 +16,7 @@ use super::oracle;
 use drive_core::maps::Maps;
 use drive_core::maps::cls9::ENTRIES;
 use drive_core::od::{OBJECTS, Obj, Type};
-use drive_core::state::program::WORDS;
+use drive_core::state::memory::WORDS;
 use drive_core::{Drive, DriveConfig};
 
 /// Every code the map answers.

@@ -9,7 +9,8 @@ use std::time::{Duration, Instant as WallClock};
 use drive_core::crc::crc16;
 use drive_core::drive::{STORAGE_CORRUPT, STORAGE_EMPTY, STORAGE_SAVE_FAILED};
 use drive_core::od::Obj;
-use drive_core::state::program::WORDS;
+use drive_core::state::ProgramMemory;
+use drive_core::state::memory::WORDS;
 use drive_core::store::{FAULTS_RECORD, FaultHistory, RECORD, SAVED, Store, item_bytes};
 use drive_core::{Drive, DriveConfig, Instant, Params};
 use hal_sim::flash::{PAGE, PAGES, SimFlash, Tear, block_on};
@@ -284,18 +285,19 @@ fn the_power_down_position_is_saved_when_enabled() {
     );
 }
 
-/// Program number `g` (seed 002's 1024-1536, kept in a PVT table's memory): every byte differs
-/// from programs `g - 1` and `g + 1`.
-fn program(g: u8) -> drive_core::motion::cubic::Table {
-    let t = drive_core::motion::cubic::Table::new();
-    for i in 0..2 * WORDS {
-        t.set_byte(i, (i as u8).wrapping_mul(31).wrapping_add(g));
+/// Program number `g` (seed 002's 1024-1536, in a program memory): every byte differs from
+/// programs `g - 1` and `g + 1`.
+fn program(g: u8) -> ProgramMemory {
+    let m = ProgramMemory::new();
+    let byte = |i: usize| (i as u8).wrapping_mul(31).wrapping_add(g);
+    for k in 0..WORDS {
+        m.set_word(k, u16::from_be_bytes([byte(2 * k), byte(2 * k + 1)]));
     }
-    t
+    m
 }
 
-fn program_bytes(t: &drive_core::motion::cubic::Table) -> Vec<u8> {
-    (0..2 * WORDS).map(|i| t.byte(i).unwrap_or(0)).collect()
+fn program_bytes(m: &ProgramMemory) -> Vec<u8> {
+    (0..WORDS).flat_map(|k| m.word(k).unwrap_or(0).to_be_bytes()).collect()
 }
 
 #[test]
@@ -319,7 +321,7 @@ fn a_power_cut_in_a_program_save_loads_the_old_program_the_new_or_none() {
                 assert!(block_on(s.save_program(&next)).is_err(), "cut at op {k} ({tear:?}) went through");
                 let bytes = s.into_flash().bytes().to_vec();
                 assert_eq!(restart(&bytes), (set(0), 0), "the parameters survive a cut program save");
-                let loaded = drive_core::motion::cubic::Table::new();
+                let loaded = ProgramMemory::new();
                 let whole = block_on(store_on(SimFlash::from_bytes(bytes)).load_program(&loaded));
                 let got = program_bytes(&loaded);
                 if !whole {
@@ -335,7 +337,7 @@ fn a_power_cut_in_a_program_save_loads_the_old_program_the_new_or_none() {
             }
         }
         block_on(store.save_program(&next)).expect("save");
-        let loaded = drive_core::motion::cubic::Table::new();
+        let loaded = ProgramMemory::new();
         assert!(block_on(store_on(SimFlash::from_bytes(store.flash().bytes().to_vec())).load_program(&loaded)));
         assert_eq!(program_bytes(&loaded), program_bytes(&next));
     }

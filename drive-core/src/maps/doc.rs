@@ -87,7 +87,7 @@ pub fn write_layout(out: &mut impl Write, layout: &Layout, r: &Reference) -> fmt
 
 /// The multi-segment program's window: raw words, not an object.
 fn program_row(out: &mut impl Write, first: u16) -> fmt::Result {
-    let words = crate::state::program::WORDS;
+    let words = crate::state::memory::WORDS;
     let last = usize::from(first) + words - 1;
     writeln!(
         out,

@@ -28,7 +28,7 @@ use super::native::{NativeMap, Op, RegisterMap, Spoilt};
 use crate::motion::cubic::Table;
 use crate::od::{Access, Obj, ObjError, ObjectDef, Type};
 use crate::pdu::{Exception, Request, Words};
-use crate::state::DriveState;
+use crate::state::{DriveState, ProgramMemory};
 use core::borrow::Borrow;
 
 pub use super::exceptions::Exceptions;
@@ -382,8 +382,8 @@ impl Layout {
     /// `Err` if they begin in it but run past its end.
     fn in_program(&self, addr: u16, qty: usize) -> Option<Result<usize, ()>> {
         let k = usize::from(addr.checked_sub(self.program?)?);
-        (k < crate::state::program::WORDS).then_some(())?;
-        Some(if k + qty <= crate::state::program::WORDS { Ok(k) } else { Err(()) })
+        (k < crate::state::memory::WORDS).then_some(())?;
+        Some(if k + qty <= crate::state::memory::WORDS { Ok(k) } else { Err(()) })
     }
 }
 
@@ -396,7 +396,7 @@ const fn mask(width: u8) -> u32 {
 }
 
 /// Whether register `k` (0 or 1) of a 32-bit object is its high half in `order`.
-fn is_high<P: Borrow<Table>>(order: WordOrder, drive: &DriveState<P>, k: u32) -> bool {
+fn is_high<P: Borrow<Table>, G: Borrow<ProgramMemory>>(order: WordOrder, drive: &DriveState<P, G>, k: u32) -> bool {
     let high_first = match order {
         WordOrder::HighFirst => true,
         WordOrder::LowFirst => false,
@@ -471,7 +471,7 @@ impl LayoutMap {
     }
 
     /// The map's value of `e` now, as register bits (32 at most).
-    fn map_value<P: Borrow<Table>>(&self, drive: &DriveState<P>, e: &Entry) -> u32 {
+    fn map_value<P: Borrow<Table>, G: Borrow<ProgramMemory>>(&self, drive: &DriveState<P, G>, e: &Entry) -> u32 {
         let d = e.obj.def();
         if let Scale::Field(shift, width) = *e.scale {
             return drive.read_def(d).checked_shr(u32::from(shift)).unwrap_or(0) & mask(width);
@@ -482,7 +482,12 @@ impl LayoutMap {
     }
 
     /// The drive's raw value of the map's register bits `bits` for `e`.
-    fn drive_value<P: Borrow<Table>>(&self, drive: &DriveState<P>, e: &Entry, bits: u32) -> Result<u32, ObjError> {
+    fn drive_value<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+        &self,
+        drive: &DriveState<P, G>,
+        e: &Entry,
+        bits: u32,
+    ) -> Result<u32, ObjError> {
         if e.is_clear() {
             return if bits == 1 { Ok(0) } else { Err(ObjError::OutOfRange) };
         }
@@ -505,9 +510,9 @@ impl LayoutMap {
     }
 
     /// Decodes a write into what it does to each object, or the first address error.
-    fn plan<P: Borrow<Table>>(
+    fn plan<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
         &self,
-        drive: &DriveState<P>,
+        drive: &DriveState<P, G>,
         addr: u16,
         values: &Words<'_>,
         plan: &mut heapless::Vec<(&'static Entry, Op), MAX_OBJECTS>,
@@ -562,7 +567,12 @@ impl LayoutMap {
 }
 
 impl RegisterMap for LayoutMap {
-    fn read<P: Borrow<Table>>(&self, drive: &DriveState<P>, addr: u16, out: &mut [u8]) -> Result<(), Exception> {
+    fn read<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+        &self,
+        drive: &DriveState<P, G>,
+        addr: u16,
+        out: &mut [u8],
+    ) -> Result<(), Exception> {
         let ex = self.layout.exceptions;
         let order = self.layout.order;
         let qty = (out.len() / 2) as u32;
@@ -622,9 +632,9 @@ impl RegisterMap for LayoutMap {
     // Out of line: its plan (123 objects at most) is on the stack for a layout's writes only,
     // not under every write of the maps it is a variant of.
     #[inline(never)]
-    fn write<P: Borrow<Table>>(
+    fn write<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
         &mut self,
-        drive: &mut DriveState<P>,
+        drive: &mut DriveState<P, G>,
         addr: u16,
         values: Words<'_>,
     ) -> Result<(), Exception> {
@@ -682,7 +692,11 @@ impl RegisterMap for LayoutMap {
         usize::from(self.layout.sub_index.is_some())
     }
 
-    fn spoilt_frame<P: Borrow<Table>>(&self, drive: &DriveState<P>, spoilt: Spoilt) -> Option<u8> {
+    fn spoilt_frame<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+        &self,
+        drive: &DriveState<P, G>,
+        spoilt: Spoilt,
+    ) -> Option<u8> {
         let codes = self.layout.spoilt;
         match spoilt {
             Spoilt::Gap => codes.gap,
@@ -695,7 +709,7 @@ impl RegisterMap for LayoutMap {
         self.layout.address
     }
 
-    fn factory_settings<P: Borrow<Table>>(&self, drive: &mut DriveState<P>) {
+    fn factory_settings<P: Borrow<Table>, G: Borrow<ProgramMemory>>(&self, drive: &mut DriveState<P, G>) {
         for &(addr, value) in self.layout.defaults {
             let Some(e) = self.layout.entries.iter().find(|e| e.addr == addr) else { continue };
             // A default the drive does not take (a unit it cannot convert) leaves its own.

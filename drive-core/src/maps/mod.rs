@@ -14,7 +14,7 @@ pub mod native;
 
 use crate::motion::cubic::Table;
 use crate::pdu::{Exception, Request, Words};
-use crate::state::DriveState;
+use crate::state::{DriveState, ProgramMemory};
 use core::borrow::Borrow;
 use layout::LayoutMap;
 pub use native::{NativeMap, RegisterMap, Spoilt};
@@ -75,7 +75,12 @@ impl Maps {
 impl RegisterMap for Maps {
     // Each map's code has one call site, so that it is inlined once: the native map's serves
     // the native map and a sub-indexed layout's window.
-    fn read<P: Borrow<Table>>(&self, drive: &DriveState<P>, addr: u16, out: &mut [u8]) -> Result<(), Exception> {
+    fn read<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+        &self,
+        drive: &DriveState<P, G>,
+        addr: u16,
+        out: &mut [u8],
+    ) -> Result<(), Exception> {
         let (native, codes) = match self {
             Self::Native(m) => (m, None),
             Self::Layout(m) => match m.window(addr) {
@@ -97,9 +102,9 @@ impl RegisterMap for Maps {
         native.check_read(addr, qty).map_err(|e| codes.map_or(e, |c| c.native(e)))
     }
 
-    fn write<P: Borrow<Table>>(
+    fn write<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
         &mut self,
-        drive: &mut DriveState<P>,
+        drive: &mut DriveState<P, G>,
         addr: u16,
         values: Words<'_>,
     ) -> Result<(), Exception> {
@@ -135,7 +140,7 @@ impl RegisterMap for Maps {
         matches!(self, Self::Layout(m) if m.has_program())
     }
 
-    fn factory_settings<P: Borrow<Table>>(&self, drive: &mut DriveState<P>) {
+    fn factory_settings<P: Borrow<Table>, G: Borrow<ProgramMemory>>(&self, drive: &mut DriveState<P, G>) {
         if let Self::Layout(m) = self {
             m.factory_settings(drive);
         }
@@ -165,7 +170,11 @@ impl RegisterMap for Maps {
         }
     }
 
-    fn spoilt_frame<P: Borrow<Table>>(&self, drive: &DriveState<P>, spoilt: Spoilt) -> Option<u8> {
+    fn spoilt_frame<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+        &self,
+        drive: &DriveState<P, G>,
+        spoilt: Spoilt,
+    ) -> Option<u8> {
         match self {
             Self::Native(m) => m.spoilt_frame(drive, spoilt),
             Self::Layout(m) => m.spoilt_frame(drive, spoilt),

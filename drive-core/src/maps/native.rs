@@ -5,20 +5,25 @@ use super::index;
 use crate::motion::cubic::Table;
 use crate::od::{Access, OBJECTS, Obj, ObjError, ObjectDef, Range, Storage, Type, is_command};
 use crate::pdu::{Exception, MAX_WRITE, Request, Words};
-use crate::state::DriveState;
+use crate::state::{DriveState, ProgramMemory};
 use core::borrow::Borrow;
 use heapless::Vec;
 
 /// A vendor's register layout over the drive's objects.
 pub trait RegisterMap {
     /// Reads `out.len() / 2` registers from `addr` into `out`, big-endian.
-    fn read<P: Borrow<Table>>(&self, drive: &DriveState<P>, addr: u16, out: &mut [u8]) -> Result<(), Exception>;
+    fn read<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+        &self,
+        drive: &DriveState<P, G>,
+        addr: u16,
+        out: &mut [u8],
+    ) -> Result<(), Exception>;
     /// Whether `qty` registers from `addr` could be read (checked before 0x17 writes anything).
     fn check_read(&self, addr: u16, qty: u16) -> Result<(), Exception>;
     /// Writes `values` from `addr`: all of them, or none and an exception.
-    fn write<P: Borrow<Table>>(
+    fn write<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
         &mut self,
-        drive: &mut DriveState<P>,
+        drive: &mut DriveState<P, G>,
         addr: u16,
         values: Words<'_>,
     ) -> Result<(), Exception>;
@@ -37,9 +42,9 @@ pub trait RegisterMap {
     }
     /// Sets the map's own factory settings over the drive's factory values (a drive with
     /// nothing saved, a factory reset); most maps have none.
-    fn factory_settings<P: Borrow<Table>>(&self, _drive: &mut DriveState<P>) {}
-    /// Whether the map has a multi-segment program (seed 002's), kept in the PVT table's memory:
-    /// such a map has no PVT.
+    fn factory_settings<P: Borrow<Table>, G: Borrow<ProgramMemory>>(&self, _drive: &mut DriveState<P, G>) {}
+    /// Whether the map offers a multi-segment program (seed 002's, in a window of its
+    /// registers): without one the drive refuses the program commands and saves no program.
     fn has_program(&self) -> bool {
         false
     }
@@ -56,7 +61,11 @@ pub trait RegisterMap {
     }
     /// The exception code a frame `spoilt` is answered with, if it began with this drive's
     /// address; `None` drops it, as the Modbus serial line has it.
-    fn spoilt_frame<P: Borrow<Table>>(&self, _drive: &DriveState<P>, _spoilt: Spoilt) -> Option<u8> {
+    fn spoilt_frame<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+        &self,
+        _drive: &DriveState<P, G>,
+        _spoilt: Spoilt,
+    ) -> Option<u8> {
         None
     }
     /// The serial port's own address, which the drive answers to from power-up while the
@@ -182,9 +191,9 @@ impl NativeMap {
     /// the first refusal goes to `refused`: an address error anywhere in the request still comes
     /// first, and a request with commands among several objects is checked again by the caller.
     #[inline]
-    fn plan<P: Borrow<Table>>(
+    fn plan<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
         &self,
-        drive: &DriveState<P>,
+        drive: &DriveState<P, G>,
         addr: u16,
         values: Words<'_>,
         plan: &mut Plan,
@@ -258,7 +267,11 @@ impl NativeMap {
     /// it in the same request (a speed, then a move), so each value is checked on the drive that
     /// has taken the ones before, all or nothing ([`DriveState::write_in_order`]).
     #[inline(never)]
-    fn commit_in_order<P: Borrow<Table>>(&mut self, drive: &mut DriveState<P>, plan: &Plan) -> Result<(), Exception> {
+    fn commit_in_order<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+        &mut self,
+        drive: &mut DriveState<P, G>,
+        plan: &Plan,
+    ) -> Result<(), Exception> {
         drive
             .write_in_order(plan.iter(), |_, s| {
                 Ok(match s.get() {
@@ -277,9 +290,9 @@ impl NativeMap {
     /// changes, all or nothing.
     // Out of line, with its plan on the stack: a one-register write does without both.
     #[inline(never)]
-    fn write_planned<P: Borrow<Table>>(
+    fn write_planned<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
         &mut self,
-        drive: &mut DriveState<P>,
+        drive: &mut DriveState<P, G>,
         addr: u16,
         values: Words<'_>,
     ) -> Result<(), Exception> {
@@ -358,7 +371,7 @@ const fn interval(ty: Type, range: Range) -> Option<(u16, u16)> {
 
 /// Register `reg` of the `i`th object, a live value or a text.
 #[inline(never)]
-fn other_word<P: Borrow<Table>>(drive: &DriveState<P>, i: usize, reg: u32) -> u16 {
+fn other_word<P: Borrow<Table>, G: Borrow<ProgramMemory>>(drive: &DriveState<P, G>, i: usize, reg: u32) -> u16 {
     let Some(d) = OBJECTS.get(i) else { return 0 };
     let Some(k) = reg.checked_sub(u32::from(d.addr)) else { return 0 };
     match d.ty() {
@@ -414,7 +427,12 @@ type Plan = Vec<Step, PLAN_CAPACITY>;
 
 impl RegisterMap for NativeMap {
     #[inline(always)]
-    fn read<P: Borrow<Table>>(&self, drive: &DriveState<P>, addr: u16, out: &mut [u8]) -> Result<(), Exception> {
+    fn read<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+        &self,
+        drive: &DriveState<P, G>,
+        addr: u16,
+        out: &mut [u8],
+    ) -> Result<(), Exception> {
         let regs = index::registers(addr, (out.len() / 2) as u16).ok_or(Exception::IllegalDataAddress)?;
         for ((slot, &e), reg) in out.chunks_exact_mut(2).zip(regs).zip(u32::from(addr)..) {
             // A stored value, or a reserved register (shifted out), as the index entry says;
@@ -435,9 +453,9 @@ impl RegisterMap for NativeMap {
     }
 
     #[inline(always)]
-    fn write<P: Borrow<Table>>(
+    fn write<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
         &mut self,
-        drive: &mut DriveState<P>,
+        drive: &mut DriveState<P, G>,
         addr: u16,
         values: Words<'_>,
     ) -> Result<(), Exception> {

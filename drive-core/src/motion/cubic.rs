@@ -119,19 +119,6 @@ impl Table {
             }
         }
     }
-
-    /// Byte `i` of the table's memory (`None` past its end), see [`Table::set_byte`].
-    pub fn byte(&self, i: usize) -> Option<u8> {
-        self.slots.as_flattened().get(i).map(|b| b.load(Ordering::Relaxed))
-    }
-
-    /// Stores `v` as byte `i` of the table's memory (nothing past its end): a register map
-    /// without PVT points keeps other data in the 9 KB (seed 002's multi-segment programs).
-    pub fn set_byte(&self, i: usize, v: u8) {
-        if let Some(b) = self.slots.as_flattened().get(i) {
-            b.store(v, Ordering::Relaxed);
-        }
-    }
 }
 
 /// One segment: from an integer start position and velocity to a point, over whole ticks.

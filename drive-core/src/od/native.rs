@@ -340,8 +340,8 @@ objects! {
     /// (04) while moving); 12 the homing of 0x2160 (as 0x2161 = 1); 13 clear the alarms (0x6000,
     /// 0x2135, 0x2138, 0x6001's external stop and stall), leaving the enable as it is. Runs and
     /// jogs ramp with 0x6067, 0x6069, 0x606B and 0x606D, and stop at an enabled soft limit
-    /// (0x21AD). 14-18 act on the multi-segment program (`state::program`) of a map that has
-    /// one (seed 002's; its memory is the PVT table's, so the native map refuses them, 04): 14
+    /// (0x21AD). 14-18 act on the multi-segment program (`state::program`) of a map that has a
+    /// program window (seed 002's; the native map has none and refuses them, 04): 14
     /// check it (0x21CE), 15 save it with the parameters (as 0x200F = 2), 16 start the selected
     /// segment or resume a paused one, 17 pause, 18 end; while a program runs the other motion
     /// commands but 6 and 7 (which end it) are refused (04). A value the drive does not do is

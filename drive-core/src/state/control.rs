@@ -21,6 +21,7 @@
 
 use super::DriveState;
 use super::inputs::{INPUT_FUNCTION_OBJECTS, INPUT_LIMIT_NEGATIVE, INPUT_LIMIT_POSITIVE, INPUT_PROBE_1, INPUT_PROBE_2};
+use super::memory::ProgramMemory;
 use crate::controller::handoff::{Lent, Orders, TickSide};
 use crate::controller::io::{IoFunctions, NotifyOutput, OUT_PINS, OutputFunction, PinConfig, PulseInput};
 use crate::controller::{DECAY, Events, STATUS_EXT, STATUS_STALL, Settings};
@@ -286,7 +287,7 @@ fn stop_deceleration(mode: WorkMode, pp_decel: u32, level: u32) -> u32 {
     if mode.is_profile() { pp_decel } else { LEVELS.get((level as usize).wrapping_sub(1)).copied().unwrap_or(0) }
 }
 
-impl<P: Borrow<Table>> DriveState<P> {
+impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     pub(crate) fn param(&self, obj: Obj) -> u32 {
         self.params.get(obj as usize).copied().unwrap_or(0)
     }

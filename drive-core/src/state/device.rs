@@ -8,6 +8,7 @@
 //! all (a condition still present latches again) and leaves the drive switch on disabled.
 
 use super::DriveState;
+use super::memory::ProgramMemory;
 use crate::faults::{FAULT_OVER_VOLTAGE, FAULT_OVERLOAD, FAULT_POSITION};
 use crate::modes::{PowerState, WorkMode};
 use crate::motion::cubic::Table;
@@ -29,7 +30,7 @@ const CW_PROFILE: u16 = 0x0370;
 /// How often a quick stop is checked for rest, µs.
 const QUICK_STOP_CHECK: u64 = 1_000;
 
-impl<P: Borrow<Table>> DriveState<P> {
+impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// The power state, a latched fault first.
     pub fn device_state(&self) -> DeviceState {
         if self.may_move() == Err(ObjError::Faulted) { DeviceState::Fault } else { self.device }

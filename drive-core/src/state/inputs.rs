@@ -14,6 +14,7 @@
 //! in between stands until the next change.
 
 use super::DriveState;
+use super::memory::ProgramMemory;
 use crate::modes::Command;
 use crate::motion::cubic::Table;
 use crate::od::Obj;
@@ -52,7 +53,7 @@ pub(crate) struct Inputs {
     enable_seen: Option<bool>,
 }
 
-impl<P: Borrow<Table>> DriveState<P> {
+impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// The function of IN k+1 (0x21BA-0x21C0).
     pub(crate) fn input_function(&self, k: usize) -> u32 {
         INPUT_FUNCTION_OBJECTS.get(k).map_or(0, |&obj| self.param(obj))

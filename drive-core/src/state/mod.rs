@@ -1,6 +1,7 @@
 //! The drive's state behind the object dictionary: the objects' values, the profile set-points,
-//! the PVT points, and the controller the control tick runs (see [`crate::controller`]). What a
-//! write to an object does is here and in [`control`] (the motion modes) and [`pvt`].
+//! the PVT points, the multi-segment programs, and the controller the control tick runs (see
+//! [`crate::controller`]). What a write to an object does is here and in [`control`] (the motion
+//! modes) and [`pvt`].
 
 pub mod analog;
 mod command;
@@ -8,6 +9,7 @@ pub mod control;
 mod device;
 pub mod homing;
 mod inputs;
+pub mod memory;
 pub mod program;
 pub mod pvt;
 
@@ -26,6 +28,7 @@ use control::{Pp, runs_on, settings_of};
 use core::borrow::Borrow;
 
 pub use crate::controller::{STATUS_BUSY, STATUS_STALL, Status};
+pub use memory::ProgramMemory;
 
 /// Storage status (0x2120) bit 0: no saved parameters were found at power-up; factory values.
 pub const STORAGE_EMPTY: u8 = 1 << 0;
@@ -164,11 +167,12 @@ impl Default for Params {
 
 /// Everything the object dictionary reads and writes.
 ///
-/// `P` holds the PVT point table (9 KB): the state owns it by default; a microcontroller keeps
-/// it in a static of its own and lends it (`&'static mut Table`), so that building the state
-/// never passes 9 KB through its stack.
+/// `P` holds the PVT point table (9 KB) and `G` the multi-segment programs' memory (1 KB): the
+/// state owns them by default; a microcontroller keeps each in a static of its own and lends it
+/// (`&'static Table`, `&'static ProgramMemory`), so that building the state never passes them
+/// through its stack.
 #[derive(Clone, Debug)]
-pub struct DriveState<P = Table> {
+pub struct DriveState<P = Table, G = ProgramMemory> {
     pub(crate) params: [u32; Obj::COUNT],
     /// Storage status bits (0x2120): `STORAGE_*`.
     storage: u8,
@@ -183,6 +187,9 @@ pub struct DriveState<P = Table> {
     pub(crate) pvt: Pvt,
     /// The PVT points (9 KB: kept out of [`Checkpoint`]).
     pub(crate) table: P,
+    /// The multi-segment programs (1 KB: kept out of [`Checkpoint`]; a program write is one
+    /// object's, refused whole or done).
+    pub(crate) programs: G,
     /// What the control tick owns: the motion, supervision, the loops and the running status.
     pub(crate) ctl: Controller,
     /// The alarm count when the platform was last asked to save the history (changed only by
@@ -235,8 +242,8 @@ fn plans_motion(obj: Obj) -> bool {
         && !matches!(obj, Obj::Position | Obj::HomingControl)
 }
 
-/// Everything of a [`DriveState`] but the PVT point table: what a multi-object write restores
-/// when a later object of it is refused. (A table slot written by such a write lies beyond the
+/// Everything of a [`DriveState`] but the PVT point table and the programs' memory: what a
+/// multi-object write restores when a later object of it is refused. (A table slot written by such a write lies beyond the
 /// restored count of points, so it is not a point.)
 #[derive(Clone, Debug)]
 pub struct Checkpoint {
@@ -263,13 +270,15 @@ pub struct Checkpoint {
 impl DriveState {
     /// Factory state.
     pub fn new(identity: &'static Identity, can_save: bool) -> Self {
-        Self::booted(identity, can_save, &Params::factory().values, 0, FaultLog::default(), Table::new())
+        let (table, programs) = (Table::new(), ProgramMemory::new());
+        Self::booted(identity, can_save, &Params::factory().values, 0, FaultLog::default(), table, programs)
     }
 }
 
-impl<P: Borrow<Table>> DriveState<P> {
-    /// The state at power-up with the object values `params`, the storage status `storage` and
-    /// the fault history `faults` (as saved: not to be saved again).
+impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
+    /// The state at power-up with the object values `params`, the storage status `storage`, the
+    /// fault history `faults` (as saved: not to be saved again), the PVT point table `table` and
+    /// the programs' memory `programs` (their contents kept).
     ///
     /// One struct expression, out of line: built in a local and then modified, the state would
     /// be copied once more. (The compiler still builds it in a temporary and copies it to the
@@ -283,6 +292,7 @@ impl<P: Borrow<Table>> DriveState<P> {
         storage: u8,
         faults: FaultLog,
         table: P,
+        programs: G,
     ) -> Self {
         let get = |obj: Obj| params.get(obj as usize).copied().unwrap_or(0);
         let feedback = Feedback::from_objects(get(Obj::Feedback), get(Obj::EncoderCpr));
@@ -300,6 +310,7 @@ impl<P: Borrow<Table>> DriveState<P> {
             pp: Pp::default(),
             pvt: Pvt::default(),
             table,
+            programs,
             base: Base::default(),
             orders: Orders::default(),
             homing: homing::Homing::default(),
@@ -319,7 +330,7 @@ impl<P: Borrow<Table>> DriveState<P> {
         }
     }
 
-    /// Everything but the PVT table, to [`DriveState::restore`] later.
+    /// Everything but the PVT table and the programs' memory, to [`DriveState::restore`] later.
     pub fn checkpoint(&self) -> Checkpoint {
         // Naming every field: a new one must be decided on here.
         let Self {
@@ -332,6 +343,7 @@ impl<P: Borrow<Table>> DriveState<P> {
             pp,
             pvt,
             table: _,
+            programs: _,
             ctl,
             faults_saved: _,
             history_unsaved,

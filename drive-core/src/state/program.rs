@@ -1,6 +1,7 @@
 //! Multi-segment programs (seed 002 §7, registers 1024-1536): moves, speeds, waits and loops a
 //! master stores once and starts by one command or one input, run on the bus side one
-//! instruction at a time, each move planned as a motion command's is.
+//! instruction at a time, each move planned as a motion command's is. The program is kept in a
+//! [`ProgramMemory`] of its own, which the drive is handed beside the PVT point table.
 //!
 //! The program is a stream of instructions in the map's registers, each a code word and its
 //! parameter words (32-bit ones high word first): 1 absolute run (two words, pulses), 2
@@ -21,6 +22,7 @@
 
 use super::DriveState;
 use super::control::SetPoint;
+use super::memory::{ProgramMemory, WORDS};
 use crate::modes::{Command, WorkMode};
 use crate::motion::cubic::Table;
 use crate::motion::scurve::Limits;
@@ -29,8 +31,6 @@ use crate::pdu::Words;
 use crate::units::Instant;
 use core::borrow::Borrow;
 
-/// Registers of the program (1024..=1536).
-pub const WORDS: usize = 513;
 /// Instructions a program holds at most (§7: "at most 256 data").
 pub const MAX_INSTRUCTIONS: u16 = 256;
 /// Segments a program holds at most (0327).
@@ -71,11 +71,11 @@ pub(crate) enum Instruction {
 }
 
 impl Instruction {
-    /// The instruction at word `at` of the program in `table` and its length in words; `None`
+    /// The instruction at word `at` of the program in `memory` and its length in words; `None`
     /// for an unknown code, a value out of the manual's range, or one that runs past the
     /// program's end.
-    pub(crate) fn decode(table: &Table, at: usize) -> Option<(Self, usize)> {
-        let p = |k: usize| word(table, at + k);
+    pub(crate) fn decode(memory: &ProgramMemory, at: usize) -> Option<(Self, usize)> {
+        let p = |k: usize| memory.word(at + k);
         let (code, a) = (p(0)?, p(1));
         let two = || Some((a?, p(2)?));
         let span = |lo: u16, hi: u16| a.filter(|v| (lo..=hi).contains(v));
@@ -104,12 +104,6 @@ impl Instruction {
             _ => return None,
         })
     }
-}
-
-/// Register `k` of the program kept in `table` (1024 + k), if there is such a register.
-fn word(table: &Table, k: usize) -> Option<u16> {
-    (k < WORDS).then_some(())?;
-    Some(u16::from_be_bytes([table.byte(2 * k)?, table.byte(2 * k + 1)?]))
 }
 
 /// The speeds a segment's moves run with, in the drive's units (microsteps a second, and a
@@ -157,12 +151,12 @@ struct Run {
     loops: [(u16, u16); MAX_LOOPS],
 }
 
-/// The program's state on the bus side (the program itself is in the PVT table's memory).
+/// The program's state on the bus side (the program itself is in the drive's [`ProgramMemory`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(crate) struct Program {
-    /// Whether this drive keeps a program: its register map has one (seed 002's), and with it
-    /// no PVT points, whose table holds the program.
-    pub(crate) memory: bool,
+    /// Whether the register map offers programs (a program window: seed 002's); without it the
+    /// program commands are refused and a save leaves the saved program as it is.
+    pub(crate) offered: bool,
     /// The first segment the last check or start found in error (1-32), 0 none.
     error: u8,
     run: Option<Run>,
@@ -230,29 +224,27 @@ impl Run {
     }
 }
 
-impl<P: Borrow<Table>> DriveState<P> {
+impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// Register `k` of the program (seed 002's 1024 + k), 0 past its end or without a program.
     pub fn program_word(&self, k: usize) -> u16 {
-        self.program_memory().and_then(|t| word(t, k)).unwrap_or(0)
+        self.program_memory().and_then(|m| m.word(k)).unwrap_or(0)
     }
 
     /// Writes `words` into the program from register `k`: refused (busy) while a program runs or
     /// a save is under way, and without a program (unknown).
     pub(crate) fn write_program(&mut self, k: usize, words: &Words<'_>) -> Result<(), ObjError> {
-        refuse(self.program.memory && k.saturating_add(words.len()) <= WORDS, ObjError::Unknown)?;
+        refuse(self.program.offered && k.saturating_add(words.len()) <= WORDS, ObjError::Unknown)?;
         refuse(self.program.run.is_none() && self.storage & super::STORAGE_SAVING == 0, ObjError::Busy)?;
-        let t = self.table.borrow();
+        let memory = self.programs.borrow();
         for (j, w) in words.iter().enumerate() {
-            let [hi, lo] = w.to_be_bytes();
-            t.set_byte(2 * (k + j), hi);
-            t.set_byte(2 * (k + j) + 1, lo);
+            memory.set_word(k + j, w);
         }
         Ok(())
     }
 
-    /// The program's memory, for the store: the table, if this drive keeps a program.
-    pub fn program_memory(&self) -> Option<&Table> {
-        self.program.memory.then(|| self.table.borrow())
+    /// The program's memory, for the store, if the register map offers programs.
+    pub fn program_memory(&self) -> Option<&ProgramMemory> {
+        self.program.offered.then(|| self.programs.borrow())
     }
 
     /// Where segment `segment` (1-based) begins, once segments 1..=0x21CB check: the first
@@ -261,7 +253,7 @@ impl<P: Borrow<Table>> DriveState<P> {
         let count = self.param(Obj::ProgramSegments).clamp(1, u32::from(MAX_SEGMENTS)) as u8;
         let (mut at, mut index) = (0usize, 0u16);
         let mut found = Start { word: 0, index: 0 };
-        let (table, per_rev) = (self.table.borrow(), self.per_rev());
+        let (memory, per_rev) = (self.programs.borrow(), self.per_rev());
         for s in 1..=count {
             let start = Start { word: at as u16, index };
             if s == segment {
@@ -271,7 +263,7 @@ impl<P: Borrow<Table>> DriveState<P> {
             let (mut loops, mut lowest, mut highest) = (0, u16::MAX, 0);
             // Walk to the end code, checking each instruction; then the jumps' targets.
             loop {
-                let (i, len) = Instruction::decode(table, at).filter(|_| index < MAX_INSTRUCTIONS).ok_or(s)?;
+                let (i, len) = Instruction::decode(memory, at).filter(|_| index < MAX_INSTRUCTIONS).ok_or(s)?;
                 speeds = speeds.after(i, per_rev).ok_or(s)?;
                 if let Instruction::WaitJump { to, .. } | Instruction::Loop { to, .. } = i {
                     (lowest, highest) = (lowest.min(to), highest.max(to));
@@ -326,7 +318,7 @@ impl<P: Borrow<Table>> DriveState<P> {
 
     /// Checks the program commands 14-18 of the motion command.
     pub(crate) fn check_program_command(&self, command: Command) -> Result<(), ObjError> {
-        refuse(self.program.memory, ObjError::Unsupported)?;
+        refuse(self.program.offered, ObjError::Unsupported)?;
         match command {
             // As 0x200F = 2.
             Command::ProgramSave => {
@@ -462,7 +454,7 @@ impl<P: Borrow<Table>> DriveState<P> {
                     self.jump(&mut run, to);
                 }
                 Step::Next => {
-                    let Some((i, len)) = Instruction::decode(self.table.borrow(), usize::from(run.at)) else {
+                    let Some((i, len)) = Instruction::decode(self.programs.borrow(), usize::from(run.at)) else {
                         // Changed under the run (it cannot be): end it rather than guess.
                         self.program.run = None;
                         return;
@@ -518,7 +510,7 @@ impl<P: Borrow<Table>> DriveState<P> {
     fn jump(&self, run: &mut Run, to: u16) {
         let (mut at, mut index) = (usize::from(run.start.word), run.start.index);
         while index < to {
-            let Some((_, len)) = Instruction::decode(self.table.borrow(), at) else { break };
+            let Some((_, len)) = Instruction::decode(self.programs.borrow(), at) else { break };
             (at, index) = (at + len, index + 1);
         }
         (run.at, run.index) = (at as u16, index);

@@ -46,6 +46,7 @@
 //! receives one frame starts in the same tick.
 
 use super::DriveState;
+use super::memory::ProgramMemory;
 use crate::controller::run::{Phase, Source};
 use crate::modes::{PvtMode, WorkMode};
 use crate::motion::axis::Axis;
@@ -82,7 +83,7 @@ enum Effect {
     Stop,
 }
 
-impl<P: Borrow<Table>> DriveState<P> {
+impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     fn pvt_mode(&self) -> PvtMode {
         PvtMode::from_raw(self.param(Obj::PvtMode)).unwrap_or_default()
     }
