@@ -39,8 +39,8 @@ const ACCESS: Exception = Exception::Vendor(5);
 /// Exception 06: a value out of range, or one the drive cannot take now.
 const VALUE: Exception = Exception::Vendor(6);
 
-/// The key of the table's (index, sub-index): 0x2000-0x20FF with sub-indices 0-15, below
-/// [`WINDOW`].
+/// The key of the table's (index, sub-index): 0x2000-0x20FF with sub-indices 0-15, below the
+/// window (register numbers from 0x1000 on, [`LAYOUT`]'s [`SubIndex::window`]).
 pub const fn key(index: u16, sub: u8) -> u16 {
     (index.wrapping_sub(0x2000) << 4) | sub as u16
 }
@@ -61,8 +61,9 @@ fn register(index: u16, sub: u8) -> Result<u16, Exception> {
 }
 
 /// Decodes an EC-57 request PDU: 03, 06 and 16 with the sub-index byte after the index (their
-/// register numbers as [`register`] makes them), the Modbus diagnostics 0x08 and identification
-/// 0x2B as Modbus has them ([`Request::parse`]); any other function is refused.
+/// register number a table's key, or in the window the native register at the index), the
+/// Modbus diagnostics 0x08 and identification 0x2B as Modbus has them ([`Request::parse`]); any
+/// other function is refused.
 ///
 /// ```
 /// use drive_core::maps::ec57::parse;
