@@ -317,7 +317,8 @@ pub async fn modbus(drive: &'static mut Drive, mut serial: Serial, store: &'stat
     use embedded_io_async::Read;
     // Bytes come one or a few at a time: the task reads them as they arrive.
     let mut buf = [0u8; 16];
-    let mut frame = crate::frames::Assembler::new();
+    // The map's bytes after a register address (seed 003's sub-index) lengthen its requests.
+    let mut frame = crate::frames::Assembler::new(drive_core::maps::RegisterMap::address_extra(drive.map()));
     loop {
         let silence = if frame.expects_more() { SILENCE_PARTIAL } else { SILENCE };
         match select3(serial.read(&mut buf), Timer::after(silence), ATTENTION.wait()).await {

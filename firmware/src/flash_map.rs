@@ -113,7 +113,7 @@ const _: () = {
     while i < REGIONS.len() {
         let r = REGIONS[i];
         assert!(r.start == at, "the regions leave a gap or overlap");
-        assert!(r.start % PAGE == 0 && r.len % PAGE == 0, "a region is not whole pages");
+        assert!(r.start.is_multiple_of(PAGE) && r.len.is_multiple_of(PAGE), "a region is not whole pages");
         at = r.end();
         i += 1;
     }

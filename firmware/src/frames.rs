@@ -11,17 +11,21 @@ pub const MAX_FRAME: usize = drive_core::rtu::MAX_FRAME;
 
 /// The length of the RTU request that starts with `head`, once `head` holds enough of it to
 /// tell; `None` while it does not, or for function codes whose length the request cannot tell
-/// (those end by silence).
-pub fn request_len(head: &[u8]) -> Option<usize> {
+/// (those end by silence). `sub_index` is the bytes a map puts after a register address in
+/// 03, 06 and 16 (the EC-57 map's sub-index: 1; every other map: 0).
+pub fn request_len(head: &[u8], sub_index: usize) -> Option<usize> {
     let &fc = head.get(1)?;
     let counted = |at: usize, fixed: usize| head.get(at).map(|&n| fixed + usize::from(n));
     match fc {
-        // Reads, single writes and diagnostics: address, code, 4 bytes, CRC.
-        0x01..=0x06 | 0x08 => Some(8),
+        // Reads and single writes: address, code, register (and sub-index), 2 bytes, CRC.
+        0x03 | 0x06 => Some(8 + sub_index),
+        // Bits, input registers and diagnostics: address, code, 4 bytes, CRC.
+        0x01 | 0x02 | 0x04 | 0x05 | 0x08 => Some(8),
         // Exception status, event counter and log, report server id: address, code, CRC.
         0x07 | 0x0B | 0x0C | 0x11 => Some(4),
-        // Multiple writes: address, code, start, quantity, byte count, data, CRC.
-        0x0F | 0x10 => counted(6, 9),
+        // Multiple registers: address, code, start (and sub-index), quantity, byte count, data, CRC.
+        0x10 => counted(6 + sub_index, 9 + sub_index),
+        0x0F => counted(6, 9),
         // Read/write multiple: two start/quantity pairs, byte count, data, CRC.
         0x17 => counted(10, 13),
         // Read device identification (MEI 0x0E): MEI type, code, object id, CRC.
@@ -36,18 +40,14 @@ pub fn request_len(head: &[u8]) -> Option<usize> {
 pub struct Assembler {
     buf: [u8; MAX_FRAME],
     len: usize,
-}
-
-impl Default for Assembler {
-    fn default() -> Self {
-        Self::new()
-    }
+    sub_index: usize,
 }
 
 impl Assembler {
-    /// Nothing received.
-    pub const fn new() -> Self {
-        Self { buf: [0; MAX_FRAME], len: 0 }
+    /// Nothing received, for a map whose requests carry `sub_index` bytes after a register
+    /// address (see [`request_len`]).
+    pub const fn new(sub_index: usize) -> Self {
+        Self { buf: [0; MAX_FRAME], len: 0, sub_index }
     }
 
     /// Adds a byte; true when the request is complete (its length reached, or the buffer full).
@@ -56,7 +56,7 @@ impl Assembler {
             *slot = byte;
             self.len += 1;
         }
-        self.len == MAX_FRAME || request_len(self.bytes()).is_some_and(|n| self.len >= n)
+        self.len == MAX_FRAME || request_len(self.bytes(), self.sub_index).is_some_and(|n| self.len >= n)
     }
 
     /// The bytes received so far.
@@ -66,7 +66,7 @@ impl Assembler {
 
     /// Whether the bytes so far start a request whose length is known and not yet reached.
     pub fn expects_more(&self) -> bool {
-        request_len(self.bytes()).is_some_and(|n| self.len < n)
+        request_len(self.bytes(), self.sub_index).is_some_and(|n| self.len < n)
     }
 
     /// Whether nothing has been received.
@@ -85,7 +85,11 @@ mod tests {
     use super::*;
 
     fn complete_after(frame: &[u8]) -> Option<usize> {
-        let mut a = Assembler::new();
+        complete_after_in(frame, 0)
+    }
+
+    fn complete_after_in(frame: &[u8], sub_index: usize) -> Option<usize> {
+        let mut a = Assembler::new(sub_index);
         frame.iter().position(|&b| a.push(b)).map(|i| i + 1)
     }
 
@@ -108,8 +112,20 @@ mod tests {
     }
 
     #[test]
+    fn sub_indexed_requests_are_a_byte_longer() {
+        // EC-57 (seed 003): `01 03 20 00 00 00 01` reads 0x2000 sub-index 0.
+        assert_eq!(complete_after_in(&[1, 3, 0x20, 0, 0, 0, 1, 0xAA, 0xBB, 9], 1), Some(9));
+        assert_eq!(complete_after_in(&[1, 6, 0x20, 5, 0, 0, 1, 0xAA, 0xBB, 9], 1), Some(9));
+        // 16 with two registers: the byte count after the sub-index and the quantity.
+        let f = [1, 0x10, 0x20, 0, 0, 0, 2, 4, 0, 1, 0, 2, 0xAA, 0xBB];
+        assert_eq!(complete_after_in(&f, 1), Some(14));
+        // The identification request has no register address.
+        assert_eq!(complete_after_in(&[1, 0x2B, 0x0E, 1, 0, 0x70, 0x77], 1), Some(7));
+    }
+
+    #[test]
     fn a_partial_request_of_known_length_expects_more() {
-        let mut a = Assembler::new();
+        let mut a = Assembler::new(0);
         assert!(!a.expects_more());
         a.push(1);
         assert!(!a.expects_more(), "the function code is not known yet");
@@ -125,7 +141,7 @@ mod tests {
     fn unknown_codes_wait_for_silence_and_overruns_end_at_the_buffer() {
         assert_eq!(complete_after(&[1, 0x41, 0, 0, 0, 0, 0, 0, 0, 0]), None);
         assert_eq!(complete_after(&[1, 0x41].repeat(200)), Some(MAX_FRAME));
-        assert_eq!(request_len(&[1]), None);
-        assert_eq!(request_len(&[1, 0x10, 0, 0, 0, 1]), None);
+        assert_eq!(request_len(&[1], 0), None);
+        assert_eq!(request_len(&[1, 0x10, 0, 0, 0, 1], 0), None);
     }
 }

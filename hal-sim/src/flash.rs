@@ -1,4 +1,4 @@
-//! A NOR flash like the STM32G431's last pages, in memory or backed by a file, that can lose
+//! A NOR flash like the STM32G474's parameter store, in memory or backed by a file, that can lose
 //! power in the middle of any program or erase operation.
 //!
 //! Pages of 2 KiB, 8-byte (double-word) programming, erased bytes 0xFF. As on the STM32G4, a
@@ -12,7 +12,7 @@
 //! after it with [`FlashError::PowerCut`]: the microcontroller is off. A restart is a new
 //! [`SimFlash`] on the same bytes.
 //!
-//! The time an operation would take on the G431 (datasheet typical: 81.7 µs a double word,
+//! The time an operation would take on the G474 (datasheet typical: 81.7 µs a double word,
 //! 22.02 ms a page erase) is added up in [`SimFlash::busy`]; nothing waits for it.
 
 use std::fs::{File, OpenOptions};
@@ -26,12 +26,13 @@ use std::time::Duration;
 
 use embedded_storage_async::nor_flash::{ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash};
 
-/// Bytes in a page (the erase unit), as the G431's.
+/// Bytes in a page (the erase unit), as the G474's in dual-bank mode.
 pub const PAGE: usize = 2048;
-/// Bytes programmed at once, as the G431's double word.
+/// Bytes programmed at once, as the G474's double word.
 pub const WORD: usize = 8;
-/// Pages of the simulator's store: the G431's last 8 KiB.
-pub const PAGES: usize = 4;
+/// Pages of the simulator's store: the G474's parameter store (PARAMS, 16 KiB in bank 2,
+/// `firmware/src/flash_map.rs`).
+pub const PAGES: usize = 8;
 /// Datasheet typical time to program one double word.
 const PROGRAM_TIME: Duration = Duration::from_nanos(81_690);
 /// Datasheet typical time to erase one page.

@@ -307,8 +307,8 @@ fn a_power_cut_in_a_program_save_loads_the_old_program_the_new_or_none() {
     block_on(store.save_program(&program(0))).expect("first program");
     let (mut old, mut new, mut none, mut points) = (0, 0, 0, 0);
     // Enough saves to wrap around the pages (a program is five records and a commit, about
-    // 1.4 KB, in one of two banks).
-    for g in 1..=8u8 {
+    // 1.4 KB, in one of two banks): two a page.
+    for g in 1..=2 * PAGES as u8 {
         let before = store.flash().bytes().to_vec();
         let (was, next) = (program(g - 1), program(g));
         let mut uncut = store_on(SimFlash::from_bytes(before.clone()));

@@ -143,6 +143,16 @@ pub mod qemu {
     /// # Panics
     /// If `cargo xtask qemu` does not start or does not say where it listens.
     pub fn boot() -> (Firmware, String) {
+        let (fw, at, _) = boot_with_monitor();
+        (fw, at)
+    }
+
+    /// [`boot`], and the endpoint of QEMU's monitor (`system_reset` restarts the emulated chip,
+    /// its parameter store kept).
+    ///
+    /// # Panics
+    /// If `cargo xtask qemu` does not start or does not say where it listens.
+    pub fn boot_with_monitor() -> (Firmware, String, String) {
         let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("workspace root");
         let mut child = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()))
             .args(["run", "-q", "-p", "xtask", "--", "qemu", "--tcp", "127.0.0.1:0", "--exit-on-eof"])
@@ -154,8 +164,24 @@ pub mod qemu {
         let mut stdout = BufReader::new(child.stdout.take().expect("piped stdout"));
         let mut line = String::new();
         stdout.read_line(&mut line).expect("first line of cargo xtask qemu");
-        let fw = Firmware(child, stdout);
         let at = line.trim().strip_prefix("listening on ").unwrap_or_else(|| panic!("unexpected line {line:?}"));
-        (fw, at.to_string())
+        let at = at.to_string();
+        line.clear();
+        stdout.read_line(&mut line).expect("second line of cargo xtask qemu");
+        let monitor = line.trim().strip_prefix("monitor on ").unwrap_or_else(|| panic!("unexpected line {line:?}"));
+        let monitor = monitor.to_string();
+        (Firmware(child, stdout), at, monitor)
+    }
+
+    /// Restarts the emulated chip through QEMU's monitor at `monitor`.
+    ///
+    /// # Panics
+    /// If the monitor cannot be reached.
+    pub fn reset(monitor: &str) {
+        use std::io::{Read, Write};
+        let mut m = std::net::TcpStream::connect(monitor).expect("QEMU's monitor");
+        m.write_all(b"system_reset\n").expect("to the monitor");
+        m.set_read_timeout(Some(Duration::from_millis(300))).expect("a read timeout");
+        let _ = m.read(&mut [0u8; 1024]);
     }
 }

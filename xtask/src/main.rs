@@ -8,7 +8,9 @@
 //! - `firmware`: cross-build the firmware, print its size and its stack by the call graph against
 //!   the budgets, fail if it does not fit the chip or if the tick reaches software floating
 //!   point.
-//! - `qemu --tcp HOST:PORT`: build the QEMU variant and run it with its USART on that port.
+//! - `qemu --tcp HOST:PORT [--map NAME]`: build the QEMU variant and run it with its USART on that
+//!   port (switched to map NAME as a master would: 0x2190, a save, a reset), and QEMU's monitor on
+//!   the port it prints second (`system_reset` restarts the chip, its store kept).
 //! - `hil`: build the hardware-in-the-loop suite (`probe-rs` runs it on a board).
 //! - `tick-cost`: the control tick's instruction count under QEMU (`-icount`): the firmware's, and
 //!   the drive core's alone with the closed loops and the stall detection (CI runs the latter).
@@ -114,6 +116,11 @@ fn ci() -> Result<(), String> {
     run(cargo().arg("test"))?;
     step("firmware build and size");
     firmware()?;
+    step("`cargo run --release` from firmware/, up to the probe (the runner here prints the image's sections)");
+    run(cargo()
+        .current_dir(root().join("firmware"))
+        .args(["run", "--release"])
+        .env("CARGO_TARGET_THUMBV7EM_NONE_EABIHF_RUNNER", "arm-none-eabi-size"))?;
     step("QEMU firmware build and clippy (with the tick-cost program)");
     run(cargo()
         .args(firmware_args("clippy", &["--no-default-features", "--features", "tick-cost", "--bins"]))
@@ -442,12 +449,19 @@ fn build_qemu() -> Result<PathBuf, String> {
 /// on HOST:PORT (port 0: a free one), prints `listening on HOST:PORT` once the drive answers a
 /// read, then runs until QEMU ends (or, with `--exit-on-eof`, until stdin closes).
 fn qemu(args: &[String]) -> Result<(), String> {
-    let usage = "usage: cargo xtask qemu --tcp HOST:PORT [--exit-on-eof]";
+    let usage = "usage: cargo xtask qemu --tcp HOST:PORT [--map native|jmc|cls9|ec57] [--exit-on-eof]";
     let endpoint = match args {
         [flag, e, ..] if flag == "--tcp" => e.clone(),
         _ => return Err(usage.into()),
     };
     let exit_on_eof = args.iter().any(|a| a == "--exit-on-eof");
+    let map = match args.iter().position(|a| a == "--map").map(|i| args.get(i + 1)) {
+        None => None,
+        Some(name) => {
+            let id = name.and_then(|n| drive_core::maps::NAMES.iter().position(|m| m == n)).ok_or(usage)?;
+            Some(u16::try_from(id).map_err(|e| e.to_string())?)
+        }
+    };
     let (host, port) = endpoint.rsplit_once(':').ok_or(usage)?;
     let port = match port.parse::<u16>().map_err(|e| format!("{endpoint}: {e}"))? {
         // QEMU does not say which port it took: take a free one for it.
@@ -456,14 +470,21 @@ fn qemu(args: &[String]) -> Result<(), String> {
     };
     let elf = build_qemu()?;
     let started = Instant::now();
-    let mut qemu = spawn_qemu(&elf, host, port, &["-monitor", "none"])?;
+    let monitor_port = free_port()?;
+    let monitor_at = format!("tcp:127.0.0.1:{monitor_port},server=on,wait=off");
+    let mut qemu = spawn_qemu(&elf, host, port, &["-monitor", &monitor_at])?;
     let first_answer = probe(host, port, &mut qemu.0, Duration::from_millis(100))?;
     eprintln!(
-        "QEMU: first answer {:.1} ms after launch (100 ms retries); that read's round trip {:.2} ms",
+        "QEMU: first answer {:.1} ms after launch (100 ms retries); that request's round trip {:.2} ms",
         (started.elapsed() - Duration::from_millis(100)).as_secs_f64() * 1e3,
         first_answer.as_secs_f64() * 1e3
     );
+    // QEMU's store is empty at its first boot: the drive starts in the native map.
+    if let Some(id) = map.filter(|&id| id != 0) {
+        switch_map(host, port, monitor_port, &mut qemu.0, id)?;
+    }
     println!("listening on {host}:{port}");
+    println!("monitor on 127.0.0.1:{monitor_port}");
     std::io::stdout().flush().map_err(|e| e.to_string())?;
     if exit_on_eof {
         // Whoever started us is gone or done: stop QEMU with us.
@@ -594,28 +615,18 @@ fn tick_cost() -> Result<(), String> {
     }
     let g474_stack_start = symbol(&nm_symbols(&g474_elf, &[])?, "_stack_start")?;
     let (port, mon) = (free_port()?, free_port()?);
-    let monitor = format!("tcp:127.0.0.1:{mon},server=on,wait=off");
+    let monitor_at = format!("tcp:127.0.0.1:{mon},server=on,wait=off");
     let mut qemu = spawn_qemu(
         &elf,
         "127.0.0.1",
         port,
-        &["-icount", &format!("shift={ICOUNT_SHIFT},align=off"), "-monitor", &monitor],
+        &["-icount", &format!("shift={ICOUNT_SHIFT},align=off"), "-monitor", &monitor_at],
     )?;
     // Generous: under -icount a reply takes a few hundred ms.
     probe("127.0.0.1", port, &mut qemu.0, Duration::from_millis(1000))?;
     // `n` words of the emulated chip's memory at `at`, through QEMU's monitor.
     let read_memory = |at: u64, n: usize| -> Result<Vec<u64>, String> {
-        let mut m = TcpStream::connect(("127.0.0.1", mon)).map_err(|e| e.to_string())?;
-        m.set_read_timeout(Some(Duration::from_millis(500))).map_err(|e| e.to_string())?;
-        m.write_all(format!("xp /{n}wx 0x{at:x}\n").as_bytes()).map_err(|e| e.to_string())?;
-        let mut text = String::new();
-        let mut buf = [0u8; 4096];
-        while let Ok(k) = m.read(&mut buf) {
-            if k == 0 {
-                break;
-            }
-            text.push_str(&String::from_utf8_lossy(&buf[..k]));
-        }
+        let text = monitor(mon, &format!("xp /{n}wx 0x{at:x}"))?;
         // QEMU prints four words a line, each line after its address and a colon.
         let words: Vec<u64> = text
             .lines()
@@ -764,6 +775,10 @@ fn tick_cost() -> Result<(), String> {
 /// `-icount` shift of the `tick_cost` program: an instruction takes 256 virtual ns, a SysTick
 /// count 250 ns, so a count is 250/256 of an instruction.
 const CORE_ICOUNT_SHIFT: u32 = 8;
+/// The G474's receive ring (`firmware/src/board/g474.rs`): two frames of 256 bytes.
+const RX_RING: usize = 2 * 256;
+/// Bytes a second on the line at 115 200 baud, 8N1 (10 bits a byte).
+const BYTES_PER_S_AT_115200: f64 = 11_520.0;
 /// Cycles of one 20 kHz control tick on the 170 MHz Cortex-M4 of the G474.
 const TICK_CYCLES: f64 = 170e6 / 20e3;
 
@@ -786,6 +801,7 @@ fn core_tick_cost() -> Result<(), String> {
     let per_count = 250.0 / f64::from(1u32 << CORE_ICOUNT_SHIFT);
     println!("control tick of drive-core on the Cortex-M4 (QEMU -icount), the cases of firmware/src/bin/tick_cost.rs:");
     let mut over_budget = false;
+    let mut longest_request = 0.0f64;
     for line in text.lines() {
         // `tick_cost NAME mean M most N counts`
         let words: Vec<&str> = line.split_whitespace().collect();
@@ -805,6 +821,7 @@ fn core_tick_cost() -> Result<(), String> {
             // `request NAME N counts`
             ["request", name, spent, "counts"] => {
                 let spent = spent.parse::<f64>().map_err(|e| format!("{line}: {e}"))? * per_count;
+                longest_request = longest_request.max(spent);
                 println!(
                     "  request {name:14} {spent:7.0} instructions to serve ({:.2} ms of the bus task; the tick runs on meanwhile)",
                     spent / 170e3,
@@ -825,6 +842,20 @@ fn core_tick_cost() -> Result<(), String> {
     }
     if !out.status.success() {
         return Err(format!("tick_cost under QEMU: {}", out.status));
+    }
+    // The board's receive ring must hold what arrives while the Modbus task serves the longest
+    // request (the tick preempting it meanwhile: its mean share counted in) at the fastest baud.
+    let serving_s = longest_request / (170e6 * (1.0 - TICK_MEAN_BUDGET / TICK_CYCLES));
+    let arriving = serving_s * BYTES_PER_S_AT_115200;
+    println!(
+        "  receive ring: the longest request here keeps the Modbus task {:.2} ms, {arriving:.0} bytes at 115 200 \
+         baud, of the G474's {RX_RING} B ring",
+        serving_s * 1e3
+    );
+    if arriving > RX_RING as f64 {
+        return Err(format!(
+            "a request keeps the Modbus task long enough for {arriving:.0} bytes to overrun the {RX_RING} B ring"
+        ));
     }
     if over_budget {
         return Err(format!(
@@ -847,11 +878,12 @@ impl Drop for Qemu {
     }
 }
 
-/// Reads 0x600C..0x600D until the drive answers (QEMU boots in tens of ms; a request sent before
-/// the USART is on is lost), waiting `patience` for each answer; returns the round trip of the
-/// answered read.
+/// Asks for the device identification (0x2B/0x0E, which every map answers) until the drive
+/// answers (QEMU boots in tens of ms; a request sent before the USART is on is lost), waiting
+/// `patience` for each answer; returns the round trip of the answered request.
 fn probe(host: &str, port: u16, qemu: &mut Child, patience: Duration) -> Result<Duration, String> {
-    let request = [0x01, 0x03, 0x60, 0x0C, 0x00, 0x02, 0x1A, 0x08];
+    // Basic identification, from object 0.
+    let request = [0x01, 0x2B, 0x0E, 0x01, 0x00, 0x70, 0x77];
     // Generous: a loaded machine slows QEMU's boot and its serial line.
     let deadline = Instant::now() + PROBE_FOR;
     while Instant::now() < deadline {
@@ -867,12 +899,13 @@ fn probe(host: &str, port: u16, qemu: &mut Child, patience: Duration) -> Result<
         for _ in 0..50 {
             let sent = Instant::now();
             s.write_all(&request).map_err(|e| e.to_string())?;
-            let mut reply = [0u8; 9];
-            if s.read_exact(&mut reply).is_ok() && reply.get(..3) == Some(&[0x01, 0x03, 0x04][..]) {
+            let mut head = [0u8; 3];
+            if s.read_exact(&mut head).is_ok() && head == [0x01, 0x2B, 0x0E] {
                 let rtt = sent.elapsed();
-                // Let a late answer to an earlier attempt arrive here, not at the next client.
+                // The rest of the reply, and a late answer to an earlier attempt: here, not at
+                // the next client.
                 std::thread::sleep(patience);
-                let _ = s.read(&mut [0u8; 64]);
+                let _ = s.read(&mut [0u8; 512]);
                 return Ok(rtt);
             }
             // A partial or garbled answer: let the drive's receiver clear. It waits up to 250 ms
@@ -883,6 +916,50 @@ fn probe(host: &str, port: u16, qemu: &mut Child, patience: Duration) -> Result<
         }
     }
     Err(format!("the drive under QEMU did not answer on {host}:{port}"))
+}
+
+/// Sends `command` to QEMU's monitor at `port` and returns what it printed.
+fn monitor(port: u16, command: &str) -> Result<String, String> {
+    let mut m = TcpStream::connect(("127.0.0.1", port)).map_err(|e| format!("QEMU's monitor: {e}"))?;
+    m.set_read_timeout(Some(Duration::from_millis(500))).map_err(|e| e.to_string())?;
+    m.write_all(format!("{command}\n").as_bytes()).map_err(|e| e.to_string())?;
+    let mut text = String::new();
+    let mut buf = [0u8; 4096];
+    while let Ok(k) = m.read(&mut buf) {
+        if k == 0 {
+            break;
+        }
+        text.push_str(&String::from_utf8_lossy(&buf[..k]));
+    }
+    Ok(text)
+}
+
+/// Switches the drive under QEMU, at the native map, to map number `id` as a master would:
+/// 0x2190 = id, a save (0x200F = 2, until 0x2120 bit 3 clears), then a reset of the emulated
+/// chip through the monitor (its store, in RAM, stays), and waits for it to answer again.
+fn switch_map(host: &str, port: u16, monitor_port: u16, qemu: &mut Child, id: u16) -> Result<(), String> {
+    let mut s = TcpStream::connect((host, port)).map_err(|e| e.to_string())?;
+    s.set_read_timeout(Some(Duration::from_secs(2))).map_err(|e| e.to_string())?;
+    let write = |s: &mut TcpStream, reg: u16, v: u16| -> Result<(), String> {
+        let ([rh, rl], [vh, vl]) = (reg.to_be_bytes(), v.to_be_bytes());
+        let reply = transact(s, &[1, 6, rh, rl, vh, vl], 8)?;
+        if reply.get(1) == Some(&6) { Ok(()) } else { Err(format!("{reg:#06x} = {v} refused: {reply:02x?}")) }
+    };
+    write(&mut s, 0x2190, id)?;
+    write(&mut s, 0x200F, 2)?;
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        let status = transact(&mut s, &[1, 3, 0x21, 0x20, 0, 1], 7)?;
+        match status.get(4) {
+            Some(b) if b & 0x10 != 0 => return Err(format!("the save failed: 0x2120 = {b:#04x}")),
+            Some(b) if b & 0x08 == 0 => break,
+            _ if Instant::now() > deadline => return Err("the save did not end".into()),
+            _ => {}
+        }
+    }
+    drop(s);
+    monitor(monitor_port, "system_reset")?;
+    probe(host, port, qemu, Duration::from_millis(100)).map(drop)
 }
 
 /// Builds the embedded-test HIL suite for the G474 (it runs with `probe-rs` on a board).

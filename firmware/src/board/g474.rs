@@ -46,6 +46,10 @@ use embassy_stm32::{Peri, bind_interrupts, peripherals};
 
 use crate::flash_map;
 #[path = "pins.rs"]
+#[allow(
+    dead_code,
+    reason = "the whole table is read by the tests and the doc; the code uses the pins it sets up itself"
+)]
 pub mod pins;
 use crate::power::PowerStage;
 

@@ -38,8 +38,9 @@ const RELOAD: u32 = CORE_HZ / TICK_HZ - 1;
 /// SysTick's rate: the clock of embassy-time and the control tick.
 const TICK_HZ: u32 = 1000;
 
-/// Received bytes, from the RXNE interrupt to the Modbus task.
-static RX: Pipe<CriticalSectionRawMutex, 256> = Pipe::new();
+/// Received bytes, from the RXNE interrupt to the Modbus task: two frames of the longest, as the
+/// board's receive ring.
+static RX: Pipe<CriticalSectionRawMutex, { 2 * drive_core::rtu::MAX_FRAME }> = Pipe::new();
 
 /// USART1 as the RS-485 port (QEMU's line has no transceiver and no baud timing).
 pub struct Serial(());
