@@ -112,8 +112,10 @@ fn ci() -> Result<(), String> {
     run(cargo().args(firmware_args("clippy", &["--bin", "firmware", "--test", "hil"])).args(["--", "-D", "warnings"]))?;
     // drive-tests' `qemu` test boots the firmware under QEMU (`cargo xtask qemu`) for tokio-modbus.
     step("tests (host, including the register reference, tokio-modbus and the firmware under QEMU)");
-    // The default members: the firmware is cross-built below, never for the host.
+    // The default members: the firmware is cross-built below; on the host only its framing by
+    // length (QEMU's) has tests.
     run(cargo().arg("test"))?;
+    run(cargo().args(["test", "-p", "firmware", "--bins"]))?;
     step("firmware build and size");
     firmware()?;
     step("`cargo run --release` from firmware/, up to the probe (the runner here prints the image's sections)");
