@@ -143,7 +143,7 @@ impl SimFlash {
         &self.erases
     }
 
-    /// How long the operations so far would have kept the G431's flash busy.
+    /// How long the operations so far would have kept the G474's flash busy.
     pub fn busy(&self) -> Duration {
         self.busy
     }

@@ -41,7 +41,7 @@ struct Args {
     /// Baud rate the frame timing (t1.5, t3.5) follows [default: the drive's, factory 9600].
     #[arg(long, value_name = "B")]
     baud: Option<u32>,
-    /// Keep the drive's parameter flash (8 KiB, as the STM32G431's last four pages) in FILE,
+    /// Keep the drive's parameter flash (16 KiB, as the STM32G474's parameter store) in FILE,
     /// created erased if missing: parameters saved with 0x200F = 2 are back after a restart.
     /// Without it the flash is in memory and saves last for the run.
     #[arg(long, value_name = "FILE", conflicts_with = "script")]

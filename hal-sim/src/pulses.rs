@@ -20,7 +20,7 @@ use drive_core::modes::PulseFormat;
 /// The filter's length in timer clocks for ICxF = 0..=15 (STM32 reference manuals: N samples
 /// at f_DTS divided as each setting says).
 const FILTER_CLOCKS: [u32; 16] = [1, 2, 4, 8, 12, 16, 24, 32, 48, 64, 80, 96, 128, 160, 192, 256];
-/// The input timer's clock (the G431's 170 MHz, no division).
+/// The input timer's clock (the G474's 170 MHz, no division).
 const TIMER_HZ: f64 = 170e6;
 
 /// The shortest level the filter `filter` lets through, s.

@@ -1,4 +1,4 @@
-//! The parameter store on the simulated G431 flash: a power cut at every program and erase
+//! The parameter store on the simulated G474 flash: a power cut at every program and erase
 //! operation of a save leaves the complete old set or the complete new set, and the drive boots
 //! and answers; many saves wear the pages evenly.
 //!
@@ -228,7 +228,7 @@ fn a_hundred_thousand_saves_spread_wear_over_the_pages() {
     let per_save = flash.busy() / CYCLES;
     println!(
         "{CYCLES} saves in {wall:.2?}; {SAVED} objects, record {RECORD} bytes, {} flash bytes a save; \
-         erases per page {erases:?}; G431 flash time a save: mean {per_save:.2?}, worst {worst_busy:.2?}; \
+         erases per page {erases:?}; G474 flash time a save: mean {per_save:.2?}, worst {worst_busy:.2?}; \
          position record worst {position_busy:.2?}",
         item_bytes::<SimFlash>(RECORD)
     );
@@ -268,7 +268,7 @@ fn the_power_down_position_is_saved_when_enabled() {
     let busy = store.flash().busy();
     hal_sim::serve_request(&mut drive, &mut store);
     println!(
-        "power-down position: {} flash operations, {:.2?} of G431 flash time",
+        "power-down position: {} flash operations, {:.2?} of G474 flash time",
         store.flash().ops() - ops,
         store.flash().busy() - busy
     );

@@ -105,7 +105,8 @@ objects! {
     /// System control. 2 saves every ROM object the master can write (one record, so a power cut
     /// leaves the old set or the new one, never a mix); 3 restores their factory values and saves
     /// them too, so that they survive a restart as §3.11's FSET reset does. Both are refused (04)
-    /// while the axis moves (an erase stalls the flash for ~22 ms) or a save is in progress, and 2
+    /// while the axis moves (a save keeps the bus side busy for up to a page erase, ~22 ms, when a
+    /// stop or a re-target must not wait) or a save is in progress, and 2
     /// on a platform without storage. The reply means the save started: 0x2120 bit 3 shows it
     /// running, bit 4 a failure. 1 (jump to the boot loader) is refused (04): the simulator has
     /// none, and the firmware does not jump. 4 (ours, seed 002's alarm clear) clears the latched
@@ -688,7 +689,7 @@ objects! {
     /// Closed loop: 1 enables the torque (servo) loop with PID; 0 is the position loop.
     TorqueLoop @ 0x605D: U8, Rw, Rom, Span(0, 1), default 0, None, "torque loop enable";
     /// 1 saves the position (as 0x6055) when power loss is detected: one record of two flash
-    /// writes, ~0.2 ms on the STM32G431 (~22 ms more if it falls at a page's end).
+    /// writes, ~0.2 ms on the STM32G474 (~22 ms more if it falls at a page's end).
     AutoSave @ 0x605E: U8, Rw, Rom, Span(0, 1), default 0, None, "power-down save enable";
     /// Analog input, 12-bit ADC code. Read only here: the appendix's RW has no meaning for an input.
     AnalogIn @ 0x605F: U16, Ro, Live, Span(0, 4095), default 0, None, "analog input";

@@ -668,8 +668,9 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             (Obj::SystemControl, 2) if !self.can_save => Err(ObjError::Unsupported),
             // A map this platform does not carry would not answer after the restart.
             (Obj::RegisterMap, v) if self.maps & (1 << (v & 7)) == 0 => Err(ObjError::Unsupported),
-            // A flash erase stalls the STM32G431's single bank for ~22 ms: never while moving. A
-            // second save waits for the first to end.
+            // A save keeps the bus side in the flash for up to a page erase (~22 ms), when a
+            // stop or a re-target must not wait: never while moving. A second save waits for
+            // the first to end.
             (Obj::SystemControl, 2 | 3) if !self.ctl.axis.is_still() || self.storage & STORAGE_SAVING != 0 => {
                 Err(ObjError::Busy)
             }

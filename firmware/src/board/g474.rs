@@ -1,6 +1,5 @@
 //! The STM32G474CE board (LQFP48): clocks, pin map and peripheral setup. Nothing else knows a
-//! pin name. The pins are those of the G431CB board it replaces (the same package and pinout);
-//! `tests/tests/board.rs` checks each alternate function against the chip's data.
+//! pin name; `tests/tests/board.rs` checks each alternate function against the chip's data.
 //!
 //! The pin map is [`pins`]: every signal, its pin, peripheral and alternate function.
 //!
@@ -330,7 +329,7 @@ impl PowerStage for StepDir {
         // pulse (either edge counts each pulse once) with CH1's level for the direction (CC1P =
         // 1: high counts down); the directional clock counts CH2's edges up and CH1's down
         // (CCxP = 1: rising edges); quadrature counts every edge of both, CH1 inverted so that
-        // A on CH2 leading counts up. Not yet checked on a board (docs/board-g431.md).
+        // A on CH2 leading counts up. Not yet checked on a board (docs/board-g474.md).
         let (sms, clock_rising) = match input.format {
             PulseFormat::StepDir => (Sms::ENCODER_UP_X1, false),
             PulseFormat::CwCcw => (Sms::ENCODER_DIR_X1, true),
