@@ -9,7 +9,7 @@ use crate::ident::Identity;
 use crate::maps::{NativeMap, RegisterMap, Spoilt};
 use crate::motion::cubic::Table;
 use crate::od::Obj;
-use crate::pdu::{Exception, MAX_READ, Request, Words};
+use crate::pdu::{Exception, MAX_READ, Parser, Request, Words};
 use crate::rtu::{Framer, MAX_FRAME, RxError};
 use crate::state::ProgramMemory;
 use crate::units::{Baud, Instant, SlaveAddr};
@@ -71,10 +71,28 @@ pub struct Drive<M: RegisterMap = NativeMap, P = Table, G = ProgramMemory> {
     baud: Baud,
     listen_only: bool,
     counters: Counters,
+    framing: Framing,
     tx: [u8; MAX_FRAME],
     tx_len: usize,
     map: M,
     state: DriveState<P, G>,
+}
+
+/// What the slave needs of its map's framing on every request, asked of the map once when the
+/// drive is built (it is fixed for the map's life) and kept as plain data, so that no request
+/// pays a call into the map for it.
+#[derive(Clone, Copy, Debug)]
+struct Framing {
+    /// [`RegisterMap::parser`]: `None` for Modbus's PDUs.
+    parser: Option<Parser>,
+    /// [`RegisterMap::address_extra`].
+    address_extra: usize,
+}
+
+impl Framing {
+    fn of(map: &impl RegisterMap) -> Self {
+        Self { parser: map.parser(), address_extra: map.address_extra() }
+    }
 }
 
 impl Drive<NativeMap> {
@@ -236,6 +254,7 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
             baud,
             listen_only: false,
             counters: Counters::default(),
+            framing: Framing::of(&map),
             tx: [0; MAX_FRAME],
             tx_len: 0,
             map,
@@ -254,10 +273,11 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
     /// The same drive answering through the map `f` makes of its own (the native map into
     /// [`Maps`](crate::maps::Maps), say).
     pub fn map_into<N: RegisterMap>(self, f: impl FnOnce(M) -> N) -> Drive<N, P, G> {
-        let Self { framer, address, baud, listen_only, counters, tx, tx_len, map, mut state } = self;
+        let Self { framer, address, baud, listen_only, counters, tx, tx_len, map, mut state, .. } = self;
         let map = f(map);
         state.program.offered = map.has_program();
-        Drive { framer, address, baud, listen_only, counters, tx, tx_len, map, state }
+        let framing = Framing::of(&map);
+        Drive { framer, address, baud, listen_only, counters, framing, tx, tx_len, map, state }
     }
 
     /// The address this drive answers to.
@@ -440,7 +460,7 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
 
     /// Serves a frame with a good CRC that sits in the framer.
     fn serve(&mut self) {
-        let Self { framer, address, listen_only, counters, tx, tx_len, map, state, .. } = self;
+        let Self { framer, address, listen_only, counters, framing, tx, tx_len, map, state, .. } = self;
         counters.bus_messages = counters.bus_messages.wrapping_add(1);
         let (frame, _) = framer.frame();
         let Some((&to, rest)) = frame.split_first() else {
@@ -459,7 +479,10 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
             counters.no_responses = counters.no_responses.wrapping_add(1);
             return;
         }
-        let request = map.parse(pdu);
+        let request = match framing.parser {
+            Some(parse) => parse(pdu),
+            None => Request::parse(pdu),
+        };
         let mut server = Server { map, state, counters, listen_only };
         let silent = broadcast || *server.listen_only;
         if silent && !request.as_ref().is_ok_and(|req| server.silent_allowed(req)) {
@@ -485,7 +508,7 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
             }
             Ok(Outcome::Echo) => {
                 // The request's register (with what the map puts after it) and value or count.
-                let echo = pdu.get(1..5 + map.address_extra()).unwrap_or_default();
+                let echo = pdu.get(1..5 + framing.address_extra).unwrap_or_default();
                 *head = [address.get(), function];
                 put(body, 0, echo);
                 echo.len()

@@ -129,6 +129,9 @@ pub enum Request<'a> {
     },
 }
 
+/// A decoder of request PDUs: [`Request::parse`], or a map's own ([`RegisterMap::parser`](crate::maps::RegisterMap::parser)).
+pub type Parser = fn(&[u8]) -> Result<Request<'_>, Exception>;
+
 fn be16(b: &[u8], at: usize) -> Option<u16> {
     Some(u16::from_be_bytes([*b.get(at)?, *b.get(at + 1)?]))
 }

@@ -27,7 +27,7 @@
 use super::native::{NativeMap, Op, RegisterMap, Spoilt};
 use crate::motion::cubic::Table;
 use crate::od::{Access, Obj, ObjError, ObjectDef, Type};
-use crate::pdu::{Exception, Request, Words};
+use crate::pdu::{Exception, Parser, Words};
 use crate::state::{DriveState, ProgramMemory};
 use core::borrow::Borrow;
 
@@ -301,7 +301,7 @@ pub struct Layout {
 #[derive(Clone, Copy, Debug)]
 pub struct SubIndex {
     /// Decodes a request PDU, its register as the layout's register number.
-    pub parse: fn(&[u8]) -> Result<Request<'_>, Exception>,
+    pub parse: Parser,
     /// The index and sub-index of a layout's register number below the window.
     pub index_of: fn(u16) -> (u16, u8),
     /// The first register number that is the native map's.
@@ -681,11 +681,8 @@ impl RegisterMap for LayoutMap {
         self.layout.program.is_some()
     }
 
-    fn parse<'a>(&self, pdu: &'a [u8]) -> Result<Request<'a>, Exception> {
-        match self.layout.sub_index {
-            Some(s) => (s.parse)(pdu),
-            None => Request::parse(pdu),
-        }
+    fn parser(&self) -> Option<Parser> {
+        self.layout.sub_index.map(|s| s.parse)
     }
 
     fn address_extra(&self) -> usize {

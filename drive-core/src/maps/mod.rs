@@ -13,7 +13,7 @@ pub mod layout;
 pub mod native;
 
 use crate::motion::cubic::Table;
-use crate::pdu::{Exception, Request, Words};
+use crate::pdu::{Exception, Parser, Words};
 use crate::state::{DriveState, ProgramMemory};
 use core::borrow::Borrow;
 use layout::LayoutMap;
@@ -156,10 +156,10 @@ impl RegisterMap for Maps {
         }
     }
 
-    fn parse<'a>(&self, pdu: &'a [u8]) -> Result<Request<'a>, Exception> {
+    fn parser(&self) -> Option<Parser> {
         match self {
-            Self::Native(m) => m.parse(pdu),
-            Self::Layout(m) => m.parse(pdu),
+            Self::Native(m) => m.parser(),
+            Self::Layout(m) => m.parser(),
         }
     }
 

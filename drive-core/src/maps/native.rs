@@ -4,7 +4,7 @@ use super::exceptions::Exceptions;
 use super::index;
 use crate::motion::cubic::Table;
 use crate::od::{Access, OBJECTS, Obj, ObjError, ObjectDef, Range, Storage, Type, is_command};
-use crate::pdu::{Exception, MAX_WRITE, Request, Words};
+use crate::pdu::{Exception, MAX_WRITE, Parser, Words};
 use crate::state::{DriveState, ProgramMemory};
 use core::borrow::Borrow;
 use heapless::Vec;
@@ -48,10 +48,11 @@ pub trait RegisterMap {
     fn has_program(&self) -> bool {
         false
     }
-    /// Decodes a request PDU into the map's register numbers: Modbus's PDU by default; a map
-    /// whose requests carry more (seed 003's sub-index byte after the register) decodes its own.
-    fn parse<'a>(&self, pdu: &'a [u8]) -> Result<Request<'a>, Exception> {
-        Request::parse(pdu)
+    /// The map's own decoder of request PDUs into its register numbers, if its requests carry
+    /// more than Modbus's (seed 003's sub-index byte after the register); `None`: Modbus's PDUs
+    /// ([`Request::parse`](crate::pdu::Request::parse)). The slave asks once, at power-up.
+    fn parser(&self) -> Option<Parser> {
+        None
     }
     /// The bytes a register request (0x03, 0x06, 0x10) carries after its register address, which
     /// a write's reply echoes with it: none in Modbus's requests, seed 003's sub-index 1. (A
