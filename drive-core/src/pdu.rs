@@ -155,9 +155,7 @@ impl<'a> Request<'a> {
         let (&function, data) = pdu.split_first().ok_or(Exception::IllegalFunction)?;
         let word = |at| be16(data, at).ok_or(Bad);
         let fixed = |n: usize| if data.len() == n { Ok(()) } else { Err(Bad) };
-        let read_qty = |q: u16| {
-            if (1..=MAX_READ).contains(&q) { Ok(q) } else { Err(Bad) }
-        };
+        let read_qty = |q: u16| if read_quantity(q) { Ok(q) } else { Err(Bad) };
         match function {
             0x03 | 0x04 => {
                 fixed(4)?;
@@ -192,6 +190,43 @@ impl<'a> Request<'a> {
             _ => Err(Exception::IllegalFunction),
         }
     }
+
+    /// The request of a PDU of the commonest shapes, a register read (0x03, 0x04) or write
+    /// (0x06, 0x10), if it is one and well-formed: then what [`Request::parse`] makes of it;
+    /// `None` for anything else, which `parse` decodes (or refuses). A slave tries it first,
+    /// inlined: one match on the PDU's bytes.
+    ///
+    /// ```
+    /// use drive_core::pdu::{Request, Words};
+    /// assert_eq!(Request::short(&[0x03, 0x60, 0x0C, 0x00, 0x02]), Some(Request::ReadHolding { addr: 0x600C, qty: 2 }));
+    /// assert_eq!(Request::short(&[0x03, 0x60, 0x0C, 0x00, 126]), None);
+    /// let pdu = [0x10, 0x60, 0x08, 0x00, 0x01, 0x02, 0x00, 0x05];
+    /// assert_eq!(Request::short(&pdu), Some(Request::WriteMultiple { addr: 0x6008, values: Words::new(&pdu[6..]) }));
+    /// assert_eq!(Request::short(&[0x10, 0x60, 0x08, 0x00, 0x01, 0x02, 0x00]), None);
+    /// ```
+    #[inline(always)]
+    pub fn short(pdu: &'a [u8]) -> Option<Self> {
+        let (&[function, ah, al, bh, bl], rest) = pdu.split_first_chunk::<5>()?;
+        let (addr, word) = (u16::from_be_bytes([ah, al]), u16::from_be_bytes([bh, bl]));
+        match (function, rest) {
+            (0x03, []) if read_quantity(word) => Some(Request::ReadHolding { addr, qty: word }),
+            (0x04, []) if read_quantity(word) => Some(Request::ReadInput { addr, qty: word }),
+            (0x06, []) => Some(Request::WriteSingle { addr, value: word }),
+            (0x10, [count, values @ ..])
+                if (1..=MAX_WRITE).contains(&word)
+                    && usize::from(*count) == 2 * usize::from(word)
+                    && values.len() == usize::from(*count) =>
+            {
+                Some(Request::WriteMultiple { addr, values: Words::new(values) })
+            }
+            _ => None,
+        }
+    }
+}
+
+/// Whether a read may ask for `qty` registers.
+const fn read_quantity(qty: u16) -> bool {
+    qty >= 1 && qty <= MAX_READ
 }
 
 /// The values of a write request whose quantity sits before a byte count at `at`.
@@ -205,4 +240,53 @@ fn counted(data: &[u8], at: usize, qty: u16, max: u16) -> Result<Words<'_>, Exce
         return Err(Exception::ByteCount);
     }
     Ok(Words::new(values))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// PDUs of every function code, with addresses and words at their edges and tails of
+    /// every sort (none, byte counts right and wrong, values short, long and exact): `short` is
+    /// `parse`'s request for the shapes it knows, `None` for the rest.
+    #[test]
+    fn short_is_parse_for_its_shapes() {
+        let words = [0u16, 1, 2, 3, 122, 123, 124, 125, 126, 0x600C, 0xFFFF];
+        let mut tails: heapless::Vec<heapless::Vec<u8, 256>, 64> = heapless::Vec::new();
+        let _ = tails.push(heapless::Vec::new());
+        for count in [0u8, 1, 2, 3, 4, 6, 246, 255] {
+            for len in [0usize, 1, 2, 3, 4, 6, 246] {
+                let mut tail = heapless::Vec::new();
+                let _ = tail.push(count);
+                let _ = tail.extend_from_slice([0xAB; 246].get(..len).unwrap_or_default());
+                let _ = tails.push(tail);
+            }
+        }
+        let mut short = 0;
+        for function in 0..=u8::MAX {
+            for addr in words {
+                for word in words {
+                    for tail in &tails {
+                        let mut pdu: heapless::Vec<u8, 256> = heapless::Vec::new();
+                        let _ = pdu.push(function);
+                        let _ = pdu.extend_from_slice(&addr.to_be_bytes());
+                        let _ = pdu.extend_from_slice(&word.to_be_bytes());
+                        let _ = pdu.extend_from_slice(tail);
+                        let parsed = Request::parse(&pdu);
+                        let known = matches!(
+                            parsed,
+                            Ok(Request::ReadHolding { .. }
+                                | Request::ReadInput { .. }
+                                | Request::WriteSingle { .. }
+                                | Request::WriteMultiple { .. })
+                        );
+                        assert_eq!(Request::short(&pdu), parsed.ok().filter(|_| known), "{pdu:02X?}");
+                        short += usize::from(known);
+                    }
+                }
+            }
+        }
+        assert!(short > 300, "{short} requests of the known shapes");
+        assert_eq!(Request::short(&[0x03, 0, 0, 0]), None);
+    }
 }
