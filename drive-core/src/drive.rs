@@ -521,9 +521,18 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
                 n
             }
             Ok(Outcome::Echo) => {
-                // The request's register (with what the map puts after it) and value or count.
-                let echo = pdu.get(1..5 + framing.address_extra).unwrap_or_default();
+                // The request's register (with what the map puts after it) and value or count: the
+                // request's first bytes, its address this drive's.
+                let n = 5 + framing.address_extra;
+                if pdu.len() == n {
+                    // The whole request (a one-register write): the reply is the request frame,
+                    // whose CRC is checked already.
+                    put(tx, 0, frame);
+                    *tx_len = frame.len();
+                    return;
+                }
                 *head = [address.get(), function];
+                let echo = pdu.get(1..n).unwrap_or_default();
                 put(body, 0, echo);
                 echo.len()
             }
