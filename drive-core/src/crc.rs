@@ -11,10 +11,23 @@ pub const MODBUS: Crc<u16, Table<1>> = Crc::<u16, Table<1>>::new(&CRC_16_MODBUS)
 /// assert_eq!(drive_core::crc::crc16(&[0x01, 0x03, 0x60, 0x0C, 0x00, 0x02]), 0x081A);
 /// ```
 pub fn crc16(bytes: &[u8]) -> u16 {
+    update_bytes(INIT, bytes)
+}
+
+/// The CRC register `crc` after `bytes`: from [`INIT`], their CRC; from the register after a
+/// frame's first bytes, the CRC of the frame.
+///
+/// ```
+/// use drive_core::crc::{INIT, crc16, update, update_bytes};
+/// let frame = [0x01, 0x03, 0x60, 0x0C, 0x00, 0x02];
+/// assert_eq!(update_bytes(update(INIT, 0x01), &frame[1..]), crc16(&frame));
+/// ```
+#[inline]
+pub fn update_bytes(crc: u16, bytes: &[u8]) -> u16 {
     // Two bytes a turn over the crate's table: half the loop's overhead for a few bytes of code,
     // what a long reply (a read of 125 registers) spends most of its CRC on.
     let (pairs, rest) = bytes.as_chunks::<2>();
-    let crc = pairs.iter().fold(INIT, |crc, &[a, b]| update(update(crc, a), b));
+    let crc = pairs.iter().fold(crc, |crc, &[a, b]| update(update(crc, a), b));
     rest.iter().fold(crc, |crc, &b| update(crc, b))
 }
 

@@ -68,6 +68,8 @@ pub struct Counters {
 pub struct Drive<M: RegisterMap = NativeMap, P = Table, G = ProgramMemory> {
     framer: Framer,
     address: SlaveAddr,
+    /// The CRC register after `address`, the first byte of every reply.
+    address_crc: u16,
     baud: Baud,
     listen_only: bool,
     counters: Counters,
@@ -252,6 +254,7 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
         Self {
             framer: Framer::new(baud),
             address,
+            address_crc: crc::update(crc::INIT, address.get()),
             baud,
             listen_only: false,
             counters: Counters::default(),
@@ -274,11 +277,11 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
     /// The same drive answering through the map `f` makes of its own (the native map into
     /// [`Maps`](crate::maps::Maps), say).
     pub fn map_into<N: RegisterMap>(self, f: impl FnOnce(M) -> N) -> Drive<N, P, G> {
-        let Self { framer, address, baud, listen_only, counters, tx, tx_len, map, mut state, .. } = self;
+        let Self { framer, address, address_crc, baud, listen_only, counters, tx, tx_len, map, mut state, .. } = self;
         let map = f(map);
         state.program.offered = map.has_program();
         let framing = Framing::of(&map);
-        Drive { framer, address, baud, listen_only, counters, framing, tx, tx_len, map, state }
+        Drive { framer, address, address_crc, baud, listen_only, counters, framing, tx, tx_len, map, state }
     }
 
     /// The address this drive answers to.
@@ -455,13 +458,13 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
         self.counters.exceptions = self.counters.exceptions.wrapping_add(1);
         if let Some(head) = self.tx.first_chunk_mut::<3>() {
             *head = [to, function | 0x80, code];
-            self.tx_len = seal(&mut self.tx, 3);
+            self.tx_len = seal(&mut self.tx, 3, self.address_crc);
         }
     }
 
     /// Serves a frame with a good CRC that sits in the framer.
     fn serve(&mut self) {
-        let Self { framer, address, listen_only, counters, framing, tx, tx_len, map, state, .. } = self;
+        let Self { framer, address, address_crc, listen_only, counters, framing, tx, tx_len, map, state, .. } = self;
         counters.bus_messages = counters.bus_messages.wrapping_add(1);
         let (frame, _) = framer.frame();
         let Some((&to, rest)) = frame.split_first() else {
@@ -551,14 +554,15 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
                 1
             }
         };
-        *tx_len = seal(tx, 2 + len);
+        *tx_len = seal(tx, 2 + len, *address_crc);
     }
 }
 
-/// Appends the CRC to the first `n` bytes of `buf`; the frame's length, or 0 if it does not fit.
+/// Appends the CRC to the first `n` bytes of `buf`, a reply that begins with this drive's address
+/// (`address_crc`: the CRC register after it); the frame's length, or 0 if it does not fit.
 #[inline(always)]
-fn seal(buf: &mut [u8], n: usize) -> usize {
-    let sum = crc::crc16(buf.get(..n).unwrap_or_default());
+fn seal(buf: &mut [u8], n: usize, address_crc: u16) -> usize {
+    let sum = crc::update_bytes(address_crc, buf.get(1..n).unwrap_or_default());
     match buf.get_mut(n..n + 2) {
         Some(c) => {
             c.copy_from_slice(&sum.to_le_bytes());
