@@ -53,7 +53,7 @@ pub const BOOTLOADER: Region = Region {
     name: "BOOTLOADER",
     start: FLASH_START,
     len: 32 * 1024,
-    why: "the boot loader (embassy-boot with its flash driver and logs, about 16 KiB); twice that for room",
+    why: "the boot loader (embassy-boot with its flash driver and logs, about 16 KiB); twice that for room. Until it exists, its first two words start the image (memory.x)",
 };
 
 /// The image that runs.

@@ -168,7 +168,7 @@ fn firmware() -> Result<(), String> {
             })
             .sum()
     };
-    let flash = size(".vector_table") + size(".text") + size(".rodata") + size(".data");
+    let flash = size(".boot_stub") + size(".vector_table") + size(".text") + size(".rodata") + size(".data");
     let statics = size(".data") + size(".bss") + size(".uninit");
     println!(
         "firmware (STM32G474CE): flash {flash} B of the {FLASH_BUDGET} B budget ({:.1} %), in a {FLASH_CAPACITY} B slot",
@@ -182,6 +182,7 @@ fn firmware() -> Result<(), String> {
     if flash == 0 {
         return Err(format!("no sections read from {}", elf.display()));
     }
+    check_boot(&elf)?;
     flash_by_part(&elf, flash)?;
     call_graph_checks(&elf, statics)?;
     if flash > FLASH_CAPACITY || statics > RAM_CAPACITY {
@@ -444,6 +445,7 @@ fn build_qemu() -> Result<PathBuf, String> {
     run(cargo().args(firmware_args("build", &["--no-default-features", "--features", "qemu"])))?;
     let elf = elf_dir().join("firmware-qemu");
     std::fs::copy(elf_dir().join("firmware"), &elf).map_err(|e| format!("{}: {e}", elf.display()))?;
+    check_boot(&elf)?;
     Ok(elf)
 }
 
@@ -497,56 +499,42 @@ fn qemu(args: &[String]) -> Result<(), String> {
     if status.success() { Ok(()) } else { Err(format!("qemu: {status}")) }
 }
 
-/// QEMU's arguments that boot `elf`, linked into ACTIVE behind the boot loader's pages: the
-/// image, and in the boot loader's place a stand-in that starts it (the core reads its initial
-/// stack pointer and reset vector at the start of flash, where the board's boot loader lies).
-fn qemu_boot(elf: &Path) -> Result<Vec<std::ffi::OsString>, String> {
-    let symbols = nm_symbols(elf, &[])?;
-    let (sp, reset) = (symbol(&symbols, "_stack_start")?, symbol(&symbols, "Reset")?);
-    let (vectors, active) = (symbol(&symbols, "__vector_table")?, ACTIVE_START);
-    if vectors != active {
-        return Err(format!("the vector table is at {vectors:#x}, not at ACTIVE ({active:#x})"));
+/// The first `n` bytes of section `name` of `elf`.
+fn section_bytes(elf: &Path, name: &str, n: usize) -> Result<Vec<u8>, String> {
+    let out = elf.with_extension(format!("{}.bin", name.trim_start_matches('.')));
+    let status = Command::new("arm-none-eabi-objcopy")
+        .args(["-O", "binary", "--only-section", name])
+        .arg(elf)
+        .arg(&out)
+        .status()
+        .map_err(|e| format!("arm-none-eabi-objcopy (binutils-arm-none-eabi, .ci/install): {e}"))?;
+    let bytes = std::fs::read(&out).map_err(|e| format!("{}: {e}", out.display()))?;
+    match bytes.get(..n) {
+        Some(b) if status.success() => Ok(b.to_vec()),
+        _ => Err(format!("{} has no {n} bytes of {name}", elf.display())),
     }
-    let stub = elf.with_extension("boot.elf");
-    // Thumb code: the reset vector's bit 0 set.
-    std::fs::write(&stub, boot_stub_elf(0x0800_0000, &[sp as u32, reset as u32 | 1]))
-        .map_err(|e| format!("{}: {e}", stub.display()))?;
-    let mut device = std::ffi::OsString::from("loader,file=");
-    device.push(&stub);
-    Ok(vec!["-kernel".into(), elf.into(), "-device".into(), device])
 }
 
-/// A minimal 32-bit ARM ELF executable that loads `words` at `at` (one program header): QEMU's
-/// generic loader takes an ELF at any address, a raw file only into RAM.
-fn boot_stub_elf(at: u32, words: &[u32]) -> Vec<u8> {
-    const EHSIZE: u16 = 52;
-    const PHENTSIZE: u16 = 32;
-    let data: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
-    let offset = u32::from(EHSIZE + PHENTSIZE);
-    let mut f = b"\x7fELF\x01\x01\x01".to_vec();
-    f.resize(16, 0);
-    let (half, word) = (|v: u16| v.to_le_bytes().to_vec(), |v: u32| v.to_le_bytes().to_vec());
-    // ET_EXEC, EM_ARM, version, entry, program headers' offset, no sections, EABI 5 + hard float.
-    for part in [half(2), half(40), word(1), word(at), word(u32::from(EHSIZE)), word(0), word(0x0500_0400)] {
-        f.extend(part);
+/// Fails unless `elf` starts where the core starts: its vector table at ACTIVE, and the boot
+/// loader's stand-in at the start of flash holding the same stack pointer and reset vector
+/// (`memory.x`), so that a board flashed with the image alone, and QEMU, boot it.
+fn check_boot(elf: &Path) -> Result<(), String> {
+    let vectors = symbol(&nm_symbols(elf, &[])?, "__vector_table")?;
+    if vectors != ACTIVE_START {
+        return Err(format!("the vector table is at {vectors:#x}, not at ACTIVE ({ACTIVE_START:#x})"));
     }
-    for part in [half(EHSIZE), half(PHENTSIZE), half(1), half(40), half(0), half(0)] {
-        f.extend(part);
+    let (stub, table) = (section_bytes(elf, ".boot_stub", 8)?, section_bytes(elf, ".vector_table", 8)?);
+    if stub != table {
+        return Err(format!("the boot stand-in {stub:02x?} is not the vector table's {table:02x?}"));
     }
-    // PT_LOAD, readable.
-    let len = data.len() as u32;
-    for part in [1, offset, at, at, len, len, 4, 4] {
-        f.extend(word(part));
-    }
-    f.extend(data);
-    f
+    Ok(())
 }
 
 /// Boots `elf` on QEMU's b-l475e-iot01a with USART1 a TCP server on `host:port`.
 fn spawn_qemu(elf: &Path, host: &str, port: u16, extra: &[&str]) -> Result<Qemu, String> {
     let child = Command::new("qemu-system-arm")
-        .args(["-M", "b-l475e-iot01a", "-nographic"])
-        .args(qemu_boot(elf)?)
+        .args(["-M", "b-l475e-iot01a", "-nographic", "-kernel"])
+        .arg(elf)
         .arg("-serial")
         .arg(format!("tcp:{host}:{port},server=on,wait=off,nodelay=on"))
         .args(extra)
@@ -795,7 +783,8 @@ fn core_tick_cost() -> Result<(), String> {
         .args(["-M", "b-l475e-iot01a", "-nographic", "-serial", "none", "-monitor", "none"])
         .args(["-semihosting-config", "enable=on,target=native", "-icount"])
         .arg(format!("shift={CORE_ICOUNT_SHIFT},align=off"))
-        .args(qemu_boot(&elf_dir().join("tick_cost"))?)
+        .arg("-kernel")
+        .arg(elf_dir().join("tick_cost"))
         .stdin(Stdio::null())
         .output()
         .map_err(|e| format!("qemu-system-arm (QEMU 10, .ci/install installs it): {e}"))?;
