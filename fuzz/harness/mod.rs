@@ -4,6 +4,7 @@
 //!
 //! Each target is a `run(data)` that panics when the drive disagrees with the oracle.
 
+pub mod ascii_stream;
 pub mod oracle;
 pub mod pdu_cls9;
 pub mod pdu_ec57;
@@ -17,7 +18,7 @@ pub mod rtu_stream;
 pub type Run = fn(&[u8]);
 
 /// The targets and their entry points, for the replay.
-pub const TARGETS: [(&str, Run); 7] = [
+pub const TARGETS: [(&str, Run); 8] = [
     ("rtu_stream", rtu_stream::run),
     ("rtu_frame", rtu_frame::run),
     ("pdu_native", pdu_native::run),
@@ -25,4 +26,5 @@ pub const TARGETS: [(&str, Run); 7] = [
     ("pdu_jmc", pdu_jmc::run),
     ("pdu_cls9", pdu_cls9::run),
     ("pdu_ec57", pdu_ec57::run),
+    ("ascii_stream", ascii_stream::run),
 ];
