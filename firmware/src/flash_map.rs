@@ -100,11 +100,6 @@ pub const FREE: Region = Region {
 /// Every region, in address order.
 pub const REGIONS: [Region; 6] = [BOOTLOADER, ACTIVE, DFU, STATE, PARAMS, FREE];
 
-/// The region that holds `address`, if any.
-pub fn region_of(address: u32) -> Option<&'static Region> {
-    REGIONS.iter().find(|r| (r.start..r.end()).contains(&address))
-}
-
 /// Checked when this is compiled: the regions tile both banks, page-aligned, and embassy-boot's
 /// conditions on its partitions hold.
 const _: () = {

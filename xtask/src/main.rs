@@ -560,6 +560,28 @@ fn transact(s: &mut TcpStream, body: &[u8], reply_len: usize) -> Result<Vec<u8>,
     Ok(reply)
 }
 
+/// Writes `v` to the native register `reg` of node 1 (0x06); fails unless the write is echoed.
+fn write_register(s: &mut TcpStream, reg: u16, v: u16) -> Result<(), String> {
+    let ([rh, rl], [vh, vl]) = (reg.to_be_bytes(), v.to_be_bytes());
+    let reply = transact(s, &[1, 6, rh, rl, vh, vl], 8)?;
+    if reply.get(1) == Some(&6) { Ok(()) } else { Err(format!("{reg:#06x} = {v} refused: {reply:02x?}")) }
+}
+
+/// A parameter save (0x200F = 2) to its end: 0x2120 bit 3 is set while it runs, bit 4 if it
+/// failed; fails on a failure or at `deadline`.
+fn save(s: &mut TcpStream, deadline: Instant) -> Result<(), String> {
+    write_register(s, 0x200F, 2)?;
+    loop {
+        let status = transact(s, &[1, 3, 0x21, 0x20, 0, 1], 7)?;
+        match status.get(4) {
+            Some(b) if b & 0x10 != 0 => return Err(format!("the parameter save failed: 0x2120 = {b:#04x}")),
+            Some(b) if b & 0x08 == 0 => return Ok(()),
+            _ if Instant::now() > deadline => return Err("the parameter save did not end".into()),
+            _ => {}
+        }
+    }
+}
+
 /// Where `tick-cost` re-targets its move: once past this position, an absolute move to that.
 const RETARGETS: [(i32, u16); 4] = [(1000, 12_000), (3000, 14_000), (5000, 16_000), (7000, 18_000)];
 
@@ -653,10 +675,6 @@ fn tick_cost() -> Result<(), String> {
     // while it cruises by absolute moves, each further: the bus task plans while the tick runs
     // the axis, and hands each plan over at the tick it was planned for. Four plans let the
     // tick interrupt land at more depths of the planner's stack.
-    let write = |s: &mut TcpStream, reg: u16, v: u16| -> Result<(), String> {
-        let ([rh, rl], [vh, vl]) = (reg.to_be_bytes(), v.to_be_bytes());
-        transact(s, &[1, 6, rh, rl, vh, vl], 8).map(|_| ())
-    };
     let words: [u16; 5] = [0, 0, 4000, 0, 8000];
     let mut request = vec![1, 0x10, 0x60, 0x02, 0, 5, 10];
     request.extend(words.iter().flat_map(|w| w.to_be_bytes()));
@@ -669,8 +687,8 @@ fn tick_cost() -> Result<(), String> {
                 return Err(format!("the move did not pass {past}"));
             }
         }
-        write(&mut s, 0x6044, 0)?;
-        write(&mut s, 0x6045, target)?;
+        write_register(&mut s, 0x6044, 0)?;
+        write_register(&mut s, 0x6045, target)?;
     }
     while read_word(&mut s, 0x6001, 1)?[4] & 0x08 != 0 {
         if Instant::now() > deadline {
@@ -682,21 +700,9 @@ fn tick_cost() -> Result<(), String> {
     let stack_served = stack_peak()?;
     // Then two parameter saves (the first into the empty store, the second replacing its
     // record): the store's frames in the bus task, without the drive's lock, with control ticks
-    // landing on top of them. 0x2120 bit 3 is set while a save runs, bit 4 if one failed.
+    // landing on top of them.
     for _ in 0..2 {
-        write(&mut s, 0x200F, 2)?;
-        let status = loop {
-            let status = read_word(&mut s, 0x2120, 1)?[4];
-            if status & 0x08 == 0 {
-                break status;
-            }
-            if Instant::now() > deadline {
-                return Err("the parameter save did not end".into());
-            }
-        };
-        if status & 0x10 != 0 {
-            return Err(format!("the parameter save failed: 0x2120 = {status:#04x}"));
-        }
+        save(&mut s, deadline)?;
     }
     let stack_saved = stack_peak()?;
     // The store's RAM (`firmware/src/board/qemu.rs`), erased at power-up: what the saves programmed.
@@ -765,8 +771,8 @@ fn tick_cost() -> Result<(), String> {
 /// `-icount` shift of the `tick_cost` program: an instruction takes 256 virtual ns, a SysTick
 /// count 250 ns, so a count is 250/256 of an instruction.
 const CORE_ICOUNT_SHIFT: u32 = 8;
-/// The G474's receive ring (`firmware/src/board/g474.rs`): two frames of 256 bytes.
-const RX_RING: usize = 2 * 256;
+/// The G474's receive ring (`firmware/src/board/g474.rs`): two frames of the longest.
+const RX_RING: usize = 2 * drive_core::rtu::MAX_FRAME;
 /// Bytes a second on the line at 115 200 baud, 8N1 (10 bits a byte).
 const BYTES_PER_S_AT_115200: f64 = 11_520.0;
 /// Cycles of one 20 kHz control tick on the 170 MHz Cortex-M4 of the G474.
@@ -931,23 +937,8 @@ fn monitor(port: u16, command: &str) -> Result<String, String> {
 fn switch_map(host: &str, port: u16, monitor_port: u16, qemu: &mut Child, id: u16) -> Result<(), String> {
     let mut s = TcpStream::connect((host, port)).map_err(|e| e.to_string())?;
     s.set_read_timeout(Some(Duration::from_secs(2))).map_err(|e| e.to_string())?;
-    let write = |s: &mut TcpStream, reg: u16, v: u16| -> Result<(), String> {
-        let ([rh, rl], [vh, vl]) = (reg.to_be_bytes(), v.to_be_bytes());
-        let reply = transact(s, &[1, 6, rh, rl, vh, vl], 8)?;
-        if reply.get(1) == Some(&6) { Ok(()) } else { Err(format!("{reg:#06x} = {v} refused: {reply:02x?}")) }
-    };
-    write(&mut s, 0x2190, id)?;
-    write(&mut s, 0x200F, 2)?;
-    let deadline = Instant::now() + Duration::from_secs(10);
-    loop {
-        let status = transact(&mut s, &[1, 3, 0x21, 0x20, 0, 1], 7)?;
-        match status.get(4) {
-            Some(b) if b & 0x10 != 0 => return Err(format!("the save failed: 0x2120 = {b:#04x}")),
-            Some(b) if b & 0x08 == 0 => break,
-            _ if Instant::now() > deadline => return Err("the save did not end".into()),
-            _ => {}
-        }
-    }
+    write_register(&mut s, 0x2190, id)?;
+    save(&mut s, Instant::now() + Duration::from_secs(10))?;
     drop(s);
     monitor(monitor_port, "system_reset")?;
     probe(host, port, qemu, Duration::from_millis(100)).map(drop)
