@@ -61,6 +61,8 @@ pub mod alarm {
     pub const OVERLOAD: u8 = 26;
     /// Encoder lost (our code: seed 002 files it under "other").
     pub const ENCODER: u8 = 27;
+    /// The communication timeout 0x2137 ran out (our code: seed 004's communication error).
+    pub const COMM_TIMEOUT: u8 = 30;
 }
 
 /// The 0x6000 bits with their alarm codes, most severe first.

@@ -204,11 +204,14 @@ pub enum Command {
     ProgramPause = 17,
     /// End the running program segment (18).
     ProgramEnd = 18,
+    /// Go on with the next position data group now, whatever the waiting group's step-change
+    /// conditions (19; seed 004's POS-STEP).
+    ProgramStep = 19,
 }
 
 impl Command {
     /// Every command's value, for the object's declared set.
-    pub const RAW: [u32; 16] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 13, 14, 15, 16, 17, 18];
+    pub const RAW: [u32; 17] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 13, 14, 15, 16, 17, 18, 19];
 
     /// The command of a register value, if it is one.
     pub const fn from_raw(v: u32) -> Option<Self> {
@@ -229,6 +232,7 @@ impl Command {
             16 => Self::ProgramStart,
             17 => Self::ProgramPause,
             18 => Self::ProgramEnd,
+            19 => Self::ProgramStep,
             _ => return None,
         })
     }

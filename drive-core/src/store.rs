@@ -291,7 +291,7 @@ impl<S: NorFlash> Store<S> {
             }
             Job::SavePosition(position) => self.save_position(*position).await,
             Job::SaveFaults(history) => self.save_faults(history).await,
-            Job::BootLoader => Ok(()),
+            Job::BootLoader | Job::Restart => Ok(()),
         }
     }
 
@@ -430,6 +430,8 @@ pub enum Job {
     SaveFaults(FaultHistory),
     /// Jump to the boot loader: the platform's to act on, nothing for the store.
     BootLoader,
+    /// Restart: the platform's to act on, nothing for the store.
+    Restart,
 }
 
 impl Job {
@@ -443,6 +445,7 @@ impl Job {
             SystemRequest::SavePosition(position) => Job::SavePosition(position),
             SystemRequest::SaveFaults => Job::SaveFaults(drive.state().fault_history()),
             SystemRequest::BootLoader => Job::BootLoader,
+            SystemRequest::Restart => Job::Restart,
         })
     }
 
@@ -453,6 +456,7 @@ impl Job {
             Job::SavePosition(position) => SystemRequest::SavePosition(*position),
             Job::SaveFaults(_) => SystemRequest::SaveFaults,
             Job::BootLoader => SystemRequest::BootLoader,
+            Job::Restart => SystemRequest::Restart,
         }
     }
 

@@ -333,10 +333,13 @@ fn the_native_map_has_no_program() {
 }
 
 #[test]
-fn only_the_cls9_map_has_a_program() {
+fn only_the_cls9_and_servo_maps_have_a_program_window() {
     use drive_core::maps::RegisterMap;
+    use drive_core::state::ProgramKind;
     for id in 0..8 {
-        assert_eq!(Maps::by_id(id).has_program(), Maps::has_program_id(id), "0x2190 = {id}");
+        let kind = Maps::by_id(id).program_kind();
+        assert_eq!(kind != ProgramKind::None, Maps::has_program_id(id), "0x2190 = {id}");
     }
-    assert!(Maps::has_program_id(2));
+    assert_eq!(Maps::cls9().program_kind(), ProgramKind::Segments);
+    assert_eq!(Maps::servo().program_kind(), ProgramKind::Groups);
 }

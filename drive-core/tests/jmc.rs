@@ -48,7 +48,7 @@ impl Rig {
 
     fn snapshot(&self) -> (Vec<u32>, DeviceState, i64) {
         let st = self.drive.state();
-        (OBJECTS.iter().map(|d| st.read_def(d)).collect(), st.device_state(), st.position())
+        (OBJECTS.iter().filter(|d| d.obj != drive_core::od::Obj::CurrentCommand).map(|d| st.read_def(d)).collect(), st.device_state(), st.position())
     }
 }
 
@@ -530,7 +530,7 @@ fn the_register_map_takes_only_a_map_the_platform_carries() {
     let mut b = common::Bus::factory();
     assert_eq!(b.request(&[1, 0x06, 0x21, 0x90, 0, 1]), common::reply(&[1, 0x06, 0x21, 0x90, 0, 1]));
     assert_eq!(b.drive.state().read(Obj::RegisterMap), 1);
-    assert_eq!(b.request(&[1, 0x06, 0x21, 0x90, 0, 4]), common::reply(&[1, 0x86, 0x03]));
+    assert_eq!(b.request(&[1, 0x06, 0x21, 0x90, 0, 5]), common::reply(&[1, 0x86, 0x03]));
     b.drive.state_mut().set_maps(1);
     assert_eq!(b.request(&[1, 0x06, 0x21, 0x90, 0, 0]), common::reply(&[1, 0x06, 0x21, 0x90, 0, 0]));
     assert_eq!(b.request(&[1, 0x06, 0x21, 0x90, 0, 1]), common::reply(&[1, 0x86, 0x04]));

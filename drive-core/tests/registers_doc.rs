@@ -71,3 +71,10 @@ fn ec57_reference_is_current() {
         format!("0x{index:04X}.{sub}")
     });
 }
+
+/// `docs/registers-servo.md`, the servo map's reference.
+#[test]
+fn servo_reference_is_current() {
+    use drive_core::maps::servo;
+    check_map_reference("registers-servo.md", &servo::LAYOUT, &servo::REFERENCE, |a| format!("0x{a:04X}"));
+}

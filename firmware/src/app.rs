@@ -242,6 +242,8 @@ pub fn serve_store(drive: &mut Drive, store: &mut crate::board::ParamStore) {
             (Job::Save(_), Err(_)) => warn!("parameter save failed"),
             (Job::SavePosition(_), Err(_)) => warn!("power-down position not saved"),
             (Job::SaveFaults(_), Err(_)) => warn!("fault history not saved"),
+            // Seed 004's 0541h: the reply has gone out; start again as from power-up.
+            (Job::Restart, _) => cortex_m::peripheral::SCB::sys_reset(),
             // The drive refuses 0x200F = 1: there is no boot loader to jump to yet.
             _ => {}
         }

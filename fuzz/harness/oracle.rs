@@ -394,6 +394,11 @@ pub fn map_value(state: &drive_core::DriveState, e: &drive_core::maps::layout::E
         Scale::Field(k, w) => (v >> k) & ((1 << w) - 1),
         Scale::Invert(mask) => v ^ i64::from(mask),
         Scale::PulsesPerRev => v.max(1) * FULL_STEPS_PER_REV,
+        Scale::Gear => {
+            let num = i64::from(state.read(drive_core::od::Obj::GearNumerator).max(1));
+            let den = i64::from(state.read(drive_core::od::Obj::GearDenominator).max(1));
+            round(v * den, num)
+        }
     }
 }
 

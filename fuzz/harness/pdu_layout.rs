@@ -52,6 +52,7 @@ pub static LAYOUT: Layout = Layout {
     spoilt: SpoiltCodes::DROPPED,
     defaults: &[],
     program: None,
+    reserved: &[],
     sub_index: None,
     address: None,
 };

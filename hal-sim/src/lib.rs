@@ -57,7 +57,7 @@ use std::sync::{Arc, Mutex};
 use drive_core::maps::Maps;
 use drive_core::od::{Obj, Range};
 use drive_core::store::Store;
-use drive_core::{Baud, DriveConfig, Instant, SlaveAddr};
+use drive_core::{Baud, DriveConfig, Instant, SlaveAddr, SystemRequest};
 
 /// The simulator's drive: whichever register map 0x2190 (or `--map`) chose.
 pub type Drive = drive_core::Drive<Maps>;
@@ -197,8 +197,8 @@ pub struct Snapshot {
 #[derive(Debug)]
 pub struct Simulator {
     plants: Vec<Plant>,
-    /// Each drive's parameter store, in the order of the plants.
-    stores: Vec<Store<SimFlash>>,
+    /// Each drive's parameter store and power-up, in the order of the plants.
+    stores: Vec<Powered>,
     port: Port,
     endpoint: String,
     snapshots: Vec<Arc<Mutex<Snapshot>>>,
@@ -372,13 +372,24 @@ pub fn boot(store: &mut Store<SimFlash>, config: DriveConfig, fset_low: bool, ma
 
 /// Does what the drive asks of its platform ([`Store::serve`]); failures are logged (the drive
 /// shows a failed save in 0x2120). The boot loader is never asked for: the simulator's drive
-/// refuses 0x200F = 1.
-pub fn serve_request(drive: &mut Drive, store: &mut Store<SimFlash>) {
+/// refuses 0x200F = 1. True if the drive asked to be restarted (0x219F), which the caller does.
+pub fn serve_request(drive: &mut Drive, store: &mut Store<SimFlash>) -> bool {
+    let mut restart = false;
     while let Some((request, done)) = block_on(store.serve(drive)) {
+        restart |= request == SystemRequest::Restart;
         if let Err(e) = done {
             eprintln!("hal-sim: {request:?} failed: {e:?}");
         }
     }
+    restart
+}
+
+/// A drive's parameter store and how it powers up again after a restart.
+#[derive(Debug)]
+struct Powered {
+    store: Store<SimFlash>,
+    config: DriveConfig,
+    map: Option<u8>,
 }
 
 /// The drives and motors `opts` ask for, traces open, without parameter stores (a save is
@@ -393,7 +404,7 @@ pub fn plants(opts: &SimOptions) -> io::Result<Vec<Plant>> {
 
 /// The drives and motors `opts` ask for, traces open, each powered up from its own store: the
 /// `--flash` file (`-axisN` added with several axes), or erased flash in memory.
-fn powered(opts: &SimOptions) -> io::Result<Vec<(Plant, Store<SimFlash>)>> {
+fn powered(opts: &SimOptions) -> io::Result<Vec<(Plant, Powered)>> {
     build(opts, |address, config| {
         let flash = match &opts.flash {
             Some(path) => {
@@ -406,8 +417,9 @@ fn powered(opts: &SimOptions) -> io::Result<Vec<(Plant, Store<SimFlash>)>> {
             None => SimFlash::erased(PAGES),
         };
         let mut store = store(flash)?;
-        let drive = boot(&mut store, DriveConfig { can_save: true, ..config }, opts.fset_low, opts.map);
-        Ok((drive, store))
+        let config = DriveConfig { can_save: true, ..config };
+        let drive = boot(&mut store, config, opts.fset_low, opts.map);
+        Ok((drive, Powered { store, config, map: opts.map }))
     })
 }
 
@@ -592,7 +604,7 @@ trait Line: AsFd {
 /// The plants on the bus, their stores and what they publish, as the loop sees them.
 struct Sim<'a> {
     plants: &'a mut [Plant],
-    stores: &'a mut [Store<SimFlash>],
+    stores: &'a mut [Powered],
     snapshots: &'a [Arc<Mutex<Snapshot>>],
     /// The power switch: set, the loop ends.
     off: &'a AtomicBool,
@@ -642,10 +654,13 @@ impl Sim<'_> {
         Ok(())
     }
 
-    /// Does what the drives ask of their platform (saves), each with its own store.
+    /// Does what the drives ask of their platform (saves, a restart), each with its own store.
     fn serve_requests(&mut self) {
-        for (plant, store) in self.plants.iter_mut().zip(self.stores.iter_mut()) {
-            serve_request(plant.drive_mut(), store);
+        for (plant, p) in self.plants.iter_mut().zip(self.stores.iter_mut()) {
+            if serve_request(plant.drive_mut(), &mut p.store) {
+                // Seed 004's 0541h: powered up again from the store, as after a power cycle.
+                *plant.drive_mut() = boot(&mut p.store, p.config, false, p.map);
+            }
         }
     }
 

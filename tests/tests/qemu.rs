@@ -82,7 +82,7 @@ async fn tokio_modbus_drives_the_firmware_under_qemu() {
     assert_eq!(read(&mut ctx, 0x2190, 1).await, vec![2]);
     write(&mut ctx, 0x2190, 3).await.expect("the EC-57 map is carried");
     assert_eq!(read(&mut ctx, 0x2190, 1).await, vec![3]);
-    assert_eq!(write(&mut ctx, 0x2190, 4).await, Err(ExceptionCode::IllegalDataValue));
+    assert_eq!(write(&mut ctx, 0x2190, 5).await, Err(ExceptionCode::IllegalDataValue));
     write(&mut ctx, 0x2190, 0).await.expect("back to the native map");
 
     // A write that is out of range changes nothing.

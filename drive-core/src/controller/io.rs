@@ -49,6 +49,9 @@ pub enum OutputFunction {
     Free = 4,
     /// Ready (5): on while the power stage drives the motor.
     Ready = 5,
+    /// Speed coincidence (6; seed 004's /V-CMP): on while the speed is within the window
+    /// (0x21F2) of the commanded one; in a position move and at rest, while in position.
+    Coincidence = 6,
 }
 
 impl OutputFunction {
@@ -61,6 +64,7 @@ impl OutputFunction {
             3 => Self::InPosition,
             4 => Self::Free,
             5 => Self::Ready,
+            6 => Self::Coincidence,
             _ => return None,
         })
     }
@@ -90,6 +94,11 @@ pub struct IoFunctions {
     /// The in-position window (0x21C9): counts of the encoder in closed loop; `u32::MAX` where
     /// the plan's end is the position (0x21D9 = 0).
     pub in_position: u32,
+    /// The speed coincidence window (0x21F2), microsteps a second.
+    pub speed_window: u32,
+    /// The overtravel signals of the communication IO (0x2193 bits 2 and 3, while no input is
+    /// that limit switch): bit 0 positive, bit 1 negative, acting as active limit switches.
+    pub overtravel: u8,
 }
 
 /// The three external stops: their pin, their bit in 0x6013/0x6014, their bit in 0x6001.
@@ -300,7 +309,7 @@ impl Controller {
     #[inline]
     fn functions(&mut self, levels: u16) {
         let (inputs, input_low) = (self.settings.io.inputs, self.settings.io.input_low);
-        if inputs == 0 {
+        if inputs | self.settings.io.overtravel == 0 {
             return;
         }
         // IN1-IN3 are 0x6031's bits 7-9, IN4-IN7 its bits 0-3 (`IN_PINS`).
@@ -315,7 +324,8 @@ impl Controller {
         }
         let v = self.axis.setpoint().velocity;
         let io = &self.settings.io;
-        let into = (v > 0.0 && active & io.limit_positive != 0) || (v < 0.0 && active & io.limit_negative != 0);
+        let (up, down) = (active & io.limit_positive != 0, active & io.limit_negative != 0);
+        let into = (v > 0.0 && (up || io.overtravel & 1 != 0)) || (v < 0.0 && (down || io.overtravel & 2 != 0));
         // The pulse following drops the pulses heading into a limit instead (`count_pulses`).
         if self.axis.is_still() {
             self.io.limit_stop = false;
@@ -422,20 +432,45 @@ impl Controller {
         if s.io.output_pins == 0 {
             return levels;
         }
+        let on = self.outputs_on();
+        for (k, &pin) in OUT_PINS.iter().enumerate() {
+            if s.io.outputs.get(k).is_none_or(|f| *f == OutputFunction::None) {
+                continue;
+            }
+            let high = (on & (1 << k) != 0) != (s.io.output_low & (1 << k) != 0);
+            levels = if high { levels | pin } else { levels & !pin };
+        }
+        levels
+    }
+
+    /// The outputs whose function is active (bit k: OUT k+1), before their inversion (0x21C8).
+    pub(crate) fn outputs_on(&self) -> u8 {
+        let s = &self.settings;
         let (alarm, ready) = (self.faulted(), self.power_stage_on());
-        for (k, (&pin, &function)) in OUT_PINS.iter().zip(&s.io.outputs).enumerate() {
-            let on = match function {
-                OutputFunction::None => continue,
+        let mut on = 0u8;
+        for (k, &function) in s.io.outputs.iter().enumerate() {
+            let active = match function {
+                OutputFunction::None => false,
                 OutputFunction::General => s.io.general & (1 << k) != 0,
                 OutputFunction::Alarm => !alarm,
                 OutputFunction::InPosition => self.in_position(),
                 OutputFunction::Free => !ready,
                 OutputFunction::Ready => ready,
+                OutputFunction::Coincidence => self.speed_coincides(),
             };
-            let high = on != (s.io.output_low & (1 << k) != 0);
-            levels = if high { levels | pin } else { levels & !pin };
+            on |= u8::from(active) << k;
         }
-        levels
+        on
+    }
+
+    /// Whether the speed is the commanded one within 0x21F2; in a position move and at rest,
+    /// whether the axis is in position.
+    fn speed_coincides(&self) -> bool {
+        if self.axis.is_still() || self.axis.target().is_some() {
+            return self.in_position();
+        }
+        let error = self.real_speed() as f32 - self.axis.setpoint().velocity;
+        error.abs() <= self.settings.io.speed_window as f32
     }
 
     /// The coil output's duty (0x6038): in brake mode released only while the power stage is on

@@ -97,6 +97,8 @@ pub struct Status {
     pub supply_mv: u16,
     /// The larger phase current last measured, mA (0x21B0).
     pub current_ma: u16,
+    /// The phase current the last tick set, mA (0x21E7's measure).
+    pub current_cmd_ma: u16,
     /// The inputs IN1-IN7 active (bit k: IN k+1).
     pub inputs: u8,
     /// The inputs that turned active since the bus side last took them.
@@ -470,6 +472,7 @@ impl Controller {
             // 0x6031 shows what an output with a function drives (inverted, as the manual has it).
             self.status.gpio = (self.status.gpio & !function_pins) | (!gpio & function_pins);
         }
+        self.status.current_cmd_ma = if enabled { current.min(u32::from(u16::MAX)) as u16 } else { 0 };
         let (mut commutation, mut steps) = (commutation, steps);
         if self.reversed {
             mirror(&mut commutation, &mut steps);

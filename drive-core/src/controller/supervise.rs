@@ -17,7 +17,11 @@ impl Controller {
 
     /// The alarm code 0x2134 shows: the most severe latched alarm, 0 for none.
     pub(crate) fn alarm_code(&self) -> u8 {
-        code_of(&ERROR_ALARMS, self.status.error).or_else(|| code_of(&FAULT_ALARMS, self.status.faults)).unwrap_or(0)
+        let comm = (self.status.comm & COMM_TIMEOUT != 0).then_some(crate::faults::alarm::COMM_TIMEOUT);
+        code_of(&ERROR_ALARMS, self.status.error)
+            .or_else(|| code_of(&FAULT_ALARMS, self.status.faults))
+            .or(comm)
+            .unwrap_or(0)
     }
 
     /// Checks the measurements at `now`: latches faults, records them, and applies the fault and
@@ -126,6 +130,7 @@ impl Controller {
         let since = now.since(*self.faults.last_frame.get_or_insert(now));
         if limit != 0 && since >= limit && self.status.comm & COMM_TIMEOUT == 0 {
             self.status.comm |= COMM_TIMEOUT;
+            self.faults.record(crate::faults::alarm::COMM_TIMEOUT, now);
             self.decelerate_to_stop();
         }
     }

@@ -14,7 +14,7 @@
 //! assert_eq!(drive.state().read(Obj::CommandSpeed), 1_000);
 //! ```
 
-use super::layout::{Choice, Entry, Exceptions, Layout, Scale, SpoiltCodes, Walk, WordOrder, ZERO_ONE};
+use super::layout::{Choice, Entry, Exceptions, Layout, ProgramWindow, Scale, SpoiltCodes, Walk, WordOrder, ZERO_ONE};
 use crate::od::Obj;
 
 /// 0.01 rev/s in the drive's microsteps a second.
@@ -162,6 +162,14 @@ pub const EXCEPTIONS: Exceptions = Exceptions::MODBUS;
 /// frame that came before t3.5; a wrong CRC is dropped.
 pub const SPOILT: SpoiltCodes = SpoiltCodes { gap: Some(0x0C), early: Some(0x0D), crc: None };
 
+/// The multi-segment program's window: 1024-1536.
+const PROGRAM: ProgramWindow = ProgramWindow {
+    first: 1024,
+    words: crate::state::memory::WORDS as u16,
+    kind: crate::state::ProgramKind::Segments,
+    check: None,
+};
+
 /// The DS-CLS9 layout.
 pub static LAYOUT: Layout = Layout {
     entries: &ENTRIES,
@@ -171,7 +179,8 @@ pub static LAYOUT: Layout = Layout {
     halves: false,
     spoilt: SPOILT,
     defaults: &DEFAULTS,
-    program: Some(1024),
+    program: Some(PROGRAM),
+    reserved: &[],
     sub_index: None,
     address: None,
 };
@@ -211,7 +220,7 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         "Speeds are in 0.01 rev/s and accelerations in rev/s² of the resolution in force (0242: a revolution is 0242 pulses), converted exactly to the drive's microsteps (a revolution is 200 × the microsteps, so 0.01 rev/s is a whole number of microsteps a second); a drive value that is not a whole number of the map's units (one a native master wrote) reads rounded to the nearest. The drive runs 150 to 300 000 microsteps a second: a speed below that is refused (03). Start and stop speeds (0301, 0302) take 151 microsteps a second at least.",
         "0242 and 0104 (pulses a revolution) take the drive's resolutions 200, 400, 800, 1600, 3200, 6400, 12800, 25600 and 51200; others are refused (03). 0246 (encoder counts a revolution, lines × 4) takes 800, 1600, 2000, 2400, 3200, 4000, 4800 and 6400.",
         "0100 (motor current) reads in 0.1 A and 0101 (supply) in volts, as last measured; 0241 (current setting) in mA as the manual's range 100-4500 says.",
-        "0108 is the drive's alarm code, which uses the manual's table 1-2: 10 over-current, 11 phase loss, 13 under-voltage, 14 over-voltage, 25 position error, 26 overload; 15 (over-temperature) and 27 (encoder lost) are the drive's own among \"other\". 0109 is table 1-1's run state: 1 enable off (or a fault), 2 standing, 3 running.",
+        "0108 is the drive's alarm code, which uses the manual's table 1-2: 10 over-current, 11 phase loss, 13 under-voltage, 14 over-voltage, 25 position error, 26 overload; 15 (over-temperature), 27 (encoder lost) and 30 (communication timeout, 0x2137) are the drive's own among \"other\". 0109 is table 1-1's run state: 1 enable off (or a fault), 2 standing, 3 running.",
         "0206 user command: 1 restores the factory parameters and saves them (0x200F = 3), 2 clears the alarms, 3 (restart) is refused (04): the drive does not restart itself; switch the power.",
         "0323 control command (the drive's 0x21A0): 1 absolute run to 0313 at 0306's speed, re-targeted when 0313 is written during the run; 2 relative run by 0313, refused (04) while moving (a write of 0313 during it changes nothing of the run); 3 run at 0307 (its sign the direction; a write of 0307 during it changes the speed); 4 and 5 jog at 0308 until 6 or 7; 6 stop at 0304; 7 stop at the quick-stop deceleration (0x2183, 320 000 microsteps/s² from the factory); 8 set the position to 0321, refused (04) while moving; 12 homing; 13 alarm clear; 14-18 the multi-segment program's check, save, start, pause and end (see below). Runs ramp at 0303/0304 from 0301 and down to 0302. A run is refused (04) with the power stage off or an alarm latched, and in the native map's PVT mode, where only 6 and 7 act (they end the PVT run). Reading 0323 gives the last command written.",
         "Soft limits 0317 / 0319 with 0324 bit 0 (positive) and bit 1 (negative): no motion command goes beyond an enabled limit; a target beyond it stops on it, a run or a jog towards it ends on it. Homing ignores them. 0324's other bits are refused (03).",

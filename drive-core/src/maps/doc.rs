@@ -71,28 +71,67 @@ pub fn write_layout(out: &mut impl Write, layout: &Layout, r: &Reference) -> fmt
     writeln!(out)?;
     writeln!(out, "| Register | Words | Name | Access | Values | Default | Unit | Drive object | Description |")?;
     writeln!(out, "|---|---|---|---|---|---|---|---|---|")?;
-    let mut program = layout.program;
+    // The program window and the reserved ranges, in address order among the entries.
+    let mut extra: heapless::Vec<(u16, Extra), 16> = heapless::Vec::new();
+    if let Some(p) = layout.program {
+        let _ = extra.push((p.first, Extra::Program(p)));
+    }
+    for &(first, last) in layout.reserved {
+        let _ = extra.push((first, Extra::Reserved(first, last)));
+    }
+    extra.sort_unstable_by_key(|(a, _)| *a);
+    let mut extra = extra.into_iter().peekable();
     for entry in layout.entries {
-        if let Some(first) = program.filter(|&first| entry.addr > first) {
-            program_row(out, first)?;
-            program = None;
+        while let Some((_, x)) = extra.next_if(|(a, _)| entry.addr > *a) {
+            extra_row(out, x, r)?;
         }
         row(out, layout, entry, r)?;
     }
-    if let Some(first) = program {
-        program_row(out, first)?;
+    for (_, x) in extra {
+        extra_row(out, x, r)?;
     }
     Ok(())
 }
 
-/// The multi-segment program's window: raw words, not an object.
-fn program_row(out: &mut impl Write, first: u16) -> fmt::Result {
-    let words = crate::state::memory::WORDS;
-    let last = usize::from(first) + words - 1;
-    writeln!(
-        out,
-        "| {first:04}-{last:04} | {words} | multi-segment program | rw | 0..65535 | 0 |  | - | The program's instructions (see the notes), saved with the parameters. |"
-    )
+/// A row of the reference that is not an object's.
+#[derive(Clone, Copy)]
+enum Extra {
+    Program(super::layout::ProgramWindow),
+    Reserved(u16, u16),
+}
+
+/// The program window (raw words) or a reserved range.
+fn extra_row(out: &mut impl Write, x: Extra, r: &Reference) -> fmt::Result {
+    let register = |out: &mut dyn Write, a: u16| if r.decimal { write!(out, "{a:04}") } else { write!(out, "0x{a:04X}") };
+    let (first, last) = match x {
+        Extra::Program(p) => (p.first, p.first + p.words - 1),
+        Extra::Reserved(first, last) => (first, last),
+    };
+    write!(out, "| ")?;
+    register(out, first)?;
+    if last != first {
+        write!(out, "-")?;
+        register(out, last)?;
+    }
+    write!(out, " | {} | ", last - first + 1)?;
+    match x {
+        Extra::Program(p) if p.kind == crate::state::ProgramKind::Groups => writeln!(
+            out,
+            "position data groups | rw | see the notes | 0 |  | - | The groups, eight registers each (see the notes), saved with the parameters. |"
+        ),
+        Extra::Program(_) => writeln!(
+            out,
+            "multi-segment program | rw | 0..65535 | 0 |  | - | The program's instructions (see the notes), saved with the parameters. |"
+        ),
+        Extra::Reserved(..) => {
+            let text = r
+                .remarks
+                .iter()
+                .find(|(a, _)| *a == first)
+                .map_or("Reserved: the drive has nothing for it (see the notes).", |(_, t)| t);
+            writeln!(out, "reserved | ro | 0 | 0 |  | - | {text} |")
+        }
+    }
 }
 
 fn row(out: &mut impl Write, layout: &Layout, e: &Entry, r: &Reference) -> fmt::Result {
@@ -150,7 +189,7 @@ fn values(out: &mut impl Write, e: &Entry) -> fmt::Result {
         s => s.to_map(v, FACTORY_PER_REV).unwrap_or(v),
     };
     match (*d.range, *e.scale) {
-        (Range::Any, _) | (_, Scale::PerRev(..)) => write!(out, "as the drive object"),
+        (Range::Any, _) | (_, Scale::PerRev(..) | Scale::Gear) => write!(out, "as the drive object"),
         (Range::Span(a, b), _) => {
             let (a, b) = (map(i64::from(a)), map(i64::from(b)));
             write!(out, "{}..{}", a.min(b), a.max(b))
@@ -177,6 +216,9 @@ pub fn unit(e: &Entry) -> &'static str {
         (Scale::Ratio(1000, 1), Unit::MilliVolts) => "V",
         (Scale::PerRev(1, 60), Unit::Pps) => "r/min",
         (Scale::PulsesPerRev, _) => "pulse/rev",
+        (Scale::PerRev(1, 6), Unit::Pps2) => "10 r/min/s",
+        (Scale::Ratio(1000, 1), Unit::Pps) => "kHz",
+        (Scale::Gear, _) => "group unit",
         (Scale::One | Scale::Ratio(-1, 1) | Scale::Table(_) | Scale::Field(..) | Scale::Invert(_), u) => u.symbol(),
         _ => "see the description",
     }

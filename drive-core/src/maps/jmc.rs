@@ -114,6 +114,7 @@ pub static LAYOUT: Layout = Layout {
     spoilt: SpoiltCodes::DROPPED,
     defaults: &[],
     program: None,
+    reserved: &[],
     sub_index: None,
     address: None,
 };

@@ -103,6 +103,10 @@ pub enum Scale {
     /// The microsteps a full step as pulses a revolution of a 1.8° motor: a multiple of 200
     /// (the drive's full stepping, 0, reads as 200).
     PulsesPerRev,
+    /// A position in the position data groups' unit: `drive = map × 0x219B / 0x219C` (seed
+    /// 004's electronic gear 05F8h/05F9h). The layout map applies the gear in force; alone
+    /// (the functions below) it is the factory's 1:1.
+    Gear,
 }
 
 /// `n / d` rounded to the nearest (halves away from zero); `None` for `d == 0` or overflow.
@@ -120,7 +124,7 @@ impl Scale {
     /// The factor as a fraction, given the microsteps a revolution.
     const fn fraction(self, per_rev: i64) -> (i64, i64) {
         match self {
-            Scale::One | Scale::Table(_) | Scale::Field(..) | Scale::Invert(_) | Scale::PulsesPerRev => (1, 1),
+            Scale::One | Scale::Table(_) | Scale::Field(..) | Scale::Invert(_) | Scale::PulsesPerRev | Scale::Gear => (1, 1),
             Scale::Ratio(n, d) => (n as i64, d as i64),
             Scale::PerRev(n, d) => (n as i64 * per_rev, d as i64),
         }
@@ -283,15 +287,33 @@ pub struct Layout {
     /// in the map's units, set after the drive's factory values (a drive with nothing saved, a
     /// factory reset).
     pub defaults: &'static [(u16, i32)],
-    /// The first register of the multi-segment program's window, if the map has one (seed
-    /// 002's 1024-1536): raw words the drive keeps as written, in its program memory.
-    pub program: Option<u16>,
+    /// The program window, if the map has one (seed 002's multi-segment programs at 1024-1536,
+    /// seed 004's position data groups at 0600h-06FFh): raw words the drive keeps as written, in
+    /// its program memory.
+    pub program: Option<ProgramWindow>,
+    /// Registers that read 0 and refuse writes with [`Exceptions::unsupported`]: the manual's
+    /// registers the drive has nothing for (each documented in the map's reference), as
+    /// inclusive ranges.
+    pub reserved: &'static [(u16, u16)],
     /// Requests that name a register by an index and a sub-index (seed 003), if the map's are
     /// such; `None`: Modbus's requests.
     pub sub_index: Option<&'static SubIndex>,
     /// The serial port's own address, which the drive answers to from power-up while the
     /// address source 0x21D1 is 0 (seed 003's, 1); `None`: the node id 0x2028 always.
     pub address: Option<u8>,
+}
+
+/// A map's window of raw program words.
+#[derive(Clone, Copy, Debug)]
+pub struct ProgramWindow {
+    /// Its first register.
+    pub first: u16,
+    /// Its registers.
+    pub words: u16,
+    /// What it holds.
+    pub kind: crate::state::ProgramKind,
+    /// Whether a value may be word `k` of it (a value it refuses is out of range); `None`: any.
+    pub check: Option<fn(usize, u16) -> bool>,
 }
 
 /// How a map's requests name a register by an index and a sub-index byte after it (seed 003):
@@ -343,6 +365,7 @@ impl Layout {
             spoilt: SpoiltCodes::DROPPED,
             defaults: &[],
             program: None,
+            reserved: &[],
             sub_index: None,
             address: None,
         }
@@ -381,9 +404,18 @@ impl Layout {
     /// The place in the program of `qty` registers from `addr`, if they are in its window;
     /// `Err` if they begin in it but run past its end.
     fn in_program(&self, addr: u16, qty: usize) -> Option<Result<usize, ()>> {
-        let k = usize::from(addr.checked_sub(self.program?)?);
-        (k < crate::state::memory::WORDS).then_some(())?;
-        Some(if k + qty <= crate::state::memory::WORDS { Ok(k) } else { Err(()) })
+        let window = self.program?;
+        let k = usize::from(addr.checked_sub(window.first)?);
+        let words = usize::from(window.words).min(crate::state::memory::WORDS);
+        (k < words).then_some(())?;
+        Some(if k + qty <= words { Ok(k) } else { Err(()) })
+    }
+
+    /// Whether `qty` registers from `addr` are all reserved ([`Layout::reserved`]); `Err` if
+    /// they begin in a reserved range and run past it.
+    fn in_reserved(&self, addr: u16, qty: usize) -> Option<Result<(), ()>> {
+        let &(_, last) = self.reserved.iter().find(|(first, last)| (*first..=*last).contains(&addr))?;
+        Some(if usize::from(addr) + qty <= usize::from(last) + 1 { Ok(()) } else { Err(()) })
     }
 }
 
@@ -403,6 +435,11 @@ fn is_high<P: Borrow<Table>, G: Borrow<ProgramMemory>>(order: WordOrder, drive: 
         WordOrder::Setting => drive.read(Obj::MapWordOrder) == 0,
     };
     (k == 0) == high_first
+}
+
+/// The position data groups' electronic gear (0x219B / 0x219C), both at least 1.
+fn gear<P: Borrow<Table>, G: Borrow<ProgramMemory>>(drive: &DriveState<P, G>) -> (i64, i64) {
+    (i64::from(drive.read(Obj::GearNumerator).max(1)), i64::from(drive.read(Obj::GearDenominator).max(1)))
 }
 
 /// The drive's raw value as a number: two's complement for a signed object.
@@ -477,6 +514,10 @@ impl LayoutMap {
             return drive.read_def(d).checked_shr(u32::from(shift)).unwrap_or(0) & mask(width);
         }
         let v = signed(d, drive.read_def(d));
+        if *e.scale == Scale::Gear {
+            let (num, den) = gear(drive);
+            return div_round(v.saturating_mul(den), num).unwrap_or(v) as u32;
+        }
         // A drive value beyond the map's range reads as its low bits.
         e.scale.to_map(v, i64::from(drive.per_rev())).unwrap_or(v) as u32
     }
@@ -505,8 +546,13 @@ impl LayoutMap {
             Type::S32 if e.is_narrow() => i64::from(bits as u16 as i16),
             _ => signed(d, bits),
         };
-        let v = e.scale.to_drive(v, i64::from(drive.per_rev())).ok_or(ObjError::OutOfRange)?;
-        raw_of(d, v).ok_or(ObjError::OutOfRange)
+        let v = if *e.scale == Scale::Gear {
+            let (num, den) = gear(drive);
+            div_round(v.saturating_mul(num), den)
+        } else {
+            e.scale.to_drive(v, i64::from(drive.per_rev()))
+        };
+        raw_of(d, v.ok_or(ObjError::OutOfRange)?).ok_or(ObjError::OutOfRange)
     }
 
     /// Decodes a write into what it does to each object, or the first address error.
@@ -583,6 +629,11 @@ impl RegisterMap for LayoutMap {
             }
             return Ok(());
         }
+        if let Some(reserved) = self.layout.in_reserved(addr, qty as usize) {
+            reserved.map_err(|()| ex.unknown)?;
+            out.fill(0);
+            return Ok(());
+        }
         let mut slots = out.chunks_exact_mut(2);
         let mut refused = None;
         let walked = self.layout.covered(addr, qty, |e, k, n| {
@@ -616,6 +667,9 @@ impl RegisterMap for LayoutMap {
         if let Some(window) = self.layout.in_program(addr, usize::from(qty)) {
             return window.map(|_| ()).map_err(|()| ex.unknown);
         }
+        if let Some(reserved) = self.layout.in_reserved(addr, usize::from(qty)) {
+            return reserved.map_err(|()| ex.unknown);
+        }
         let mut refused = None;
         let walked = self.layout.covered(addr, u32::from(qty), |e, _, _| {
             if e.view() == View::WriteOnly {
@@ -641,7 +695,17 @@ impl RegisterMap for LayoutMap {
         let ex = self.layout.exceptions;
         if let Some(window) = self.layout.in_program(addr, values.len()) {
             let k = window.map_err(|()| ex.unknown)?;
+            if let Some(check) = self.layout.program.and_then(|p| p.check) {
+                let bad = values.iter().enumerate().any(|(j, v)| !check(k + j, v));
+                if bad {
+                    return Err(ex.out_of_range);
+                }
+            }
             return drive.write_program(k, &values).map_err(|x| ex.of(x));
+        }
+        if let Some(reserved) = self.layout.in_reserved(addr, values.len()) {
+            reserved.map_err(|()| ex.unknown)?;
+            return Err(ex.unsupported);
         }
         let mut plan = heapless::Vec::new();
         self.plan(drive, addr, &values, &mut plan)?;
@@ -677,8 +741,8 @@ impl RegisterMap for LayoutMap {
         }
     }
 
-    fn has_program(&self) -> bool {
-        self.layout.program.is_some()
+    fn program_kind(&self) -> crate::state::ProgramKind {
+        self.layout.program.map_or(crate::state::ProgramKind::None, |p| p.kind)
     }
 
     fn parser(&self) -> Option<Parser> {

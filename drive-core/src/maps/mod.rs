@@ -11,6 +11,7 @@ pub mod index;
 pub mod jmc;
 pub mod layout;
 pub mod native;
+pub mod servo;
 
 use crate::motion::cubic::Table;
 use crate::pdu::{Exception, Parser, Words};
@@ -20,7 +21,7 @@ use layout::LayoutMap;
 pub use native::{NativeMap, RegisterMap, Spoilt};
 
 /// The maps' names, by their number in the register map object 0x2190.
-pub const NAMES: [&str; 4] = ["native", "jmc", "cls9", "ec57"];
+pub const NAMES: [&str; 5] = ["native", "jmc", "cls9", "ec57", "servo"];
 
 /// The map the drive answers with: the native one or a layout, as 0x2190 chose at power-up.
 #[derive(Clone, Debug)]
@@ -41,14 +42,16 @@ impl Maps {
             1 => Self::jmc(),
             2 => Self::cls9(),
             3 => Self::ec57(),
+            4 => Self::servo(),
             _ => Self::Native(NativeMap::new()),
         }
     }
 
-    /// Whether the map of 0x2190's value `id` has a multi-segment program (seed 002's), without
-    /// building it: where power-up loads the program before the drive exists.
+    /// Whether the map of 0x2190's value `id` has a program window (seed 002's multi-segment
+    /// programs, seed 004's position data groups), without building it: where power-up loads
+    /// the program before the drive exists.
     pub const fn has_program_id(id: u32) -> bool {
-        id == 2
+        id == 2 || id == 4
     }
 
     /// The map named `name` ([`NAMES`]), if there is one.
@@ -69,6 +72,11 @@ impl Maps {
     /// The EC-57 map (seed 003).
     pub fn ec57() -> Self {
         Self::Layout(LayoutMap::new(&ec57::LAYOUT))
+    }
+
+    /// The servo map (seed 004).
+    pub fn servo() -> Self {
+        Self::Layout(LayoutMap::new(&servo::LAYOUT))
     }
 }
 
@@ -131,13 +139,16 @@ impl RegisterMap for Maps {
     }
 
     fn starts_disabled(&self) -> bool {
-        // CiA 402's state machine powers up switch on disabled; the others energise as the
-        // native map does.
-        matches!(self, Self::Layout(m) if core::ptr::eq(m.layout(), &jmc::LAYOUT))
+        // CiA 402's state machine powers up switch on disabled, and a servo with its servo-on
+        // off; the others energise as the native map does.
+        matches!(self, Self::Layout(m) if core::ptr::eq(m.layout(), &jmc::LAYOUT) || core::ptr::eq(m.layout(), &servo::LAYOUT))
     }
 
-    fn has_program(&self) -> bool {
-        matches!(self, Self::Layout(m) if m.has_program())
+    fn program_kind(&self) -> crate::state::ProgramKind {
+        match self {
+            Self::Native(m) => m.program_kind(),
+            Self::Layout(m) => m.program_kind(),
+        }
     }
 
     fn factory_settings<P: Borrow<Table>, G: Borrow<ProgramMemory>>(&self, drive: &mut DriveState<P, G>) {
@@ -152,6 +163,7 @@ impl RegisterMap for Maps {
             Self::Layout(m) if core::ptr::eq(m.layout(), &jmc::LAYOUT) => Some("drive-core, JMC map (seed 001)"),
             Self::Layout(m) if core::ptr::eq(m.layout(), &cls9::LAYOUT) => Some("drive-core, DS-CLS9 map (seed 002)"),
             Self::Layout(m) if core::ptr::eq(m.layout(), &ec57::LAYOUT) => Some("drive-core, EC-57 map (seed 003)"),
+            Self::Layout(m) if core::ptr::eq(m.layout(), &servo::LAYOUT) => Some("drive-core, servo map (seed 004)"),
             Self::Layout(_) => Some("drive-core, layout map"),
         }
     }

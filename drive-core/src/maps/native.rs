@@ -43,10 +43,11 @@ pub trait RegisterMap {
     /// Sets the map's own factory settings over the drive's factory values (a drive with
     /// nothing saved, a factory reset); most maps have none.
     fn factory_settings<P: Borrow<Table>, G: Borrow<ProgramMemory>>(&self, _drive: &mut DriveState<P, G>) {}
-    /// Whether the map offers a multi-segment program (seed 002's, in a window of its
-    /// registers): without one the drive refuses the program commands and saves no program.
-    fn has_program(&self) -> bool {
-        false
+    /// What the map's program window holds (seed 002's multi-segment programs, seed 004's
+    /// position data groups), if it has one: without one the drive refuses the program commands
+    /// and saves no program.
+    fn program_kind(&self) -> crate::state::ProgramKind {
+        crate::state::ProgramKind::None
     }
     /// The map's own decoder of request PDUs into its register numbers, if its requests carry
     /// more than Modbus's (seed 003's sub-index byte after the register); `None`: Modbus's PDUs
@@ -582,6 +583,7 @@ mod tests {
             comm: 0x01,
             supply_mv: 24_000,
             current_ma: 1_500,
+            current_cmd_ma: 1_200,
             inputs: 0,
             input_edges: 0,
             probes: 2,

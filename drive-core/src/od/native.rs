@@ -25,7 +25,7 @@ const HOMING_METHODS: [u32; 26] = [
 /// The functions an input takes (0x21BA-0x21C0): the motion commands, the limit and home
 /// switches, enable.
 const INPUT_FUNCTIONS: &[u32] =
-    &[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 20, 21, 22, 25, 26, 27, 28, 29];
+    &[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 25, 26, 27, 28, 29];
 /// A PVT table index or count.
 const PVT_INDEX: Range = Span(0, 1000);
 /// Full signed 32-bit range.
@@ -324,13 +324,54 @@ objects! {
     ErrorRegister @ 0x2185: U8, Ro, Live, Any, default 0, None, "error register";
     /// Register map (our object): which vendor's registers the drive answers to, from the next
     /// power-up once saved (0x200F = 2): 0 native (seed 000), 1 JMC (seed 001), 2 DS-CLS9
-    /// (seed 002), 3 EC-57 (seed 003). Every map has it at this address (the EC-57 map in its
+    /// (seed 002), 3 EC-57 (seed 003), 4 servo (seed 004). Every map has it at this address (the EC-57 map in its
     /// window, index 0x2190 sub-index 0xFF), so a master can always switch back. A map the
     /// platform does not carry is refused (04).
-    RegisterMap @ 0x2190: U8, Rw, Rom, Span(0, 3), default 0, None, "register map";
+    RegisterMap @ 0x2190: U8, Rw, Rom, Span(0, 4), default 0, None, "register map";
     /// Word order of the compatibility maps that make it a setting (our object; JMC's 0x6000):
     /// 0 high word first, 1 low word first.
     MapWordOrder @ 0x2191: U8, Rw, Rom, Span(0, 1), default 0, None, "map word order";
+    /// Framing of the serial line (our object; seed 004's P□600 chooses it): 0 RTU, 1 Modbus
+    /// ASCII (`:`, hex, LRC, CR LF). Takes effect after saving and restarting, as the baud rate.
+    LineFraming @ 0x2192: U8, Rw, Rom, Span(0, 1), default 0, None, "line framing";
+    /// Communication IO (our object; seed 004's 0451h): signals a master sets, each acting as the
+    /// same signal from an input would while no input carries its function: bit 0 servo on (the
+    /// power state machine, as 0x6011), 2 positive and 3 negative overtravel (as limit switches),
+    /// 4 alarm reset (rising edge: as 0x200F = 4), 5 clear (rising edge, at rest: the position
+    /// error cleared, the commanded position the actual one), 9-11 the position data group
+    /// (POS0-2), 13 start the selected group (rising edge), 14 step to the next group (rising
+    /// edge), 15 start homing (rising edge). Bits 1 (P-CON), 6-8 (torque limits, gain select)
+    /// and 12 (POS-REF: the home switch must come from an input, which the tick watches) are
+    /// refused. Not saved.
+    CommInputs @ 0x2193: U16, Rw, Ram, Bits(0xEE3D), default 0, None, "communication IO";
+    /// Speed jog (our object; seed 004's 0528h): bit 15 energises the motor for the jog (off
+    /// stops and de-energises it), bit 0 jogs positive, bit 1 negative at 0x21A5 while set (both
+    /// or neither: decelerate to rest); bits 0-1 need bit 15.
+    SpeedJog @ 0x2194: U16, Rw, Ram, Bits(0x8003), default 0, None, "speed jog";
+    /// Position jog (our object; seed 004's 0529h): bit 15 energises the motor for the jog (off
+    /// de-energises it once at rest), a rising bit 0 moves 0x2196 positive, bit 1 negative, at
+    /// 0x21A5; bits 0-1 need bit 15.
+    PositionJog @ 0x2195: U16, Rw, Ram, Bits(0x8003), default 0, None, "position jog";
+    /// The distance a position jog moves (our object).
+    JogDistance @ 0x2196: U32, Rw, Rom, Span(1, 100_000_000), default 200, Steps, "jog distance";
+    /// The position data group running (our object; seed 004's 05F0h), 0-31; 0xFFFF none.
+    GroupRunning @ 0x2198: U16, Ro, Live, Any, default 0xFFFF, None, "running data group";
+    /// The group the chain goes on with (our object; seed 004's 05F1h), 0-31; 0xFFFF none.
+    GroupNext @ 0x2199: U16, Ro, Live, Any, default 0xFFFF, None, "next data group";
+    /// Where the group selection comes from (our object; seed 004's 05F4h): 0 the communication
+    /// IO's POS0-2 (task), 1 inputs with the segment-select functions 25-27 (external).
+    GroupSource @ 0x219A: U8, Ro, Live, Span(0, 1), default 0, None, "data group source";
+    /// Numerator of the position data groups' electronic gear (our object; seed 004's 05F8h): a
+    /// group's position unit is numerator / denominator microsteps.
+    GearNumerator @ 0x219B: U16, Rw, Rom, Span(1, 65_535), default 1, None, "group gear numerator";
+    /// Denominator of the position data groups' electronic gear (our object; seed 004's 05F9h).
+    GearDenominator @ 0x219C: U16, Rw, Rom, Span(1, 65_535), default 1, None, "group gear denominator";
+    /// Teach position (our object; seed 004's 05FDh/05FEh): a write names the place the axis
+    /// stands on (as the position 0x600E, refused while moving); reads the last one written.
+    TeachPosition @ 0x219D: S32, Rw, Ram, S32_ANY, default 0, Steps, "teach position";
+    /// Restart (our object; seed 004's 0541h): 1 restarts the drive as a power cycle would, once
+    /// the reply is sent; refused while moving or saving.
+    Restart @ 0x219F: U8, Cmd, Ram, Span(1, 1), default 0, None, "restart";
     /// Motion command (our object; seed 002's control command 0323), acting on its write in any
     /// work mode (in PVT mode (0x6007 = 2) only 6 and 7, which end the run; the others 04): 0
     /// nothing; 1 absolute run to 0x21A1 at 0x21B5's speed (re-targets a
@@ -406,9 +447,11 @@ objects! {
     /// positive / negative limit switch: a motion heading into an active one stops at the stop
     /// deceleration and a command towards it is refused (04); 11 the home switch of the homing
     /// (9 and 10 its limits too), over 0x216C; 20 enable: 0x6011 takes the input's level when
-    /// it changes; 14-18 the program commands of 0x21A0; 21 / 22 touch probe 1 / 2: the control
+    /// it changes; 14-19 the program commands of 0x21A0 (19: the next position data group, seed
+    /// 004's POS-STEP); 21 / 22 touch probe 1 / 2: the control
     /// tick captures the position at the input's activation (0x21DB-0x21DF; a pseudo-input
-    /// captures nothing); 25-29 bits 0-4 of the program segment a start runs (0x21CD). IN1-IN3
+    /// captures nothing); 25-29 bits 0-4 of the program segment a start runs (0x21CD; seed 004's
+    /// POS0-2 the data group's bits 0-2). IN1-IN3
     /// are EXT1-EXT3, IN4-IN7 GPIO1-GPIO4.
     InputFunction1 @ 0x21BA: U8, Rw, Rom, Set(INPUT_FUNCTIONS), default 0, None, "IN1 function";
     /// IN2 function (our object; seed 002's 0401): as 0x21BA.
@@ -432,15 +475,16 @@ objects! {
     /// (the pin is GPIO5 as 0x602E/0x602F/0x6031 set it), 1 general (on while 0x21C7's bit is
     /// set), 2 alarm (on while no alarm is latched), 3 in position (on while the axis stands on
     /// its target, within 0x21C9 in closed loop), 4 motor free (on while the power stage is off),
-    /// 5 ready (on while it drives the motor). An output with a function is a push-pull output,
+    /// 5 ready (on while it drives the motor), 6 speed coincidence (seed 004's /V-CMP: on while the
+    /// speed is within 0x21F2 of the commanded one, in a position move while in position). An output with a function is a push-pull output,
     /// high when on unless 0x21C8 inverts it. OUT1-OUT4 are GPIO5-GPIO8.
-    OutputFunction1 @ 0x21C3: U8, Rw, Rom, Span(0, 5), default 0, None, "OUT1 function";
+    OutputFunction1 @ 0x21C3: U8, Rw, Rom, Span(0, 6), default 0, None, "OUT1 function";
     /// OUT2 function (our object; seed 002's 0421): as 0x21C3, on GPIO6.
-    OutputFunction2 @ 0x21C4: U8, Rw, Rom, Span(0, 5), default 0, None, "OUT2 function";
+    OutputFunction2 @ 0x21C4: U8, Rw, Rom, Span(0, 6), default 0, None, "OUT2 function";
     /// OUT3 function (our object; seed 002's 0422): as 0x21C3, on GPIO7.
-    OutputFunction3 @ 0x21C5: U8, Rw, Rom, Span(0, 5), default 0, None, "OUT3 function";
+    OutputFunction3 @ 0x21C5: U8, Rw, Rom, Span(0, 6), default 0, None, "OUT3 function";
     /// OUT4 function (our object; seed 002's 0423): as 0x21C3, on GPIO8.
-    OutputFunction4 @ 0x21C6: U8, Rw, Rom, Span(0, 5), default 0, None, "OUT4 function";
+    OutputFunction4 @ 0x21C6: U8, Rw, Rom, Span(0, 6), default 0, None, "OUT4 function";
     /// General outputs (our object; seed 002's 0428): bit k turns OUT k+1 on if its function is 1.
     GeneralOutputs @ 0x21C7: U8, Rw, Ram, Bits(0x0F), default 0, None, "general outputs";
     /// Output logic (our object; seed 002's 0430): bit k set, OUT k+1 is low when on.
@@ -532,6 +576,44 @@ objects! {
     /// Soft start (our object; seed 003's 0x200C): 1 ramps the current up over 0x21E0 when the
     /// stage is energised; 0 energises it at once.
     SoftStart @ 0x21E1: U8, Rw, Rom, Span(0, 1), default 0, None, "soft start";
+    /// Electrical angle (our object): the rotor's place in its electrical cycle (4 full steps), by
+    /// the commanded microstep.
+    ElectricalAngle @ 0x21E2: U16, Ro, Live, Span(0, 359), default 0, Degrees, "electrical angle";
+    /// Pulse input speed (our object): the pulse following's rate, microsteps a second; 0 when
+    /// not following.
+    PulseRate @ 0x21E3: S32, Ro, Live, S32_ANY, default 0, Pps, "pulse input speed";
+    /// Analog speed command (our object): the speed the analog input asks for (0x2170-0x2173),
+    /// 0 while 0x2170 is off.
+    AnalogSpeed @ 0x21E5: S32, Ro, Live, S32_ANY, default 0, Pps, "analog speed command";
+    /// Current command (our object): the phase current the drive sets now, percent of 0x600D
+    /// (the standstill current included); 0 de-energised.
+    CurrentCommand @ 0x21E7: U16, Ro, Live, Any, default 0, Percent, "current command";
+    /// Output states (our object): bit k OUT k+1 on (its function active), before 0x21C8.
+    OutputStates @ 0x21E8: U8, Ro, Live, Bits(0x0F), default 0, None, "output states";
+    /// Encoder signals (our object): bit 0 A, bit 1 B, the quadrature levels of the encoder's
+    /// count (0 without an encoder).
+    EncoderSignals @ 0x21E9: U8, Ro, Live, Bits(0x03), default 0, None, "encoder signals";
+    /// Load (our object): the measured phase current, percent of 0x600D; the overload alarm is
+    /// 150 % for 2 s.
+    Load @ 0x21EA: U16, Ro, Live, Any, default 0, Percent, "load";
+    /// Encoder angle (our object): the place within a revolution by the encoder, microsteps at
+    /// the resolution in force (0 without an encoder).
+    EncoderAngle @ 0x21EB: U32, Ro, Live, Any, default 0, Steps, "encoder angle";
+    /// Encoder turns (our object): whole revolutions by the encoder (0 without one).
+    EncoderTurns @ 0x21ED: S32, Ro, Live, S32_ANY, default 0, None, "encoder turns";
+    /// Actual position (our object): the commanded position less the following error (the
+    /// encoder's place in closed loop; the commanded one in open loop).
+    ActualPosition @ 0x21EF: S32, Ro, Live, S32_ANY, default 0, Steps, "actual position";
+    /// Serial format (our object; seed 004's P□600), a view of 0x202A, 0x2100 and 0x2192 as two
+    /// hexadecimal digits: digit 0 the baud rate (0 4800, 1 9600, 2 19200, 3 38400, 4 57600,
+    /// 5 115200; 51200 reads as 6 and is not written so), digit 1 the framing and parity (0 RTU
+    /// 8N1, 1 RTU 8E1, 2 RTU 8O1, 3 ASCII 8N1, 4 ASCII 8E1, 5 ASCII 8O1). Takes effect after
+    /// saving and restarting, as the three objects.
+    SerialFormat @ 0x21F1: U16, Rw, Live, Bits(0x00FF), default 0x01, None, "serial format";
+    /// Speed coincidence window (our object; seed 004's P□503): an output with function 6 is on
+    /// while the speed is within this much of the commanded one (in a position move: while in
+    /// position).
+    SpeedWindow @ 0x21F2: U32, Rw, Rom, Span(0, 300_000), default 33, Pps, "speed coincidence window";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake

@@ -123,6 +123,12 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         }
     }
 
+    /// The speed the analog input asks for (0x21E5): the target in force while it sets a speed.
+    pub(crate) fn analog_speed(&self) -> i32 {
+        let speed = self.follows() == Some(Follow::Speed) && self.analog.following;
+        if speed { self.analog.target } else { 0 }
+    }
+
     /// Plans a PP move to `target` with the PP set-point's limits (from wherever the axis is).
     fn follow_position(&mut self, target: i64) {
         let planner = self.planner();

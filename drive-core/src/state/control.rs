@@ -107,6 +107,7 @@ pub(crate) const fn runs_on(obj: Obj) -> bool {
             | Obj::OverTemperature
             | Obj::OverCurrent
             | Obj::CommTimeout
+            | Obj::SpeedWindow
             | Obj::PowerLossControl
             | Obj::PowerLossFreeVoltage
             | Obj::PowerLossBrakeVoltage
@@ -274,6 +275,8 @@ fn io_functions(get: &impl Fn(Obj) -> u32) -> IoFunctions {
         output_low: get(Obj::OutputLogic) as u8,
         // Without the encoder's say (0x21D9 = 0) every following error is within the window.
         in_position: if get(Obj::InPositionSource) == 0 { u32::MAX } else { get(Obj::InPositionWindow) },
+        speed_window: get(Obj::SpeedWindow),
+        overtravel: super::inputs::overtravel(get(Obj::CommInputs), with(INPUT_LIMIT_POSITIVE), with(INPUT_LIMIT_NEGATIVE)),
     }
 }
 
@@ -494,6 +497,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         self.follow_service();
         self.inputs_service();
         self.program_service();
+        self.signals_service();
         self.jog_service();
         self.quick_stop_settle();
     }
@@ -503,7 +507,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     pub fn service_due(&self) -> Option<Instant> {
         let due = self.homing_due().into_iter().chain(self.analog_due()).chain(self.device_due());
         let due = due.chain(self.follow_due()).chain(self.inputs_due()).chain(self.program_due());
-        due.chain(self.jog_due()).min()
+        due.chain(self.jog_due()).chain(self.signals_due()).min()
     }
 
     /// Whether [`DriveState::service`] has something to do at `now`: for a platform that must

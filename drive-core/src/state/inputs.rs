@@ -44,6 +44,18 @@ pub(crate) const INPUT_PROBE_1: u32 = 21;
 /// Input function 22: touch probe 2 (0x21DD).
 pub(crate) const INPUT_PROBE_2: u32 = 22;
 
+/// 0x2193 bit 2: positive overtravel (seed 004's P-OT).
+pub const P_OT: u16 = 1 << 2;
+/// 0x2193 bit 3: negative overtravel (N-OT).
+pub const N_OT: u16 = 1 << 3;
+
+/// The overtravel signals of the communication IO `comm` that act (bit 0 positive, bit 1
+/// negative): those of the limits no input is (`positive`, `negative`: the inputs that are).
+pub(crate) fn overtravel(comm: u32, positive: u8, negative: u8) -> u8 {
+    let comm = comm as u16;
+    u8::from(positive == 0 && comm & P_OT != 0) | u8::from(negative == 0 && comm & N_OT != 0) << 1
+}
+
 /// The bus side's memory of the inputs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(crate) struct Inputs {
@@ -115,6 +127,6 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     pub(crate) fn limit_ahead(&self, up: bool) -> bool {
         let io = &self.ctl.settings.io;
         let limits = if up { io.limit_positive } else { io.limit_negative };
-        self.active_inputs() & limits != 0
+        self.active_inputs() & limits != 0 || io.overtravel & if up { 1 } else { 2 } != 0
     }
 }

@@ -7,11 +7,13 @@ pub mod analog;
 mod command;
 pub mod control;
 mod device;
+pub mod groups;
 pub mod homing;
 mod inputs;
 pub mod memory;
 pub mod program;
 pub mod pvt;
+pub mod signals;
 
 use crate::controller::handoff::{Base, Orders};
 use crate::controller::{Controller, Pvt};
@@ -29,6 +31,7 @@ use core::borrow::Borrow;
 
 pub use crate::controller::{STATUS_BUSY, STATUS_STALL, Status};
 pub use memory::ProgramMemory;
+pub use program::ProgramKind;
 
 /// Storage status (0x2120) bit 0: no saved parameters were found at power-up; factory values.
 pub const STORAGE_EMPTY: u8 = 1 << 0;
@@ -50,6 +53,8 @@ pub enum SystemRequest {
     Save,
     /// Jump to the boot loader (0x200F = 1).
     BootLoader,
+    /// Restart as a power cycle would, once the reply has gone out (0x219F).
+    Restart,
     /// Power is failing and 0x605E is on: save this position as 0x6055 before it is gone.
     SavePosition(i32),
     /// An alarm was recorded: save the fault history and the alarm count (0x213C..0x214F,
@@ -226,6 +231,13 @@ pub struct DriveState<P = Table, G = ProgramMemory> {
     maps: u8,
     /// The power-up jog's next move (0x21D8).
     jog: command::Jog,
+    /// What the signal objects left to do (`signals`).
+    pub(crate) signals: signals::Signals,
+}
+
+/// `ma` in percent of `of` mA (0 for none).
+fn percent(ma: u16, of: u32) -> u32 {
+    (u32::from(ma) * 100).checked_div(of).unwrap_or(0)
 }
 
 /// Whether the motion command `value` (0x21A0) plans a motion; the others act at once.
@@ -327,6 +339,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             quick_check: Instant::from_micros(0),
             maps: u8::MAX,
             jog: if get(Obj::PowerUpJog) == 1 { command::Jog::Start } else { command::Jog::Done },
+            signals: signals::Signals::default(),
         }
     }
 
@@ -360,6 +373,8 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             quick_check: _,
             maps: _,
             jog: _,
+            // Set only after the write that sets it succeeded.
+            signals: _,
         } = self;
         Checkpoint {
             params: *params,
@@ -486,7 +501,8 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// Microsteps a revolution at the resolution in force (0x600C; 0 is full steps): what a
     /// map's units per revolution and a program's speeds convert by.
     pub(crate) fn per_rev(&self) -> u32 {
-        crate::units::FULL_STEPS_PER_REV as u32 * self.params.get(Obj::Microsteps as usize).copied().unwrap_or(0).max(1)
+        let microsteps = self.params.get(Obj::Microsteps as usize).copied().unwrap_or(0).max(1);
+        (crate::units::FULL_STEPS_PER_REV as u32).saturating_mul(microsteps)
     }
 
     /// Declares the present position, as writing 0x600E..F does; refused while moving.
@@ -598,11 +614,39 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             Obj::ProbePosition1 => self.ctl.probe[0] as u32,
             Obj::ProbePosition2 => self.ctl.probe[1] as u32,
             Obj::ProbeStatus => u32::from(s.probes),
+            Obj::GroupRunning | Obj::GroupNext | Obj::GroupSource => self.groups_live(obj),
+            Obj::ElectricalAngle => {
+                // An electrical cycle is 4 full steps: a 50th of a revolution.
+                let cycle = i64::from((self.per_rev() / 50).max(1));
+                (self.ctl.axis.setpoint().whole.rem_euclid(cycle) * 360 / cycle) as u32
+            }
+            Obj::PulseRate if self.mode() == crate::modes::WorkMode::Follow => self.ctl.real_speed() as u32,
+            Obj::PulseRate => 0,
+            Obj::AnalogSpeed => self.analog_speed() as u32,
+            Obj::CurrentCommand => percent(s.current_cmd_ma, self.param(Obj::PhaseCurrent)),
+            Obj::Load => percent(s.current_ma, self.param(Obj::PhaseCurrent)),
+            Obj::OutputStates => u32::from(self.ctl.outputs_on()),
+            Obj::EncoderSignals | Obj::EncoderAngle | Obj::EncoderTurns => self.encoder_live(obj),
+            Obj::ActualPosition => self.ctl.axis.setpoint().whole.wrapping_sub(self.ctl.servo.following) as u32,
+            Obj::SerialFormat => self.serial_format(),
             // The ten entries are consecutive objects.
             h if (Obj::FaultHistory0 as usize..=Obj::FaultHistory9 as usize).contains(&(h as usize)) => {
                 self.history(h as usize - Obj::FaultHistory0 as usize)
             }
             _ => self.params.get(obj as usize).copied().unwrap_or(0),
+        }
+    }
+
+    /// 0x21E9, 0x21EB and 0x21ED: the encoder's quadrature levels, its angle in microsteps and
+    /// its turns (0 without an encoder).
+    fn encoder_live(&self, obj: Obj) -> u32 {
+        let Some(e) = self.ctl.servo.feedback.encoder() else { return 0 };
+        let (counts, cpr) = (self.ctl.servo.encoder, i64::from(e.counts_per_rev().max(1)));
+        match obj {
+            // A, B of the quadrature count: 00, 01, 11, 10.
+            Obj::EncoderSignals => [0, 1, 3, 2].get(counts.rem_euclid(4) as usize).copied().unwrap_or(0),
+            Obj::EncoderAngle => (counts.rem_euclid(cpr).saturating_mul(i64::from(self.per_rev())) / cpr) as u32,
+            _ => counts.div_euclid(cpr) as i32 as u32,
         }
     }
 
@@ -645,6 +689,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             && !has_effect(d.obj)
             && !runs_on(d.obj)
             && !matches!(d.obj, Obj::SystemControl | Obj::RegisterMap)
+            && !signals::is_signal(d.obj)
     }
 
     /// Whether the object `d` declares takes writes, and `value` is within its range.
@@ -684,6 +729,10 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// move possible), and so does applying it, and a plan costs a Cortex-M4 hundreds of
     /// thousands of instructions, during which the control tick waits for the bus task.
     pub fn write_def(&mut self, d: &ObjectDef, value: u32) -> Result<(), ObjError> {
+        if signals::is_signal(d.obj) {
+            Self::check_writable(d, value)?;
+            return self.write_signal(d.obj, value, false);
+        }
         if d.obj == Obj::MotionCommand && !plans_motion_command(value) {
             Self::check_writable(d, value)?;
             return self.other_command(value);
@@ -705,6 +754,10 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// command is planned on the axis and set-points themselves, with no copy (a refused plan
     /// may leave them halted, and the checkpoint restores them).
     fn write_undoable(&mut self, d: &ObjectDef, value: u32) -> Result<(), ObjError> {
+        if signals::is_signal(d.obj) {
+            Self::check_writable(d, value)?;
+            return self.write_signal(d.obj, value, true);
+        }
         if d.obj == Obj::MotionCommand && !plans_motion_command(value) {
             Self::check_writable(d, value)?;
             return self.other_command(value);

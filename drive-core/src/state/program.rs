@@ -157,9 +157,26 @@ pub(crate) struct Program {
     /// Whether the register map offers programs (a program window: seed 002's); without it the
     /// program commands are refused and a save leaves the saved program as it is.
     pub(crate) offered: bool,
+    /// Whether the program window holds seed 004's position data groups (`groups`) rather than
+    /// seed 002's segments.
+    pub(crate) groups: bool,
     /// The first segment the last check or start found in error (1-32), 0 none.
     error: u8,
     run: Option<Run>,
+    /// The running chain of position data groups.
+    pub(crate) chain: Option<super::groups::Chain>,
+}
+
+/// What a register map's program window holds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ProgramKind {
+    /// No program window.
+    #[default]
+    None,
+    /// Seed 002's multi-segment programs.
+    Segments,
+    /// Seed 004's position data groups.
+    Groups,
 }
 
 /// The speeds of a segment's start (§7's defaults), in microsteps at `per_rev` a revolution.
@@ -225,6 +242,12 @@ impl Run {
 }
 
 impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
+    /// Sets what the register map's program window holds, at power-up.
+    pub(crate) fn set_program_kind(&mut self, kind: ProgramKind) {
+        self.program.offered = kind != ProgramKind::None;
+        self.program.groups = kind == ProgramKind::Groups;
+    }
+
     /// Register `k` of the program (seed 002's 1024 + k), 0 past its end or without a program.
     pub fn program_word(&self, k: usize) -> u16 {
         self.program_memory().and_then(|m| m.word(k)).unwrap_or(0)
@@ -235,6 +258,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     pub(crate) fn write_program(&mut self, k: usize, words: &Words<'_>) -> Result<(), ObjError> {
         refuse(self.program.offered && k.saturating_add(words.len()) <= WORDS, ObjError::Unknown)?;
         refuse(self.program.run.is_none() && self.storage & super::STORAGE_SAVING == 0, ObjError::Busy)?;
+        refuse(self.groups_writable(k, words.len()), ObjError::Busy)?;
         let memory = self.programs.borrow();
         for (j, w) in words.iter().enumerate() {
             memory.set_word(k + j, w);
@@ -313,12 +337,21 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// Whether a program runs (paused included): motion commands other than the stops are
     /// refused meanwhile.
     pub(crate) fn program_runs(&self) -> bool {
-        self.program.run.is_some()
+        self.program.run.is_some() || self.program.chain.is_some()
     }
 
     /// Checks the program commands 14-18 of the motion command.
     pub(crate) fn check_program_command(&self, command: Command) -> Result<(), ObjError> {
         refuse(self.program.offered, ObjError::Unsupported)?;
+        if self.program.groups {
+            return match command {
+                Command::ProgramStart => self.check_group_start(),
+                Command::ProgramStep => self.check_group_step(),
+                Command::ProgramEnd => Ok(()),
+                _ => Err(ObjError::Unsupported),
+            };
+        }
+        refuse(command != Command::ProgramStep, ObjError::Unsupported)?;
         match command {
             // As 0x200F = 2.
             Command::ProgramSave => {
@@ -346,6 +379,18 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// [`DriveState::check_program_command`] accepted: a start is refused (04) if the program
     /// has a segment in error, which a check and a refused start report in 0x21CE.
     pub(crate) fn program_command(&mut self, command: Command) -> Result<(), ObjError> {
+        if self.program.groups {
+            match command {
+                Command::ProgramStart => return self.group_start(),
+                Command::ProgramStep => self.group_step(),
+                Command::ProgramEnd if self.program.chain.take().is_some() => {
+                    let decel = self.param(Obj::PpDecel);
+                    self.ctl.axis.stop_ramp(decel);
+                }
+                _ => {}
+            }
+            return Ok(());
+        }
         match command {
             Command::ProgramCheck => self.program.error = self.locate(1).err().unwrap_or(0),
             Command::ProgramSave => self.apply(Obj::SystemControl, 2),
@@ -414,11 +459,14 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
 
     /// Ends the program (a stop, a fault, a disable): the motion already stopping is theirs.
     pub(crate) fn program_stopped(&mut self) {
-        self.program.run = None;
+        (self.program.run, self.program.chain) = (None, None);
     }
 
     /// When [`DriveState::program_service`] has something to do.
     pub(crate) fn program_due(&self) -> Option<Instant> {
+        if self.program.chain.is_some() {
+            return self.groups_due();
+        }
         let run = self.program.run.filter(|r| !r.paused)?;
         Some(match run.step {
             Step::Next => self.now,
@@ -430,6 +478,9 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// Runs the program on: the next instructions up to a move or a wait, the end of a move,
     /// the end of a wait.
     pub(crate) fn program_service(&mut self) {
+        if self.program.chain.is_some() {
+            return self.groups_service();
+        }
         for _ in 0..STEPS_PER_SERVICE {
             let Some(mut run) = self.program.run.filter(|r| !r.paused) else { return };
             match run.step {

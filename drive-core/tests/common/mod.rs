@@ -58,7 +58,7 @@ impl Bus {
     /// Every object's value and the drive's status: equal snapshots mean nothing changed.
     pub fn snapshot(&self) -> Vec<u32> {
         let st = self.drive.state();
-        OBJECTS.iter().map(|d| st.read(d.obj)).collect()
+        OBJECTS.iter().filter(|d| d.obj != drive_core::od::Obj::CurrentCommand).map(|d| st.read(d.obj)).collect()
     }
 }
 
