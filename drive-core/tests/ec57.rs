@@ -31,7 +31,11 @@ impl MapRig {
     /// Every object's value.
     fn objects(&self) -> Vec<u32> {
         let st = self.drive.state();
-        drive_core::od::OBJECTS.iter().filter(|d| d.obj != drive_core::od::Obj::CurrentCommand).map(|d| st.read(d.obj)).collect()
+        drive_core::od::OBJECTS
+            .iter()
+            .filter(|d| d.obj != drive_core::od::Obj::CurrentCommand)
+            .map(|d| st.read(d.obj))
+            .collect()
     }
 
     /// Reads `n` registers from (index, sub); the values or the exception code.

@@ -68,7 +68,10 @@ impl Rig {
 
     fn snapshot(&self) -> (Vec<u32>, i64) {
         let s = self.drive.state();
-        (OBJECTS.iter().filter(|d| d.obj != drive_core::od::Obj::CurrentCommand).map(|d| s.read_def(d)).collect(), self.position())
+        (
+            OBJECTS.iter().filter(|d| d.obj != drive_core::od::Obj::CurrentCommand).map(|d| s.read_def(d)).collect(),
+            self.position(),
+        )
     }
 }
 
@@ -314,4 +317,3 @@ fn restart_is_requested_at_rest() {
     r.write(0x0541, 1).expect("restart");
     assert_eq!(r.drive.take_system_request(), Some(drive_core::SystemRequest::Restart));
 }
-

@@ -102,7 +102,8 @@ enum Extra {
 
 /// The program window (raw words) or a reserved range.
 fn extra_row(out: &mut impl Write, x: Extra, r: &Reference) -> fmt::Result {
-    let register = |out: &mut dyn Write, a: u16| if r.decimal { write!(out, "{a:04}") } else { write!(out, "0x{a:04X}") };
+    let register =
+        |out: &mut dyn Write, a: u16| if r.decimal { write!(out, "{a:04}") } else { write!(out, "0x{a:04X}") };
     let (first, last) = match x {
         Extra::Program(p) => (p.first, p.first + p.words - 1),
         Extra::Reserved(first, last) => (first, last),

@@ -124,7 +124,9 @@ impl Scale {
     /// The factor as a fraction, given the microsteps a revolution.
     const fn fraction(self, per_rev: i64) -> (i64, i64) {
         match self {
-            Scale::One | Scale::Table(_) | Scale::Field(..) | Scale::Invert(_) | Scale::PulsesPerRev | Scale::Gear => (1, 1),
+            Scale::One | Scale::Table(_) | Scale::Field(..) | Scale::Invert(_) | Scale::PulsesPerRev | Scale::Gear => {
+                (1, 1)
+            }
             Scale::Ratio(n, d) => (n as i64, d as i64),
             Scale::PerRev(n, d) => (n as i64 * per_rev, d as i64),
         }

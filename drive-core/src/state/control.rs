@@ -276,7 +276,11 @@ fn io_functions(get: &impl Fn(Obj) -> u32) -> IoFunctions {
         // Without the encoder's say (0x21D9 = 0) every following error is within the window.
         in_position: if get(Obj::InPositionSource) == 0 { u32::MAX } else { get(Obj::InPositionWindow) },
         speed_window: get(Obj::SpeedWindow),
-        overtravel: super::inputs::overtravel(get(Obj::CommInputs), with(INPUT_LIMIT_POSITIVE), with(INPUT_LIMIT_NEGATIVE)),
+        overtravel: super::inputs::overtravel(
+            get(Obj::CommInputs),
+            with(INPUT_LIMIT_POSITIVE),
+            with(INPUT_LIMIT_NEGATIVE),
+        ),
     }
 }
 

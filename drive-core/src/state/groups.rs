@@ -298,7 +298,13 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
                         return;
                     }
                     (Some(x), None) | (None, Some(x)) => x,
-                    (Some(x), Some(y)) => if g.either { x || y } else { x && y },
+                    (Some(x), Some(y)) => {
+                        if g.either {
+                            x || y
+                        } else {
+                            x && y
+                        }
+                    }
                 };
                 if go {
                     self.step_on(chain.group);

@@ -110,11 +110,9 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
                     refuse(self.ctl.axis.is_still(), ObjError::Busy)?;
                     push(&mut out, Obj::Position, self.live(Obj::ActualPosition))?;
                 }
-                for (bit, command) in [
-                    (START_HOME, Command::Home),
-                    (POS_START, Command::ProgramStart),
-                    (POS_STEP, Command::ProgramStep),
-                ] {
+                for (bit, command) in
+                    [(START_HOME, Command::Home), (POS_START, Command::ProgramStart), (POS_STEP, Command::ProgramStep)]
+                {
                     if rose(bit) && !self.input_has(command.raw()) {
                         push(&mut out, Obj::MotionCommand, command.raw())?;
                     }
