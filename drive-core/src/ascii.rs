@@ -79,13 +79,16 @@ enum State {
 pub struct Framer {
     /// The bytes decoded so far, the LRC last once the line is whole.
     buf: [u8; MAX_ADU + 1],
+    /// The bytes in `buf`: of the frame in progress, or in [`State::Idle`] of the line that
+    /// ended last ([`Framer::ended`]; 0 once another verdict or [`Framer::clear`] came).
     len: usize,
     /// The first digit of a byte whose second has not come yet.
     high: Option<u8>,
     /// The sum of the decoded bytes: 0 over a whole frame and its LRC.
     sum: u8,
     state: State,
-    /// When the last byte of the frame in progress arrived; meaningful outside [`State::Idle`].
+    /// When the last byte arrived: of the frame in progress outside [`State::Idle`], of any
+    /// byte after the line that ended last in it.
     last: Instant,
     timeout: u64,
 }
@@ -154,6 +157,22 @@ impl Framer {
         }
     }
 
+    /// The line that ended last at its CR LF with the bytes of a frame, a good LRC or a bad one,
+    /// kept while the receiver waits for the next `:`: its bytes as decoded (the LRC last: they
+    /// sum to 0 if it matched, [`lrc`] of them is 0) and when the last byte came (its LF, or
+    /// noise after it). `None` once the next `:` came, after any other verdict, or after
+    /// [`Framer::clear`].
+    ///
+    /// A slave that serves a frame after its LF rather than at it (after syncing with whatever
+    /// the request reads) finds it here, and a slave that answers a frame spoilt by its LRC
+    /// finds its address and function code.
+    pub fn ended(&self) -> Option<(&[u8], Instant)> {
+        match self.state {
+            State::Idle if self.len > 0 => Some((self.buf.get(..self.len).unwrap_or_default(), self.last)),
+            _ => None,
+        }
+    }
+
     /// Adds bytes received together at `now`, handing `each` every push's outcome in order.
     pub fn extend(&mut self, now: Instant, bytes: &[u8], mut each: impl FnMut(Result<&[u8], RxError>)) {
         for &b in bytes {
@@ -216,9 +235,12 @@ impl Framer {
             None
         };
         let adu = self.len.saturating_sub(1);
-        self.clear();
+        // The frame's bytes stay (`ended`) until the next `:`, unless they make no frame.
+        self.state = State::Idle;
+        self.sum = 0;
         match error {
-            Some(e) => Err(e),
+            Some(RxError::Lrc) => Err(RxError::Lrc),
+            Some(e) => Err(self.drop_frame(e)),
             None => Ok(self.buf.get(..adu).unwrap_or_default()),
         }
     }
@@ -270,6 +292,50 @@ pub fn encode(adu: &[u8], out: &mut [u8]) -> Option<usize> {
         *end = *b"\r\n";
     }
     Some(n)
+}
+
+/// [`encode`] in place: the first `n` bytes of `buf`, an ADU (address, function, data), become
+/// the line that carries it, which takes `buf`'s first [`line_len`]`(n)` bytes. Its length, or
+/// `None` if `n` is below 2 or over [`MAX_ADU`], or `buf` too short (then `buf` is unchanged).
+///
+/// A slave builds its binary reply at the start of its transmit buffer, as for RTU, and turns it
+/// into its line here: a buffer of [`MAX_LINE`] bytes holds any reply, and no second one is
+/// needed.
+///
+/// ```
+/// use drive_core::ascii::encode_in_place;
+/// let mut buf = [0u8; 32];
+/// buf[..6].copy_from_slice(&[0x01, 0x03, 0x02, 0x01, 0x00, 0x01]);
+/// assert_eq!(encode_in_place(&mut buf, 6), Some(17));
+/// assert_eq!(&buf[..17], b":010302010001F8\r\n");
+/// ```
+pub fn encode_in_place(buf: &mut [u8], n: usize) -> Option<usize> {
+    if !(2..=MAX_ADU).contains(&n) {
+        return None;
+    }
+    let len = line_len(n);
+    let line = buf.get_mut(..len)?;
+    let check = lrc(line.get(..n).unwrap_or_default());
+    let (first, rest) = line.split_first_mut()?;
+    let (pairs, _) = rest.as_chunks_mut::<2>();
+    if let Some(end) = pairs.last_mut() {
+        *end = *b"\r\n";
+    }
+    if let Some(pair) = pairs.get_mut(n) {
+        *pair = [hex_digit(check >> 4), hex_digit(check)];
+    }
+    // From the last byte back: byte `i` (at `i` in `buf`) becomes the pair at `1 + 2i`, after
+    // every byte not yet read (`0..i`). `pairs` starts at `buf`'s 1, so byte `i` is the pair `i`
+    // as a byte of `rest` at `i - 1`: read it before its pair overwrites it.
+    for i in (0..n).rev() {
+        let b = if i == 0 { *first } else { rest.get(i - 1).copied().unwrap_or(0) };
+        let (pairs, _) = rest.as_chunks_mut::<2>();
+        if let Some(pair) = pairs.get_mut(i) {
+            *pair = [hex_digit(b >> 4), hex_digit(b)];
+        }
+    }
+    *first = b':';
+    Some(len)
 }
 
 /// The upper-case hex digit of the low nibble of `v`.

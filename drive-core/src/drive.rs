@@ -1,6 +1,7 @@
-//! The RTU slave: frames in, requests executed on the drive's state through a register map,
-//! replies out; the diagnostic counters.
+//! The serial slave: frames in (RTU, or Modbus ASCII lines: 0x2192), requests executed on the
+//! drive's state through a register map, replies out; the diagnostic counters.
 
+use crate::ascii;
 use crate::controller::Outputs;
 use crate::controller::handoff::{Handover, Lent, TickSide};
 use crate::crc;
@@ -10,7 +11,7 @@ use crate::maps::{NativeMap, RegisterMap, Spoilt};
 use crate::motion::cubic::Table;
 use crate::od::Obj;
 use crate::pdu::{Exception, MAX_READ, Parser, Request, Words};
-use crate::rtu::{Framer, MAX_FRAME, RxError};
+use crate::rtu::{self, MAX_FRAME, RxError};
 use crate::state::ProgramMemory;
 use crate::units::{Baud, Instant, SlaveAddr};
 use core::borrow::Borrow;
@@ -40,13 +41,32 @@ impl Default for DriveConfig {
     }
 }
 
+/// The framing of the serial line: the object 0x2192 at power-up chooses it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LineFraming {
+    /// RTU: binary frames ended by t3.5 of silence, checked by their CRC.
+    Rtu,
+    /// Modbus ASCII: lines `:`, hex, LRC, CR LF ([`crate::ascii`]), with the spec's one-second
+    /// inter-character timeout.
+    Ascii,
+}
+
+impl LineFraming {
+    /// The framing the object 0x2192 chooses by its `value`: 1 ASCII, else RTU.
+    pub const fn of(value: u32) -> Self {
+        if value == 1 { Self::Ascii } else { Self::Rtu }
+    }
+}
+
 /// The Modbus serial-line diagnostic counters (function 0x08, sub-functions 0x0B-0x12).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Counters {
-    /// 0x0B: frames with a good CRC seen on the bus, for any address.
+    /// 0x0B: frames with a good CRC (ASCII: LRC) seen on the bus, for any address.
     pub bus_messages: u16,
     /// 0x0C: frames dropped for a bad CRC, a gap inside the frame, or too short to hold a function
-    /// code and a CRC.
+    /// code and a CRC; in ASCII, lines dropped for a bad LRC, a character that is no hex digit
+    /// (CR LF at their end excepted), an odd number of digits, too few for an address, a function
+    /// code and an LRC, a `:` before their end, or a silence over the inter-character timeout.
     pub bus_errors: u16,
     /// 0x0D: exception replies sent.
     pub exceptions: u16,
@@ -58,7 +78,8 @@ pub struct Counters {
     pub naks: u16,
     /// 0x11: busy replies (never sent by this drive).
     pub busy: u16,
-    /// 0x12: frames lost to a receive overrun (longer than 256 bytes).
+    /// 0x12: frames lost to a receive overrun (longer than 256 bytes; ASCII lines longer than 513
+    /// characters).
     pub overruns: u16,
 }
 
@@ -66,7 +87,7 @@ pub struct Counters {
 /// table (`P`) and its programs' memory (`G`), owned or lent ([`DriveState`]).
 #[derive(Clone, Debug)]
 pub struct Drive<M: RegisterMap = NativeMap, P = Table, G = ProgramMemory> {
-    framer: Framer,
+    line: Line,
     address: SlaveAddr,
     /// The CRC register after `address`, the first byte of every reply.
     address_crc: u16,
@@ -74,10 +95,25 @@ pub struct Drive<M: RegisterMap = NativeMap, P = Table, G = ProgramMemory> {
     listen_only: bool,
     counters: Counters,
     framing: Framing,
-    tx: [u8; MAX_FRAME],
+    /// The reply: an RTU frame, or an ASCII line (built binary at its start, then encoded in
+    /// place: [`ascii::encode_in_place`]).
+    tx: [u8; ascii::MAX_LINE],
     tx_len: usize,
     map: M,
     state: DriveState<P, G>,
+}
+
+/// The receiver of the framing in force, one or the other in the same memory (the ASCII
+/// framer, 288 bytes, is no larger than the RTU one). The slave looks at which once a call.
+///
+/// The tag is a byte of its own (`repr(u8)`) rather than a value the RTU framer's fields leave
+/// free: the RTU path then reads its framer as it did before there was a choice.
+#[derive(Clone, Debug)]
+#[repr(u8)]
+enum Line {
+    Rtu(rtu::Framer),
+    /// A line that ended waits in the framer ([`ascii::Framer::ended`]) until it is served.
+    Ascii(ascii::Framer),
 }
 
 /// What the slave needs of its map's framing on every request, asked of the map once when the
@@ -251,15 +287,19 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
         };
         let address = SlaveAddr::new(node as u8).unwrap_or(SlaveAddr::BROADCAST);
         let baud = Baud::new(get(Obj::BaudRate)).unwrap_or(Baud::FACTORY);
+        let line = match LineFraming::of(get(Obj::LineFraming)) {
+            LineFraming::Rtu => Line::Rtu(rtu::Framer::new(baud)),
+            LineFraming::Ascii => Line::Ascii(ascii::Framer::new(ascii::DEFAULT_TIMEOUT_MICROS)),
+        };
         Self {
-            framer: Framer::new(baud),
+            line,
             address,
             address_crc: crc::update(crc::INIT, address.get()),
             baud,
             listen_only: false,
             counters: Counters::default(),
             framing: Framing::of(&map),
-            tx: [0; MAX_FRAME],
+            tx: [0; ascii::MAX_LINE],
             tx_len: 0,
             map,
             state: DriveState::booted(
@@ -277,11 +317,11 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
     /// The same drive answering through the map `f` makes of its own (the native map into
     /// [`Maps`](crate::maps::Maps), say).
     pub fn map_into<N: RegisterMap>(self, f: impl FnOnce(M) -> N) -> Drive<N, P, G> {
-        let Self { framer, address, address_crc, baud, listen_only, counters, tx, tx_len, map, mut state, .. } = self;
+        let Self { line, address, address_crc, baud, listen_only, counters, tx, tx_len, map, mut state, .. } = self;
         let map = f(map);
         state.set_program_kind(map.program_kind());
         let framing = Framing::of(&map);
-        Drive { framer, address, address_crc, baud, listen_only, counters, framing, tx, tx_len, map, state }
+        Drive { line, address, address_crc, baud, listen_only, counters, framing, tx, tx_len, map, state }
     }
 
     /// The address this drive answers to.
@@ -292,6 +332,14 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
     /// The baud rate the framing is timed for.
     pub fn baud(&self) -> Baud {
         self.baud
+    }
+
+    /// The framing of the serial line, fixed at power-up (0x2192).
+    pub fn line_framing(&self) -> LineFraming {
+        match self.line {
+            Line::Rtu(_) => LineFraming::Rtu,
+            Line::Ascii(_) => LineFraming::Ascii,
+        }
     }
 
     /// The register map the drive answers through.
@@ -314,25 +362,51 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
         &self.counters
     }
 
-    /// Bytes received at `now`. A frame that had already ended is processed first.
+    /// Bytes received at `now`. A frame that had already ended is processed first
+    /// ([`Drive::frame_due`]).
+    ///
+    /// In ASCII a line ends at its LF, and waits: it is served by the next [`Drive::on_timer`]
+    /// (at once: [`Drive::deadline`] is then the time of its last byte) or the next `on_rx`, as
+    /// an RTU frame that has ended, so that a platform that syncs before serving a request sees
+    /// it in [`Drive::frame_due`] first. Only if a `:` follows it in the same call is it served
+    /// here, before that `:` starts the next line (without the platform's sync); of two lines
+    /// that ask for an answer in one call (a master that did not wait for the first answer) the
+    /// platform then takes the later answer only.
     pub fn on_rx(&mut self, now: Instant, bytes: &[u8]) {
         if bytes.is_empty() {
             return;
         }
-        // The bytes of one call arrived together: only the first can follow a silence.
-        if self.framer.ended(now) {
-            self.state.now = now;
-            self.end_frame();
+        match &mut self.line {
+            // The bytes of one call arrived together: only the first can follow a silence.
+            Line::Rtu(framer) if !framer.ended(now) => framer.extend(now, bytes),
+            Line::Rtu(_) => self.rtu_rx_after_end(now, bytes),
+            Line::Ascii(_) => self.ascii_rx(now, bytes),
         }
-        self.framer.extend(now, bytes);
     }
 
-    /// Time passes: a frame whose t3.5 has run out is processed.
+    /// RTU bytes after a silence that ended the frame before them: that frame is served first.
+    // Out of line: `on_rx` stays small enough to inline into the platform's calls.
+    #[inline(never)]
+    fn rtu_rx_after_end(&mut self, now: Instant, bytes: &[u8]) {
+        self.state.now = now;
+        self.end_frame();
+        if let Line::Rtu(framer) = &mut self.line {
+            framer.extend(now, bytes);
+        }
+    }
+
+    /// Time passes: a frame whose t3.5 has run out is processed; in ASCII a line that ended is,
+    /// and one silent for longer than the inter-character timeout is dropped.
     pub fn on_timer(&mut self, now: Instant) {
         // The time a request is served at, the time its motion is planned for.
         self.state.now = now;
-        if self.framer.ended(now) {
-            self.end_frame();
+        match &mut self.line {
+            Line::Rtu(framer) => {
+                if framer.ended(now) {
+                    self.end_frame();
+                }
+            }
+            Line::Ascii(_) => self.ascii_timer(now),
         }
     }
 
@@ -374,13 +448,23 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
     /// Whether a request is complete at `now`, to be served by the next [`Drive::on_timer`] or
     /// [`Drive::on_rx`]: where the tick owns a controller of its own, the moment to sync the
     /// model first.
+    ///
+    /// In ASCII, whether a line has ended (at its LF) and waits.
     pub fn frame_due(&self, now: Instant) -> bool {
-        self.framer.ended(now)
+        match &self.line {
+            Line::Rtu(framer) => framer.ended(now),
+            Line::Ascii(framer) => framer.ended().is_some(),
+        }
     }
 
-    /// When [`Drive::on_timer`] next has something to do.
+    /// When [`Drive::on_timer`] next has something to do: the end of the RTU frame in progress
+    /// (t3.5 after its last byte); in ASCII, the time of the last byte if a line has ended and
+    /// waits, else the inter-character timeout's expiry while a line is in progress.
     pub fn deadline(&self) -> Option<Instant> {
-        self.framer.deadline()
+        match &self.line {
+            Line::Rtu(framer) => framer.deadline(),
+            Line::Ascii(framer) => framer.ended().map(|(_, at)| at).or_else(|| framer.deadline()),
+        }
     }
 
     /// The reply frame to send, once.
@@ -420,8 +504,12 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
         self.state.save_done(ok);
     }
 
+    /// Ends the frame that has ended (RTU), or the line that ended and waits (ASCII,
+    /// [`Drive::end_line`]): serves it if its CRC is good, else counts it and answers it as the
+    /// map answers a spoilt frame; the receiver then waits for the next.
     fn end_frame(&mut self) {
-        let (_, error) = self.framer.frame();
+        let Line::Rtu(framer) = &self.line else { return self.end_line() };
+        let ((_, error), crc_ok) = (framer.frame(), framer.crc_ok());
         let c = &mut self.counters;
         match error {
             Some(RxError::Overrun) => c.overruns = c.overruns.wrapping_add(1),
@@ -429,28 +517,109 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
                 c.bus_errors = c.bus_errors.wrapping_add(1);
                 self.frame_exception(if after_frame { Spoilt::Early } else { Spoilt::Gap });
             }
-            None if !self.framer.crc_ok() => {
+            None if !crc_ok => {
                 c.bus_errors = c.bus_errors.wrapping_add(1);
                 self.frame_exception(Spoilt::Crc);
             }
-            None => {
-                self.serve();
-                if core::mem::take(&mut self.state.factory_restored) {
-                    // The map's own factory settings go over the drive's, before the save.
-                    self.map.factory_settings(&mut self.state);
+            None => self.serve_frame::<false>(),
+        }
+        if let Line::Rtu(framer) = &mut self.line {
+            framer.clear();
+        }
+    }
+
+    /// [`Drive::end_frame`] of an ASCII line: served if its LRC is good, else counted and
+    /// answered as a frame spoilt by its CRC (any other verdict was counted as the line was
+    /// dropped).
+    ///
+    /// This and the ASCII path's other functions are out of line and `cold` so that the RTU
+    /// path's code is laid out as it was before there was a choice (an ASCII line's few hundred
+    /// instructions more are nothing beside its characters' time on the line).
+    #[cold]
+    #[inline(never)]
+    fn end_line(&mut self) {
+        let Line::Ascii(framer) = &self.line else { return };
+        match framer.ended() {
+            Some((bytes, _)) if ascii::lrc(bytes) == 0 => self.serve_frame::<true>(),
+            Some(_) => {
+                self.counters.bus_errors = self.counters.bus_errors.wrapping_add(1);
+                self.frame_exception(Spoilt::Crc);
+            }
+            None => {}
+        }
+        if let Line::Ascii(framer) = &mut self.line {
+            framer.clear();
+        }
+    }
+
+    /// Serves a frame with a good check, then the map's own factory settings if it restored the
+    /// drive's. `ASCII`: the frame is an ASCII line's, and so is the reply. (One instance each,
+    /// inlined into `end_frame` and `end_line`: the RTU path pays no test of the framing.)
+    #[inline(always)]
+    fn serve_frame<const ASCII: bool>(&mut self) {
+        self.serve::<ASCII>();
+        if core::mem::take(&mut self.state.factory_restored) {
+            // The map's own factory settings go over the drive's, before the save.
+            self.map.factory_settings(&mut self.state);
+        }
+    }
+
+    /// ASCII bytes (see [`Drive::on_rx`]): a line that ended before them is served first, then
+    /// the bytes go to the framer, up to a `:` behind a line that ended in them, which is served
+    /// before the `:` starts the next.
+    // Out of line, as `ascii_timer`: `on_rx` and `on_timer` stay small enough for the RTU path
+    // to inline them into the platform's calls (see also `end_line`).
+    #[cold]
+    #[inline(never)]
+    fn ascii_rx(&mut self, now: Instant, bytes: &[u8]) {
+        let mut rest = bytes;
+        while !rest.is_empty() {
+            if matches!(&self.line, Line::Ascii(framer) if framer.ended().is_some()) {
+                self.state.now = now;
+                self.end_frame();
+            }
+            let Self { line: Line::Ascii(framer), counters, .. } = self else { return };
+            let mut taken = rest.len();
+            for (i, &b) in rest.iter().enumerate() {
+                if b == b':' && framer.ended().is_some() {
+                    taken = i;
+                    break;
+                }
+                // A line that ended waits in the framer, to be served, or with a bad LRC counted
+                // and answered as the map has it; a line dropped otherwise is counted now.
+                match framer.push(now, b) {
+                    Some(Err(ascii::RxError::Lrc)) | Some(Ok(_)) | None => {}
+                    Some(Err(ascii::RxError::Overrun)) => counters.overruns = counters.overruns.wrapping_add(1),
+                    Some(Err(_)) => counters.bus_errors = counters.bus_errors.wrapping_add(1),
                 }
             }
+            rest = rest.get(taken..).unwrap_or_default();
         }
-        self.framer.clear();
+    }
+
+    /// ASCII time passes (see [`Drive::on_timer`]): a line that ended is served, one silent for
+    /// longer than the inter-character timeout dropped.
+    #[cold]
+    #[inline(never)]
+    fn ascii_timer(&mut self, now: Instant) {
+        let Line::Ascii(framer) = &mut self.line else { return };
+        if framer.ended().is_some() {
+            self.end_frame();
+        } else if framer.expire(now).is_some() {
+            self.counters.bus_errors = self.counters.bus_errors.wrapping_add(1);
+        }
     }
 
     /// Answers a frame `spoilt` with the exception code the map has for it, if it has one, from
     /// the address and the function code the frame began with, if it began with this drive's
     /// address (a broadcast, another drive's frame or one too short to say are not answered) and
     /// not in listen-only mode.
+    // Out of line: the request path keeps to its own work.
+    #[cold]
+    #[inline(never)]
     fn frame_exception(&mut self, spoilt: Spoilt) {
         let Some(code) = self.map.spoilt_frame(&self.state, spoilt) else { return };
-        let (frame, _) = self.framer.frame();
+        let (frame, ascii) = self.line.received();
         let (Some(&to), Some(&function)) = (frame.first(), frame.get(1)) else { return };
         if to != self.address.get() || self.listen_only || function & 0x80 != 0 {
             return;
@@ -458,15 +627,23 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
         self.counters.exceptions = self.counters.exceptions.wrapping_add(1);
         if let Some(head) = self.tx.first_chunk_mut::<3>() {
             *head = [to, function | 0x80, code];
-            self.tx_len = seal(&mut self.tx, 3, self.address_crc);
+            self.tx_len = if ascii { seal_line(&mut self.tx, 3) } else { seal(&mut self.tx, 3, self.address_crc) };
         }
     }
 
-    /// Serves a frame with a good CRC that sits in the framer.
-    fn serve(&mut self) {
-        let Self { framer, address, address_crc, listen_only, counters, framing, tx, tx_len, map, state, .. } = self;
+    /// Serves a frame with a good CRC (`ASCII`: LRC) that sits in the framer.
+    // Inlined into `serve_frame`, its one caller.
+    #[inline(always)]
+    fn serve<const ASCII: bool>(&mut self) {
+        let Self { line, address, address_crc, listen_only, counters, framing, tx, tx_len, map, state, .. } = self;
         counters.bus_messages = counters.bus_messages.wrapping_add(1);
-        let (frame, _) = framer.frame();
+        // The frame and the bytes of its check: an RTU frame and its CRC, or the bytes of an ASCII
+        // line and its LRC.
+        let (frame, check) = match line {
+            Line::Rtu(framer) if !ASCII => (framer.frame().0, 2),
+            Line::Ascii(framer) if ASCII => (framer.ended().map_or(&[][..], |(bytes, _)| bytes), 1),
+            _ => return,
+        };
         let Some((&to, rest)) = frame.split_first() else {
             return;
         };
@@ -476,7 +653,7 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
         }
         counters.slave_messages = counters.slave_messages.wrapping_add(1);
         state.ctl.heard();
-        let pdu = rest.get(..rest.len().saturating_sub(2)).unwrap_or_default();
+        let pdu = rest.get(..rest.len().saturating_sub(check)).unwrap_or_default();
         let function = pdu.first().copied().unwrap_or(0);
         if function & 0x80 != 0 {
             // Codes 0x80-0xFF are exception replies, never requests: there is no way to answer.
@@ -527,9 +704,10 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
                 // The request's register (with what the map puts after it) and value or count: the
                 // request's first bytes, its address this drive's.
                 let n = 5 + framing.address_extra;
-                if pdu.len() == n {
+                if pdu.len() == n && !ASCII {
                     // The whole request (a one-register write): the reply is the request frame,
-                    // whose CRC is checked already.
+                    // whose CRC is checked already. (An ASCII line is encoded anew: the
+                    // request's may have lower-case digits.)
                     put(tx, 0, frame);
                     *tx_len = frame.len();
                     return;
@@ -554,8 +732,28 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
                 1
             }
         };
-        *tx_len = seal(tx, 2 + len, *address_crc);
+        *tx_len = if ASCII { seal_line(tx, 2 + len) } else { seal(tx, 2 + len, *address_crc) };
     }
+}
+
+impl Line {
+    /// The frame received and whether it is an ASCII line's: an RTU frame with its CRC, or the
+    /// bytes an ASCII line that ended decoded to, with its LRC.
+    fn received(&self) -> (&[u8], bool) {
+        match self {
+            Line::Rtu(framer) => (framer.frame().0, false),
+            Line::Ascii(framer) => (framer.ended().map_or(&[][..], |(bytes, _)| bytes), true),
+        }
+    }
+}
+
+/// Turns the first `n` bytes of `buf`, a binary reply, into the ASCII line that carries it; the
+/// line's length, or 0 if it does not fit.
+// Out of line and cold: see `Drive::end_line`.
+#[cold]
+#[inline(never)]
+fn seal_line(buf: &mut [u8], n: usize) -> usize {
+    ascii::encode_in_place(buf, n).unwrap_or(0)
 }
 
 /// Appends the CRC to the first `n` bytes of `buf`, a reply that begins with this drive's address

@@ -2,7 +2,9 @@
 //! the receiver over any ADU, corruption, noise and split.
 
 use drive_core::Instant;
-use drive_core::ascii::{DEFAULT_TIMEOUT_MICROS, Framer, MAX_ADU, MAX_LINE, RxError, encode, line_len, lrc};
+use drive_core::ascii::{
+    DEFAULT_TIMEOUT_MICROS, Framer, MAX_ADU, MAX_LINE, RxError, encode, encode_in_place, line_len, lrc,
+};
 use proptest::prelude::*;
 
 /// What a receiver made of some bytes: the ADUs of good frames and the errors, in order.
@@ -112,6 +114,53 @@ fn the_timeout_is_a_parameter() {
     }
 }
 
+#[test]
+fn encode_in_place_needs_room_and_an_address_and_function() {
+    let mut buf = [7u8; 16];
+    assert_eq!(encode_in_place(&mut buf, 1), None);
+    assert_eq!(encode_in_place(&mut buf, MAX_ADU + 1), None);
+    buf[..2].copy_from_slice(&[1, 3]);
+    assert_eq!(encode_in_place(&mut buf[..8], 2), None);
+    assert_eq!(&buf[..3], &[1, 3, 7], "a refusal changes nothing");
+    assert_eq!(encode_in_place(&mut buf[..9], 2), Some(line_len(2)));
+    assert_eq!(&buf[..9], b":0103FC\r\n");
+    // The longest ADU fills the longest line.
+    let mut buf = [0x5Au8; MAX_LINE];
+    assert_eq!(encode_in_place(&mut buf, MAX_ADU), Some(MAX_LINE));
+    assert_eq!(buf.to_vec(), line(&[0x5A; MAX_ADU]));
+}
+
+#[test]
+fn a_line_that_ended_is_kept_until_the_next_colon() {
+    let mut f = Framer::default();
+    let t = Instant::from_micros(5);
+    assert_eq!(f.ended(), None);
+    // A good line: its bytes with the LRC, and when its last byte came.
+    f.extend(t, SEED_004[0].0, |_| {});
+    let mut kept = SEED_004[0].1.to_vec();
+    kept.push(0xF8);
+    assert_eq!(f.ended(), Some((&kept[..], t)));
+    assert!(!f.in_frame());
+    // Noise after it keeps it (and its time moves on); a `:` forgets it.
+    let later = Instant::from_micros(9);
+    f.extend(later, b"\r\n x", |_| {});
+    assert_eq!(f.ended(), Some((&kept[..], later)));
+    f.extend(later, b":", |_| {});
+    assert_eq!(f.ended(), None);
+    // A line with a bad LRC is kept too (its bytes do not sum to 0); any other verdict is not.
+    f.extend(t, b":010302000002F9\r\n", |_| {});
+    assert_eq!(f.ended().map(|(b, _)| lrc(b) != 0), Some(true));
+    for bad in [&b":0103020000002F8\r\n"[..], b":01FE\r\n", b":0103X\r\n", b":0103\r\r"] {
+        f.extend(t, bad, |_| {});
+        assert_eq!(f.ended(), None, "{}", String::from_utf8_lossy(bad));
+    }
+    // Nor after `clear`.
+    f.extend(t, SEED_004[1].0, |_| {});
+    assert!(f.ended().is_some());
+    f.clear();
+    assert_eq!(f.ended(), None);
+}
+
 /// Any ADU the spec allows: an address, a function code and up to 252 data bytes.
 fn adu() -> impl Strategy<Value = Vec<u8>> {
     prop::collection::vec(any::<u8>(), 2..=MAX_ADU)
@@ -123,6 +172,17 @@ fn noise() -> impl Strategy<Value = Vec<u8>> {
 }
 
 proptest! {
+    #[test]
+    fn encode_in_place_is_encode(adu in adu(), junk in any::<u8>()) {
+        let mut buf = vec![junk; MAX_LINE + 3];
+        buf[..adu.len()].copy_from_slice(&adu);
+        let n = encode_in_place(&mut buf, adu.len());
+        prop_assert_eq!(n, Some(line_len(adu.len())));
+        prop_assert_eq!(&buf[..line_len(adu.len())], &line(&adu)[..]);
+        // Nothing after the line is touched.
+        prop_assert!(buf[line_len(adu.len())..].iter().all(|&b| b == junk));
+    }
+
     #[test]
     fn encode_then_decode_gives_the_adu(adu in adu(), lower in any::<bool>()) {
         let mut l = line(&adu);

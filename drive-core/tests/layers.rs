@@ -31,7 +31,21 @@ const ALLOWED: [(&str, &[&str]); 18] = [
     ("maps", &["ident", "motion", "od", "pdu", "state", "units"]),
     (
         "drive",
-        &["controller", "crc", "faults", "ident", "maps", "modes", "motion", "od", "pdu", "rtu", "state", "units"],
+        &[
+            "ascii",
+            "controller",
+            "crc",
+            "faults",
+            "ident",
+            "maps",
+            "modes",
+            "motion",
+            "od",
+            "pdu",
+            "rtu",
+            "state",
+            "units",
+        ],
     ),
     ("store", &["crc", "drive", "faults", "maps", "motion", "od", "state", "units"]),
 ];

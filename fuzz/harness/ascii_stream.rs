@@ -13,44 +13,54 @@ use drive_core::Instant;
 use drive_core::ascii::{DEFAULT_TIMEOUT_MICROS, Framer, MAX_LINE, RxError, encode};
 
 /// The inter-character timeout the harness runs: the spec's default.
-const TIMEOUT: u64 = DEFAULT_TIMEOUT_MICROS;
+pub const TIMEOUT: u64 = DEFAULT_TIMEOUT_MICROS;
 
 /// The stream's timing for [`oracle::chunks`]: silences around the timeout where the RTU
 /// targets have t1.5 and t3.5, characters of 10 bits at 9600 baud, and bytes spaced one at a
 /// time across the timeout.
-const TIMING: Timing = Timing { t15: TIMEOUT, t35: TIMEOUT, char: 1042, step: TIMEOUT / 28 };
+pub const TIMING: Timing = Timing { t15: TIMEOUT, t35: TIMEOUT, char: 1042, step: TIMEOUT / 28 };
 
 /// What a receiver reports for one byte or one timer call.
-type Outcome = Result<Vec<u8>, RxError>;
+pub type Outcome = Result<Vec<u8>, RxError>;
 
 /// The most hex digits between `:` and CR: the ADU of 254 bytes and its LRC.
 const MAX_DIGITS: usize = MAX_LINE - 3;
 
 /// A line receiver written from the spec: it keeps the characters of the line in progress and
-/// decodes them only when CR LF ends it.
-struct Reference {
+/// decodes them only when CR LF ends it. (The slave's harness, `ascii_slave`, frames with it too.)
+#[derive(Default)]
+pub struct Reference {
     /// The characters after `:` of the frame in progress.
     line: Option<Vec<u8>>,
     last: u64,
 }
 
 impl Reference {
+    /// Idle: waiting for a `:`.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
     fn timed_out(&self, t: u64) -> bool {
         self.line.is_some() && t - self.last > TIMEOUT
     }
 
-    fn timer(&mut self, t: u64) -> Option<Outcome> {
+    /// The line is still silent at `t`: a frame in progress times out.
+    pub fn timer(&mut self, t: u64) -> Option<Outcome> {
         self.timed_out(t).then(|| {
             self.line = None;
             Err(RxError::Timeout)
         })
     }
 
-    fn deadline(&self) -> Option<u64> {
+    /// When the frame in progress times out if nothing more comes.
+    pub fn deadline(&self) -> Option<u64> {
         self.line.as_ref().map(|_| self.last + TIMEOUT + 1)
     }
 
-    fn byte(&mut self, t: u64, b: u8) -> Option<Outcome> {
+    /// Byte `b` arrives at `t`: a frame's ADU at its LF, the reason a frame was dropped, or
+    /// nothing.
+    pub fn byte(&mut self, t: u64, b: u8) -> Option<Outcome> {
         let timeout = self.timer(t);
         if b == b':' {
             // A `:` always starts a frame; the one it interrupts is dropped.
@@ -144,7 +154,7 @@ impl Harness {
 }
 
 /// The bytes a chunk sends: a good line for a marked ADU, else the chunk itself.
-fn line_of(bytes: &[u8]) -> Vec<u8> {
+pub fn line_of(bytes: &[u8]) -> Vec<u8> {
     let mut out = [0u8; MAX_LINE];
     match bytes {
         [m @ (0xFE | 0xFF), adu @ ..] => match encode(adu, &mut out) {
@@ -163,7 +173,7 @@ fn line_of(bytes: &[u8]) -> Vec<u8> {
 
 /// One execution.
 pub fn run(data: &[u8]) {
-    let mut h = Harness { framer: Framer::new(TIMEOUT), reference: Reference { line: None, last: 0 }, now: 0 };
+    let mut h = Harness { framer: Framer::new(TIMEOUT), reference: Reference::new(), now: 0 };
     for c in oracle::chunks(data, TIMING) {
         h.advance(h.now + c.delta, c.late);
         let bytes = line_of(c.bytes);

@@ -4,6 +4,7 @@
 //!
 //! Each target is a `run(data)` that panics when the drive disagrees with the oracle.
 
+pub mod ascii_slave;
 pub mod ascii_stream;
 pub mod oracle;
 pub mod pdu_cls9;
@@ -18,7 +19,7 @@ pub mod rtu_stream;
 pub type Run = fn(&[u8]);
 
 /// The targets and their entry points, for the replay.
-pub const TARGETS: [(&str, Run); 8] = [
+pub const TARGETS: [(&str, Run); 9] = [
     ("rtu_stream", rtu_stream::run),
     ("rtu_frame", rtu_frame::run),
     ("pdu_native", pdu_native::run),
@@ -27,4 +28,5 @@ pub const TARGETS: [(&str, Run); 8] = [
     ("pdu_cls9", pdu_cls9::run),
     ("pdu_ec57", pdu_ec57::run),
     ("ascii_stream", ascii_stream::run),
+    ("ascii_slave", ascii_slave::run),
 ];

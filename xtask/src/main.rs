@@ -771,8 +771,9 @@ fn tick_cost() -> Result<(), String> {
 /// `-icount` shift of the `tick_cost` program: an instruction takes 256 virtual ns, a SysTick
 /// count 250 ns, so a count is 250/256 of an instruction.
 const CORE_ICOUNT_SHIFT: u32 = 8;
-/// The G474's receive ring (`firmware/src/board/g474.rs`): two frames of the longest.
-const RX_RING: usize = 2 * drive_core::rtu::MAX_FRAME;
+/// The G474's receive ring (`firmware/src/board/g474.rs`): two requests of the longest (ASCII
+/// lines).
+const RX_RING: usize = 2 * drive_core::ascii::MAX_LINE;
 /// Bytes a second on the line at 115 200 baud, 8N1 (10 bits a byte).
 const BYTES_PER_S_AT_115200: f64 = 11_520.0;
 /// Cycles of one 20 kHz control tick on the 170 MHz Cortex-M4 of the G474.

@@ -23,6 +23,12 @@ pub(crate) const fn has_effect(obj: Obj) -> bool {
             | Obj::MotionCommand
             | Obj::CommandTarget
             | Obj::CommandVelocity
+            | Obj::CommInputs
+            | Obj::SpeedJog
+            | Obj::PositionJog
+            | Obj::TeachPosition
+            | Obj::SerialFormat
+            | Obj::Restart
     ) || is_pvt_command(obj)
 }
 

@@ -26,6 +26,19 @@ const HOMING_METHODS: [u32; 26] = [
 /// switches, enable.
 const INPUT_FUNCTIONS: &[u32] =
     &[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 25, 26, 27, 28, 29];
+/// The values of 0x21F1: baud rate digit 0-5, framing digit 0-5.
+const SERIAL_FORMATS: [u32; 36] = {
+    let mut v = [0u32; 36];
+    let mut i = 0;
+    while i < 36 {
+        #[allow(clippy::indexing_slicing)] // const evaluation: out of bounds is a compile error
+        {
+            v[i] = ((i as u32 / 6) << 4) | (i as u32 % 6);
+        }
+        i += 1;
+    }
+    v
+};
 /// A PVT table index or count.
 const PVT_INDEX: Range = Span(0, 1000);
 /// Full signed 32-bit range.
@@ -609,7 +622,7 @@ objects! {
     /// 5 115200; 51200 reads as 6 and is not written so), digit 1 the framing and parity (0 RTU
     /// 8N1, 1 RTU 8E1, 2 RTU 8O1, 3 ASCII 8N1, 4 ASCII 8E1, 5 ASCII 8O1). Takes effect after
     /// saving and restarting, as the three objects.
-    SerialFormat @ 0x21F1: U16, Rw, Live, Bits(0x00FF), default 0x01, None, "serial format";
+    SerialFormat @ 0x21F1: U16, Rw, Live, Set(&SERIAL_FORMATS), default 0x01, None, "serial format";
     /// Speed coincidence window (our object; seed 004's P□503): an output with function 6 is on
     /// while the speed is within this much of the commanded one (in a position move: while in
     /// position).

@@ -719,6 +719,8 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             (Obj::SystemControl, 2 | 3) if !self.ctl.axis.is_still() || self.storage & STORAGE_SAVING != 0 => {
                 Err(ObjError::Busy)
             }
+            // Their writes (`signals`) are checked as they are made.
+            (obj, v) if signals::is_signal(obj) => self.check_signal(obj, v),
             (obj, _) if is_command(obj) => self.check_motion(obj, value),
             _ => Ok(()),
         }

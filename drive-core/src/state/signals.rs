@@ -170,6 +170,12 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         Ok(out)
     }
 
+    /// Whether `obj` = `value` may be written now, as far as can be told without making its
+    /// writes (each is checked as it is made).
+    pub(crate) fn check_signal(&self, obj: Obj, value: u32) -> Result<(), ObjError> {
+        self.signal_actions(obj, value).map(|_| ())
+    }
+
     /// Writes the signal object `obj` = `value` (in range): its writes all or nothing, then the
     /// bits kept. `undoable`: inside a write whose checkpoint undoes it if refused later.
     pub(crate) fn write_signal(&mut self, obj: Obj, value: u32, undoable: bool) -> Result<(), ObjError> {

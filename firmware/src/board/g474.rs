@@ -76,11 +76,12 @@ const CURRENT_PWM_PERIOD: u32 = TIMER_HZ / 100_000;
 /// Phase current at 100 % reference duty (3.3 V on VREF).
 const FULL_SCALE_MA: u32 = 3000;
 
-/// Receive ring: two frames of the longest (256 bytes), so that frames sent back to back (to
-/// other drives on the bus, broadcasts) are all held while the task serves one of them.
-const RX_BUF: usize = 2 * drive_core::rtu::MAX_FRAME;
-/// Transmit ring: the longest reply whole, so that the task hands it over at once.
-const TX_BUF: usize = drive_core::rtu::MAX_FRAME;
+/// Receive ring: two requests of the longest (an ASCII line, 513 characters; an RTU frame is
+/// 256 bytes), so that requests sent back to back (to other drives on the bus, broadcasts) are
+/// all held while the task serves one of them.
+const RX_BUF: usize = 2 * drive_core::ascii::MAX_LINE;
+/// Transmit ring: the longest reply whole (an ASCII line), so that the task hands it over at once.
+const TX_BUF: usize = drive_core::ascii::MAX_LINE;
 
 /// The RS-485 port.
 pub type Serial = BufferedUart<'static>;

@@ -40,7 +40,7 @@ const TICK_HZ: u32 = 1000;
 
 /// Received bytes, from the RXNE interrupt to the Modbus task: two frames of the longest, as the
 /// board's receive ring.
-static RX: Pipe<CriticalSectionRawMutex, { 2 * drive_core::rtu::MAX_FRAME }> = Pipe::new();
+static RX: Pipe<CriticalSectionRawMutex, { 2 * drive_core::ascii::MAX_LINE }> = Pipe::new();
 
 /// USART1 as the RS-485 port (QEMU's line has no transceiver and no baud timing).
 pub struct Serial(());
