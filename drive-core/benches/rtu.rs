@@ -351,6 +351,48 @@ fn ec57(case: MapCase) -> usize {
     map_reply(case)
 }
 
+fn setup_servo(frame: &'static [u8]) -> MapCase {
+    setup_map(drive_core::maps::Maps::servo(), frame)
+}
+
+// servo: the servo map (seed 004): a read of the actual position 05F2h-05F3h (two registers low
+// word first, in the groups' gear unit) and a write of P□304 (the jog speed, r/min).
+#[library_benchmark]
+#[bench::read_2(args = (&[SLAVE, 0x03, 0x05, 0xF2, 0x00, 0x02]), setup = setup_servo)]
+#[bench::write_1(args = (&[SLAVE, 0x06, 0x01, 0x30, 0x02, 0x58]), setup = setup_servo)]
+fn servo(case: MapCase) -> usize {
+    map_reply(case)
+}
+
+/// The servo map's request `adu` as an ASCII line to a servo drive in ASCII, all but its LF
+/// received; checked to be answered.
+fn setup_servo_ascii(adu: &'static [u8]) -> (Drive<drive_core::maps::Maps>, u8) {
+    let mut params = drive_core::Params::factory();
+    assert!(params.set(drive_core::od::Obj::LineFraming, 1));
+    let boot = || Drive::boot_with_map(drive_core::DriveConfig::default(), drive_core::maps::Maps::servo(), &params, 0);
+    let line = ascii_line(adu);
+    let mut probe = boot();
+    probe.on_rx(T0, &line);
+    probe.on_timer(T0);
+    let reply = probe.take_reply().expect("the drive answers").to_vec();
+    assert_eq!(reply.get(..5), Some(&line[..5]), "not a normal reply: {reply:02X?}");
+    let (&last, head) = line.split_last().expect("line");
+    let mut drive = boot();
+    drive.on_rx(T0, head);
+    (drive, last)
+}
+
+#[library_benchmark]
+#[bench::read_2(args = (&[SLAVE, 0x03, 0x05, 0xF2, 0x00, 0x02]), setup = setup_servo_ascii)]
+#[bench::write_1(args = (&[SLAVE, 0x06, 0x01, 0x30, 0x02, 0x58]), setup = setup_servo_ascii)]
+fn servo_ascii((mut drive, last): (Drive<drive_core::maps::Maps>, u8)) -> usize {
+    let t0 = black_box(T0);
+    drive.on_rx(t0, &[black_box(last)]);
+    drive.on_timer(t0);
+    let reply = black_box(drive.take_reply());
+    reply.map_or(0, <[u8]>::len)
+}
+
 // ---------------------------------------------------------------------------------------------
 // ascii: the native map's read 2 and write 1 in Modbus ASCII.
 
@@ -417,7 +459,7 @@ fn ascii_whole(mut case: WholeCase) -> usize {
 
 library_benchmark_group!(
     name = rtu;
-    benchmarks = drive, drive_whole, crc_floor, rmodbus, jmc, cls9, ec57, ascii, ascii_whole
+    benchmarks = drive, drive_whole, crc_floor, rmodbus, jmc, cls9, ec57, servo, ascii, servo_ascii, ascii_whole
 );
 
 main!(library_benchmark_groups = rtu);

@@ -187,11 +187,14 @@ fn seed_004_lines_through_the_servo_map() {
     let saved = rtu.drive.state().params();
     let mut rig = Rig::new(Drive::boot_with_map(DriveConfig::default(), Maps::servo(), &saved, 0));
     assert_eq!(rig.drive.line_framing(), LineFraming::Ascii);
-    // §6.3's lines. P□512 and P□513 read 0 in this map (the manual's 00B1h and 1F40h are
-    // values of parameters its excerpt does not describe: `seed_004_manual_lines_byte_for_byte`
-    // has them), and refuse writes with 04: 01+86+04 = 8Bh, LRC 75h.
+    // §6.3's lines. P□512 and P□513 (the signal allocation) read 0 from the factory: no
+    // signal on an input (the manual's 00B1h and 1F40h name terminals this drive does not have:
+    // `seed_004_manual_lines_byte_for_byte` has them). The write 0064h puts /START-HOME on IN4
+    // and /POS-START on IN6, and its answer echoes it.
     assert_eq!(rig.exchange(b":010302000002F8\r\n").as_deref(), Some(&b":01030400000000F8\r\n"[..]));
-    assert_eq!(rig.exchange(b":01060200006493\r\n").as_deref(), Some(&b":01860475\r\n"[..]));
+    assert_eq!(rig.exchange(b":01060200006493\r\n").as_deref(), Some(&b":01060200006493\r\n"[..]));
+    assert_eq!(rig.drive.state().read(Obj::InputFunction4), 12);
+    assert_eq!(rig.drive.state().read(Obj::InputFunction6), 16);
     assert_eq!(rig.exchange(b":010302010001F8\r\n").as_deref(), Some(&b":0103020000FA\r\n"[..]));
     // P□600 reads 31h: 01+03+02+00+31 = 37h, LRC C9h.
     assert_eq!(rig.exchange(&line(&[0x01, 0x03, 0x02, 0x58, 0x00, 0x01])).as_deref(), Some(&b":0103020031C9\r\n"[..]));

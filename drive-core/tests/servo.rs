@@ -317,3 +317,26 @@ fn restart_is_requested_at_rest() {
     r.write(0x0541, 1).expect("restart");
     assert_eq!(r.drive.take_system_request(), Some(drive_core::SystemRequest::Restart));
 }
+
+#[test]
+fn signal_allocation_moves_functions_between_inputs() {
+    let mut r = servo();
+    // §6.3's write: P□512 = 0064h, /START-HOME on IN4, /POS-START on IN6.
+    r.write(0x0200, 0x0064).expect("P512");
+    assert_eq!(r.drive.state().read(Obj::InputFunction4), 12);
+    assert_eq!(r.drive.state().read(Obj::InputFunction6), 16);
+    assert_eq!(r.read(0x0200, 1), Ok(vec![0x0064]));
+    // /POS-START moves to IN2 (.1 = 2): IN6 loses it.
+    r.write(0x0200, 0x0024).expect("moved");
+    assert_eq!(r.drive.state().read(Obj::InputFunction6), 0);
+    assert_eq!(r.drive.state().read(Obj::InputFunction2), 16);
+    // Two signals on one input, or a terminal the drive does not have: 03, nothing changed.
+    let before = r.snapshot();
+    assert_eq!(r.write(0x0200, 0x0022), Err(3));
+    assert_eq!(r.write(0x0200, 0x00B1), Err(3));
+    assert_eq!(r.snapshot(), before);
+    // P□513 .3: servo-on from IN1.
+    r.write(0x0201, 0x1000).expect("P513");
+    assert_eq!(r.drive.state().read(Obj::InputFunction1), 20);
+    assert_eq!(r.read(0x0201, 1), Ok(vec![0x1000]));
+}

@@ -12,6 +12,7 @@ pub mod pdu_ec57;
 pub mod pdu_jmc;
 pub mod pdu_layout;
 pub mod pdu_native;
+pub mod pdu_servo;
 pub mod rtu_frame;
 pub mod rtu_stream;
 
@@ -19,7 +20,7 @@ pub mod rtu_stream;
 pub type Run = fn(&[u8]);
 
 /// The targets and their entry points, for the replay.
-pub const TARGETS: [(&str, Run); 9] = [
+pub const TARGETS: [(&str, Run); 10] = [
     ("rtu_stream", rtu_stream::run),
     ("rtu_frame", rtu_frame::run),
     ("pdu_native", pdu_native::run),
@@ -27,6 +28,7 @@ pub const TARGETS: [(&str, Run); 9] = [
     ("pdu_jmc", pdu_jmc::run),
     ("pdu_cls9", pdu_cls9::run),
     ("pdu_ec57", pdu_ec57::run),
+    ("pdu_servo", pdu_servo::run),
     ("ascii_stream", ascii_stream::run),
     ("ascii_slave", ascii_slave::run),
 ];

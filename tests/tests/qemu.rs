@@ -247,11 +247,27 @@ fn every_map_is_served_under_qemu_across_restarts() {
         assert_eq!(window.get(3..5), Some(&[0x03, 0xE8][..]), "the native phase current in the window");
         // Out of the table: the manual's exception 03.
         assert_eq!(ec57(&mut s, &[1, 3, 0x20, 0x03, 7, 0, 1]).get(1..3), Some(&[0x83, 0x03][..]));
-        // Back to the native map through the window, saved (0x2030 = 1).
-        ec57(&mut s, &[1, 6, 0x21, 0x90, 0xFF, 0, 0]);
+        // On to the servo map through the window, saved (0x2030 = 1).
+        ec57(&mut s, &[1, 6, 0x21, 0x90, 0xFF, 0, 4]);
         ec57(&mut s, &[1, 6, 0x20, 0x30, 0, 0, 1]);
         std::thread::sleep(Duration::from_millis(500));
     }
+    restart();
+
+    // Servo (seed 004): P□602, a position data group low word first, the standstill current of
+    // the DS-CLS9 map as the drive's, then back to the native map.
+    on_modbus(&at, async |ctx| {
+        assert_eq!(read(ctx, 0x2190, 1).await, vec![4], "the servo map after the restart");
+        write(ctx, 0x025A, 50).await.expect("P602");
+        assert_eq!(read(ctx, 0x025A, 1).await, vec![50]);
+        let group = [3200, 0, 600, 1, 0, 0, 1, 1];
+        drive_tests::write_many(ctx, 0x0600, &group).await.expect("group 0");
+        assert_eq!(read(ctx, 0x0600, 8).await, group.to_vec());
+        assert_eq!(write(ctx, 0x0607, 3).await, Err(ExceptionCode::IllegalDataValue), "no type 3");
+        assert_eq!(read(ctx, 0x0100, 2).await, vec![0, 0], "a parameter the excerpt does not describe");
+        write(ctx, 0x025A, 0).await.expect("P602 off");
+        switch_to(ctx, 0).await;
+    });
     restart();
 
     on_modbus(&at, async |ctx| {

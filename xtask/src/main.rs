@@ -444,8 +444,12 @@ fn percent(part: u64, whole: u64) -> f64 {
 fn build_qemu() -> Result<PathBuf, String> {
     run(cargo().args(firmware_args("build", &["--no-default-features", "--features", "qemu"])))?;
     let elf = elf_dir().join("firmware-qemu");
-    std::fs::copy(elf_dir().join("firmware"), &elf).map_err(|e| format!("{}: {e}", elf.display()))?;
-    check_boot(&elf)?;
+    // Copied aside under a name of this process's, then renamed: tests boot QEMU from several
+    // processes at once, and a rename never shows another one a half-written file.
+    let part = elf_dir().join(format!("firmware-qemu.{}", std::process::id()));
+    std::fs::copy(elf_dir().join("firmware"), &part).map_err(|e| format!("{}: {e}", part.display()))?;
+    check_boot(&part)?;
+    std::fs::rename(&part, &elf).map_err(|e| format!("{}: {e}", elf.display()))?;
     Ok(elf)
 }
 
@@ -453,7 +457,7 @@ fn build_qemu() -> Result<PathBuf, String> {
 /// on HOST:PORT (port 0: a free one), prints `listening on HOST:PORT` once the drive answers a
 /// read, then runs until QEMU ends (or, with `--exit-on-eof`, until stdin closes).
 fn qemu(args: &[String]) -> Result<(), String> {
-    let usage = "usage: cargo xtask qemu --tcp HOST:PORT [--map native|jmc|cls9|ec57] [--exit-on-eof]";
+    let usage = "usage: cargo xtask qemu --tcp HOST:PORT [--map native|jmc|cls9|ec57|servo] [--exit-on-eof]";
     let endpoint = match args {
         [flag, e, ..] if flag == "--tcp" => e.clone(),
         _ => return Err(usage.into()),
@@ -999,5 +1003,14 @@ fn masters() -> Result<(), String> {
     run(Command::new(&python).arg(script.join("pymodbus_ec57.py")).arg(&sim.1))?;
     drop(sim);
     let sim = start_sim(&["--map", "ec57", "--tcp", "127.0.0.1:0"])?;
-    run(Command::new(&python).arg(script.join("pymodbus_ec57.py")).arg(&sim.1))
+    run(Command::new(&python).arg(script.join("pymodbus_ec57.py")).arg(&sim.1))?;
+    drop(sim);
+    // The servo map, RTU then ASCII (P□600, saved, 0541h restart), over the pseudo-terminal and
+    // over TCP; two cams where its position data groups end, to see the rotor there.
+    let cams = ["--switch", "ext1:pnp:3195:to=3205", "--switch", "ext2:pnp:-1605:to=-1595"];
+    for tcp in [&[][..], &["--tcp", "127.0.0.1:0"][..]] {
+        let sim = start_sim(&[&["--map", "servo"][..], &cams[..], tcp].concat())?;
+        run(Command::new(&python).arg(script.join("pymodbus_servo.py")).arg(&sim.1))?;
+    }
+    Ok(())
 }

@@ -46,9 +46,11 @@ static REFERENCE_MODES: &[Choice] = &[
 
 /// The registers, by address: §6.4's, then ours at their native addresses (the save, the map,
 /// the jog distance, the inputs' and outputs' functions).
-pub static ENTRIES: [Entry; 80] = [
+pub static ENTRIES: [Entry; 82] = [
     Entry::new(0x0130, Obj::JogSpeed, &RPM).narrow(),
     Entry::new(0x01F7, Obj::SpeedWindow, &RPM).narrow(),
+    Entry::new(0x0200, Obj::SignalInputs1, &Scale::One),
+    Entry::new(0x0201, Obj::SignalInputs2, &Scale::One),
     Entry::new(0x0258, Obj::SerialFormat, &Scale::One),
     Entry::new(0x0259, Obj::NodeId, &Scale::One),
     Entry::new(0x025A, Obj::CommTimeout, &Scale::One),
@@ -136,10 +138,11 @@ pub const EXCEPTIONS: Exceptions = Exceptions::MODBUS;
 /// The registers of §6.4 the drive has nothing for (read 0, writes refused with 04): the
 /// parameters this excerpt does not describe, the analog zero offsets, the analog torque
 /// command, the inertia ratio and the multi-turn clear.
-static RESERVED: [(u16, u16); 8] = [
+static RESERVED: [(u16, u16); 9] = [
     (0x0000, 0x012F),
     (0x0131, 0x01F6),
-    (0x01F8, 0x0257),
+    (0x01F8, 0x01FF),
+    (0x0202, 0x0257),
     (0x025B, 0x03FF),
     (0x0410, 0x0413),
     (0x042A, 0x042B),
@@ -181,7 +184,7 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
     notes: &[
         "Chosen with 0x2190 = 4, saved (0x200F = 2), from the next power-up; `hal-sim --map servo` for one run. 0x2190 = 0 and a save switch back to the native map. The map powers up with the servo off (the power state machine switch on disabled) until servo-on: 0451h bit 0, 0528h/0529h bit 15, or an input with the enable function.",
         "Framing: P□600 (0258h, the drive's 0x21F1) chooses Modbus RTU or ASCII with the parity and the baud rate; like P□601 it takes effect after a save (0x200F = 2) and a restart (0541h = 1 or a power cycle). ASCII lines are `:`, hex, LRC, CR LF, with the Modbus serial line's 1 s inter-character timeout; a line with a wrong LRC, a wrong character or an odd number of digits is dropped (§6.3: a transmission error is not answered). Broadcast (address 0) is carried out and never answered. A read takes up to 125 registers (the manual's 20 and more); a write up to 123.",
-        "Parameters: P□abc is register abc, decimal (P□304 is 0130h, P□600 0258h): the parameter area 0000h-03FFh holds P□000-P□1023. §6.3's exception example writes Pn100 at 0002h, which this numbering does not follow; its read of 0200h-0201h (P□512, P□513) shows values of parameters this excerpt does not describe. The parameters it describes act: P□304 (jog speed, r/min), P□503 (speed coincidence window, r/min, factory 10: an output with function 6 is /V-CMP, /COIN in a position move), P□600 (serial format: digit 0 the baud rate 0 4800, 1 9600, 2 19200, 3 38400, 4 57600, 5 115200; digit 1 0-2 RTU 8N1/8E1/8O1, 3-5 ASCII 8N1/8E1/8O1; 7-bit framings are not offered: the drive's line is 8 data bits), P□601 (address 1-127, one axis: A), P□602 (communication timeout in 100 ms, 0 off: the moving axis decelerates to rest, alarm 30 is recorded and current, moves are refused until 0521h = 1). The others read 0 and refuse writes with 04.",
+        "Parameters: P□abc is register abc, decimal (P□304 is 0130h, P□600 0258h): the parameter area 0000h-03FFh holds P□000-P□1023. §6.3's exception example writes Pn100 at 0002h, which this numbering does not follow. The parameters it describes act: P□304 (jog speed, r/min), P□503 (speed coincidence window, r/min, factory 10: an output with function 6 is /V-CMP, /COIN in a position move), P□600 (serial format: digit 0 the baud rate 0 4800, 1 9600, 2 19200, 3 38400, 4 57600, 5 115200; digit 1 0-2 RTU 8N1/8E1/8O1, 3-5 ASCII 8N1/8E1/8O1; 7-bit framings are not offered: the drive's line is 8 data bits), P□601 (address 1-127, one axis: A), P□512 and P□513 (the signal allocation §6.4 *1 names in \"P□512.1 = 0\": one hexadecimal digit a signal, 0 not from an input, so that 0451h's bit acts, 1-7 the input IN1-IN7 that carries it; a write gives the input that function and takes it from the others; digits 8-F, which would name terminals the drive does not have, and two signals on one input are refused with 03 — so §6.3's read example, 0200h-0201h = 00B1h 1F40h, shows a state this drive cannot be in, and its write 0200h = 0064h is /START-HOME on IN4 and /POS-START on IN6), P□602 (communication timeout in 100 ms, 0 off: the moving axis decelerates to rest, alarm 30 is recorded and current, moves are refused until 0521h = 1). The others read 0 and refuse writes with 04.",
         "Parameters are kept by a save (0x200F = 2) as in every map, not at each write: a flash write per register would wear the store and stall the bus side while the motor runs.",
         "32-bit values (two registers) are low word first (§6.4: 0600h target low, 0601h high) and written whole with 0x10 (one half alone is refused with 02); the drive's own registers at their native addresses take the same order.",
         "Alarm codes (0400h-0409h, newest first, and 044Ah): the drive's: 10 over-current, 11 phase loss, 13 under-voltage, 14 over-voltage, 15 over-temperature, 25 position error, 26 overload, 27 encoder lost, 30 communication timeout. 0520h = 1 clears the history, 0521h = 1 the current alarms (a cause still present latches again), 0522h = 1 as 0521h (the encoder's alarms are the drive's); 0523h (clear the multi-turn data) is refused with 04: the multi-turn encoder keeps its own turns. 0457h is the run state: 1 servo off or an alarm, 2 servo on at rest, 3 moving.",
@@ -195,6 +198,11 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
     remarks: &[
         (0x0130, "P□304 jog speed, r/min."),
         (0x01F7, "P□503 speed coincidence window, r/min."),
+        (
+            0x0200,
+            "P□512 signal allocation: .0 /START-HOME, .1 /POS-START, .2 /POS-STEP, .3 /ALM-RST; each digit 0 (from 0451h) or 1-7 (IN1-IN7).",
+        ),
+        (0x0201, "P□513 signal allocation: .0 /POS0, .1 /POS1, .2 /POS2, .3 /SON, as P□512."),
         (0x0258, "P□600 serial format (see the notes)."),
         (0x0259, "P□601 address, from the next power-up (save first)."),
         (0x025A, "P□602 communication timeout, 100 ms, 0 off."),

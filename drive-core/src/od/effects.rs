@@ -29,6 +29,8 @@ pub(crate) const fn has_effect(obj: Obj) -> bool {
             | Obj::TeachPosition
             | Obj::SerialFormat
             | Obj::Restart
+            | Obj::SignalInputs1
+            | Obj::SignalInputs2
     ) || is_pvt_command(obj)
 }
 

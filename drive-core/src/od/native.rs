@@ -627,6 +627,16 @@ objects! {
     /// while the speed is within this much of the commanded one (in a position move: while in
     /// position).
     SpeedWindow @ 0x21F2: U32, Rw, Rom, Span(0, 300_000), default 33, Pps, "speed coincidence window";
+    /// Signal inputs 1 (our object; seed 004's P□512), a view of the inputs' functions as four
+    /// hexadecimal digits, one a signal: .0 /START-HOME (function 12), .1 /POS-START (16), .2
+    /// /POS-STEP (19), .3 /ALM-RST (13); a digit 1-7 is the input IN1-IN7 that carries it, 0
+    /// none (the communication IO's bit acts). A write gives each named input that function
+    /// (whatever it had) and takes it from every other input; two signals on one input are
+    /// refused.
+    SignalInputs1 @ 0x21F4: U16, Rw, Live, Bits(0x7777), default 0, None, "signal inputs 1";
+    /// Signal inputs 2 (our object; seed 004's P□513), as 0x21F4: .0 /POS0 (function 25), .1
+    /// /POS1 (26), .2 /POS2 (27), .3 /SON (the enable, 20).
+    SignalInputs2 @ 0x21F5: U16, Rw, Live, Bits(0x7777), default 0, None, "signal inputs 2";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake

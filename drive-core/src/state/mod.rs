@@ -629,6 +629,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             Obj::EncoderSignals | Obj::EncoderAngle | Obj::EncoderTurns => self.encoder_live(obj),
             Obj::ActualPosition => self.ctl.axis.setpoint().whole.wrapping_sub(self.ctl.servo.following) as u32,
             Obj::SerialFormat => self.serial_format(),
+            Obj::SignalInputs1 | Obj::SignalInputs2 => self.signal_inputs(obj),
             // The ten entries are consecutive objects.
             h if (Obj::FaultHistory0 as usize..=Obj::FaultHistory9 as usize).contains(&(h as usize)) => {
                 self.history(h as usize - Obj::FaultHistory0 as usize)

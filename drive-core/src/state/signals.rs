@@ -44,6 +44,9 @@ pub const JOG_MINUS: u16 = 1 << 1;
 /// Input function 20 (enable), 13 (alarm clear), 12 (home), 16 and 19 (program start, step).
 const INPUT_ENABLE: u32 = 20;
 
+/// The input functions of 0x21F4's and 0x21F5's digits.
+const SIGNAL_FUNCTIONS: [[u32; 4]; 2] = [[12, 16, 19, 13], [25, 26, 27, INPUT_ENABLE]];
+
 /// The baud rates of the serial format's digit 0 (0x21F1).
 pub const SERIAL_BAUDS: [u32; 7] = [4800, 9600, 19_200, 38_400, 57_600, 115_200, 51_200];
 
@@ -51,7 +54,14 @@ pub const SERIAL_BAUDS: [u32; 7] = [4800, 9600, 19_200, 38_400, 57_600, 115_200,
 pub(crate) const fn is_signal(obj: Obj) -> bool {
     matches!(
         obj,
-        Obj::CommInputs | Obj::SpeedJog | Obj::PositionJog | Obj::TeachPosition | Obj::SerialFormat | Obj::Restart
+        Obj::CommInputs
+            | Obj::SpeedJog
+            | Obj::PositionJog
+            | Obj::TeachPosition
+            | Obj::SerialFormat
+            | Obj::Restart
+            | Obj::SignalInputs1
+            | Obj::SignalInputs2
     )
 }
 
@@ -162,6 +172,30 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
                 push(&mut out, Obj::Parity, format % 3)?;
                 push(&mut out, Obj::LineFraming, format / 3)?;
             }
+            Obj::SignalInputs1 | Obj::SignalInputs2 => {
+                let functions =
+                    SIGNAL_FUNCTIONS.get(usize::from(obj == Obj::SignalInputs2)).copied().unwrap_or_default();
+                let mut now = INPUT_FUNCTION_OBJECTS.map(|o| self.param(o));
+                let mut named = 0u8;
+                for (k, &f) in functions.iter().enumerate() {
+                    let digit = value >> (4 * k) & 0xF;
+                    for slot in now.iter_mut().filter(|s| **s == f) {
+                        *slot = 0;
+                    }
+                    if let Some(input) = (digit as usize).checked_sub(1) {
+                        refuse(input < 7 && named & (1 << input) == 0, ObjError::OutOfRange)?;
+                        named |= 1 << input;
+                        if let Some(slot) = now.get_mut(input) {
+                            *slot = f;
+                        }
+                    }
+                }
+                for (&o, &f) in INPUT_FUNCTION_OBJECTS.iter().zip(&now) {
+                    if self.param(o) != f {
+                        push(&mut out, o, f)?;
+                    }
+                }
+            }
             Obj::Restart => {
                 refuse(self.ctl.axis.is_still() && self.storage & super::STORAGE_SAVING == 0, ObjError::Busy)?;
             }
@@ -208,7 +242,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             self.request = Some(super::SystemRequest::Restart);
             return Ok(());
         }
-        if !matches!(obj, Obj::SerialFormat) {
+        if !matches!(obj, Obj::SerialFormat | Obj::SignalInputs1 | Obj::SignalInputs2) {
             self.set_param(obj, value);
         }
         if obj == Obj::CommInputs {
@@ -253,6 +287,14 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             self.signals.disable_at_rest = false;
             let _ = self.write_undoable(Obj::Enable.def(), 0);
         }
+    }
+
+    /// 0x21F4 or 0x21F5 now: for each digit's signal, the first input that carries it.
+    pub(crate) fn signal_inputs(&self, obj: Obj) -> u32 {
+        let functions = SIGNAL_FUNCTIONS.get(usize::from(obj == Obj::SignalInputs2)).copied().unwrap_or_default();
+        let digit =
+            |f: u32| INPUT_FUNCTION_OBJECTS.iter().position(|&o| self.param(o) == f).map_or(0, |k| k as u32 + 1);
+        functions.iter().enumerate().fold(0, |v, (k, &f)| v | digit(f) << (4 * k))
     }
 
     /// The position data group the communication IO's POS0-2 select.
