@@ -23,7 +23,16 @@ pub(crate) const fn has_effect(obj: Obj) -> bool {
             | Obj::MotionCommand
             | Obj::CommandTarget
             | Obj::CommandVelocity
-            | Obj::CommInputs
+    ) || is_pvt_command(obj)
+        || is_signal(obj)
+}
+
+/// Whether `obj` is one of the signal and view objects whose write is writes of other objects
+/// (`state::signals`).
+pub(crate) const fn is_signal(obj: Obj) -> bool {
+    matches!(
+        obj,
+        Obj::CommInputs
             | Obj::SpeedJog
             | Obj::PositionJog
             | Obj::TeachPosition
@@ -31,7 +40,7 @@ pub(crate) const fn has_effect(obj: Obj) -> bool {
             | Obj::Restart
             | Obj::SignalInputs1
             | Obj::SignalInputs2
-    ) || is_pvt_command(obj)
+    )
 }
 
 /// Whether `obj` is one of the PVT and group objects whose write does more than store.

@@ -9,7 +9,7 @@ pub mod doc;
 mod effects;
 pub mod native;
 
-pub(crate) use effects::{has_effect, is_command, is_pvt_command};
+pub(crate) use effects::{has_effect, is_command, is_pvt_command, is_signal};
 pub use native::{OBJECTS, Obj};
 
 /// How an object's value is encoded in registers.

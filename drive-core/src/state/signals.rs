@@ -50,20 +50,7 @@ const SIGNAL_FUNCTIONS: [[u32; 4]; 2] = [[12, 16, 19, 13], [25, 26, 27, INPUT_EN
 /// The baud rates of the serial format's digit 0 (0x21F1).
 pub const SERIAL_BAUDS: [u32; 7] = [4800, 9600, 19_200, 38_400, 57_600, 115_200, 51_200];
 
-/// Whether a write of `obj` is one of this module's.
-pub(crate) const fn is_signal(obj: Obj) -> bool {
-    matches!(
-        obj,
-        Obj::CommInputs
-            | Obj::SpeedJog
-            | Obj::PositionJog
-            | Obj::TeachPosition
-            | Obj::SerialFormat
-            | Obj::Restart
-            | Obj::SignalInputs1
-            | Obj::SignalInputs2
-    )
-}
+pub(crate) use crate::od::is_signal;
 
 /// What the signals left to do in time.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
