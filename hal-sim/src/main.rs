@@ -101,7 +101,7 @@ struct Args {
     #[arg(long, value_name = "SPEC", value_parser = hal_sim::pulses::Train::parse)]
     pulses: Option<hal_sim::pulses::Train>,
     /// The register map to answer with for this run, instead of the saved 0x2190: `native`
-    /// (seed 000), `jmc` (seed 001), `cls9` (seed 002) or `ec57` (seed 003).
+    /// (seed 000), `jmc` (seed 001), `cls9` (seed 002), `ec57` (seed 003) or `servo` (seed 004).
     #[arg(long, value_name = "NAME", value_parser = parse_map)]
     map: Option<u8>,
     /// Simulated seconds a wall-clock second while masters talk (1: real time): long moves of
