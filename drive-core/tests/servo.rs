@@ -340,3 +340,50 @@ fn signal_allocation_moves_functions_between_inputs() {
     assert_eq!(r.drive.state().read(Obj::InputFunction1), 20);
     assert_eq!(r.read(0x0201, 1), Ok(vec![0x1000]));
 }
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+
+    /// r/min and 10 r/min/s become the nearest microsteps a second (squared) at every
+    /// resolution and read back as written; a position in the groups' unit becomes the nearest
+    /// microstep through the gear and reads back as written (a gear of at least one microstep a
+    /// unit).
+    #[test]
+    fn units_round_trip(
+        k in 0usize..9,
+        rpm in 45u16..=6000,
+        accel in 1u16..=60_000,
+        num in 1u16..=1000,
+        extra in 0u16..=1000,
+        position in -1_000_000i32..=1_000_000,
+    ) {
+        let microsteps = [0u16, 2, 4, 8, 16, 32, 64, 128, 256][k];
+        let per_rev = 200 * i64::from(microsteps.max(1));
+        let mut r = servo();
+        proptest::prop_assert_eq!(r.write(0x600C, microsteps), Ok(()));
+        let pps = (i64::from(rpm) * per_rev + 30) / 60;
+        if (150..=300_000).contains(&pps) {
+            proptest::prop_assert_eq!(r.write(0x0130, rpm), Ok(()));
+            proptest::prop_assert_eq!(i64::from(r.drive.state().read(Obj::JogSpeed)), pps);
+            proptest::prop_assert_eq!(r.read(0x0130, 1), Ok(vec![rpm]));
+        } else {
+            let before = r.drive.state().read(Obj::JogSpeed);
+            proptest::prop_assert_eq!(r.write(0x0130, rpm), Err(3));
+            proptest::prop_assert_eq!(r.drive.state().read(Obj::JogSpeed), before);
+        }
+        let pps2 = (i64::from(accel) * per_rev + 3) / 6;
+        if pps2 >= 151 {
+            proptest::prop_assert_eq!(r.write(0x05F5, accel), Ok(()));
+            proptest::prop_assert_eq!(i64::from(r.drive.state().read(Obj::PpAccel)), pps2);
+            proptest::prop_assert_eq!(r.read(0x05F5, 1), Ok(vec![accel]));
+        }
+        let den = num.saturating_sub(extra).max(1);
+        proptest::prop_assert_eq!(r.write(0x05F8, num), Ok(()));
+        proptest::prop_assert_eq!(r.write(0x05F9, den), Ok(()));
+        let steps = i64::from(position) * i64::from(num);
+        let want = if steps >= 0 { (steps + i64::from(den) / 2) / i64::from(den) } else { (steps - i64::from(den) / 2) / i64::from(den) };
+        proptest::prop_assert_eq!(r.write32(0x05FD, position), Ok(()));
+        proptest::prop_assert_eq!(r.position(), want);
+        proptest::prop_assert_eq!(r.read32(0x05FD), position);
+    }
+}
