@@ -15,13 +15,19 @@ def check(name, ok, detail=""):
     print(f"{'ok  ' if ok else 'FAIL'} {name} {detail}")
 
 
-def connect(endpoint):
-    """An RTU client of the drive at `endpoint`; exits with 2 if it cannot connect."""
-    if ":" in endpoint and not endpoint.startswith("/"):
+def is_tcp(endpoint):
+    """True for HOST:PORT, false for a pseudo-terminal's path."""
+    return ":" in endpoint and not endpoint.startswith("/")
+
+
+def connect(endpoint, framer=FramerType.RTU):
+    """A client of the drive at `endpoint` with pymodbus's RTU framer (or `framer`: ASCII, over
+    the pseudo-terminal or TCP alike); exits with 2 if it cannot connect."""
+    if is_tcp(endpoint):
         host, port = endpoint.rsplit(":", 1)
-        client = ModbusTcpClient(host, port=int(port), framer=FramerType.RTU, timeout=2)
+        client = ModbusTcpClient(host, port=int(port), framer=framer, timeout=2)
     else:
-        client = ModbusSerialClient(endpoint, framer=FramerType.RTU, baudrate=9600, timeout=2)
+        client = ModbusSerialClient(endpoint, framer=framer, baudrate=9600, timeout=2)
     if not client.connect():
         print(f"cannot connect to {endpoint}")
         sys.exit(2)

@@ -145,7 +145,7 @@ before = read(301, 8)
 check("0102 does not exist (02)", write(102, 1) == 2)
 check("a half of 0313 alone (02)", write(313, 1) == 2)
 check("resolution 300 (03)", write32(242, 300) == 3)
-check("command 19 (03)", command(19) == 3)
+check("command 20 (03)", command(20) == 3)
 check("state unchanged", read(301, 8) == before and read32(104) == 3200)
 
 # Homing (12): the home cam between 40 and 44 full steps (640-704 pulses); inputs: home EXT1,
@@ -166,7 +166,7 @@ for direction, name in [(0, "clockwise"), (1, "counter-clockwise")]:
 
 # Inputs 0400-0416: IN4 jogs + and IN5 stops, given by their pseudo-inputs 0413 and 0414.
 check("0403 = 4, 0404 = 6", write(403, 4) == 0 and write(404, 6) == 0)
-check("0400 = 19 (no such function) refused (03)", write(400, 19) == 3 and read(400) == [0])
+check("0400 = 23 (no such function) refused (03)", write(400, 23) == 3 and read(400) == [0])
 check("0413 = 1: IN4 jogs +", write(413, 1) == 0 and speed_after(0.3) == 200)
 check("0414 = 1: IN5 stops", write(414, 1) == 0 and settle(3) is not None)
 check("0410-0416 read back", read(410, 7) == [0, 0, 0, 1, 1, 0, 0], read(410, 7))
