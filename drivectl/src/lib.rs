@@ -90,11 +90,18 @@ impl Drive {
 
     /// The register named (or at) `key`.
     pub fn register(&self, key: &str) -> Result<Register, Error> {
-        self.dict.find(key).cloned().ok_or_else(|| {
-            Error::Usage(format!(
+        self.dict.find(key).cloned().ok_or_else(|| match self.dict.reserved_at(key) {
+            Some(r) => Error::Usage(format!(
+                "{key} is reserved in the {} map (0x{:04X}-0x{:04X}: {}): the drive has nothing there, it reads 0 and refuses writes",
+                self.dict.map.name(),
+                r.first,
+                r.last,
+                r.about.trim_end_matches('.')
+            )),
+            None => Error::Usage(format!(
                 "the {} map has no register {key:?} (`drivectl list` names them)",
                 self.dict.map.name()
-            ))
+            )),
         })
     }
 
@@ -131,14 +138,26 @@ impl Drive {
             ))
         })?;
         self.link.write(r.at, &words).await?;
-        if r.obj == Obj::MapWordOrder {
+        if r.obj == Some(Obj::MapWordOrder) {
             // The pairs after it are in the new order.
             self.low_first = self.dict.low_first(v as u16);
         }
         Ok(())
     }
 
-    /// Writes `v` to object `obj`'s register.
+    /// Writes the drive's value `v` to object `obj` (a command: a save, a motion command), at
+    /// the register that holds it as the drive does ([`Dictionary::plain`]).
+    async fn command(&mut self, obj: Obj, what: &str, v: i64) -> Result<(), Error> {
+        let r = self.dict.plain(obj).ok_or_else(|| {
+            Error::Usage(format!(
+                "the {} map has no register for {what}: switch the drive to the native map (register-map = 0, save, restart)",
+                self.dict.map.name()
+            ))
+        })?;
+        self.set(&r, v).await
+    }
+
+    /// Writes `v` to object `obj`'s register, in the map's unit.
     async fn set_obj(&mut self, obj: Obj, what: &str, v: i64) -> Result<(), Error> {
         let r = self.needs(obj, what)?;
         self.set(&r, v).await
@@ -154,19 +173,33 @@ impl Drive {
     }
 
     /// Every saved setting (writable, kept once saved) and its value.
+    ///
+    /// The raw words of a program window (seed 004's position data groups) are read in runs
+    /// of up to 125 registers, as the window serves them; every other register alone, as its
+    /// map may not serve a read across entries.
     pub async fn dump(&mut self) -> Result<Settings, Error> {
         let mut values = BTreeMap::new();
-        for r in self.dict.registers.clone().iter().filter(|r| r.saved) {
-            if let Value::Number(v) = self.get(r).await? {
-                values.insert(r.name.clone(), v);
+        let saved: Vec<Register> = self.dict.registers.iter().filter(|r| r.saved && r.readable).cloned().collect();
+        for run in runs(&saved, 125) {
+            let Some(first) = run.first() else { continue };
+            let words = run.iter().map(|r| r.words).sum();
+            let read = self.link.read(first.at, words).await?;
+            let mut at = 0;
+            for r in run {
+                let w = read.get(at..at + usize::from(r.words)).unwrap_or_default();
+                at += usize::from(r.words);
+                if let Value::Number(v) = decode(r, w, self.low_first) {
+                    values.insert(r.name.clone(), v);
+                }
             }
         }
         Ok(Settings { map: self.dict.map.name().to_string(), settings: values })
     }
 
-    /// Writes every value of `settings` (for this drive's map), in the map's register order so
-    /// that a setting others depend on (the microstep resolution) comes first. Returns how many
-    /// were written; stops at the first refusal, naming it.
+    /// Writes every value of `settings` (for this drive's map): the microstep resolution first,
+    /// which the speeds and accelerations of a map in revolutions are scaled by, then the others
+    /// in the map's register order (a program window's raw words in runs of up to 123 registers).
+    /// Returns how many were written; stops at the first refusal, naming it.
     pub async fn load(&mut self, settings: &Settings) -> Result<usize, Error> {
         if settings.map != self.dict.map.name() {
             return Err(Error::Usage(format!(
@@ -181,25 +214,54 @@ impl Drive {
                 return Err(Error::Usage(format!("{name} is not a saved setting")));
             }
         }
-        let mut n = 0;
-        for r in self.dict.registers.clone().iter() {
-            if let Some(&v) = settings.settings.get(&r.name) {
-                self.set(r, v).await.map_err(|e| Error::Usage(format!("{} = {v}: {e}", r.name)))?;
-                n += 1;
+        let mut order: Vec<Register> =
+            self.dict.registers.iter().filter(|r| settings.settings.contains_key(&r.name)).cloned().collect();
+        // Stable: the map's order otherwise (seed 004 puts 0x600C after its r/min registers).
+        order.sort_by_key(|r| r.obj != Some(Obj::Microsteps));
+        let value = |r: &Register| settings.settings.get(&r.name).copied().unwrap_or(0);
+        for run in runs(&order, 123) {
+            match run {
+                [] => {}
+                [r] => {
+                    let v = value(r);
+                    self.set(r, v).await.map_err(|e| Error::Usage(format!("{} = {v}: {e}", r.name)))?;
+                }
+                [first, .., last] => {
+                    let mut words = Vec::new();
+                    for r in run {
+                        let v = value(r);
+                        words.extend(
+                            encode(r, v, self.low_first)
+                                .ok_or_else(|| Error::Usage(format!("{v} does not fit {}", r.name)))?,
+                        );
+                    }
+                    match self.link.write(first.at, &words).await {
+                        Ok(()) => {}
+                        // All or nothing: nothing was written. One by one, the refusal names
+                        // its register.
+                        Err(Error::Refused { .. }) => {
+                            for r in run {
+                                let v = value(r);
+                                self.set(r, v).await.map_err(|e| Error::Usage(format!("{} = {v}: {e}", r.name)))?;
+                            }
+                        }
+                        Err(e) => return Err(Error::Usage(format!("{} to {}: {e}", first.name, last.name))),
+                    }
+                }
             }
         }
-        Ok(n)
+        Ok(order.len())
     }
 
     /// Saves the settings to the drive's flash (0x200F = 2) and waits for the save to end.
     pub async fn save(&mut self) -> Result<(), Error> {
-        self.set_obj(Obj::SystemControl, "system control", 2).await?;
+        self.command(Obj::SystemControl, "system control", 2).await?;
         self.storage_done().await
     }
 
     /// Restores the factory settings and saves them (0x200F = 3).
     pub async fn factory_reset(&mut self) -> Result<(), Error> {
-        self.set_obj(Obj::SystemControl, "system control", 3).await?;
+        self.command(Obj::SystemControl, "system control", 3).await?;
         self.storage_done().await
     }
 
@@ -226,7 +288,7 @@ impl Drive {
             self.set_obj(Obj::CommandSpeed, "the run speed", s).await?;
         }
         self.set_obj(Obj::CommandTarget, "the run target", target).await?;
-        self.set_obj(Obj::MotionCommand, "motion commands", if relative { 2 } else { 1 }).await
+        self.command(Obj::MotionCommand, "motion commands", if relative { 2 } else { 1 }).await
     }
 
     /// Jogs forward or backward until a stop, at `speed` if given.
@@ -234,12 +296,12 @@ impl Drive {
         if let Some(s) = speed {
             self.set_obj(Obj::JogSpeed, "the jog speed", s).await?;
         }
-        self.set_obj(Obj::MotionCommand, "motion commands", if forward { 4 } else { 5 }).await
+        self.command(Obj::MotionCommand, "motion commands", if forward { 4 } else { 5 }).await
     }
 
     /// Stops at the deceleration, or at once (`quick`: the emergency deceleration).
     pub async fn stop(&mut self, quick: bool) -> Result<(), Error> {
-        self.set_obj(Obj::MotionCommand, "motion commands", if quick { 7 } else { 6 }).await
+        self.command(Obj::MotionCommand, "motion commands", if quick { 7 } else { 6 }).await
     }
 
     /// Starts the homing (method `method` if given).
@@ -247,17 +309,21 @@ impl Drive {
         if let Some(m) = method {
             self.set_obj(Obj::HomingMethod, "the homing method", m).await?;
         }
-        self.set_obj(Obj::HomingControl, "homing", 1).await
+        self.command(Obj::HomingControl, "homing", 1).await
     }
 
     /// Energises (`true`) or frees the motor.
     pub async fn enable(&mut self, on: bool) -> Result<(), Error> {
-        self.set_obj(Obj::Enable, "the motor enable", i64::from(on)).await
+        self.command(Obj::Enable, "the motor enable", i64::from(on)).await
     }
 
-    /// Clears the latched alarms.
+    /// Clears the latched alarms: the motion command 13, or where the map has none (seed 004)
+    /// the system control's 4.
     pub async fn clear(&mut self) -> Result<(), Error> {
-        self.set_obj(Obj::MotionCommand, "motion commands", 13).await
+        if self.dict.plain(Obj::MotionCommand).is_none() && self.dict.plain(Obj::SystemControl).is_some() {
+            return self.command(Obj::SystemControl, "system control", 4).await;
+        }
+        self.command(Obj::MotionCommand, "motion commands", 13).await
     }
 
     /// Waits until the axis stands (run state 0x21AE is not 3), up to `limit`; the position.
@@ -289,10 +355,12 @@ impl Drive {
         }
     }
 
-    /// The status screen: each of [`STATUS`] the map has, with its value and unit.
+    /// The status screen: each of [`STATUS`] the map has, with its value and unit (the actual
+    /// position where the map has no position: seed 004).
     pub async fn status(&mut self) -> Result<Vec<(Register, Value)>, Error> {
         let mut out = Vec::new();
-        for obj in STATUS {
+        let position = if self.dict.of_object(Obj::Position).is_some() { Obj::Position } else { Obj::ActualPosition };
+        for obj in STATUS.map(|o| if o == Obj::Position { position } else { o }) {
             if let Some(r) = self.dict.of_object(obj).filter(|r| r.readable).cloned() {
                 let v = self.get(&r).await?;
                 out.push((r, v));
@@ -300,6 +368,31 @@ impl Drive {
         }
         Ok(out)
     }
+}
+
+/// `registers` in runs a request can carry: the raw words of a program window one after the
+/// other, up to `most` registers; any other register alone.
+fn runs(registers: &[Register], most: u16) -> Vec<&[Register]> {
+    let mut out = Vec::new();
+    let mut rest = registers;
+    while let [first, ..] = rest {
+        let mut n = 1;
+        let mut words = first.words;
+        while let Some(next) = rest.get(n)
+            && first.obj.is_none()
+            && next.obj.is_none()
+            && next.at.sub.is_none()
+            && next.at.register == first.at.register + words
+            && words + next.words <= most
+        {
+            words += next.words;
+            n += 1;
+        }
+        let (run, after) = rest.split_at(n);
+        out.push(run);
+        rest = after;
+    }
+    out
 }
 
 /// The objects the status screen shows, where the map has them.

@@ -1,6 +1,10 @@
 //! The wire to one drive: tokio-modbus's RTU master over a serial port or the simulator's TCP
-//! endpoint (raw RTU frames), and for seed 003's sub-indexed requests, which no standard master
-//! frames, a small RTU exchange of its own over the same kind of stream.
+//! endpoint (raw RTU frames), and requests framed here where tokio-modbus has no master for them:
+//! seed 003's sub-indexed requests, which no standard master frames, and Modbus ASCII lines
+//! (tokio-modbus has no ASCII client). Those share one path above the framing: the request's PDU
+//! is built once ([`Link::read`], [`Link::write`], [`Link::identify`]) and [`Link::exchange`]
+//! frames it as RTU (CRC, a reply ended by t3.5 of silence) or ASCII (`:`, hex, LRC, CR LF, a
+//! reply ended by its LF), then checks the reply's address and function and maps exceptions.
 
 use std::fmt;
 use std::time::Duration;
@@ -15,7 +19,7 @@ use crate::dict::{Address, Map};
 /// Where the bus is.
 #[derive(Clone, Debug)]
 pub enum Target {
-    /// The simulator's TCP endpoint (`HOST:PORT`), raw RTU frames.
+    /// The simulator's TCP endpoint (`HOST:PORT`), raw frames (RTU, or ASCII lines).
     Tcp(String),
     /// A serial port at a baud rate (8N1).
     Serial {
@@ -24,6 +28,16 @@ pub enum Target {
         /// Bits a second.
         baud: u32,
     },
+}
+
+/// How frames are delimited on the line (the drive's 0x2192 at its power-up).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Framing {
+    /// Modbus RTU: binary, a CRC, a frame ended by a silence (the factory's).
+    #[default]
+    Rtu,
+    /// Modbus ASCII: a line of `:`, two hex digits a byte, the LRC, CR LF.
+    Ascii,
 }
 
 /// Why a request failed.
@@ -93,8 +107,9 @@ impl<T: AsyncRead + AsyncWrite + Unpin + Send> Stream for T {}
 enum Io {
     /// tokio-modbus's RTU master.
     Modbus(Context),
-    /// Our own exchange of raw frames (seed 003's sub-indexed requests).
-    Raw(Box<dyn Stream>),
+    /// Our own frames in this framing (seed 003's sub-indexed requests in RTU; every request in
+    /// ASCII).
+    Raw(Box<dyn Stream>, Framing),
 }
 
 /// The identification strings of function 0x2B / 0x0E, objects 0-6.
@@ -208,22 +223,37 @@ async fn answered<T>(
 }
 
 impl Link {
-    /// Connects to slave `slave` on `target`, answering with `map` (or, if `None`, the map its
-    /// identification names).
+    /// Connects to slave `slave` on `target` in RTU framing, answering with `map` (or, if
+    /// `None`, the map its identification names).
     pub async fn connect(target: Target, slave: u8, map: Option<Map>, limit: Duration) -> Result<Self, Error> {
+        Self::connect_with(target, Framing::Rtu, slave, map, limit).await
+    }
+
+    /// Connects to slave `slave` on `target` in `framing`, answering with `map` (or, if `None`,
+    /// the map its identification names).
+    pub async fn connect_with(
+        target: Target,
+        framing: Framing,
+        slave: u8,
+        map: Option<Map>,
+        limit: Duration,
+    ) -> Result<Self, Error> {
         let stream = open(&target).await?;
-        let io = Io::Modbus(rtu::attach_slave(stream, Slave(slave)));
+        let io = match framing {
+            Framing::Rtu => Io::Modbus(rtu::attach_slave(stream, Slave(slave))),
+            Framing::Ascii => Io::Raw(stream, Framing::Ascii),
+        };
         let mut link = Self { target, slave, io, limit, map: map.unwrap_or(Map::Native) };
         if map.is_none() {
             let id = link.identify().await?;
             link.map = Map::from_application_name(id.object(6));
         }
-        if link.map.sub_indexed() {
+        if link.map.sub_indexed() && matches!(link.io, Io::Modbus(_)) {
             // Drop tokio-modbus's stream before opening ours: a serial port opens once.
             // Its framing tasks close the port once they see the pipe's end: retry a moment.
-            link.io = Io::Raw(Box::new(tokio::io::empty()));
+            link.io = Io::Raw(Box::new(tokio::io::empty()), Framing::Rtu);
             let mut tries = 0;
-            link.io = Io::Raw(loop {
+            let stream = loop {
                 tokio::task::yield_now().await;
                 match open(&link.target).await {
                     Ok(s) => break s,
@@ -231,9 +261,18 @@ impl Link {
                     Err(e) => return Err(e),
                 }
                 tokio::time::sleep(Duration::from_millis(20)).await;
-            });
+            };
+            link.io = Io::Raw(stream, Framing::Rtu);
         }
         Ok(link)
+    }
+
+    /// The framing of the link.
+    pub fn framing(&self) -> Framing {
+        match self.io {
+            Io::Modbus(_) => Framing::Rtu,
+            Io::Raw(_, framing) => framing,
+        }
     }
 
     /// The slave address.
@@ -266,6 +305,7 @@ impl Link {
     }
 
     async fn identify_raw(&mut self) -> Result<Identity, Error> {
+        // Read device identification, the regular category, from object 0.
         let reply = self.exchange(&[0x2B, 0x0E, 0x02, 0x00]).await?;
         // 2B 0E code conformity more next count, then (id, len, bytes)...
         let mut objects = Vec::new();
@@ -284,10 +324,12 @@ impl Link {
         let (limit, map) = (self.limit, self.map);
         match (&mut self.io, at.sub) {
             (Io::Modbus(ctx), None) => answered(limit, map, ctx.read_holding_registers(at.register, n)).await,
-            (_, sub) => {
-                let [hi, lo] = at.register.to_be_bytes();
-                let [nh, nl] = n.to_be_bytes();
-                let reply = self.exchange(&[0x03, hi, lo, sub.unwrap_or(0), nh, nl]).await?;
+            _ => {
+                let mut pdu = vec![0x03];
+                pdu.extend_from_slice(&at.register.to_be_bytes());
+                pdu.extend(at.sub);
+                pdu.extend_from_slice(&n.to_be_bytes());
+                let reply = self.exchange(&pdu).await?;
                 let data = reply.get(2..).unwrap_or_default();
                 if reply.get(1).copied() != Some(2 * n as u8) || data.len() != 2 * usize::from(n) {
                     return Err(Error::Link(format!("a read of {n} registers answered with {reply:02X?}")));
@@ -304,14 +346,13 @@ impl Link {
             (Io::Modbus(ctx), None, [v]) => answered(limit, map, ctx.write_single_register(at.register, *v)).await,
             (Io::Modbus(ctx), None, _) => answered(limit, map, ctx.write_multiple_registers(at.register, values)).await,
             (_, sub, values) => {
-                let [hi, lo] = at.register.to_be_bytes();
-                let mut pdu = match values {
-                    [_] => vec![0x06, hi, lo, sub.unwrap_or(0)],
-                    _ => {
-                        let [nh, nl] = (values.len() as u16).to_be_bytes();
-                        vec![0x10, hi, lo, sub.unwrap_or(0), nh, nl, 2 * values.len() as u8]
-                    }
-                };
+                let mut pdu = vec![if values.len() == 1 { 0x06 } else { 0x10 }];
+                pdu.extend_from_slice(&at.register.to_be_bytes());
+                pdu.extend(sub);
+                if values.len() != 1 {
+                    pdu.extend_from_slice(&(values.len() as u16).to_be_bytes());
+                    pdu.push(2 * values.len() as u8);
+                }
                 for v in values {
                     pdu.extend_from_slice(&v.to_be_bytes());
                 }
@@ -320,47 +361,239 @@ impl Link {
         }
     }
 
-    /// Sends `pdu` in a frame of our own and returns the reply's PDU (an exception as an error).
+    /// Sends `pdu` in a frame of our own, RTU or ASCII as the link is framed, and returns the
+    /// reply's PDU (an exception as an error).
     async fn exchange(&mut self, pdu: &[u8]) -> Result<Vec<u8>, Error> {
         let (limit, slave, map) = (self.limit, self.slave, self.map);
         let baud = match &self.target {
             Target::Serial { baud, .. } => *baud,
             Target::Tcp(_) => 115_200,
         };
-        // Sub-indexed requests only: a link to such a map is opened raw (`Link::connect`).
-        let Io::Raw(stream) = &mut self.io else {
+        // A link to a sub-indexed map or an ASCII link is opened raw (`Link::connect_with`).
+        let Io::Raw(stream, framing) = &mut self.io else {
             return Err(Error::Usage("a sub-indexed address on a map without sub-indices".into()));
         };
-        let mut frame = vec![slave];
-        frame.extend_from_slice(pdu);
-        let crc = drive_core::crc::crc16(&frame);
-        frame.extend_from_slice(&crc.to_le_bytes());
-        stream.write_all(&frame).await.map_err(|e| Error::Link(e.to_string()))?;
-        // The reply is whole when the line falls silent for t3.5 after its first byte.
+        let Some(&function) = pdu.first() else { return Err(Error::Usage("an empty request".into())) };
+        // What came after a reply's time was up belongs to no request.
+        drain(stream).await;
+        let mut adu = vec![slave];
+        adu.extend_from_slice(pdu);
         let deadline = Instant::now() + limit;
-        let mut reply = Vec::new();
-        let mut buf = [0u8; 256];
-        loop {
-            let wait = if reply.is_empty() {
-                timeout_at(deadline, stream.read(&mut buf)).await
-            } else {
-                timeout(t35(baud), stream.read(&mut buf)).await
-            };
-            match wait {
-                Ok(Ok(0)) => return Err(Error::Link("connection closed".into())),
-                Ok(Ok(n)) => reply.extend_from_slice(buf.get(..n).unwrap_or_default()),
-                Ok(Err(e)) => return Err(Error::Link(e.to_string())),
-                Err(_) if reply.is_empty() => return Err(Error::Timeout),
-                Err(_) => break,
+        let reply = match framing {
+            Framing::Rtu => rtu_exchange(stream, &adu, deadline, t35(baud)).await?,
+            Framing::Ascii => ascii_exchange(stream, &adu, deadline).await?,
+        };
+        match reply.as_slice() {
+            [a, ..] if *a != slave => Err(Error::Link(format!("a reply from address {a} to a request to {slave}"))),
+            [_, f, code] if *f == function | 0x80 => Err(Error::Refused { code: *code, meaning: meaning(map, *code) }),
+            [_, f, ..] if *f == function => Ok(reply.get(1..).unwrap_or_default().to_vec()),
+            _ => Err(Error::Link(format!("a malformed reply {reply:02X?} to function {function:02X}"))),
+        }
+    }
+}
+
+/// Reads and drops whatever the stream holds now.
+async fn drain(stream: &mut Box<dyn Stream>) {
+    let mut buf = [0u8; 256];
+    while let Ok(Ok(n)) = timeout(Duration::ZERO, stream.read(&mut buf)).await {
+        if n == 0 {
+            break;
+        }
+    }
+}
+
+/// Sends `adu` (address, PDU) as an RTU frame and returns the reply's ADU, its CRC checked and
+/// dropped: the reply is whole when the line falls silent for `t35` after its first byte.
+async fn rtu_exchange(
+    stream: &mut Box<dyn Stream>,
+    adu: &[u8],
+    deadline: Instant,
+    t35: Duration,
+) -> Result<Vec<u8>, Error> {
+    let mut frame = adu.to_vec();
+    let crc = drive_core::crc::crc16(&frame);
+    frame.extend_from_slice(&crc.to_le_bytes());
+    stream.write_all(&frame).await.map_err(|e| Error::Link(e.to_string()))?;
+    let mut reply = Vec::new();
+    let mut buf = [0u8; 256];
+    loop {
+        let wait = if reply.is_empty() {
+            timeout_at(deadline, stream.read(&mut buf)).await
+        } else {
+            timeout(t35, stream.read(&mut buf)).await
+        };
+        match wait {
+            Ok(Ok(0)) => return Err(Error::Link("connection closed".into())),
+            Ok(Ok(n)) => reply.extend_from_slice(buf.get(..n).unwrap_or_default()),
+            Ok(Err(e)) => return Err(Error::Link(e.to_string())),
+            Err(_) if reply.is_empty() => return Err(Error::Timeout),
+            Err(_) => break,
+        }
+    }
+    if !drive_core::crc::frame_ok(&reply) {
+        return Err(Error::Link(format!("a malformed reply {reply:02X?}")));
+    }
+    reply.truncate(reply.len() - 2);
+    Ok(reply)
+}
+
+/// The Modbus ASCII line of `adu` (address, PDU): `:`, two upper-case hex digits a byte, the
+/// LRC (the two's complement of the bytes' sum), CR LF.
+pub fn ascii_line(adu: &[u8]) -> Vec<u8> {
+    const HEX: &[u8; 16] = b"0123456789ABCDEF";
+    let lrc = adu.iter().fold(0u8, |s, b| s.wrapping_add(*b)).wrapping_neg();
+    let mut line = vec![b':'];
+    for b in adu.iter().chain([lrc].iter()) {
+        line.push(HEX[usize::from(b >> 4)]);
+        line.push(HEX[usize::from(b & 0xF)]);
+    }
+    line.extend_from_slice(b"\r\n");
+    line
+}
+
+/// The ADU (address, PDU) a Modbus ASCII line carries, its LRC checked and dropped: `line` is
+/// what follows the `:` up to its LF. Hex digits of either case.
+pub fn ascii_adu(line: &[u8]) -> Result<Vec<u8>, String> {
+    let shown = || String::from_utf8_lossy(line).trim_end().to_string();
+    let digits = line
+        .strip_suffix(b"\n")
+        .and_then(|l| l.strip_suffix(b"\r"))
+        .ok_or_else(|| format!("a reply line {:?} not ended by CR LF", shown()))?;
+    let (pairs, odd) = digits.as_chunks::<2>();
+    if !odd.is_empty() || pairs.len() < 3 {
+        return Err(format!("a reply line {:?} of an odd or too small number of digits", shown()));
+    }
+    let hex = |c: u8| char::from(c).to_digit(16).map(|d| d as u8);
+    let mut bytes = Vec::with_capacity(pairs.len());
+    for [h, l] in pairs {
+        let (Some(h), Some(l)) = (hex(*h), hex(*l)) else {
+            return Err(format!("a reply line {:?} with a character that is no hex digit", shown()));
+        };
+        bytes.push(h << 4 | l);
+    }
+    if bytes.iter().fold(0u8, |s, b| s.wrapping_add(*b)) != 0 {
+        return Err(format!("a reply line {:?} with a bad LRC", shown()));
+    }
+    bytes.pop();
+    Ok(bytes)
+}
+
+/// Sends `adu` (address, PDU) as a Modbus ASCII line and returns the reply's ADU, its LRC
+/// checked and dropped: the first line for the same address and function (with or without
+/// the exception bit) that ends by `deadline`. Lines for others, and anything outside a line,
+/// are passed over.
+async fn ascii_exchange(stream: &mut Box<dyn Stream>, adu: &[u8], deadline: Instant) -> Result<Vec<u8>, Error> {
+    stream.write_all(&ascii_line(adu)).await.map_err(|e| Error::Link(e.to_string()))?;
+    let ours = |reply: &[u8]| match (reply, adu) {
+        ([a, f, ..], [slave, function, ..]) => a == slave && f & 0x7F == *function,
+        _ => false,
+    };
+    let mut pending: Vec<u8> = Vec::new();
+    let mut buf = [0u8; 256];
+    loop {
+        while let Some(lf) = pending.iter().position(|&b| b == b'\n') {
+            let line: Vec<u8> = pending.drain(..=lf).collect();
+            // A `:` starts a line wherever it comes: the last one's.
+            let Some(colon) = line.iter().rposition(|&b| b == b':') else { continue };
+            let reply = ascii_adu(line.get(colon + 1..).unwrap_or_default()).map_err(Error::Link)?;
+            if ours(&reply) {
+                return Ok(reply);
             }
         }
-        if !drive_core::crc::frame_ok(&reply) || reply.first() != Some(&slave) {
-            return Err(Error::Link(format!("a malformed reply {reply:02X?}")));
+        match timeout_at(deadline, stream.read(&mut buf)).await {
+            Ok(Ok(0)) => return Err(Error::Link("connection closed".into())),
+            Ok(Ok(n)) => pending.extend_from_slice(buf.get(..n).unwrap_or_default()),
+            Ok(Err(e)) => return Err(Error::Link(e.to_string())),
+            Err(_) if pending.contains(&b':') => {
+                let line = String::from_utf8_lossy(&pending).into_owned();
+                return Err(Error::Link(format!("a reply line {line:?} unfinished in time")));
+            }
+            Err(_) => return Err(Error::Timeout),
         }
-        let body = reply.get(1..reply.len() - 2).unwrap_or_default().to_vec();
-        match body.as_slice() {
-            [f, code] if f & 0x80 != 0 => Err(Error::Refused { code: *code, meaning: meaning(map, *code) }),
-            _ => Ok(body),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_ascii_line_is_hex_and_its_lrc() {
+        // docs/modbus.md: a read of 2 registers from 0x0200 of node 1.
+        assert_eq!(ascii_line(&[0x01, 0x03, 0x02, 0x00, 0x00, 0x02]), b":010302000002F8\r\n");
+        let mut line = [0u8; drive_core::ascii::MAX_LINE];
+        let adu = [0x11, 0x10, 0x06, 0x00, 0x00, 0x02, 0x04, 0x0C, 0x80, 0x00, 0x00];
+        let n = drive_core::ascii::encode(&adu, &mut line).expect("encodes");
+        assert_eq!(ascii_line(&adu), line.get(..n).expect("line"), "as the drive encodes it");
+    }
+
+    #[test]
+    fn an_ascii_reply_is_checked() {
+        assert_eq!(ascii_adu(b"0103020258A0\r\n"), Ok(vec![0x01, 0x03, 0x02, 0x02, 0x58]));
+        assert_eq!(ascii_adu(b"0103020258a0\r\n"), Ok(vec![0x01, 0x03, 0x02, 0x02, 0x58]), "lower case");
+        assert!(ascii_adu(b"0103020258A1\r\n").is_err_and(|e| e.contains("LRC")));
+        assert!(ascii_adu(b"0103020258A\r\n").is_err_and(|e| e.contains("odd")));
+        assert!(ascii_adu(b"01030202G8A0\r\n").is_err_and(|e| e.contains("hex")));
+        assert!(ascii_adu(b"0103020258A0\n").is_err_and(|e| e.contains("CR LF")));
+        assert!(ascii_adu(b"01FF\r\n").is_err());
+    }
+
+    /// A link to a fake ASCII slave on the other end of a pipe, which answers each request line
+    /// with `answer(request ADU)`: raw bytes.
+    fn fake(answer: impl Fn(&[u8]) -> Vec<u8> + Send + 'static) -> Link {
+        let (ours, theirs) = tokio::io::duplex(1024);
+        tokio::spawn(async move {
+            let (mut rx, mut tx) = tokio::io::split(theirs);
+            let mut line = Vec::new();
+            let mut byte = [0u8; 1];
+            while rx.read_exact(&mut byte).await.is_ok() {
+                line.push(byte[0]);
+                if byte[0] == b'\n' {
+                    let adu = ascii_adu(line.get(1..).unwrap_or_default()).expect("a good request line");
+                    if tx.write_all(&answer(&adu)).await.is_err() {
+                        return;
+                    }
+                    line.clear();
+                }
+            }
+        });
+        Link {
+            target: Target::Tcp("pipe".into()),
+            slave: 1,
+            io: Io::Raw(Box::new(ours), Framing::Ascii),
+            limit: Duration::from_millis(300),
+            map: Map::Servo,
         }
+    }
+
+    #[tokio::test(flavor = "current_thread")]
+    async fn the_ascii_exchange_reads_writes_and_maps_exceptions() {
+        let mut link = fake(|adu| match adu {
+            // A read of 0130h: noise, another node's line, then ours in lower case.
+            [1, 0x03, 0x01, 0x30, 0, 2] => {
+                let mut out = b"junk\r\n".to_vec();
+                out.extend(ascii_line(&[2, 0x03, 2, 0, 9]));
+                out.extend(ascii_line(&[1, 0x03, 4, 0x02, 0x58, 0x00, 0x01]).to_ascii_lowercase());
+                out
+            }
+            // A write of one register: the echo.
+            [1, 0x06, ..] => ascii_line(adu),
+            // 0x10: 02, no such register.
+            [1, 0x10, ..] => ascii_line(&[1, 0x90, 0x02]),
+            // A reply with a bad LRC.
+            [1, 0x03, 0x05, ..] => b":01030200019A\r\n".to_vec(),
+            _ => Vec::new(),
+        });
+        assert_eq!(link.framing(), Framing::Ascii);
+        let at = |register| Address { register, sub: None };
+        assert_eq!(link.read(at(0x0130), 2).await.expect("read"), [0x0258, 0x0001]);
+        link.write(at(0x0130), &[300]).await.expect("write");
+        let refused = link.write(at(0x0000), &[1, 2]).await.expect_err("refused");
+        assert!(
+            matches!(refused, Error::Refused { code: 2, ref meaning } if meaning.contains("no such register")),
+            "{refused}"
+        );
+        assert!(matches!(link.read(at(0x0500), 1).await, Err(Error::Link(ref e)) if e.contains("LRC")));
+        assert!(matches!(link.read(at(0x0600), 1).await, Err(Error::Timeout)), "no answer");
     }
 }

@@ -1,17 +1,18 @@
-//! `drivectl`: the commissioning tool for OpenStep drives on a Modbus-RTU bus.
+//! `drivectl`: the commissioning tool for OpenStep drives on a Modbus bus (RTU or ASCII).
 
 use std::process::ExitCode;
 use std::time::Duration;
 
 use clap::{Parser, Subcommand};
 use drivectl::dict::{Dictionary, Map};
-use drivectl::link::{Error, Link, Target};
+use drivectl::link::{Error, Framing, Link, Target};
 use drivectl::{Drive, Settings, Value, parse_assignment, scan};
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Commission OpenStep drives over their Modbus link: find them, read and write their settings
 /// by name, keep the settings in a file, move, jog, home and watch them. Works with every
-/// register map the drive answers with (native, jmc, cls9, ec57); values are in the map's units.
+/// register map the drive answers with (native, jmc, cls9, ec57, servo); values are in the map's
+/// units.
 #[derive(Parser)]
 #[command(version)]
 struct Cli {
@@ -21,14 +22,19 @@ struct Cli {
     /// Baud rate on the serial port.
     #[arg(long, default_value_t = 9600, global = true)]
     baud: u32,
-    /// The simulator's TCP endpoint (raw RTU frames): `hal-sim --tcp HOST:PORT`.
+    /// The simulator's TCP endpoint (raw RTU frames, or ASCII lines with --ascii): `hal-sim --tcp
+    /// HOST:PORT`.
     #[arg(long, global = true)]
     tcp: Option<String>,
+    /// Modbus ASCII framing (`:`, hex, LRC, CR LF) instead of RTU: a drive whose line framing
+    /// 0x2192 (the servo map's P□600) was 1 at power-up.
+    #[arg(long, global = true)]
+    ascii: bool,
     /// Slave address of the drive.
     #[arg(long, short = 'a', default_value_t = 1, global = true)]
     address: u8,
     /// The drive's register map, if not the one its identification names (native, jmc, cls9,
-    /// ec57).
+    /// ec57, servo).
     #[arg(long, global = true)]
     map: Option<String>,
     /// How long one request may take, ms.
@@ -49,11 +55,13 @@ enum Command {
         #[arg(long, default_value_t = 247)]
         to: u8,
     },
-    /// The registers of a map (`--map`, default native): name, address, registers, access, unit.
+    /// The registers of a map (`--map`, default native): name, address, registers, access, unit;
+    /// then its reserved ranges.
     List,
     /// Reads registers by name or address.
     Get {
-        /// Names (`max-speed`) or addresses (`0x6003`, seed 003: `0x2003.1`).
+        /// Names (`max-speed`, seed 004: `group3.target`) or addresses (`0x6003`, seed 003:
+        /// `0x2003.1`).
         #[arg(required = true)]
         keys: Vec<String>,
     },
@@ -150,12 +158,16 @@ fn target(cli: &Cli) -> Result<Target, Error> {
     }
 }
 
+fn framing(cli: &Cli) -> Framing {
+    if cli.ascii { Framing::Ascii } else { Framing::Rtu }
+}
+
 fn map_arg(cli: &Cli) -> Result<Option<Map>, Error> {
     match &cli.map {
         None => Ok(None),
         Some(name) => Map::from_name(name)
             .map(Some)
-            .ok_or_else(|| Error::Usage(format!("no map {name:?}: native, jmc, cls9 or ec57"))),
+            .ok_or_else(|| Error::Usage(format!("no map {name:?}: native, jmc, cls9, ec57 or servo"))),
     }
 }
 
@@ -195,10 +207,14 @@ async fn run(cli: Cli) -> Result<(), Error> {
                 r.about
             );
         }
+        for r in &dict.reserved {
+            let at = format!("0x{:04X}-0x{:04X}", r.first, r.last);
+            say!("{:<28} {at:<10} {} ro {:<4} {:<10} {}", "reserved", r.last - r.first + 1, "", "", r.about);
+        }
         return Ok(());
     }
     if let Command::Scan { from, to } = cli.command {
-        let mut link = Link::connect(target(&cli)?, from, Some(Map::Native), limit).await?;
+        let mut link = Link::connect_with(target(&cli)?, framing(&cli), from, Some(Map::Native), limit).await?;
         let bar = ProgressBar::new(u64::from(to.saturating_sub(from)) + 1);
         bar.set_style(
             ProgressStyle::with_template("scanning {bar:40} {pos}/{len} addresses, {msg}")
@@ -226,7 +242,7 @@ async fn run(cli: Cli) -> Result<(), Error> {
         say!("{n} drive(s)");
         return if n == 0 { Err(Error::Usage("no drive answered".into())) } else { Ok(()) };
     }
-    let link = Link::connect(target(&cli)?, cli.address, map_arg(&cli)?, limit).await?;
+    let link = Link::connect_with(target(&cli)?, framing(&cli), cli.address, map_arg(&cli)?, limit).await?;
     let mut drive = Drive::new(link).await?;
     match cli.command {
         Command::Scan { .. } | Command::List => {}
