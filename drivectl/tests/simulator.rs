@@ -281,19 +281,22 @@ fn snapshot_enabled(snapshot: &Arc<Mutex<Snapshot>>) -> bool {
     snapshot.lock().expect("snapshot").enabled
 }
 
+/// A simulator over TCP powered up from the flash file `flash`.
+fn on_flash(flash: &std::path::Path) -> PowerSwitch {
+    let opts = SimOptions {
+        endpoint: Endpoint::Tcp("127.0.0.1:0".into()),
+        flash: Some(flash.to_path_buf()),
+        ..Default::default()
+    };
+    Simulator::bind(opts).expect("bind simulator").power_on()
+}
+
 /// Save keeps the settings across a restart; factory-reset brings back the factory ones.
 #[test]
 fn save_and_factory_reset_survive_a_restart() {
     let dir = tempfile::tempdir().expect("tempdir");
     let flash = dir.path().join("flash.bin");
-    let on = || {
-        let opts = SimOptions {
-            endpoint: Endpoint::Tcp("127.0.0.1:0".into()),
-            flash: Some(flash.clone()),
-            ..Default::default()
-        };
-        Simulator::bind(opts).expect("bind simulator").power_on()
-    };
+    let on = || on_flash(&flash);
     let sim = on();
     stdout(&drivectl(&sim, &["set", "phase-current=1000"]));
     stdout(&drivectl(&sim, &["save"]));
@@ -396,14 +399,7 @@ fn the_servo_map_by_name_in_its_units() {
 fn ascii_framing_over_tcp() {
     let dir = tempfile::tempdir().expect("tempdir");
     let flash = dir.path().join("flash.bin");
-    let on = || {
-        let opts = SimOptions {
-            endpoint: Endpoint::Tcp("127.0.0.1:0".into()),
-            flash: Some(flash.clone()),
-            ..Default::default()
-        };
-        Simulator::bind(opts).expect("bind simulator").power_on()
-    };
+    let on = || on_flash(&flash);
     let sim = on();
     stdout(&drivectl(&sim, &["set", "line-framing=1", "phase-current=1000"]));
     stdout(&drivectl(&sim, &["save"]));
