@@ -387,3 +387,15 @@ proptest::proptest! {
         proptest::prop_assert_eq!(r.read32(0x05FD), position);
     }
 }
+
+/// A factory reset (0540h) refused with the rest of its write (0541h = 0 is out of range)
+/// changes nothing, the map's own factory values included (found by `pdu_servo`).
+#[test]
+fn a_refused_write_with_a_factory_reset_changes_nothing() {
+    let mut r = servo();
+    r.write(0x01F7, 0).expect("P503 = 0");
+    let before = r.snapshot();
+    assert_eq!(r.request(&[1, 0x10, 0x05, 0x40, 0, 2, 4, 0, 1, 0, 0]).map(|_| ()), Err(3));
+    assert_eq!(r.snapshot(), before);
+    assert_eq!(r.read(0x01F7, 1), Ok(vec![0]));
+}

@@ -448,6 +448,9 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         self.program = program;
         (self.history_unsaved, self.command_base, self.ctl.clear_history) =
             (history_unsaved, command_base, clear_history);
+        // A factory reset undone with the rest: the map's own factory values are not set over
+        // the restored ones (a request starts with none pending: the slave takes it at its end).
+        self.factory_restored = false;
         self.refresh_settings();
     }
 
