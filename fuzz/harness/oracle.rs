@@ -373,6 +373,12 @@ pub fn requests<M: drive_core::maps::RegisterMap>(
     }
 }
 
+/// Whether a snapshot compares `d`: every object but the current command, which the standstill
+/// current lowers as time passes, request or none.
+pub fn compared(d: &&drive_core::od::ObjectDef) -> bool {
+    d.obj != drive_core::od::Obj::CurrentCommand
+}
+
 /// `n / d` to the nearest, halves away from zero.
 pub fn round(n: i64, d: i64) -> i64 {
     if n >= 0 { (n + d / 2) / d } else { (n - d / 2) / d }

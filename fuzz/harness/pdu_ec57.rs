@@ -27,7 +27,7 @@ const T35: u64 = 4010;
 /// Everything a refusal must leave as it was: every object.
 fn snapshot(drive: &Drive<Maps>) -> (Vec<u32>, i64) {
     let s = drive.state();
-    (OBJECTS.iter().map(|d| s.read_def(d)).collect(), s.position())
+    (OBJECTS.iter().filter(oracle::compared).map(|d| s.read_def(d)).collect(), s.position())
 }
 
 /// The registers a read of `qty` from the table's `(index, sub)` gets, or `None` if there is no

@@ -25,7 +25,7 @@ const T35: u64 = 4010;
 
 fn snapshot(drive: &Drive<Maps>) -> (Vec<u32>, i64, drive_core::power::DeviceState) {
     let s = drive.state();
-    (OBJECTS.iter().map(|d| s.read_def(d)).collect(), s.position(), s.device_state())
+    (OBJECTS.iter().filter(oracle::compared).map(|d| s.read_def(d)).collect(), s.position(), s.device_state())
 }
 
 /// The registers a read of `qty` from `addr` gets by the list walk, or `None` if it cannot be

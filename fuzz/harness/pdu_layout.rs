@@ -65,7 +65,7 @@ const T35: u64 = 4010;
 
 fn snapshot(drive: &Drive<LayoutMap>) -> (Vec<u32>, i64) {
     let s = drive.state();
-    (OBJECTS.iter().map(|d| s.read_def(d)).collect(), s.position())
+    (OBJECTS.iter().filter(oracle::compared).map(|d| s.read_def(d)).collect(), s.position())
 }
 
 /// What register `reg` reads as by the layout: `None` where the layout has no object.

@@ -12,7 +12,7 @@
 use super::oracle;
 use drive_core::maps::Maps;
 use drive_core::maps::servo::{ENTRIES, LAYOUT};
-use drive_core::od::{OBJECTS, Obj, Type};
+use drive_core::od::{OBJECTS, Type};
 use drive_core::{Drive, DriveConfig};
 
 /// Every code the map answers.
@@ -31,7 +31,7 @@ const GROUP_WORDS: usize = drive_core::state::groups::WORDS;
 fn snapshot(drive: &Drive<Maps>) -> (Vec<u32>, i64) {
     let s = drive.state();
     let groups = (0..GROUP_WORDS).map(|k| u32::from(s.program_word(k)));
-    let objects = OBJECTS.iter().filter(|d| d.obj != Obj::CurrentCommand).map(|d| s.read_def(d));
+    let objects = OBJECTS.iter().filter(oracle::compared).map(|d| s.read_def(d));
     (objects.chain(groups).collect(), s.position())
 }
 

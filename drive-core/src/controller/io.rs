@@ -432,25 +432,10 @@ impl Controller {
         if s.io.output_pins == 0 {
             return levels;
         }
-        let on = self.outputs_on();
-        for (k, &pin) in OUT_PINS.iter().enumerate() {
-            if s.io.outputs.get(k).is_none_or(|f| *f == OutputFunction::None) {
-                continue;
-            }
-            let high = (on & (1 << k) != 0) != (s.io.output_low & (1 << k) != 0);
-            levels = if high { levels | pin } else { levels & !pin };
-        }
-        levels
-    }
-
-    /// The outputs whose function is active (bit k: OUT k+1), before their inversion (0x21C8).
-    pub(crate) fn outputs_on(&self) -> u8 {
-        let s = &self.settings;
         let (alarm, ready) = (self.faulted(), self.power_stage_on());
-        let mut on = 0u8;
-        for (k, &function) in s.io.outputs.iter().enumerate() {
-            let active = match function {
-                OutputFunction::None => false,
+        for (k, (&pin, &function)) in OUT_PINS.iter().zip(&s.io.outputs).enumerate() {
+            let on = match function {
+                OutputFunction::None => continue,
                 OutputFunction::General => s.io.general & (1 << k) != 0,
                 OutputFunction::Alarm => !alarm,
                 OutputFunction::InPosition => self.in_position(),
@@ -458,6 +443,20 @@ impl Controller {
                 OutputFunction::Ready => ready,
                 OutputFunction::Coincidence => self.speed_coincides(),
             };
+            let high = on != (s.io.output_low & (1 << k) != 0);
+            levels = if high { levels | pin } else { levels & !pin };
+        }
+        levels
+    }
+
+    /// The outputs whose function is on (bit k: OUT k+1), before 0x21C8 inverts them: from the
+    /// levels the last tick drove (0x6031 shows them inverted).
+    pub(crate) fn outputs_on(&self) -> u8 {
+        let io = &self.settings.io;
+        let mut on = 0u8;
+        for (k, (&pin, &function)) in OUT_PINS.iter().zip(&io.outputs).enumerate() {
+            let high = self.status.gpio & pin == 0;
+            let active = function != OutputFunction::None && high != (io.output_low & (1 << k) != 0);
             on |= u8::from(active) << k;
         }
         on
@@ -465,6 +464,7 @@ impl Controller {
 
     /// Whether the speed is the commanded one within 0x21F2; in a position move and at rest,
     /// whether the axis is in position.
+    #[inline(never)]
     fn speed_coincides(&self) -> bool {
         if self.axis.is_still() || self.axis.target().is_some() {
             return self.in_position();

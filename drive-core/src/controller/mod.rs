@@ -97,8 +97,6 @@ pub struct Status {
     pub supply_mv: u16,
     /// The larger phase current last measured, mA (0x21B0).
     pub current_ma: u16,
-    /// The phase current the last tick set, mA (0x21E7's measure).
-    pub current_cmd_ma: u16,
     /// The inputs IN1-IN7 active (bit k: IN k+1).
     pub inputs: u8,
     /// The inputs that turned active since the bus side last took them.
@@ -260,7 +258,7 @@ pub struct Controller {
     /// The pins' memory (debouncers, the notifications' last position).
     pub(crate) io: io::Pins,
     /// Since when the axis has stood still (for the standstill current).
-    still_since: Option<Instant>,
+    pub(crate) still_since: Option<Instant>,
     /// Ticks since the power stage was energised (saturating).
     energised: u16,
     /// What happened since the bus side last took the events.
@@ -472,7 +470,6 @@ impl Controller {
             // 0x6031 shows what an output with a function drives (inverted, as the manual has it).
             self.status.gpio = (self.status.gpio & !function_pins) | (!gpio & function_pins);
         }
-        self.status.current_cmd_ma = if enabled { current.min(u32::from(u16::MAX)) as u16 } else { 0 };
         let (mut commutation, mut steps) = (commutation, steps);
         if self.reversed {
             mirror(&mut commutation, &mut steps);

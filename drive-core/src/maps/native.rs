@@ -583,7 +583,6 @@ mod tests {
             comm: 0x01,
             supply_mv: 24_000,
             current_ma: 1_500,
-            current_cmd_ma: 1_200,
             inputs: 0,
             input_edges: 0,
             probes: 2,

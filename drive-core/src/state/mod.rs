@@ -626,7 +626,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             Obj::PulseRate if self.mode() == crate::modes::WorkMode::Follow => self.ctl.real_speed() as u32,
             Obj::PulseRate => 0,
             Obj::AnalogSpeed => self.analog_speed() as u32,
-            Obj::CurrentCommand => percent(s.current_cmd_ma, self.param(Obj::PhaseCurrent)),
+            Obj::CurrentCommand => self.current_command(),
             Obj::Load => percent(s.current_ma, self.param(Obj::PhaseCurrent)),
             Obj::OutputStates => u32::from(self.ctl.outputs_on()),
             Obj::EncoderSignals | Obj::EncoderAngle | Obj::EncoderTurns => self.encoder_live(obj),
@@ -639,6 +639,21 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             }
             _ => self.params.get(obj as usize).copied().unwrap_or(0),
         }
+    }
+
+    /// 0x21E7: the share of the phase current the tick sets, percent: the standstill current
+    /// once the axis has stood for the standstill delay (or is held while disabled), 100 while
+    /// it moves, 0 de-energised (the soft start's ramp aside).
+    fn current_command(&self) -> u32 {
+        let s = &self.ctl.settings;
+        let state = self.ctl.power_state();
+        let held = state == crate::modes::PowerState::Disabled && s.hold_disabled;
+        if state != crate::modes::PowerState::On && !held {
+            return 0;
+        }
+        let stood = self.ctl.axis.is_still()
+            && self.ctl.still_since.is_some_and(|since| self.now.since(since) >= s.idle_delay_us);
+        if held || stood { s.idle_current_pct } else { 100 }
     }
 
     /// 0x21E9, 0x21EB and 0x21ED: the encoder's quadrature levels, its angle in microsteps and
