@@ -447,6 +447,9 @@ pub fn init() -> Board {
     });
     rcc.sys = Sysclk::PLL1_R;
     rcc.boost = true; // required above 150 MHz
+    // ADC1/ADC2 on SYSCLK (embassy divides it by 4: 42.5 MHz); the reset value selects no clock,
+    // and `Adc::new` then panics.
+    rcc.mux.adc12sel = embassy_stm32::rcc::mux::Adcsel::SYS;
     check_option_bytes();
     let p = embassy_stm32::init(config);
 
