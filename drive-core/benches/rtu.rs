@@ -366,7 +366,7 @@ fn servo(case: MapCase) -> usize {
 
 /// The servo map's request `adu` as an ASCII line to a servo drive in ASCII, all but its LF
 /// received; checked to be answered.
-fn setup_servo_ascii(adu: &'static [u8]) -> (Drive<drive_core::maps::Maps>, u8) {
+fn setup_servo_ascii(adu: &'static [u8]) -> MapCase {
     let mut params = drive_core::Params::factory();
     assert!(params.set(drive_core::od::Obj::LineFraming, 1));
     let boot = || Drive::boot_with_map(drive_core::DriveConfig::default(), drive_core::maps::Maps::servo(), &params, 0);
@@ -379,17 +379,17 @@ fn setup_servo_ascii(adu: &'static [u8]) -> (Drive<drive_core::maps::Maps>, u8) 
     let (&last, head) = line.split_last().expect("line");
     let mut drive = boot();
     drive.on_rx(T0, head);
-    (drive, last)
+    MapCase { drive, last }
 }
 
 #[library_benchmark]
 #[bench::read_2(args = (&[SLAVE, 0x03, 0x05, 0xF2, 0x00, 0x02]), setup = setup_servo_ascii)]
 #[bench::write_1(args = (&[SLAVE, 0x06, 0x01, 0x30, 0x02, 0x58]), setup = setup_servo_ascii)]
-fn servo_ascii((mut drive, last): (Drive<drive_core::maps::Maps>, u8)) -> usize {
+fn servo_ascii(mut case: MapCase) -> usize {
     let t0 = black_box(T0);
-    drive.on_rx(t0, &[black_box(last)]);
-    drive.on_timer(t0);
-    let reply = black_box(drive.take_reply());
+    case.drive.on_rx(t0, &[black_box(case.last)]);
+    case.drive.on_timer(t0);
+    let reply = black_box(case.drive.take_reply());
     reply.map_or(0, <[u8]>::len)
 }
 
