@@ -213,6 +213,11 @@ fn pos_step_steps_on_and_the_gear_scales_targets() {
     r.write(COMM_IO, SON | 5 << 9 | POS_START).expect("start");
     r.settle(3);
     assert_eq!(r.position(), 200, "100 units of 2 microsteps");
+    // The chain waits in group 5: it owns the axis, a position jog is refused.
+    r.write(POSITION_JOG, 0x8000).expect("position jog on");
+    assert_eq!(r.write(POSITION_JOG, 0x8001), Err(4));
+    r.write(POSITION_JOG, 0x8000).expect("nothing moved");
+    assert_eq!(r.position(), 200);
     r.write(COMM_IO, SON | 5 << 9).expect("release");
     r.write(COMM_IO, SON | 5 << 9 | POS_STEP).expect("step");
     r.settle(3);

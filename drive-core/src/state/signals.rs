@@ -137,6 +137,8 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
                 }
                 if obj == Obj::PositionJog && (rose(JOG_PLUS) || rose(JOG_MINUS)) && dir(new) != 0 {
                     refuse(self.ctl.axis.is_still(), ObjError::Busy)?;
+                    // A running chain of groups owns the axis, as it does against the jog commands.
+                    refuse(!self.program_runs(), ObjError::NotNow)?;
                     let distance = i64::from(self.param(Obj::JogDistance)) * i64::from(dir(new));
                     out.push(Action::JogMove(distance)).map_err(|_| ObjError::Busy)?;
                 }
