@@ -505,15 +505,18 @@ fn qemu(args: &[String]) -> Result<(), String> {
 
 /// The first `n` bytes of section `name` of `elf`.
 fn section_bytes(elf: &Path, name: &str, n: usize) -> Result<Vec<u8>, String> {
-    let out = elf.with_extension(format!("{}.bin", name.trim_start_matches('.')));
+    // A name of this process's: tests check the QEMU image from several processes at once.
+    let file = elf.file_name().map_or_else(String::new, |f| f.to_string_lossy().into_owned());
+    let out = elf.with_file_name(format!("{file}.{}.{}.bin", std::process::id(), name.trim_start_matches('.')));
     let status = Command::new("arm-none-eabi-objcopy")
         .args(["-O", "binary", "--only-section", name])
         .arg(elf)
         .arg(&out)
         .status()
         .map_err(|e| format!("arm-none-eabi-objcopy (binutils-arm-none-eabi, .ci/install): {e}"))?;
-    let bytes = std::fs::read(&out).map_err(|e| format!("{}: {e}", out.display()))?;
-    match bytes.get(..n) {
+    let bytes = std::fs::read(&out).map_err(|e| format!("{}: {e}", out.display()));
+    let _ = std::fs::remove_file(&out);
+    match bytes?.get(..n) {
         Some(b) if status.success() => Ok(b.to_vec()),
         _ => Err(format!("{} has no {n} bytes of {name}", elf.display())),
     }
