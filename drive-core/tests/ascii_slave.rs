@@ -56,43 +56,22 @@ fn params(value: u32) -> Params {
     p
 }
 
+mod common;
+
 /// A drive on a line with a clock the test moves.
-struct Rig<M: RegisterMap> {
-    drive: Drive<M>,
-    now: u64,
-}
+type Rig<M> = common::Bus<M>;
 
 impl<M: RegisterMap> Rig<M> {
-    fn new(drive: Drive<M>) -> Self {
-        Self { drive, now: 1_000_000 }
-    }
-
     /// Bytes arriving together now; the reply they let out, if any (a line that had ended
     /// before them is served first).
-    fn send(&mut self, bytes: &[u8]) -> Option<Vec<u8>> {
-        self.drive.on_rx(Instant::from_micros(self.now), bytes);
+    fn rx(&mut self, bytes: &[u8]) -> Option<Vec<u8>> {
+        self.send(bytes);
         self.drive.take_reply().map(<[u8]>::to_vec)
-    }
-
-    /// `us` pass, the timer firing at every deadline; every reply.
-    fn wait(&mut self, us: u64) -> Vec<Vec<u8>> {
-        let end = self.now + us;
-        let mut replies = Vec::new();
-        while let Some(d) = self.drive.deadline() {
-            if d.as_micros() > end {
-                break;
-            }
-            self.now = self.now.max(d.as_micros());
-            self.drive.on_timer(Instant::from_micros(self.now));
-            replies.extend(self.drive.take_reply().map(<[u8]>::to_vec));
-        }
-        self.now = end;
-        replies
     }
 
     /// Sends `bytes` and lets 10 ms pass: the one reply, if any.
     fn exchange(&mut self, bytes: &[u8]) -> Option<Vec<u8>> {
-        let mut replies: Vec<_> = self.send(bytes).into_iter().collect();
+        let mut replies: Vec<_> = self.rx(bytes).into_iter().collect();
         replies.extend(self.wait(10_000));
         assert!(
             replies.len() <= 1,
@@ -280,23 +259,23 @@ fn a_line_broken_by_the_timeout_is_dropped() {
     let mut rig = ascii_native();
     let request = b":0103600C00028E\r\n";
     // One second between two characters is within the timeout.
-    assert_eq!(rig.send(&request[..5]), None);
+    assert_eq!(rig.rx(&request[..5]), None);
     let start = rig.now;
     assert_eq!(rig.drive.deadline(), Some(Instant::from_micros(start + TIMEOUT + 1)));
     assert!(rig.wait(TIMEOUT).is_empty());
     assert_eq!(rig.exchange(&request[5..]).as_deref(), Some(&b":0103040000029264\r\n"[..]));
     // A second and a microsecond: the line is dropped at the deadline, and its rest is noise.
-    assert_eq!(rig.send(&request[..5]), None);
+    assert_eq!(rig.rx(&request[..5]), None);
     assert!(rig.wait(TIMEOUT + 1).is_empty());
     assert_eq!(rig.drive.deadline(), None);
     assert_eq!(rig.counters().bus_errors, 1);
     assert_eq!(rig.exchange(&request[5..]), None);
     // The same when the timer is late: the next character finds the line timed out.
-    assert_eq!(rig.send(&request[..5]), None);
+    assert_eq!(rig.rx(&request[..5]), None);
     rig.now += TIMEOUT + 5;
     assert_eq!(rig.exchange(&request[5..]), None);
     // A `:` after the silence starts the next line.
-    assert_eq!(rig.send(&request[..5]), None);
+    assert_eq!(rig.rx(&request[..5]), None);
     rig.now += 2 * TIMEOUT;
     assert_eq!(rig.exchange(request).as_deref(), Some(&b":0103040000029264\r\n"[..]));
     let c = rig.counters();
@@ -309,7 +288,7 @@ fn a_line_waits_from_its_lf_until_the_timer_or_the_next_bytes() {
     let request = b":0103600C00028E\r\n";
     let answer = Some(b":0103040000029264\r\n".to_vec());
     // Ended at its LF: due at once, served by the timer, not inside `on_rx`.
-    assert_eq!(rig.send(request), None);
+    assert_eq!(rig.rx(request), None);
     let now = Instant::from_micros(rig.now);
     assert!(rig.drive.frame_due(now));
     assert_eq!(rig.drive.deadline(), Some(now));
@@ -317,12 +296,12 @@ fn a_line_waits_from_its_lf_until_the_timer_or_the_next_bytes() {
     assert!(!rig.drive.frame_due(now));
     assert_eq!(rig.drive.deadline(), None);
     // Or by the next bytes, first.
-    assert_eq!(rig.send(request), None);
+    assert_eq!(rig.rx(request), None);
     rig.now += 100;
-    assert_eq!(rig.send(b"\r\n"), answer);
+    assert_eq!(rig.rx(b"\r\n"), answer);
     assert_eq!(rig.drive.deadline(), None);
     // Noise after it in the same call leaves it waiting.
-    assert_eq!(rig.send(b":0103600C00028E\r\nnoise"), None);
+    assert_eq!(rig.rx(b":0103600C00028E\r\nnoise"), None);
     assert!(rig.drive.frame_due(Instant::from_micros(rig.now)));
     assert_eq!(rig.wait(0), [answer.clone().unwrap()]);
     // A `:` behind it in the same call serves it before the next line starts, which waits.
@@ -330,7 +309,7 @@ fn a_line_waits_from_its_lf_until_the_timer_or_the_next_bytes() {
     two.extend(b"\r\n");
     two.extend(&line(&[0x01, 0x03, 0x60, 0x08, 0x00, 0x01]));
     rig.now += 100;
-    assert_eq!(rig.send(&two), answer);
+    assert_eq!(rig.rx(&two), answer);
     assert_eq!(rig.wait(0), [line(&[0x01, 0x03, 0x02, 0x02, 0x58])]);
     assert_eq!(rig.counters().bus_messages, 5);
 }

@@ -1,6 +1,7 @@
 //! Helpers shared by the drive-core tests: frames with CRC, a clocked exchange, state snapshots.
 #![allow(dead_code, missing_docs)]
 
+use drive_core::maps::{NativeMap, RegisterMap};
 use drive_core::od::OBJECTS;
 use drive_core::{Drive, Instant, crc};
 
@@ -12,18 +13,20 @@ pub fn frame(body: &[u8]) -> Vec<u8> {
 }
 
 /// A drive with a clock that the test moves.
-pub struct Bus {
-    pub drive: Drive,
+pub struct Bus<M: RegisterMap = NativeMap> {
+    pub drive: Drive<M>,
     pub now: u64,
 }
 
 impl Bus {
-    pub fn new(drive: Drive) -> Self {
-        Self { drive, now: 1_000_000 }
-    }
-
     pub fn factory() -> Self {
         Self::new(Drive::factory())
+    }
+}
+
+impl<M: RegisterMap> Bus<M> {
+    pub fn new(drive: Drive<M>) -> Self {
+        Self { drive, now: 1_000_000 }
     }
 
     /// Sends `bytes` at the current time (all at once, as a pseudo-terminal delivers them).
