@@ -21,7 +21,7 @@
 //!   0x12) differ by design: the twin never sees a dropped line.
 
 use super::ascii_stream::{Reference, TIMEOUT, TIMING, line_of};
-use super::oracle::{self, Line as _};
+use super::oracle;
 use drive_core::ascii::{RxError, lrc};
 use drive_core::od::Obj;
 use drive_core::{Drive, DriveConfig, Instant, Params};
@@ -203,23 +203,7 @@ fn slave_line_of(bytes: &[u8]) -> Vec<u8> {
 pub fn run(data: &[u8]) {
     let (drive, twin) = factory();
     let mut h = Harness { drive, twin, reference: Reference::new(), waiting: None, served: Vec::new(), now: START };
-    for c in oracle::chunks(data, TIMING) {
-        h.advance(h.now + c.delta, c.late);
-        let bytes = slave_line_of(c.bytes);
-        match c.spacing {
-            Some(d) => {
-                for (i, &b) in bytes.iter().enumerate() {
-                    if i > 0 {
-                        h.advance(h.now + d, false);
-                    }
-                    h.rx(&[b]);
-                }
-            }
-            None if !bytes.is_empty() => h.rx(&bytes),
-            None => {}
-        }
-    }
-    // Silence: a line that waits is served, one in progress times out.
-    h.advance(h.now + TIMEOUT + 1, false);
+    // Then silence: a line that waits is served, one in progress times out.
+    oracle::replay_as(data, TIMING, &mut h, |b| slave_line_of(b).into(), TIMEOUT + 1);
     assert!(h.waiting.is_none() && h.drive.deadline().is_none(), "a line outlived the silence");
 }

@@ -123,6 +123,12 @@ impl Harness {
         assert_eq!(self.framer.deadline().map(Instant::as_micros), self.reference.deadline(), "deadline");
         assert_eq!(self.framer.in_frame(), self.reference.line.is_some(), "in a frame");
     }
+}
+
+impl oracle::Line for Harness {
+    fn now(&self) -> u64 {
+        self.now
+    }
 
     fn advance(&mut self, to: u64, late: bool) {
         if !late {
@@ -174,23 +180,7 @@ pub fn line_of(bytes: &[u8]) -> Vec<u8> {
 /// One execution.
 pub fn run(data: &[u8]) {
     let mut h = Harness { framer: Framer::new(TIMEOUT), reference: Reference::new(), now: 0 };
-    for c in oracle::chunks(data, TIMING) {
-        h.advance(h.now + c.delta, c.late);
-        let bytes = line_of(c.bytes);
-        match c.spacing {
-            Some(d) => {
-                for (i, &b) in bytes.iter().enumerate() {
-                    if i > 0 {
-                        h.advance(h.now + d, false);
-                    }
-                    h.rx(&[b]);
-                }
-            }
-            None if !bytes.is_empty() => h.rx(&bytes),
-            None => {}
-        }
-    }
-    // Silence: a frame left in progress times out.
-    h.advance(h.now + TIMEOUT + 1, false);
+    // Then silence: a frame left in progress times out.
+    oracle::replay_as(data, TIMING, &mut h, |b| line_of(b).into(), TIMEOUT + 1);
     assert!(!h.framer.in_frame(), "a frame outlived the timeout");
 }

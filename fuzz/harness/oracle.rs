@@ -119,22 +119,32 @@ pub trait Line {
 /// Feeds the timed stream `data` (see [`chunks`]) to `line`, then a second of silence so that
 /// the last frame ends.
 pub fn replay(data: &[u8], t: Timing, line: &mut impl Line) {
+    replay_as(data, t, line, |b| std::borrow::Cow::Borrowed(b), 1_000_000);
+}
+
+/// [`replay`] with each chunk's bytes as `bytes_of` makes them (an ASCII line of a marked ADU),
+/// then `silence` µs of silence.
+pub fn replay_as<F>(data: &[u8], t: Timing, line: &mut impl Line, bytes_of: F, silence: u64)
+where
+    F: for<'a> Fn(&'a [u8]) -> std::borrow::Cow<'a, [u8]>,
+{
     for c in chunks(data, t) {
         line.advance(line.now() + c.delta, c.late);
+        let bytes = bytes_of(c.bytes);
         match c.spacing {
             Some(d) => {
-                for (i, &b) in c.bytes.iter().enumerate() {
+                for (i, &b) in bytes.iter().enumerate() {
                     if i > 0 {
                         line.advance(line.now() + d, false);
                     }
                     line.rx(&[b]);
                 }
             }
-            None if !c.bytes.is_empty() => line.rx(c.bytes),
+            None if !bytes.is_empty() => line.rx(&bytes),
             None => {}
         }
     }
-    line.advance(line.now() + 1_000_000, false);
+    line.advance(line.now() + silence, false);
 }
 
 /// A frame that ended on the line, as the reference received it.
@@ -405,6 +415,27 @@ pub fn map_value(state: &drive_core::DriveState, e: &drive_core::maps::layout::E
             let den = i64::from(state.read(drive_core::od::Obj::GearDenominator).max(1));
             round(v * den, num)
         }
+    }
+}
+
+/// Register `k` (0 or 1) of a layout entry `e`, as a model computes it from the drive's object:
+/// one register clamped for a narrow entry (signed for a signed object), else the map's value,
+/// its high word first or second as the map's word order (`high_first`) says.
+pub fn entry_register(
+    state: &drive_core::DriveState,
+    e: &drive_core::maps::layout::Entry,
+    k: u32,
+    high_first: bool,
+) -> u16 {
+    let m = map_value(state, e);
+    if e.is_narrow() && e.obj.def().ty() == drive_core::od::Type::S32 {
+        m.clamp(i64::from(i16::MIN), i64::from(i16::MAX)) as i16 as u16
+    } else if e.is_narrow() {
+        (m as u32).min(0xFFFF) as u16
+    } else if e.words() == 1 || (k == 0) != high_first {
+        m as u16
+    } else {
+        (m as u32 >> 16) as u16
     }
 }
 

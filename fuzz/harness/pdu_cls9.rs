@@ -15,7 +15,7 @@
 use super::oracle;
 use drive_core::maps::Maps;
 use drive_core::maps::cls9::ENTRIES;
-use drive_core::od::{OBJECTS, Obj, Type};
+use drive_core::od::{OBJECTS, Obj};
 use drive_core::state::memory::WORDS;
 use drive_core::{Drive, DriveConfig};
 
@@ -45,18 +45,7 @@ fn model(drive: &Drive<Maps>, addr: u16, qty: usize) -> Option<Vec<u16>> {
         .map(|k| {
             let reg = u32::from(addr) + k;
             let e = ENTRIES.iter().find(|e| (u32::from(e.addr)..u32::from(e.addr) + e.words()).contains(&reg))?;
-            let m = oracle::map_value(drive.state(), e);
-            Some(if e.is_narrow() && e.obj.def().ty() == Type::S32 {
-                m.clamp(i64::from(i16::MIN), i64::from(i16::MAX)) as i16 as u16
-            } else if e.is_narrow() {
-                (m as u32).min(0xFFFF) as u16
-            } else if e.words() == 1 {
-                m as u16
-            } else if reg == u32::from(e.addr) {
-                (m as u32 >> 16) as u16
-            } else {
-                m as u16
-            })
+            Some(oracle::entry_register(drive.state(), e, reg - u32::from(e.addr), true))
         })
         .collect()
 }

@@ -12,7 +12,7 @@
 use super::oracle;
 use drive_core::maps::Maps;
 use drive_core::maps::servo::{ENTRIES, LAYOUT};
-use drive_core::od::{OBJECTS, Type};
+use drive_core::od::OBJECTS;
 use drive_core::{Drive, DriveConfig};
 
 /// Every code the map answers.
@@ -48,17 +48,7 @@ fn model(drive: &Drive<Maps>, addr: u16, qty: usize) -> Option<Vec<u16>> {
         .map(|k| {
             let reg = u32::from(addr) + k;
             let e = ENTRIES.iter().find(|e| (u32::from(e.addr)..u32::from(e.addr) + e.words()).contains(&reg))?;
-            let m = oracle::map_value(drive.state(), e);
-            Some(if e.is_narrow() && e.obj.def().ty() == Type::S32 {
-                m.clamp(i64::from(i16::MIN), i64::from(i16::MAX)) as i16 as u16
-            } else if e.is_narrow() {
-                (m as u32).min(0xFFFF) as u16
-            } else if e.words() == 1 || reg == u32::from(e.addr) {
-                // One register, or the low word, first in this map.
-                m as u16
-            } else {
-                (m as u32 >> 16) as u16
-            })
+            Some(oracle::entry_register(drive.state(), e, reg - u32::from(e.addr), false))
         })
         .collect()
 }
