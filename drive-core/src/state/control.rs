@@ -108,6 +108,7 @@ pub(crate) const fn runs_on(obj: Obj) -> bool {
             | Obj::OverCurrent
             | Obj::CommTimeout
             | Obj::SpeedWindow
+            | Obj::CommInputs
             | Obj::PowerLossControl
             | Obj::PowerLossFreeVoltage
             | Obj::PowerLossBrakeVoltage

@@ -206,21 +206,13 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         let jog_off = matches!(obj, Obj::SpeedJog | Obj::PositionJog)
             && self.param(obj) as u16 & JOG_ON != 0
             && value as u16 & JOG_ON == 0;
-        if undoable {
-            for &a in &actions {
-                self.write_one(a)?;
-            }
-        } else {
-            let mut failed = None;
-            let saved = self.checkpoint();
-            for &a in &actions {
-                if let Err(e) = self.write_one(a) {
-                    failed = Some(e);
-                    break;
+        // Inside a write that has its own checkpoint, that one undoes these writes too.
+        let saved = (!undoable).then(|| self.checkpoint());
+        for &a in &actions {
+            if let Err(e) = self.write_one(a) {
+                if let Some(c) = saved {
+                    self.restore(c);
                 }
-            }
-            if let Some(e) = failed {
-                self.restore(saved);
                 return Err(e);
             }
         }
@@ -233,9 +225,6 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         }
         if !matches!(obj, Obj::SerialFormat | Obj::SignalInputs1 | Obj::SignalInputs2) {
             self.set_param(obj, value);
-        }
-        if obj == Obj::CommInputs {
-            self.refresh_settings();
         }
         Ok(())
     }
