@@ -23,6 +23,7 @@
 pub mod ascii;
 pub mod controller;
 pub mod crc;
+pub mod current;
 pub mod drive;
 pub mod faults;
 pub mod ident;
