@@ -21,6 +21,7 @@
 #![deny(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::indexing_slicing, missing_docs)]
 
 pub mod ascii;
+pub mod autotune;
 pub mod controller;
 pub mod crc;
 pub mod current;

@@ -158,13 +158,26 @@ pub struct Winding {
     pub dead_time: bool,
     /// Whether the voltage is quantised as the firmware's timers do (else exact).
     pub quantised: bool,
+    /// Whether a command acts half a period after its sample (timers updated at the bottom of
+    /// the count as well as the top) instead of a whole one.
+    pub half_delay: bool,
     /// The mean voltage over the current period, commanded a period ago.
     applied: f64,
 }
 
 impl Winding {
     pub fn new(motor: &Motor, v_bus: f64) -> Self {
-        Self { r: motor.r, l: motor.l, i: 0.0, v_bus, emf: 0.0, dead_time: true, quantised: true, applied: 0.0 }
+        Self {
+            r: motor.r,
+            l: motor.l,
+            i: 0.0,
+            v_bus,
+            emf: 0.0,
+            dead_time: true,
+            quantised: true,
+            half_delay: false,
+            applied: 0.0,
+        }
     }
 
     /// Ideal switches and an exact voltage: the loop's own model.
@@ -184,15 +197,19 @@ impl Winding {
     pub fn period(&mut self, command: f32) {
         let h = 1.0 / PWM_HZ / f64::from(SUBSTEPS);
         let decay = (-self.r * h / self.l).exp();
-        for _ in 0..SUBSTEPS {
-            let loss = self.dead_volts() * (self.i / DEAD_FADE_A).clamp(-1.0, 1.0);
-            let v = self.applied - self.emf - loss;
-            self.i = self.i * decay + (1.0 - decay) * v / self.r;
-        }
-        self.applied = if self.quantised {
+        let next = if self.quantised {
             bridge_volts(command, self.v_bus)
         } else {
             f64::from(command).clamp(-self.v_bus, self.v_bus)
         };
+        for n in 0..SUBSTEPS {
+            if self.half_delay && n == SUBSTEPS / 2 {
+                self.applied = next;
+            }
+            let loss = self.dead_volts() * (self.i / DEAD_FADE_A).clamp(-1.0, 1.0);
+            let v = self.applied - self.emf - loss;
+            self.i = self.i * decay + (1.0 - decay) * v / self.r;
+        }
+        self.applied = next;
     }
 }
