@@ -41,7 +41,11 @@
 //! The settings are validated once into an immutable [`CurrentLoopSettings`] (gains worked out
 //! there, off the control tick), the loop's memory is a [`CurrentLoopState`], and
 //! [`CurrentLoopSettings::step`] runs a period: `idsp`'s `process(&self, &mut state, x)`
-//! shape. Why not `idsp`'s `BiquadClamp` or the `foc` crate: `docs/current-loop.md`.
+//! shape. Our own code rather than `idsp` 0.23's `BiquadClamp` (its clamp limits and offset are
+//! in the configuration while ours move every period with the bus voltage and the
+//! feed-forward, its offset is one the integrator accumulates, and the predictor is not a
+//! biquad on the error) or the `foc` 0.3 crate (`I16F16` fixed point only, a PI with no limit
+//! nor anti-windup, a three-phase Clarke transform and modulation): `docs/current-loop.md`.
 //!
 //! For field-oriented control (an encoder gives the rotor's electrical angle θe) the references
 //! come from d/q: [`inverse_park`] of (i_d = 0, i_q) at the angle the rotor will have when the
