@@ -72,6 +72,7 @@ use crate::flash::{PAGES, SimFlash, block_on};
 use crate::motor::{Motor, MotorCatalog, MotorInputs};
 use crate::plant::Plant;
 
+pub mod bridges;
 pub mod encoder;
 pub mod flash;
 pub mod inject;
@@ -139,6 +140,8 @@ pub struct SimOptions {
     pub map: Option<u8>,
     /// Simulated seconds a wall-clock second (`--time-scale`; 0 or 1: real time).
     pub time_scale: u32,
+    /// The ideal chopper or the board's bridges (`--power-stage`).
+    pub power_stage: bridges::PowerStage,
 }
 
 /// The trace or flash file of the drive at `address` when several share the bus: `-axisN`
@@ -441,6 +444,7 @@ fn build<T>(
         }
         let (drive, extra) = power_up(address, drive_config(&SimOptions { address, ..opts.clone() })?)?;
         let mut plant = Plant::new(drive, Motor::new(params.clone(), opts.motor.inputs));
+        plant.set_power_stage(opts.power_stage, bridges::SensingOptions::default());
         plant.schedule(opts.faults.clone());
         plant.set_encoder(opts.encoder);
         *plant.machine_mut() = opts.machine.clone();

@@ -108,6 +108,11 @@ struct Args {
     /// a manual's routine in a test's time.
     #[arg(long, value_name = "N", default_value_t = 1)]
     time_scale: u32,
+    /// How the motor's windings are driven: `chopper` (ideal: each current brought to its
+    /// reference every period) or `bridges` (the G474's power stage: the current loop on the
+    /// ADC's view, one period of PWM delay, dead time, the comparators' trip).
+    #[arg(long, value_name = "KIND", default_value = "chopper")]
+    power_stage: hal_sim::bridges::PowerStage,
     /// Record time, commanded and rotor position and velocity, and phase currents as CSV.
     #[arg(long, value_name = "FILE.csv")]
     trace: Option<PathBuf>,
@@ -192,6 +197,7 @@ fn main() -> ExitCode {
             machine,
             hard_stops,
             map: args.map,
+            power_stage: args.power_stage,
             ..Default::default()
         };
         return run_script(path, &opts);
@@ -214,6 +220,7 @@ fn main() -> ExitCode {
         hard_stops,
         map: args.map,
         time_scale: args.time_scale,
+        power_stage: args.power_stage,
     };
     let sim = match Simulator::bind(opts) {
         Ok(sim) => sim,

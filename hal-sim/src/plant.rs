@@ -15,6 +15,7 @@ use std::io::{self, BufWriter, Write};
 use std::path::Path;
 
 use crate::Drive;
+use crate::bridges::{Bridges, PowerStage, SensingOptions, TRIP_SHARE};
 use drive_core::Instant;
 use drive_core::control::{Outputs, TICK_MICROS};
 use drive_core::controller::handoff::TickSide;
@@ -59,6 +60,8 @@ pub struct Plant {
     /// The rotor's whole turns at the last tick: the incremental encoder's index pulse comes
     /// once a turn, where the rotor was at power-up.
     last_turns: i64,
+    /// The G474's bridges, with [`PowerStage::Bridges`]; `None`: the ideal chopper.
+    bridges: Option<Bridges>,
 }
 
 /// Ambient and driver temperature at power-up, °C.
@@ -153,7 +156,25 @@ impl Plant {
             machine: Machine::default(),
             last_inputs: None,
             last_turns: 0,
+            bridges: None,
         }
+    }
+
+    /// Drives the motor through `stage`: the ideal chopper (the default), or the board's bridges
+    /// with `sensing` ([`crate::bridges`]). Only before the first tick.
+    pub fn set_power_stage(&mut self, stage: PowerStage, sensing: SensingOptions) {
+        if self.last.is_some() {
+            return;
+        }
+        self.bridges = match stage {
+            PowerStage::Chopper => None,
+            PowerStage::Bridges => Some(Bridges::new(&mut self.motor, sensing)),
+        };
+    }
+
+    /// The power stage, with [`PowerStage::Bridges`].
+    pub fn bridges(&self) -> Option<&Bridges> {
+        self.bridges.as_ref()
     }
 
     /// Applies `change` now (at the next tick's time).
@@ -225,7 +246,10 @@ impl Plant {
         Inputs {
             supply_mv: Some((self.motor.inputs().supply_v.max(0.0) * 1e3).round().min(f64::from(u32::MAX)) as u32),
             temperature_c: Some(self.thermal.temperature_c().round().clamp(-40.0, 300.0) as i16),
-            phase_ma: Some([milli(a), milli(b)]),
+            phase_ma: Some(match &self.bridges {
+                Some(bridges) => bridges.reading_ma(),
+                None => [milli(a), milli(b)],
+            }),
             coil_open: [open(fa), open(fb)],
             phase_mv: Some(self.bridge.volts.map(milli)),
             encoder: self.encoder.reading(&self.motor, self.next_tick.as_micros() / TICK_MICROS),
@@ -334,10 +358,21 @@ impl Plant {
     pub fn advance_to(&mut self, now: Instant) {
         while self.next_tick <= now {
             self.disturb();
+            if let Some(bridges) = &mut self.bridges {
+                // The ADC at the PWM's centre, which the tick and the current loop read.
+                bridges.sample(&self.motor);
+            }
             let out = self.tick();
             let cmd = driver_command(&out);
             let tick_s = TICK_MICROS as f64 * 1e-6;
-            self.motor.advance(&cmd, tick_s);
+            match &mut self.bridges {
+                None => self.motor.advance(&cmd, tick_s),
+                Some(bridges) => {
+                    let setting_ma = self.drive.state().read(drive_core::od::Obj::OverCurrent);
+                    let trip_a = TRIP_SHARE * f64::from(setting_ma) * 1e-3;
+                    bridges.period(&mut self.motor, &cmd, trip_a, tick_s);
+                }
+            }
             self.bridge = self.motor.take_bridge_means();
             self.thermal.advance(self.bridge.current_sq, tick_s);
             if let Some((file, every)) = &mut self.trace

@@ -1,0 +1,125 @@
+//! The simulator's motor driven through the G474's bridges (`--power-stage bridges`,
+//! `hal_sim::bridges`): the current loop on the ADC's view, the PWM's delay, dead time and the
+//! comparators, against the ideal chopper.
+
+use drive_core::Drive;
+use drive_core::od::Obj;
+use hal_sim::bridges::{PowerStage, SensingOptions};
+use hal_sim::inject::Change;
+use hal_sim::motor::{Motor, MotorCatalog, MotorInputs, PhaseFault};
+use hal_sim::plant::Plant;
+
+/// A factory drive on the catalogue's motor `name` at 24 V through `stage`.
+fn plant(name: &str, stage: PowerStage) -> Plant {
+    let params = MotorCatalog::builtin().get(name).cloned().expect("catalogue motor");
+    let mut plant = Plant::new(Drive::factory(), Motor::new(params, MotorInputs::default()));
+    plant.set_power_stage(stage, SensingOptions::default());
+    plant
+}
+
+fn send(plant: &mut Plant, body: &[u8]) -> Vec<u8> {
+    plant.request(body).unwrap_or_else(|| panic!("no reply to {body:02X?}"))
+}
+
+fn write(plant: &mut Plant, reg: u16, value: u16) {
+    let [rh, rl] = reg.to_be_bytes();
+    let [vh, vl] = value.to_be_bytes();
+    let r = send(plant, &[0x01, 0x06, rh, rl, vh, vl]);
+    assert_eq!(r[1], 0x06, "{reg:04X}: {r:02X?}");
+}
+
+/// Runs the ticks of `secs`, the drive's timer served at each (as a board's bus task does).
+fn run(plant: &mut Plant, secs: f64) {
+    for _ in 0..(secs * 20_000.0).round() as u32 {
+        let t = plant.next_tick();
+        plant.advance_to(t);
+        plant.drive_mut().on_timer(t);
+    }
+}
+
+/// 1/32 microsteps, 1000 mA, 32 000 pps (5 turns a second) reached at 77 440 pps² (level 1:
+/// 0.41 s), then a relative move of 32 000 microsteps (1 000 full steps): at speed from 0.41 s
+/// to 1.0 s.
+fn start_move(plant: &mut Plant) {
+    let settings =
+        [(0x600C, 0x20), (0x600D, 1000), (0x600A, 1), (0x600B, 1), (0x6003, 0), (0x6004, 0x7D00), (0x6002, 0)];
+    for (reg, v) in settings {
+        write(plant, reg, v);
+    }
+    write(plant, 0x6005, 0);
+    write(plant, 0x6006, 0x7D00);
+}
+
+/// Over `secs` at constant speed: the current vector's amplitude over its reference's, mean and
+/// the worst tick.
+fn amplitude(plant: &mut Plant, secs: f64) -> (f64, f64) {
+    let (mut sum, mut n, mut worst) = (0.0, 0u32, 1.0f64);
+    for _ in 0..(secs * 20_000.0) as u32 {
+        run(plant, 50e-6);
+        let reference = plant.bridges().expect("bridges").reference();
+        let wanted = reference[0].hypot(reference[1]);
+        let (a, b) = plant.motor().phase_currents();
+        if wanted > 0.0 {
+            let ratio = a.hypot(b) / wanted;
+            sum += ratio;
+            n += 1;
+            worst = if (ratio - 1.0).abs() > (worst - 1.0).abs() { ratio } else { worst };
+        }
+    }
+    (sum / f64::from(n.max(1)), worst)
+}
+
+#[test]
+fn a_move_through_the_bridges_ends_where_the_choppers_does_and_the_current_tracks() {
+    for params in MotorCatalog::builtin().motors() {
+        let mut ends = Vec::new();
+        for stage in [PowerStage::Chopper, PowerStage::Bridges] {
+            let mut p = plant(&params.name, stage);
+            run(&mut p, 0.05);
+            start_move(&mut p);
+            run(&mut p, 0.45);
+            let speed = p.motor().speed_rps();
+            let tracking = (stage == PowerStage::Bridges).then(|| amplitude(&mut p, 0.3));
+            run(&mut p, 1.5);
+            let set = p.outputs().map_or(0.0, |o| o.setpoint.whole as f64);
+            let rotor = p.rotor_microsteps();
+            println!(
+                "{} {stage:?}: at speed {speed:.2} rev/s, current amplitude over its reference (mean, worst) {tracking:?}; end: setpoint {set}, rotor {rotor:.2} microsteps",
+                params.name
+            );
+            assert_eq!(set, 32_000.0, "{}", params.name);
+            assert!((rotor - set).abs() < 32.0, "{} {stage:?}: rotor {rotor}", params.name);
+            if let Some((mean, worst)) = tracking {
+                assert!((speed - 5.0).abs() < 0.5, "{} not at speed: {speed}", params.name);
+                assert!((mean - 1.0).abs() < 0.02 && (worst - 1.0).abs() < 0.05, "{}: {mean} {worst}", params.name);
+            }
+            ends.push(rotor);
+        }
+        assert!((ends[0] - ends[1]).abs() < 32.0, "{}: {ends:?}", params.name);
+    }
+}
+
+#[test]
+fn a_shorted_output_trips_the_comparator_within_a_period() {
+    let mut p = plant(hal_sim::DEFAULT_MOTOR, PowerStage::Bridges);
+    for (obj, v) in [(Obj::Microsteps, 16), (Obj::PhaseCurrent, 1000)] {
+        assert_eq!(p.write(obj, v), Ok(()));
+    }
+    p.run_for(0.05);
+    assert!(p.motor().phase_currents().0 > 0.9);
+    assert!(p.bridges().expect("bridges").trips().is_empty());
+    let shorted_at = p.motor().time_s();
+    p.inject(Change::Phase(0, PhaseFault::Short));
+    p.run_for(0.001);
+    let trips = p.bridges().expect("bridges").trips().to_vec();
+    let first = trips.first().expect("a trip");
+    println!("shorted at {shorted_at:.6} s, tripped at {:.6} s: {trips:?}", first.at_s);
+    assert_eq!(first.phase, 0);
+    assert!(first.at_s - shorted_at <= 50e-6 + 1e-9, "{} s after the short", first.at_s - shorted_at);
+    // The drive read the over-current (errors bit 3, alarm 10) and turned its bridges off.
+    assert_eq!(p.drive().state().read(Obj::ErrorStatus), 1 << 3);
+    assert_eq!(p.drive().state().read(Obj::AlarmCode), 10);
+    assert!(!p.outputs().expect("ticked").enabled);
+    p.run_for(0.05);
+    assert!(p.motor().phase_currents().0.abs() < 1e-3);
+}
