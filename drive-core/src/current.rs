@@ -253,6 +253,11 @@ impl CurrentLoopSettings {
         1.0 - self.ki / self.r
     }
 
+    /// The current a volt held across the winding over a period adds to it, A/V: (1 − a)/R.
+    pub fn volt_gain(&self) -> f32 {
+        self.b
+    }
+
     /// The proportional gain, V/A.
     pub fn kp(&self) -> f32 {
         self.kp
@@ -384,6 +389,13 @@ pub struct CosSin {
     pub cos: f32,
     /// sin θ.
     pub sin: f32,
+}
+
+impl Default for CosSin {
+    /// The angle 0.
+    fn default() -> Self {
+        Self { cos: 1.0, sin: 0.0 }
+    }
 }
 
 impl CosSin {

@@ -40,6 +40,7 @@ pub mod servo;
 pub mod state;
 pub mod store;
 pub mod units;
+pub mod windings;
 
 pub use drive::{Drive, DriveConfig};
 pub use pdu::Exception;

@@ -9,12 +9,12 @@
 //!   read back as (zero − code)·LSB with the zero calibrated at power-up over 16 samples at no
 //!   current, as the firmware does. The period-averaged winding model's current at a period's
 //!   boundary is the current at the centre of the low sides' interval, where the board samples;
-//! - **the current loop**, `drive_core::current` (the firmware's code), on that reading, with
-//!   the references from the tick's outputs: (I·cos θe, I·sin θe) at the commanded current I
-//!   and electrical angle θe; its gains from the catalogue's R and L (what the auto-tune
-//!   measures, within 1 %), the recommended bandwidth, 300 ns of dead time compensated; the
-//!   back-EMF fed forward is the rotor's at the middle of the coming period, as an encoder's
-//!   angle and speed would give it (the firmware's own estimate is item 5's);
+//! - **the windings' regulation**, `drive_core::windings` (the firmware's code) on that reading:
+//!   the current loop with its gains from the catalogue's R and L (what the auto-tune measures,
+//!   within 1 %), the recommended bandwidth, 300 ns of dead time compensated, the back-EMF
+//!   estimated from what the loop's model misses; its reference (I·cos θe, I·sin θe) set by the
+//!   last tick's outputs, the tick's new outputs taken after it, as the firmware's interrupt
+//!   does; the open-winding check that stands for the board's missing open-load flags;
 //! - **the PWM**: the loop's voltages quantised as the firmware's timers take them
 //!   (`bridge_shares`, the legs centred, counts of 4 250, `MAX_CCR` 4 054) act over the whole of
 //!   the next period (one period of delay), the supply clamping them; the dead time takes
@@ -27,9 +27,11 @@
 
 use std::str::FromStr;
 
-use drive_core::current::{CurrentLoopSettings, CurrentLoopState, V_BUS_RANGE, bridge_shares, recommended_bandwidth};
+use drive_core::control::Outputs;
+use drive_core::current::{CurrentLoopSettings, V_BUS_RANGE, recommended_bandwidth};
+use drive_core::windings::{WindingSettings, WindingState};
 
-use crate::motor::{BridgeVolts, ChopperConfig, DriverCommand, Motor};
+use crate::motor::{BridgeVolts, ChopperConfig, Motor};
 
 /// How the simulator drives its motor's windings.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -146,12 +148,12 @@ impl Sensing {
     }
 }
 
-/// The winding's mean voltage over a period for a commanded `volts` as the firmware sets the
-/// bridge: the share of the bus in 1/32768, the legs centred and quantised to timer counts,
-/// capped at `MAX_CCR`.
-pub fn pwm_volts(volts: [f32; 2], v_bus: f64) -> [f64; 2] {
+/// The winding's mean voltage over a period for `shares` of the bus (1/32768, what the firmware
+/// gives `Bridges::set_phase_voltages`): the legs centred and quantised to timer counts, capped
+/// at `MAX_CCR`.
+pub fn pwm_volts(shares: [i16; 2], v_bus: f64) -> [f64; 2] {
     let leg = |v: i32| (((32_768 + v).clamp(0, 65_535) * PERIOD_COUNTS) >> 16).min(MAX_CCR);
-    bridge_shares(volts, v_bus as f32).map(|share| {
+    shares.map(|share| {
         let s = i32::from(share);
         f64::from(leg(s) - leg(-s)) / f64::from(PERIOD_COUNTS) * v_bus
     })
@@ -171,8 +173,8 @@ pub struct Trip {
 /// The power stage: the current loop, the ADC, the PWM's delay and the comparators.
 #[derive(Clone, Debug)]
 pub struct Bridges {
-    settings: CurrentLoopSettings,
-    state: CurrentLoopState,
+    settings: WindingSettings,
+    state: WindingState,
     sensing: Sensing,
     /// The currents the ADC read at the last period's centre, A.
     measured: [f64; 2],
@@ -184,8 +186,6 @@ pub struct Bridges {
     unreported: Option<Trip>,
     /// Every trip so far.
     trips: Vec<Trip>,
-    /// The last period's references, A.
-    reference: [f64; 2],
     /// What the drive reads at this tick, mA.
     reading_ma: [i32; 2],
 }
@@ -206,22 +206,21 @@ impl Bridges {
                 .and_then(|s| s.with_dead_time(DEAD_TIME_S as f32, DEAD_BAND_A))
                 .unwrap_or_else(|e| panic!("{}: the current loop refuses its winding: {e:?}", p.name));
         Self {
-            settings,
-            state: CurrentLoopState::default(),
+            settings: WindingSettings::new(settings),
+            state: WindingState::default(),
             sensing: Sensing::new(sensing),
             measured: [0.0; 2],
             pending: None,
             latched: None,
             unreported: None,
             trips: Vec::new(),
-            reference: [0.0; 2],
             reading_ma: [0; 2],
         }
     }
 
     /// The current loop's settings.
     pub fn settings(&self) -> &CurrentLoopSettings {
-        &self.settings
+        self.settings.current_loop()
     }
 
     /// Samples the currents at the period's centre (the time the motor is at).
@@ -242,9 +241,20 @@ impl Bridges {
         self.measured
     }
 
-    /// The references of the last period, A.
+    /// The references of the coming period, A (0 while off).
     pub fn reference(&self) -> [f64; 2] {
-        self.reference
+        self.state.reference().unwrap_or_default().map(f64::from)
+    }
+
+    /// The voltages the loop put across the windings over the period that just ended, mV (0
+    /// while off): what the drive knows of them.
+    pub fn applied_mv(&self) -> [i32; 2] {
+        self.state.applied_mv()
+    }
+
+    /// Whether the drive's regulation finds each winding open (`WindingState::open`).
+    pub fn open(&self) -> [bool; 2] {
+        self.state.open()
     }
 
     /// The phase currents the drive reads at this tick, mA: the ADC's, and a phase that tripped
@@ -263,28 +273,26 @@ impl Bridges {
         self.latched.is_some()
     }
 
-    /// One PWM period of `period_s` s from the sample just taken: the loop's voltages for the
-    /// next period from `cmd` (the tick's outputs), the motor advanced over this one with the
-    /// voltages asked at the last sample, the comparators at `trip_a`.
-    pub fn period(&mut self, motor: &mut Motor, cmd: &DriverCommand, trip_a: f64, period_s: f64) {
+    /// One PWM period of `period_s` s from the sample just taken, as the firmware runs it: the
+    /// loop's voltages for the next period from the reference the last tick set
+    /// (`drive_core::windings`), then this tick's outputs `out` as the next reference; the motor
+    /// advanced over this period with the voltages asked at the last sample, the comparators at
+    /// `trip_a`.
+    pub fn period(&mut self, motor: &mut Motor, out: &Outputs, trip_a: f64, period_s: f64) {
         let v_bus = motor.inputs().supply_v;
-        if !cmd.enabled {
+        let supply_mv = (v_bus.max(0.0) * 1e3).round() as u32;
+        let measured_ma = self.measured.map(|a| (a * 1e3).round() as i32);
+        let next = self.settings.period(&mut self.state, measured_ma, supply_mv).map(|shares| pwm_volts(shares, v_bus));
+        self.settings.command(&mut self.state, out);
+        let next = if self.state.reference().is_none() {
             // The drive turned its bridges off: the outputs go off at once, the latch clears.
             self.latched = None;
             self.pending = None;
-        }
-        let next = if cmd.enabled && self.latched.is_none() {
-            let (s, c) = cmd.theta_e.sin_cos();
-            self.reference = [cmd.current * c, cmd.current * s];
-            let emf = back_emf(motor, 1.5 * period_s);
-            let i_ref = self.reference.map(|i| i as f32);
-            let i_meas = self.measured.map(|i| i as f32);
-            let v = self.settings.step(&mut self.state, i_ref, i_meas, emf, v_bus as f32);
-            Some(pwm_volts(v, v_bus))
-        } else {
-            self.state = CurrentLoopState::default();
-            self.reference = [0.0; 2];
             None
+        } else if self.latched.is_some() {
+            None
+        } else {
+            next
         };
         let acting = std::mem::replace(&mut self.pending, next);
         let bridges = BridgeVolts { volts: acting, dead_volts: 2.0 * DEAD_TIME_S * PWM_HZ * v_bus.max(0.0), trip_a };
@@ -294,19 +302,8 @@ impl Bridges {
             self.unreported = Some(trip);
             self.trips.push(trip);
             self.pending = None;
-            self.state = CurrentLoopState::default();
         }
     }
-}
-
-/// The back-EMF each winding meets `ahead` s from now, V (against the current), from the rotor's
-/// angle and speed now.
-fn back_emf(motor: &Motor, ahead: f64) -> [f32; 2] {
-    let km = motor.params().km_nm_per_a;
-    let omega = motor.omega();
-    let angle = motor.electrical_angle() + motor.params().rotor_teeth() * omega * ahead;
-    let (s, c) = angle.sin_cos();
-    [(-km * omega * s) as f32, (km * omega * c) as f32]
 }
 
 #[cfg(test)]
@@ -316,9 +313,9 @@ mod tests {
     #[test]
     fn the_pwm_caps_a_leg_at_max_ccr() {
         // Beyond the bus: one leg at MAX_CCR, the other at 0 (the loop itself asks 0.9 at most).
-        let [full, zero] = pwm_volts([100.0, 0.0], 24.0);
+        let [full, zero] = pwm_volts([i16::MAX, 0], 24.0);
         assert!((full - 24.0 * 4054.0 / 4250.0).abs() < 0.01 && zero == 0.0, "{full}");
-        let [v, minus] = pwm_volts([5.0, -5.0], 24.0);
+        let [v, minus] = pwm_volts([6827, -6827], 24.0);
         assert!((v - 5.0).abs() < 0.02 && (minus + 5.0).abs() < 0.02, "{v} {minus}");
     }
 

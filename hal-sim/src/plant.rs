@@ -250,8 +250,15 @@ impl Plant {
                 Some(bridges) => bridges.reading_ma(),
                 None => [milli(a), milli(b)],
             }),
-            coil_open: [open(fa), open(fb)],
-            phase_mv: Some(self.bridge.volts.map(milli)),
+            // The G474's bridges have no open-load flags: the drive's own regulation tells.
+            coil_open: match &self.bridges {
+                Some(bridges) => bridges.open(),
+                None => [open(fa), open(fb)],
+            },
+            phase_mv: Some(match &self.bridges {
+                Some(bridges) => bridges.applied_mv(),
+                None => self.bridge.volts.map(milli),
+            }),
             encoder: self.encoder.reading(&self.motor, self.next_tick.as_micros() / TICK_MICROS),
             // The pins and the analog input: the machine's, at the tick (`Plant::tick`).
             levels: 0,
@@ -370,7 +377,7 @@ impl Plant {
                 Some(bridges) => {
                     let setting_ma = self.drive.state().read(drive_core::od::Obj::OverCurrent);
                     let trip_a = TRIP_SHARE * f64::from(setting_ma) * 1e-3;
-                    bridges.period(&mut self.motor, &cmd, trip_a, tick_s);
+                    bridges.period(&mut self.motor, &out, trip_a, tick_s);
                 }
             }
             self.bridge = self.motor.take_bridge_means();
