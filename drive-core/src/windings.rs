@@ -31,8 +31,9 @@
 //! assert_eq!(settings.period(&mut state, [0, 0], 24_000), None);
 //! ```
 
+use crate::autotune::{self, Autotune, Estimate, Step};
 use crate::controller::Outputs;
-use crate::current::{CosSin, CurrentLoopSettings, CurrentLoopState, bridge_shares};
+use crate::current::{CosSin, CurrentLoopSettings, CurrentLoopState, bridge_shares, recommended_bandwidth};
 use crate::motion::axis::Setpoint;
 
 /// Full steps an electrical turn of a two-phase hybrid stepper.
@@ -42,7 +43,14 @@ pub const STEPS_PER_ELECTRICAL_TURN: u32 = 4;
 /// (0 counts full steps).
 pub fn electrical_angle(at: &Setpoint, microsteps: u16) -> f32 {
     let per_turn = STEPS_PER_ELECTRICAL_TURN * u32::from(microsteps.max(1));
-    let within = at.whole.rem_euclid(i64::from(per_turn)) as f32 + at.fraction.to_num::<f32>();
+    // Within a turn, as a u32 (the FPU converts that; an i64 takes a library routine); a
+    // power of two of microsteps a turn, the usual case, by a mask rather than a 64-bit division.
+    let turn = if per_turn.is_power_of_two() {
+        at.whole as u32 & (per_turn - 1)
+    } else {
+        at.whole.rem_euclid(i64::from(per_turn)) as u32
+    };
+    let within = turn as f32 + at.fraction.to_num::<f32>();
     within * (core::f32::consts::TAU / per_turn as f32)
 }
 
@@ -55,6 +63,14 @@ pub const OPEN_MIN_MA: f32 = 100.0;
 /// The share of its reference under which a winding's current, at the supply's limit, means the
 /// winding is open: a winding the back-EMF starves at speed still carries far more.
 pub const OPEN_SHARE: f32 = 0.1;
+
+/// Counts the periods in a row a winding has looked open: driven at the supply's `limit` with
+/// `volts` towards `reference` A, and `measured` A under [`OPEN_SHARE`] of it.
+fn looks_open(periods: &mut u16, volts: f32, reference: f32, measured: f32, limit: f32) {
+    let starved = reference.abs() * 1e3 >= OPEN_MIN_MA && measured.abs() < OPEN_SHARE * reference.abs();
+    let at_limit = volts.abs() >= 0.99 * limit && volts * reference > 0.0;
+    *periods = if starved && at_limit { periods.saturating_add(1) } else { 0 };
+}
 
 /// The share of the correction's voltage that goes into the back-EMF's estimate each period.
 pub const EMF_GAIN: f32 = 0.1;
@@ -155,7 +171,8 @@ impl WindingSettings {
         let v_bus = supply_mv as f32 * 1e-3;
         let measured = phase_ma.map(|ma| ma as f32 * 1e-3);
         let volts = self.current.step(&mut state.current, reference, measured, state.back_emf, v_bus);
-        state.next_mv = volts.map(|v| libm::roundf(v * 1e3) as i32);
+        // To the mV below (a truncation: the FPU's conversion, not a rounding routine).
+        state.next_mv = volts.map(|v| (v * 1e3) as i32);
         // What the model still misses is mostly the back-EMF, a vector turning with the rotor:
         // the correction's current as a voltage (−c/b) integrated into the estimate fed forward,
         // which is turned with the rotor to the next period, as is the correction, so that both
@@ -169,12 +186,82 @@ impl WindingSettings {
         state.back_emf = turn([ea - EMF_GAIN * missed[0] / per_volt, eb - EMF_GAIN * missed[1] / per_volt]);
         [pa.correction, pb.correction] = turn(missed);
         let limit = CurrentLoopSettings::limit(v_bus);
-        for (((open_for, v), i_ref), i) in state.open_for.iter_mut().zip(volts).zip(reference).zip(measured) {
-            let starved = i_ref.abs() * 1e3 >= OPEN_MIN_MA && i.abs() < OPEN_SHARE * i_ref.abs();
-            let at_limit = v.abs() >= 0.99 * limit && v * i_ref > 0.0;
-            *open_for = if starved && at_limit { open_for.saturating_add(1) } else { 0 };
-        }
+        let ([open_a, open_b], [va, vb], [ra, rb], [ia, ib]) = (&mut state.open_for, volts, reference, measured);
+        looks_open(open_a, va, ra, ia, limit);
+        looks_open(open_b, vb, rb, ib, limit);
         Some(bridge_shares(volts, v_bus))
+    }
+}
+
+/// The dead time the board's bridges have, s (`firmware/src/board/power_stage.rs`), which the
+/// current loop compensates.
+pub const DEAD_TIME_S: f32 = 300e-9;
+/// The reference current over which the dead-time compensation fades, A: a few of the ADC's codes.
+pub const DEAD_BAND_A: f32 = 0.05;
+
+/// The windings' power-up auto-tune: [`Autotune`] on both windings at once, each on its own
+/// bridge, a PWM period at a time; the loop's settings from their mean R and L (one motor), at
+/// the recommended bandwidth and the board's dead time compensated.
+#[derive(Clone, Debug)]
+pub struct PowerUpTune {
+    windings: [Autotune; 2],
+    results: [Option<Result<Estimate, autotune::Error>>; 2],
+    pwm_hz: f32,
+    /// The bus at the last period, V: the loop's nominal one.
+    v_bus: f32,
+}
+
+/// What the power-up tune does this period.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum TuneStep {
+    /// Put these shares of the bus across the windings over the next period
+    /// ([`bridge_shares`]).
+    Apply([i16; 2]),
+    /// Over (the bridges to 0 V): the loop's settings and the two estimates, or why not.
+    Done(Result<(WindingSettings, [Estimate; 2]), autotune::Error>),
+}
+
+impl PowerUpTune {
+    /// A tune at `test_current_ma` (see [`Autotune::new`]: the upper level; the motor's rated
+    /// current or under), at `pwm_hz`.
+    pub fn new(test_current_ma: u16, pwm_hz: f32) -> Result<Self, autotune::Error> {
+        let tune = Autotune::new(f32::from(test_current_ma) * 1e-3, pwm_hz)?;
+        Ok(Self { windings: [tune.clone(), tune], results: [None; 2], pwm_hz, v_bus: 0.0 })
+    }
+
+    /// One PWM period from the currents sampled now and the bus.
+    pub fn step(&mut self, phase_ma: [i32; 2], supply_mv: u32) -> TuneStep {
+        let v_bus = supply_mv as f32 * 1e-3;
+        self.v_bus = v_bus;
+        let mut volts = [0.0f32; 2];
+        for (((tune, result), ma), v) in self.windings.iter_mut().zip(&mut self.results).zip(phase_ma).zip(&mut volts) {
+            if result.is_some() {
+                continue;
+            }
+            match tune.step(ma as f32 * 1e-3, v_bus) {
+                Step::Apply(asked) => *v = asked,
+                Step::Done(done) => *result = Some(done),
+            }
+        }
+        match self.results {
+            [Some(a), Some(b)] => TuneStep::Done(self.settings(a, b)),
+            // One winding failed: the other stops too.
+            [Some(Err(e)), _] | [_, Some(Err(e))] => TuneStep::Done(Err(e)),
+            _ => TuneStep::Apply(bridge_shares(volts, v_bus)),
+        }
+    }
+
+    fn settings(
+        &self,
+        a: Result<Estimate, autotune::Error>,
+        b: Result<Estimate, autotune::Error>,
+    ) -> Result<(WindingSettings, [Estimate; 2]), autotune::Error> {
+        let (a, b) = (a?, b?);
+        let (r, l) = (0.5 * (a.resistance + b.resistance), 0.5 * (a.inductance + b.inductance));
+        let current = CurrentLoopSettings::new(r, l, self.v_bus, self.pwm_hz, recommended_bandwidth(self.pwm_hz))
+            .and_then(|s| s.with_dead_time(DEAD_TIME_S, DEAD_BAND_A))
+            .map_err(|_| autotune::Error::OutOfRange)?;
+        Ok((WindingSettings::new(current), [a, b]))
     }
 }
 
@@ -267,5 +354,42 @@ mod tests {
             }
         }
         assert!(worst < 0.02, "{worst}");
+    }
+
+    #[test]
+    fn the_power_up_tune_measures_both_windings_and_sets_the_loop() {
+        // Two windings of 1.4 Ω and 3 mH (the second 3 % off), 24 V, sensed to 5 mA.
+        let (t, l) = (50e-6f32, [3.0e-3f32, 3.09e-3]);
+        let mut tune = PowerUpTune::new(1000, 20_000.0).unwrap_or_else(|e| unreachable!("{e:?}"));
+        let (mut i, mut acting) = ([0.0f32; 2], [0.0f32; 2]);
+        let mut periods = 0u32;
+        let (settings, estimates) = loop {
+            periods += 1;
+            let ma = i.map(|x| 5 * libm::roundf(x * 200.0) as i32);
+            let next = match tune.step(ma, 24_000) {
+                TuneStep::Apply(shares) => shares.map(|s| f32::from(s) * 24.0 / 32_768.0),
+                TuneStep::Done(done) => break done.unwrap_or_else(|e| unreachable!("{e:?}")),
+            };
+            for ((i, l), v) in i.iter_mut().zip(l).zip(acting) {
+                let a = libm::expf(-1.4 * t / l);
+                *i = a * *i + (1.0 - a) / 1.4 * v;
+            }
+            acting = next;
+        };
+        let loop_ = settings.current_loop();
+        assert!((loop_.resistance() - 1.4).abs() < 0.03, "{}", loop_.resistance());
+        assert!((loop_.inductance() - 3.045e-3).abs() < 0.05e-3, "{}", loop_.inductance());
+        assert!((estimates[1].inductance / estimates[0].inductance - 1.03).abs() < 0.01, "{estimates:?}");
+        assert!(periods < 20_000, "{periods} periods");
+    }
+
+    #[test]
+    fn an_open_winding_fails_the_power_up_tune() {
+        let mut tune = PowerUpTune::new(1000, 20_000.0).unwrap_or_else(|e| unreachable!("{e:?}"));
+        let result = (0..40_000).find_map(|_| match tune.step([0, 0], 24_000) {
+            TuneStep::Done(done) => Some(done.map(|_| ())),
+            TuneStep::Apply(_) => None,
+        });
+        assert_eq!(result, Some(Err(autotune::Error::NoCurrent)));
     }
 }
