@@ -449,7 +449,7 @@ pub fn init() -> Board {
     rcc.boost = true; // required above 150 MHz
     // ADC1/ADC2 on SYSCLK (embassy divides it by 4: 42.5 MHz); the reset value selects no clock,
     // and `Adc::new` then panics.
-    rcc.mux.adc12sel = Adcsel::SYS;
+    rcc.mux.adc12sel = embassy_stm32::rcc::mux::Adcsel::SYS;
     check_option_bytes();
     let p = embassy_stm32::init(config);
 
