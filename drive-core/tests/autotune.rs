@@ -8,6 +8,7 @@
 mod winding;
 
 use drive_core::autotune::{Autotune, Error, Estimate, Step};
+use drive_core::current::{CurrentLoopSettings, CurrentLoopState};
 use winding::{Motor, PWM_HZ, Sensing, Winding, catalogue};
 
 /// Runs a measurement to its end: the estimate and the periods it took.
@@ -24,6 +25,22 @@ fn measure(motor: &Motor, v_bus: f64, test_current: f32, mut sensing: Sensing) -
 }
 
 /// The noise of the acceptance: 3 codes (16 mA) standard deviation, 4 codes of offset.
+/// The loop `s` on `w` at 24 V: 0.5 A for 100 ms, then a step to 0.75 A; the step's share made
+/// at each of the 400 periods after it.
+fn step_response(s: &CurrentLoopSettings, mut w: Winding) -> Vec<f64> {
+    let mut state = CurrentLoopState::default();
+    let mut y = Vec::new();
+    for k in 0..2_400 {
+        let reference = if k < 2_000 { 0.5 } else { 0.75 };
+        if k >= 2_000 {
+            y.push((w.i - 0.5) / 0.25);
+        }
+        let v = s.step(&mut state, [reference, 0.0], [w.i as f32, 0.0], [0.0; 2], 24.0);
+        w.period(v[0]);
+    }
+    y
+}
+
 fn noisy(seed: u64) -> Sensing {
     Sensing::new(4.0, 3.0, seed)
 }
@@ -88,7 +105,7 @@ fn motors_beyond_the_catalogue() {
 
 #[test]
 fn the_loop_tuned_from_the_measurement_makes_the_step() {
-    use drive_core::current::{CurrentLoopSettings, CurrentLoopState, recommended_bandwidth};
+    use drive_core::current::recommended_bandwidth;
     for motor in catalogue() {
         let (result, _) = measure(&motor, 24.0, (0.5 * motor.rated) as f32, noisy(3));
         let e = result.unwrap_or_else(|e| panic!("{}: {e:?}", motor.name));
@@ -101,17 +118,7 @@ fn the_loop_tuned_from_the_measurement_makes_the_step() {
         )
         .and_then(|s| s.with_dead_time(winding::DEAD_TIME as f32, 0.05))
         .unwrap_or_else(|e| panic!("{e:?}"));
-        let mut w = Winding::new(&motor, 24.0);
-        let mut state = CurrentLoopState::default();
-        let mut y = Vec::new();
-        for k in 0..2_400 {
-            let reference = if k < 2_000 { 0.5 } else { 0.75 };
-            if k >= 2_000 {
-                y.push((w.i - 0.5) / 0.25);
-            }
-            let v = s.step(&mut state, [reference, 0.0], [w.i as f32, 0.0], [0.0; 2], 24.0);
-            w.period(v[0]);
-        }
+        let y = step_response(&s, Winding::new(&motor, 24.0));
         let overshoot = y.iter().fold(0.0f64, |m, &v| m.max(v - 1.0));
         println!("{}: tuned to {:?}: i[3] {:.3}, overshoot {:.1} %", motor.name, e, y[3], overshoot * 100.0);
         assert!(y[3] >= 0.9 && overshoot <= 0.05, "{}", motor.name);
@@ -170,7 +177,7 @@ fn more_noise_and_offset() {
 fn half_a_period_of_delay() {
     // If the timers took the voltage half a period after the sample (updates at the bottom of
     // the count too) instead of a whole one: what the measurement and the tuned loop make of it.
-    use drive_core::current::{CurrentLoopSettings, CurrentLoopState, recommended_bandwidth};
+    use drive_core::current::recommended_bandwidth;
     for motor in catalogue() {
         for v_bus in [12.0, 48.0] {
             let mut tune = Autotune::new((0.5 * motor.rated) as f32, PWM_HZ as f32).unwrap_or_else(|e| panic!("{e:?}"));
@@ -194,16 +201,7 @@ fn half_a_period_of_delay() {
             .unwrap_or_else(|e| panic!("{e:?}"));
             let mut w = Winding::new(&motor, 24.0);
             w.half_delay = true;
-            let mut state = CurrentLoopState::default();
-            let mut y = Vec::new();
-            for k in 0..2_400 {
-                let reference = if k < 2_000 { 0.5 } else { 0.75 };
-                if k >= 2_000 {
-                    y.push((w.i - 0.5) / 0.25);
-                }
-                let v = s.step(&mut state, [reference, 0.0], [w.i as f32, 0.0], [0.0; 2], 24.0);
-                w.period(v[0]);
-            }
+            let y = step_response(&s, w);
             let overshoot = y.iter().fold(0.0f64, |m, &v| m.max(v - 1.0));
             println!(
                 "{} at {v_bus} V, half a period of delay: R {:+.2} %, L {:+.2} %; the loop's step (24 V) i[1..5] {:.3?}, overshoot {:.1} %",
