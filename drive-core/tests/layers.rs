@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 const SRC: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/src");
 
 /// Each top-level part and the parts it imports: the imports column of `docs/architecture.md`.
-const ALLOWED: [(&str, &[&str]); 20] = [
+const ALLOWED: [(&str, &[&str]); 21] = [
     ("units", &[]),
     ("math", &[]),
     ("current", &[]),
@@ -29,6 +29,7 @@ const ALLOWED: [(&str, &[&str]); 20] = [
     ("servo", &["math", "units"]),
     ("faults", &["units"]),
     ("controller", &["faults", "modes", "motion", "servo", "units"]),
+    ("windings", &["autotune", "controller", "current", "motion"]),
     ("state", &["controller", "faults", "ident", "math", "modes", "motion", "od", "pdu", "power", "servo", "units"]),
     ("maps", &["ident", "motion", "od", "pdu", "state", "units"]),
     (
@@ -53,7 +54,7 @@ const ALLOWED: [(&str, &[&str]); 20] = [
 ];
 
 /// The parts the control tick runs: they name no object of the dictionary (`Obj`).
-const TICK_SIDE: [&str; 4] = ["controller", "faults", "servo", "motion"];
+const TICK_SIDE: [&str; 5] = ["controller", "faults", "servo", "motion", "windings"];
 
 /// The source files of the top-level module `module`: its file, or every file of its directory.
 fn files(module: &str) -> Vec<PathBuf> {

@@ -179,7 +179,7 @@ impl Cubic {
         }
         let den = self.den();
         let (whole, rem) = div_floor(self.num(k.min(self.n)), den);
-        Offset { whole: whole as i64, fraction: ((rem << 32) / den) as u32 }
+        Offset { whole: whole as i64, fraction: ((rem << 32) / den.value) as u32 }
     }
 
     /// The numerator of the position at tick `k` over [`Cubic::den`] (module documentation). `k`
@@ -203,9 +203,9 @@ impl Cubic {
     /// The denominator of the position, `R·N³` (positive for a segment of some time). Out of
     /// line: a 128-bit product in four callers, each once a segment.
     #[inline(never)]
-    fn den(&self) -> i128 {
+    fn den(&self) -> Den {
         let n = i128::from(self.n);
-        i128::from(TICK_HZ) * n * n * n
+        Den { value: i128::from(TICK_HZ) * n * n * n, n: self.n }
     }
 
     /// The velocity and acceleration as polynomials in the segment's time, in `f32` (the
@@ -324,7 +324,7 @@ impl Mixed {
     /// `x·2^32 / den` (`den > 0`, below 2^95). One division when `x·2^32` fits in `i128`, as it
     /// does for any segment shorter than about 20 s; else `x = a·den + b`, then
     /// `b·2^32 = c·den + e` (the same quotient and remainder), so no product exceeds `den·2^32`.
-    fn scaled(x: i128, den: i128) -> Self {
+    fn scaled(x: i128, den: Den) -> Self {
         if x.unsigned_abs() < 1 << 94 {
             let (q, r) = div_floor(x << 32, den);
             return Self { q, r };
@@ -336,13 +336,14 @@ impl Mixed {
 
     /// `x·2^32 / den` from `x = a·den + b` (`(a, b)`): the remainder's fraction the second of
     /// [`Mixed::scaled`]'s two divisions.
-    fn from_whole((a, b): (i128, i128), den: i128) -> Self {
+    fn from_whole((a, b): (i128, i128), den: Den) -> Self {
         let (c, e) = div_floor(b << 32, den);
         Self { q: (a << 32) + c, r: e }
     }
 
     /// Adds `o`, both over `den`.
-    fn add(&mut self, o: Mixed, den: i128) {
+    fn add(&mut self, o: Mixed, den: Den) {
+        let den = den.value;
         self.q += o.q;
         self.r += o.r;
         if self.r >= den {
@@ -352,12 +353,103 @@ impl Mixed {
     }
 }
 
-/// Floor division with its remainder in `[0, den)`, `den > 0`: a 128-bit division, a library
-/// call of integer arithmetic (no floating point: the control tick prepares segments with it,
-/// one division a tick, see [`Ahead`]).
-fn div_floor(x: i128, den: i128) -> (i128, i128) {
-    let q = x.div_euclid(den);
-    (q, x - q * den)
+/// A segment's denominator `R·N³` with its `N`, which it is divided through: `R·N³` is a product
+/// of numbers under 2^32, so a division by it is divisions of 32-bit digits by 32-bit divisors,
+/// each two of the Cortex-M4's own 32-bit divisions ([`div_digit`]), where the library's 128-bit
+/// division works a bit at a time (the control tick prepares segments with it, see [`Ahead`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Den {
+    /// `R·N³`; 1 for a segment of no time.
+    value: i128,
+    /// `N`, ticks; 0 for a segment of no time.
+    n: u64,
+}
+
+impl Den {
+    /// The denominator of a segment of no time, which nothing is divided by.
+    const UNIT: Den = Den { value: 1, n: 0 };
+}
+
+/// Floor division by `den` with its remainder in `[0, den)`: `x` divided by `R` and by `N` three
+/// times, the factors multiplied together while their product stays under 2^32 (for a segment
+/// under 3.2 s, two divisions: by `R·N` and by `N²`); floor divisions by positive numbers compose.
+fn div_floor(x: i128, den: Den) -> (i128, i128) {
+    if den.n == 0 {
+        return (x, 0);
+    }
+    let mut q = x;
+    let mut acc = u64::from(TICK_HZ);
+    for _ in 0..3 {
+        let product = acc * den.n;
+        if product <= u64::from(u32::MAX) {
+            acc = product;
+        } else {
+            q = floor_div_u32(q, acc as u32);
+            acc = den.n;
+        }
+    }
+    q = floor_div_u32(q, acc as u32);
+    (q, x - q * den.value)
+}
+
+/// `floor(x / d)`, `d > 0`.
+fn floor_div_u32(x: i128, d: u32) -> i128 {
+    let (q, r) = div_u32(x.unsigned_abs(), d);
+    // |x| / d ≤ |x| ≤ 2^127: the negations wrap only at i128::MIN / 1, which they give back.
+    let q = q as i128;
+    if x >= 0 {
+        q
+    } else if r == 0 {
+        q.wrapping_neg()
+    } else {
+        q.wrapping_neg().wrapping_sub(1)
+    }
+}
+
+/// `m / d` and its remainder, `d > 0`, a 32-bit digit at a time from the top (the digits
+/// taken apart and put together by constant shifts: registers, where a loop's variable shifts of
+/// a `u128` are library calls).
+fn div_u32(m: u128, d: u32) -> (u128, u32) {
+    let (q3, r) = div_digit(0, (m >> 96) as u32, d);
+    let (q2, r) = div_digit(r, (m >> 64) as u32, d);
+    let (q1, r) = div_digit(r, (m >> 32) as u32, d);
+    let (q0, r) = div_digit(r, m as u32, d);
+    let high = (u64::from(q3) << 32) | u64::from(q2);
+    let low = (u64::from(q1) << 32) | u64::from(q0);
+    ((u128::from(high) << 64) | u128::from(low), r)
+}
+
+/// `(hi·2^32 + lo) / d` and its remainder for `hi < d` (the quotient fits in 32 bits), by two
+/// 16-bit digits, each estimated with a 32-bit division by the divisor's normalised top half
+/// and corrected at most twice (Hacker's Delight, `divlu`): two hardware divisions, where a
+/// 64-bit `/` is a library call.
+fn div_digit(hi: u32, lo: u32, d: u32) -> (u32, u32) {
+    const B: u64 = 1 << 16;
+    let s = d.leading_zeros();
+    let v = d << s;
+    let (vn1, vn0) = (v >> 16, v & 0xFFFF);
+    let un32 = if s == 0 { hi } else { (hi << s) | (lo >> (32 - s)) };
+    let un10 = lo << s;
+    let (un1, un0) = (un10 >> 16, un10 & 0xFFFF);
+    // One 16-bit digit of the quotient from `top` (the remainder so far and the next digit):
+    // the estimate is never under the digit, and over it by at most 2.
+    let digit = |top: u32, next: u32| -> u32 {
+        let mut q = top / vn1;
+        let mut rhat = top - q * vn1;
+        while u64::from(q) >= B || u64::from(q) * u64::from(vn0) > (u64::from(rhat) << 16) + u64::from(next) {
+            q -= 1;
+            rhat += vn1;
+            if u64::from(rhat) >= B {
+                break;
+            }
+        }
+        q
+    };
+    let q1 = digit(un32, un1);
+    let un21 = (un32 << 16).wrapping_add(un1).wrapping_sub(q1.wrapping_mul(v));
+    let q0 = digit(un21, un0);
+    let r = (un21 << 16).wrapping_add(un0).wrapping_sub(q0.wrapping_mul(v)) >> s;
+    ((q1 << 16) | q0, r)
 }
 
 /// The most ticks [`Walk::at`] steps through; beyond, it starts again from the exact position.
@@ -380,7 +472,7 @@ const MAX_STRIDE: u64 = 64;
 pub struct Walk {
     /// The tick `pos` is at.
     k: u64,
-    den: i128,
+    den: Den,
     /// The position times 2^32: whole microsteps in `q >> 32`, the fraction in its low bits.
     pos: Mixed,
     /// The first, second and third forward differences at `k`.
@@ -417,7 +509,7 @@ impl Walk {
 
     /// The walk of `c` at its start with no difference computed yet (all zero).
     fn blank(c: &Cubic) -> Self {
-        let den = if c.n == 0 { 1 } else { c.den() };
+        let den = if c.n == 0 { Den::UNIT } else { c.den() };
         Self { k: 0, den, pos: ZERO, d1: ZERO, d2: ZERO, d3: ZERO }
     }
 
@@ -653,18 +745,30 @@ mod tests {
             }
         }
 
-        /// The floor division is the library's Euclidean division, near and far from the
-        /// estimate's limit.
+        /// The floor division by a segment's denominator is the library's Euclidean
+        /// division, for segments of every length and numerators of every size.
         #[test]
         fn div_floor_is_euclidean(
             x in -(1i128 << 125)..(1i128 << 125),
-            den in 1i128..(1i128 << 95),
-            shift in 0u32..100,
+            time_ms in 1u16..=65535,
+            shift in 0u32..126,
         ) {
-            for x in [x, x >> shift] {
+            let c = Cubic::new(0, 0, Point { position: 0, velocity: 0, time_ms });
+            let den = c.den();
+            for x in [x, x >> shift, -(x >> shift), den.value - 1, -den.value, 0] {
                 let (q, r) = div_floor(x, den);
-                proptest::prop_assert_eq!((q, r), (x.div_euclid(den), x.rem_euclid(den)));
+                proptest::prop_assert_eq!((q, r), (x.div_euclid(den.value), x.rem_euclid(den.value)));
             }
+        }
+
+        /// A 64-by-32-bit digit division is the library's, for every divisor's size.
+        #[test]
+        fn div_digit_is_the_library_division(d in 1u32..=u32::MAX, lo in proptest::prelude::any::<u32>(), hi_share in 0.0f64..1.0, bits in 0u32..32) {
+            let d = (d >> bits).max(1);
+            let hi = (f64::from(d - 1) * hi_share) as u32;
+            let x = (u64::from(hi) << 32) | u64::from(lo);
+            let (q, r) = div_digit(hi, lo, d);
+            proptest::prop_assert_eq!((u64::from(q), u64::from(r)), (x / u64::from(d), x % u64::from(d)));
         }
 
         /// A segment prepared ahead, however far the preparation got, starts as one prepared
