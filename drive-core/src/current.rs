@@ -113,6 +113,8 @@ pub enum Error {
     Bandwidth,
     /// The dead time is negative or a tenth of the period or more, or its band not positive.
     DeadTime,
+    /// A gain set by hand is not a positive number.
+    Gains,
 }
 
 /// Resistances the loop accepts, Ω.
@@ -221,6 +223,25 @@ impl CurrentLoopSettings {
             return Err(Error::DeadTime);
         }
         Ok(Self { dead_share: 2.0 * dead_time / self.period, dead_band: band, ..self })
+    }
+
+    /// The same settings with the PI's gains set rather than worked out from R, L and the
+    /// bandwidth: `kp` V/A and `ki` V/A a period (positive); the predictor keeps its model of
+    /// the winding.
+    ///
+    /// ```
+    /// use drive_core::current::{CurrentLoopSettings, Error};
+    /// let s = CurrentLoopSettings::new(1.4, 3.0e-3, 24.0, 20_000.0, 32_189.0).unwrap();
+    /// let s = s.with_gains(30.0, 0.3).unwrap();
+    /// assert_eq!((s.kp(), s.ki()), (30.0, 0.3));
+    /// assert_eq!(s.with_gains(0.0, 0.3), Err(Error::Gains));
+    /// ```
+    pub fn with_gains(self, kp: f32, ki: f32) -> Result<Self, Error> {
+        let fine = |g: f32| g.is_finite() && g > 0.0;
+        if !(fine(kp) && fine(ki)) {
+            return Err(Error::Gains);
+        }
+        Ok(Self { kp, ki, ..self })
     }
 
     /// The winding's resistance, Ω.

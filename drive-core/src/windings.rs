@@ -193,15 +193,71 @@ impl WindingSettings {
     }
 }
 
+/// The current loop as the drive's objects hold it, in their units (0x2108 R in mΩ, 0x2109 L in
+/// µH, 0x210C KP in 0.1 V/A, 0x210D KI in 0.01 V/A a PWM period): what the platform reads at
+/// power-up to run the loop without a tune, and writes back after one.
+///
+/// ```
+/// use drive_core::windings::LoopObjects;
+/// let tuned = LoopObjects { r_mohm: 1400, l_uh: 3000, kp: 300, ki: 30 }.settings(24.0, 20_000.0).unwrap();
+/// assert!((tuned.current_loop().kp() - 30.0).abs() < 1e-6);
+/// assert_eq!(LoopObjects::of(&tuned), LoopObjects { r_mohm: 1400, l_uh: 3000, kp: 300, ki: 30 });
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LoopObjects {
+    /// The winding's resistance, mΩ.
+    pub r_mohm: u16,
+    /// The winding's inductance, µH.
+    pub l_uh: u16,
+    /// The proportional gain, 0.1 V/A.
+    pub kp: u16,
+    /// The integral gain, 0.01 V/A a PWM period.
+    pub ki: u16,
+}
+
+impl LoopObjects {
+    /// The objects' ranges (0x2108/0x2109, 0x210C, 0x210D), which [`LoopObjects::of`] keeps to.
+    const R_L: (u16, u16) = (10, 60_000);
+    const KP: (u16, u16) = (50, 32_767);
+    const KI: (u16, u16) = (10, 2_000);
+
+    /// The loop these objects describe on a bus of `v_bus` V at `pwm_hz`, the board's dead time
+    /// compensated.
+    pub fn settings(&self, v_bus: f32, pwm_hz: f32) -> Result<WindingSettings, crate::current::Error> {
+        let (r, l) = (f32::from(self.r_mohm) * 1e-3, f32::from(self.l_uh) * 1e-6);
+        let current = CurrentLoopSettings::new(r, l, v_bus, pwm_hz, recommended_bandwidth(pwm_hz))?
+            .with_gains(f32::from(self.kp) * 0.1, f32::from(self.ki) * 0.01)?
+            .with_dead_time(DEAD_TIME_S, DEAD_BAND_A)?;
+        Ok(WindingSettings::new(current))
+    }
+
+    /// The objects of `settings`, rounded into their units and ranges.
+    pub fn of(settings: &WindingSettings) -> Self {
+        let c = settings.current_loop();
+        let unit = |x: f32, (lo, hi): (u16, u16)| libm::roundf(x).clamp(f32::from(lo), f32::from(hi)) as u16;
+        Self {
+            r_mohm: unit(c.resistance() * 1e3, Self::R_L),
+            l_uh: unit(c.inductance() * 1e6, Self::R_L),
+            kp: unit(c.kp() * 10.0, Self::KP),
+            ki: unit(c.ki() * 100.0, Self::KI),
+        }
+    }
+}
+
 /// The dead time the board's bridges have, s (`firmware/src/board/power_stage.rs`), which the
 /// current loop compensates.
 pub const DEAD_TIME_S: f32 = 300e-9;
 /// The reference current over which the dead-time compensation fades, A: a few of the ADC's codes.
 pub const DEAD_BAND_A: f32 = 0.05;
 
-/// The windings' power-up auto-tune: [`Autotune`] on both windings at once, each on its own
-/// bridge, a PWM period at a time; the loop's settings from their mean R and L (one motor), at
-/// the recommended bandwidth and the board's dead time compensated.
+/// The windings' power-up auto-tune: [`Autotune`] on one winding, then the other, each on its
+/// own bridge, a PWM period at a time (the other at 0 V); the loop's settings from their mean R
+/// and L (one motor), at the recommended bandwidth and the board's dead time compensated.
+///
+/// One winding at a time: its current then holds the rotor on that winding's own axis whatever
+/// its size, so the rotor stays still through the pulses. Both at once, the current vector's
+/// angle swings with each pulse, the rotor follows it, and its back-EMF takes up to 7 % off the
+/// inductance measured at 48 V (the simulator's NEMA 23).
 #[derive(Clone, Debug)]
 pub struct PowerUpTune {
     windings: [Autotune; 2],
@@ -233,20 +289,30 @@ impl PowerUpTune {
     pub fn step(&mut self, phase_ma: [i32; 2], supply_mv: u32) -> TuneStep {
         let v_bus = supply_mv as f32 * 1e-3;
         self.v_bus = v_bus;
-        let mut volts = [0.0f32; 2];
-        for (((tune, result), ma), v) in self.windings.iter_mut().zip(&mut self.results).zip(phase_ma).zip(&mut volts) {
-            if result.is_some() {
-                continue;
-            }
-            match tune.step(ma as f32 * 1e-3, v_bus) {
-                Step::Apply(asked) => *v = asked,
-                Step::Done(done) => *result = Some(done),
-            }
-        }
+        let [tune_a, tune_b] = &mut self.windings;
+        let [result_a, result_b] = &mut self.results;
+        let [ma, mb] = phase_ma;
+        let volts = match (&result_a, &result_b) {
+            (None, _) => match tune_a.step(ma as f32 * 1e-3, v_bus) {
+                Step::Apply(v) => [v, 0.0],
+                Step::Done(done) => {
+                    *result_a = Some(done);
+                    [0.0; 2]
+                }
+            },
+            (Some(Ok(_)), None) => match tune_b.step(mb as f32 * 1e-3, v_bus) {
+                Step::Apply(v) => [0.0, v],
+                Step::Done(done) => {
+                    *result_b = Some(done);
+                    [0.0; 2]
+                }
+            },
+            _ => [0.0; 2],
+        };
         match self.results {
             [Some(a), Some(b)] => TuneStep::Done(self.settings(a, b)),
-            // One winding failed: the other stops too.
-            [Some(Err(e)), _] | [_, Some(Err(e))] => TuneStep::Done(Err(e)),
+            // A winding that failed ends the tune.
+            [Some(Err(e)), _] => TuneStep::Done(Err(e)),
             _ => TuneStep::Apply(bridge_shares(volts, v_bus)),
         }
     }
@@ -380,7 +446,7 @@ mod tests {
         assert!((loop_.resistance() - 1.4).abs() < 0.03, "{}", loop_.resistance());
         assert!((loop_.inductance() - 3.045e-3).abs() < 0.05e-3, "{}", loop_.inductance());
         assert!((estimates[1].inductance / estimates[0].inductance - 1.03).abs() < 0.01, "{estimates:?}");
-        assert!(periods < 20_000, "{periods} periods");
+        assert!(periods < 25_000, "{periods} periods");
     }
 
     #[test]

@@ -356,3 +356,30 @@ fn the_sub_index_is_one_byte_after_the_register() {
     }
     assert_eq!(rig().drive.map().address_extra(), 1);
 }
+
+#[test]
+fn the_current_loop_registers() {
+    let mut r = rig();
+    // The manual's factory values: the tune on, KP 300, KI 30; Kc the loop's correction, 250‰.
+    assert_eq!(r.read_sub(0x2007, 0, 4), Ok(vec![1, 300, 30, 250]));
+    // A drive whose power stage is an external driver runs no current loop: refused (06).
+    let before = r.objects();
+    assert_eq!(r.write_sub(0x2007, 0, 0), Err(6));
+    assert_eq!(r.objects(), before);
+    r.drive.state_mut().set_current_loop(true);
+    // While the tune is on, the gains are its: read only (05). Kc always is.
+    assert_eq!(r.write_sub(0x2008, 0, 400), Err(5));
+    assert_eq!(r.write_sub(0x200A, 0, 100), Err(5));
+    assert_eq!(r.write_sub(0x2007, 0, 2), Err(6), "0-1");
+    assert_eq!(r.objects(), before);
+    // The tune off, the gains are written within their ranges and read back.
+    assert_eq!(r.write_sub(0x2007, 0, 0), Ok(()));
+    assert_eq!(r.write_sub(0x2008, 0, 49), Err(6), "50-32767");
+    assert_eq!(r.write_sub(0x2009, 0, 2001), Err(6), "10-2000");
+    assert_eq!(r.write_sub(0x2008, 0, 764), Ok(()));
+    assert_eq!(r.write_sub(0x2009, 0, 112), Ok(()));
+    assert_eq!(r.read_sub(0x2007, 0, 3), Ok(vec![0, 764, 112]));
+    // The native objects they are.
+    let st = r.drive.state();
+    assert_eq!((st.read(Obj::CurrentAutoTune), st.read(Obj::CurrentKp), st.read(Obj::CurrentKi)), (0, 764, 112));
+}

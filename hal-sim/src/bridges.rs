@@ -27,9 +27,10 @@
 
 use std::str::FromStr;
 
+use drive_core::autotune;
 use drive_core::control::Outputs;
-use drive_core::current::{CurrentLoopSettings, V_BUS_RANGE, recommended_bandwidth};
-use drive_core::windings::{WindingSettings, WindingState};
+use drive_core::current::{CurrentLoopSettings, V_BUS_RANGE};
+use drive_core::windings::{LoopObjects, PowerUpTune, TuneStep, WindingSettings, WindingState};
 
 use crate::motor::{BridgeVolts, ChopperConfig, Motor};
 
@@ -71,8 +72,6 @@ const MAX_CCR: i32 = 4_054;
 pub const AMPS_PER_CODE: f64 = 3.3 * 16.0 / (4095.0 * 8.0 * 15.0 * 0.020);
 /// The comparators' threshold over the drive's over-current setting (`power_stage::TRIP_PERCENT`).
 pub const TRIP_SHARE: f64 = 1.25;
-/// The reference current over which the loop's dead-time compensation fades, A.
-const DEAD_BAND_A: f32 = 0.05;
 /// Samples the zero is calibrated over at power-up (`power_stage::ZERO_SAMPLES`).
 const ZERO_SAMPLES: u32 = 16;
 
@@ -173,8 +172,12 @@ pub struct Trip {
 /// The power stage: the current loop, the ADC, the PWM's delay and the comparators.
 #[derive(Clone, Debug)]
 pub struct Bridges {
-    settings: WindingSettings,
+    settings: Option<WindingSettings>,
+    /// What the power-up tune found.
+    tuned: Option<LoopObjects>,
     state: WindingState,
+    /// Whether the last tick asked a current (with no loop, the windings then read open).
+    asked: bool,
     sensing: Sensing,
     /// The currents the ADC read at the last period's centre, A.
     measured: [f64; 2],
@@ -192,35 +195,47 @@ pub struct Bridges {
 
 impl Bridges {
     /// The power stage for `motor` (its PWM set to the board's 20 kHz, four sub-steps a period:
-    /// only before it first advances), with `sensing`.
-    ///
-    /// # Panics
-    /// If the catalogue's R or L is beyond what the current loop takes.
-    pub fn new(motor: &mut Motor, sensing: SensingOptions) -> Self {
+    /// only before it first advances), with `sensing`, its current loop set up as the drive's
+    /// objects say at power-up ([`LoopSetup`]): tuned ([`Bridges::tuned`] then holds what the
+    /// tune found, for the drive's objects), or from the objects. A tune that fails (an open
+    /// winding) or objects the loop refuses leave the bridges with no loop: they stay off, and
+    /// the drive reads both windings open once it asks a current.
+    pub fn new(motor: &mut Motor, sensing: SensingOptions, setup: LoopSetup) -> Self {
         motor.set_chopper(ChopperConfig { pwm_period_s: 1.0 / PWM_HZ, substeps: SUBSTEPS });
-        let p = motor.params();
-        let nominal = (motor.inputs().supply_v as f32).clamp(V_BUS_RANGE.0, V_BUS_RANGE.1);
-        let pwm = PWM_HZ as f32;
-        let settings =
-            CurrentLoopSettings::new(p.r_ohm as f32, p.l_henry as f32, nominal, pwm, recommended_bandwidth(pwm))
-                .and_then(|s| s.with_dead_time(DEAD_TIME_S as f32, DEAD_BAND_A))
-                .unwrap_or_else(|e| panic!("{}: the current loop refuses its winding: {e:?}", p.name));
+        let mut sensing = Sensing::new(sensing);
+        let v_bus = (motor.inputs().supply_v as f32).clamp(V_BUS_RANGE.0, V_BUS_RANGE.1);
+        let (settings, tuned) = if setup.auto_tune {
+            match tune(motor, &mut sensing, setup.test_ma) {
+                Ok(settings) => (Some(settings), Some(LoopObjects::of(&settings))),
+                Err(_) => (None, None),
+            }
+        } else {
+            (setup.objects.settings(v_bus, PWM_HZ as f32).ok(), None)
+        };
         Self {
-            settings: WindingSettings::new(settings),
+            settings,
+            tuned,
             state: WindingState::default(),
-            sensing: Sensing::new(sensing),
+            sensing,
             measured: [0.0; 2],
             pending: None,
             latched: None,
             unreported: None,
             trips: Vec::new(),
             reading_ma: [0; 2],
+            asked: false,
         }
     }
 
-    /// The current loop's settings.
-    pub fn settings(&self) -> &CurrentLoopSettings {
-        self.settings.current_loop()
+    /// What the power-up tune found, in the drive's objects' units; `None` without a tune or if
+    /// it failed.
+    pub fn tuned(&self) -> Option<LoopObjects> {
+        self.tuned
+    }
+
+    /// The current loop's settings; `None` if there is no loop (a failed tune).
+    pub fn settings(&self) -> Option<&CurrentLoopSettings> {
+        self.settings.as_ref().map(WindingSettings::current_loop)
     }
 
     /// Samples the currents at the period's centre (the time the motor is at).
@@ -252,9 +267,10 @@ impl Bridges {
         self.state.applied_mv()
     }
 
-    /// Whether the drive's regulation finds each winding open (`WindingState::open`).
+    /// Whether the drive's regulation finds each winding open (`WindingState::open`); both,
+    /// while a current is asked of bridges with no loop.
     pub fn open(&self) -> [bool; 2] {
-        self.state.open()
+        if self.settings.is_none() && self.asked { [true; 2] } else { self.state.open() }
     }
 
     /// The phase currents the drive reads at this tick, mA: the ADC's, and a phase that tripped
@@ -282,8 +298,15 @@ impl Bridges {
         let v_bus = motor.inputs().supply_v;
         let supply_mv = (v_bus.max(0.0) * 1e3).round() as u32;
         let measured_ma = self.measured.map(|a| (a * 1e3).round() as i32);
-        let next = self.settings.period(&mut self.state, measured_ma, supply_mv).map(|shares| pwm_volts(shares, v_bus));
-        self.settings.command(&mut self.state, out);
+        let next = self
+            .settings
+            .as_ref()
+            .and_then(|w| w.period(&mut self.state, measured_ma, supply_mv))
+            .map(|shares| pwm_volts(shares, v_bus));
+        self.asked = out.enabled && out.current_ma != 0;
+        if let Some(w) = &self.settings {
+            w.command(&mut self.state, out);
+        }
         let next = if self.state.reference().is_none() {
             // The drive turned its bridges off: the outputs go off at once, the latch clears.
             self.latched = None;
@@ -303,6 +326,41 @@ impl Bridges {
             self.trips.push(trip);
             self.pending = None;
         }
+    }
+}
+
+/// What the drive's objects say of the current loop at power-up.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LoopSetup {
+    /// 0x210B: tune at power-up.
+    pub auto_tune: bool,
+    /// 0x2108, 0x2109, 0x210C, 0x210D: the loop without a tune.
+    pub objects: LoopObjects,
+    /// 0x600D: the tune's test current, mA.
+    pub test_ma: u16,
+}
+
+/// The power-up auto-tune (`drive_core::windings::PowerUpTune`, the firmware's) on `motor`
+/// through `sensing`: a PWM period at a time, the tune's voltages quantised as the timers take
+/// them and acting over the next period, the dead time against the current. On a copy of the
+/// motor: the rotor's twitch during the tune (both windings carry current) is left out, and the
+/// simulation starts at rest where it was.
+fn tune(motor: &Motor, sensing: &mut Sensing, test_ma: u16) -> Result<WindingSettings, autotune::Error> {
+    let mut m = motor.clone();
+    let mut tune = PowerUpTune::new(test_ma.clamp(100, 10_000), PWM_HZ as f32)?;
+    let v_bus = m.inputs().supply_v;
+    let supply_mv = (v_bus.max(0.0) * 1e3).round() as u32;
+    let dead_volts = 2.0 * DEAD_TIME_S * PWM_HZ * v_bus.max(0.0);
+    let mut acting = None;
+    loop {
+        let (a, b) = m.phase_currents();
+        let ma = sensing.read([a, b]).map(|i| (i * 1e3).round() as i32);
+        let next = match tune.step(ma, supply_mv) {
+            TuneStep::Apply(shares) => Some(pwm_volts(shares, v_bus)),
+            TuneStep::Done(done) => return done.map(|(settings, _)| settings),
+        };
+        let volts = std::mem::replace(&mut acting, next);
+        m.advance_bridges(&BridgeVolts { volts, dead_volts, trip_a: f64::INFINITY }, 1.0 / PWM_HZ);
     }
 }
 

@@ -15,12 +15,13 @@ use std::io::{self, BufWriter, Write};
 use std::path::Path;
 
 use crate::Drive;
-use crate::bridges::{Bridges, PowerStage, SensingOptions, TRIP_SHARE};
+use crate::bridges::{Bridges, LoopSetup, PowerStage, SensingOptions, TRIP_SHARE};
 use drive_core::Instant;
 use drive_core::control::{Outputs, TICK_MICROS};
 use drive_core::controller::handoff::TickSide;
 use drive_core::faults::Inputs;
 use drive_core::od::{Obj, ObjError};
+use drive_core::windings::LoopObjects;
 
 use crate::encoder::{Encoder, EncoderKind};
 use crate::inject::{Change, Injector, Scheduled, Supply};
@@ -168,8 +169,39 @@ impl Plant {
         }
         self.bridges = match stage {
             PowerStage::Chopper => None,
-            PowerStage::Bridges => Some(Bridges::new(&mut self.motor, sensing)),
+            PowerStage::Bridges => Some(self.power_up_bridges(sensing)),
         };
+    }
+
+    /// The bridges as the drive powers them up: its current loop from its objects (0x210B,
+    /// 0x2108, 0x2109, 0x210C, 0x210D, 0x600D), and a tune's results written back into them.
+    fn power_up_bridges(&mut self, sensing: SensingOptions) -> Bridges {
+        let state = self.drive.state();
+        let word = |obj: Obj| state.read(obj).min(u32::from(u16::MAX)) as u16;
+        let setup = LoopSetup {
+            auto_tune: state.read(Obj::CurrentAutoTune) != 0,
+            objects: LoopObjects {
+                r_mohm: word(Obj::MotorResistance),
+                l_uh: word(Obj::MotorInductance),
+                kp: word(Obj::CurrentKp),
+                ki: word(Obj::CurrentKi),
+            },
+            test_ma: word(Obj::PhaseCurrent),
+        };
+        let bridges = Bridges::new(&mut self.motor, sensing, setup);
+        let state = self.drive.state_mut();
+        state.set_current_loop(true);
+        if let Some(t) = bridges.tuned() {
+            for (obj, v) in [
+                (Obj::MotorResistance, t.r_mohm),
+                (Obj::MotorInductance, t.l_uh),
+                (Obj::CurrentKp, t.kp),
+                (Obj::CurrentKi, t.ki),
+            ] {
+                state.apply(obj, u32::from(v));
+            }
+        }
+        bridges
     }
 
     /// The power stage, with [`PowerStage::Bridges`].

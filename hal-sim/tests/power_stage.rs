@@ -50,10 +50,10 @@ fn start_move(plant: &mut Plant) {
     write(plant, 0x6006, 0x7D00);
 }
 
-/// Over `secs` at constant speed: the current vector's amplitude over its reference's, mean and
-/// the worst tick.
-fn amplitude(plant: &mut Plant, secs: f64) -> (f64, f64) {
-    let (mut sum, mut n, mut worst) = (0.0, 0u32, 1.0f64);
+/// Over `secs` at constant speed, the current vector's amplitude over its reference's: the mean,
+/// the share of ticks more than 5 % off, and the worst tick.
+fn amplitude(plant: &mut Plant, secs: f64) -> (f64, f64, f64) {
+    let (mut sum, mut n, mut off, mut worst) = (0.0, 0u32, 0u32, 1.0f64);
     for _ in 0..(secs * 20_000.0) as u32 {
         run(plant, 50e-6);
         let reference = plant.bridges().expect("bridges").reference();
@@ -63,10 +63,12 @@ fn amplitude(plant: &mut Plant, secs: f64) -> (f64, f64) {
             let ratio = a.hypot(b) / wanted;
             sum += ratio;
             n += 1;
+            off += u32::from((ratio - 1.0).abs() > 0.05);
             worst = if (ratio - 1.0).abs() > (worst - 1.0).abs() { ratio } else { worst };
         }
     }
-    (sum / f64::from(n.max(1)), worst)
+    let n = f64::from(n.max(1));
+    (sum / n, f64::from(off) / n, worst)
 }
 
 #[test]
@@ -84,14 +86,17 @@ fn a_move_through_the_bridges_ends_where_the_choppers_does_and_the_current_track
             let set = p.outputs().map_or(0.0, |o| o.setpoint.whole as f64);
             let rotor = p.rotor_microsteps();
             println!(
-                "{} {stage:?}: at speed {speed:.2} rev/s, current amplitude over its reference (mean, worst) {tracking:?}; end: setpoint {set}, rotor {rotor:.2} microsteps",
+                "{} {stage:?}: at speed {speed:.2} rev/s, current amplitude over its reference (mean, share of ticks beyond 5 %, worst) {tracking:?}; end: setpoint {set}, rotor {rotor:.2} microsteps",
                 params.name
             );
             assert_eq!(set, 32_000.0, "{}", params.name);
             assert!((rotor - set).abs() < 32.0, "{} {stage:?}: rotor {rotor}", params.name);
-            if let Some((mean, worst)) = tracking {
+            if let Some((mean, off, worst)) = tracking {
                 assert!((speed - 5.0).abs() < 0.5, "{} not at speed: {speed}", params.name);
-                assert!((mean - 1.0).abs() < 0.02 && (worst - 1.0).abs() < 0.05, "{}: {mean} {worst}", params.name);
+                // The ADC's noise (2 codes, 11 mA) moves single ticks: at most one in a thousand
+                // more than 5 % off, none beyond 6 %.
+                assert!((mean - 1.0).abs() < 0.01, "{}: mean {mean}", params.name);
+                assert!(off <= 0.001 && (worst - 1.0).abs() < 0.06, "{}: {off} off, worst {worst}", params.name);
             }
             ends.push(rotor);
         }
@@ -100,7 +105,10 @@ fn a_move_through_the_bridges_ends_where_the_choppers_does_and_the_current_track
 }
 
 #[test]
-fn a_shorted_output_trips_the_comparator_within_a_period() {
+fn a_shorted_output_trips_the_comparator_and_the_drive_latches_the_over_current() {
+    // The short (0.1 Ω, 5 µH) across the loop's 1-3 V (the currents' noise moves it) raises the
+    // current with a 50 µs time constant: the 10 A trip comes in the first or the second period;
+    // the comparator turns both bridges off in the sub-step (12.5 µs) it is passed.
     let mut p = plant(hal_sim::DEFAULT_MOTOR, PowerStage::Bridges);
     for (obj, v) in [(Obj::Microsteps, 16), (Obj::PhaseCurrent, 1000)] {
         assert_eq!(p.write(obj, v), Ok(()));
@@ -108,14 +116,15 @@ fn a_shorted_output_trips_the_comparator_within_a_period() {
     p.run_for(0.05);
     assert!(p.motor().phase_currents().0 > 0.9);
     assert!(p.bridges().expect("bridges").trips().is_empty());
-    let shorted_at = p.motor().time_s();
+    // An injection acts at the next tick.
+    let shorted_at = p.next_tick().as_micros() as f64 * 1e-6;
     p.inject(Change::Phase(0, PhaseFault::Short));
     p.run_for(0.001);
     let trips = p.bridges().expect("bridges").trips().to_vec();
     let first = trips.first().expect("a trip");
     println!("shorted at {shorted_at:.6} s, tripped at {:.6} s: {trips:?}", first.at_s);
     assert_eq!(first.phase, 0);
-    assert!(first.at_s - shorted_at <= 50e-6 + 1e-9, "{} s after the short", first.at_s - shorted_at);
+    assert!(first.at_s - shorted_at <= 100e-6 + 1e-9, "{} s after the short", first.at_s - shorted_at);
     // The drive read the over-current (errors bit 3, alarm 10) and turned its bridges off.
     assert_eq!(p.drive().state().read(Obj::ErrorStatus), 1 << 3);
     assert_eq!(p.drive().state().read(Obj::AlarmCode), 10);
@@ -163,4 +172,78 @@ fn a_winding_starved_by_speed_is_not_taken_for_open() {
     assert!(at_limit > 1_000, "{at_limit}");
     assert_eq!(p.drive().state().read(Obj::ErrorStatus), 0);
     assert_eq!(p.outputs().map(|o| o.setpoint.whole), Some(32_000));
+}
+
+/// A plant on `name` at `supply_v` through the bridges, 0x600D at the motor's rated current,
+/// the current loop's objects `params` says before power-up.
+fn powered_up(name: &str, supply_v: f64, mut params: drive_core::Params) -> Plant {
+    let motor = MotorCatalog::builtin().get(name).cloned().expect("catalogue motor");
+    assert!(params.set(Obj::PhaseCurrent, (motor.rated_current_a * 1e3).round() as u32));
+    let drive = Drive::boot(drive_core::DriveConfig::default(), &params, 0);
+    let mut plant = Plant::new(drive, Motor::new(motor, MotorInputs { supply_v, ..MotorInputs::default() }));
+    plant.set_power_stage(PowerStage::Bridges, SensingOptions::default());
+    plant
+}
+
+#[test]
+fn the_power_up_tune_measures_r_and_l_within_5_percent_and_sets_the_gains() {
+    for motor in MotorCatalog::builtin().motors() {
+        for supply_v in [12.0, 48.0] {
+            let p = powered_up(&motor.name, supply_v, drive_core::Params::factory());
+            let read = |obj| p.drive().state().read(obj);
+            let (r, l) = (f64::from(read(Obj::MotorResistance)) * 1e-3, f64::from(read(Obj::MotorInductance)) * 1e-6);
+            let loop_ = p.bridges().and_then(|b| b.settings()).copied().expect("a tuned loop");
+            println!(
+                "{} at {supply_v} V: R {:.3} Ω ({:+.2} %), L {:.3} mH ({:+.2} %), KP {} (0.1 V/A), KI {} (0.01 V/A a period)",
+                motor.name,
+                r,
+                100.0 * (r / motor.r_ohm - 1.0),
+                l * 1e3,
+                100.0 * (l / motor.l_henry - 1.0),
+                read(Obj::CurrentKp),
+                read(Obj::CurrentKi)
+            );
+            assert!((r / motor.r_ohm - 1.0).abs() < 0.05, "{} R {r}", motor.name);
+            assert!((l / motor.l_henry - 1.0).abs() < 0.05, "{} L {l}", motor.name);
+            assert_eq!(read(Obj::CurrentKp), (loop_.kp() * 10.0).round() as u32);
+            assert_eq!(read(Obj::CurrentKi), (loop_.ki() * 100.0).round() as u32);
+        }
+    }
+}
+
+#[test]
+fn without_the_tune_the_loop_runs_on_the_objects_gains() {
+    let mut params = drive_core::Params::factory();
+    for (obj, v) in [(Obj::CurrentAutoTune, 0), (Obj::CurrentKp, 400), (Obj::CurrentKi, 90)] {
+        assert!(params.set(obj, v));
+    }
+    let mut p = powered_up(hal_sim::DEFAULT_MOTOR, 24.0, params);
+    let loop_ = p.bridges().and_then(|b| b.settings()).copied().expect("a loop");
+    assert!((loop_.kp() - 40.0).abs() < 1e-4 && (loop_.ki() - 0.9).abs() < 1e-6, "{loop_:?}");
+    // The objects as the drive had them: R and L the factory's, nothing measured.
+    assert_eq!(p.drive().state().read(Obj::MotorResistance), 1400);
+    // The gains are written with the tune off; the tune's own switch acts at the next power-up.
+    assert_eq!(p.write(Obj::CurrentKp, 500), Ok(()));
+    assert_eq!(p.write(Obj::CurrentAutoTune, 1), Ok(()));
+    assert_eq!(p.write(Obj::CurrentKp, 600), Err(drive_core::od::ObjError::ReadOnly));
+    // The motor holds its current on these gains.
+    assert_eq!(p.write(Obj::PhaseCurrent, 1000), Ok(()));
+    p.run_for(0.05);
+    assert!((p.motor().phase_currents().0 - 1.0).abs() < 0.02);
+}
+
+#[test]
+fn an_open_winding_at_power_up_fails_the_tune_and_the_drive_reads_it_open() {
+    let motor = MotorCatalog::builtin().get(hal_sim::DEFAULT_MOTOR).cloned().expect("catalogue motor");
+    let mut m = Motor::new(motor, MotorInputs::default());
+    m.set_phase_fault(1, PhaseFault::Open);
+    let mut p = Plant::new(Drive::factory(), m);
+    p.set_power_stage(PowerStage::Bridges, SensingOptions::default());
+    assert!(p.bridges().and_then(|b| b.settings()).is_none());
+    assert_eq!(p.drive().state().read(Obj::MotorResistance), 1400, "nothing measured");
+    assert_eq!(p.write(Obj::PhaseCurrent, 1000), Ok(()));
+    p.run_for(0.01);
+    // Phase loss on both (errors bits 1 and 2), the bridges never on.
+    assert_eq!(p.drive().state().read(Obj::ErrorStatus) & 0b110, 0b110);
+    assert_eq!(p.motor().phase_currents(), (0.0, 0.0));
 }

@@ -146,7 +146,7 @@ const RPM: Scale = Scale::PerRev(1, 60);
 const FAULT_CODE: Scale = Scale::Field(24, 8);
 
 /// The table (§1.2), by (index, sub-index) as [`key`] makes them.
-pub static ENTRIES: [Entry; 46] = [
+pub static ENTRIES: [Entry; 50] = [
     Entry::new(key(0x2000, 0), Obj::NodeId, &Scale::One),
     Entry::new(key(0x2001, 0), Obj::AddressSource, &Scale::One),
     Entry::new(key(0x2002, 0), Obj::MotorDirection, &Scale::One),
@@ -155,6 +155,10 @@ pub static ENTRIES: [Entry; 46] = [
     Entry::new(key(0x2004, 0), Obj::PhaseCurrent, &Scale::One),
     Entry::new(key(0x2005, 0), Obj::Microsteps, &Scale::PulsesPerRev),
     Entry::new(key(0x2006, 0), Obj::DisabledHold, &Scale::One),
+    Entry::new(key(0x2007, 0), Obj::CurrentAutoTune, &Scale::One),
+    Entry::new(key(0x2008, 0), Obj::CurrentKp, &Scale::One),
+    Entry::new(key(0x2009, 0), Obj::CurrentKi, &Scale::One),
+    Entry::new(key(0x200A, 0), Obj::CurrentKc, &Scale::One),
     Entry::new(key(0x200B, 0), Obj::SoftStartTime, &Scale::One),
     Entry::new(key(0x200C, 0), Obj::SoftStart, &Scale::One),
     Entry::new(key(0x200D, 0), Obj::SupplyVoltage, &Scale::Ratio(1000, 1)),
@@ -277,7 +281,8 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         "0x2021 bit k inverts IN k+1; 0x2022.1-5 give IN1-IN5 a function: 1 origin (the homing's home switch), 2 positive limit, 4 negative limit (a motion heading into an active limit stops at the stop deceleration, and a command towards it is refused), 8 quick stop (stops at the quick-stop deceleration), 16 custom and 0 none (the master reads it in 0x2014); both read back as 0; 32 and 64 touch probes 1 and 2 (any input may be either; the manual offers probe 2 on IN1 and IN2): at the input's first activation after its status bit was cleared, the control tick captures the position (the encoder's in closed loop, the setpoint's in open loop) into the drive's 0x21DB (probe 1) or 0x21DD (probe 2), with 0x21DF bits 0 and 1 saying a capture is there (write 1 to re-arm): through the window, as the EC-57 has them on its fieldbus. IN1-IN3 are the drive's EXT1-EXT3, IN4 and IN5 GPIO1 and GPIO2.",
         "0x2024 bit k set: OUT k+1 is high when on (the drive's output logic inverted); 0x2025.1-3: 1 alarm output (on while no alarm is latched), 2 in position, 16 master-controlled (the drive's general output, 0x21C7 in the window), 0 none. OUT1-OUT3 are the drive's GPIO5-GPIO7.",
         "0x2030 (write only): 1 saves the parameters, 2 restores the factory ones and saves them (both refused with 06 while the motor moves); 0 does nothing. Saved parameters are kept across power cycles; the drive saves nothing on its own.",
-        "Not in this map, answered 03 (the firmware has no flash left under its 104 KiB ceiling, nor RAM under its 24 KiB budget, for them yet: performance.md): 0x2007-0x200A (the current loop's gains and their power-up tuning), 0x2012, 0x201B and 0x201F (the overspeed limit, the fault detection mask, the not-moving code), 0x2015 and 0x2016 (the command FIR filter), 0x2023.1-5 (the input filters).",
+        "0x2007-0x200A are the current loop of the drive's own power stage (the G474's bridges; the simulator's `--power-stage bridges`), read at power-up: 0x2007 = 1 (factory) measures both windings' R and L at power-up (about half a second at 0x2004's current, before the drive answers; the native 0x2108 and 0x2109 read them) and sets the gains from them; 0x2008 (KP, 0.1 V/A: the volts across a winding per ampere of error) and 0x2009 (KI, 0.01 V/A added each PWM period) then read what the tune set and refuse writes (05); with 0x2007 = 0 they are written and run as set, on the R and L of 0x2108 and 0x2109. 0x200A (Kc, ‰, read only) is the share of what the loop's winding model missed that corrects its next prediction, 250. The factory KP 300 and KI 30 are the manual's; a tune replaces them (a NEMA 17 of 1.4 Ω and 3 mH gets 764 and 112). A board whose power stage is an external STEP/DIR driver has no current loop: there 0x2007-0x2009 refuse writes (06, the drive's refusal in its state) and read their stored values.",
+        "Not in this map, answered 03: 0x2012, 0x201B and 0x201F (the overspeed limit, the fault detection mask, the not-moving code), 0x2015 and 0x2016 (the command FIR filter), 0x2023.1-5 (the input filters).",
     ],
     remarks: &[],
     decimal: false,

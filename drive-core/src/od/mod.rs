@@ -193,6 +193,12 @@ pub enum Unit {
     MicroHenries,
     /// Degrees of the motor shaft.
     Degrees,
+    /// Tenths of a volt per ampere (a current loop's proportional gain).
+    DeciVoltsPerAmp,
+    /// Hundredths of a volt per ampere, added each PWM period (a current loop's integral gain).
+    CentiVoltsPerAmpPeriod,
+    /// Thousandths.
+    PerMille,
 }
 
 impl Unit {
@@ -214,6 +220,9 @@ impl Unit {
             Unit::MilliOhms => "mΩ",
             Unit::MicroHenries => "µH",
             Unit::Degrees => "°",
+            Unit::DeciVoltsPerAmp => "0.1 V/A",
+            Unit::CentiVoltsPerAmpPeriod => "0.01 V/A a PWM period",
+            Unit::PerMille => "‰",
         }
     }
 }

@@ -158,13 +158,34 @@ objects! {
     /// detection always runs; 0x6043 says whether a stall stops the motor); 0 turns it off for a
     /// motor whose resistance and inductance (0x2108, 0x2109) are not known.
     StallDetect @ 0x2107: U8, Rw, Rom, Span(0, 1), default 1, None, "stall detection";
-    /// Motor winding resistance (our object), for the back-EMF estimate of the stall detection.
+    /// Motor winding resistance (our object), for the back-EMF estimate of the stall detection
+    /// and the current loop's model; with 0x210B = 1 the power-up auto-tune's measurement (the
+    /// mean of both windings).
     MotorResistance @ 0x2108: U16, Rw, Rom, Span(10, 60_000), default 1400, MilliOhms, "motor resistance";
-    /// Motor winding inductance (our object), for the back-EMF estimate of the stall detection.
+    /// Motor winding inductance (our object), for the back-EMF estimate of the stall detection
+    /// and the current loop's model; with 0x210B = 1 the power-up auto-tune's measurement.
     MotorInductance @ 0x2109: U16, Rw, Rom, Span(10, 60_000), default 3000, MicroHenries, "motor inductance";
     /// Stall detection minimum speed (our object): below this commanded speed (full steps a
     /// second) the back-EMF is too small to tell a stall, and nothing is detected.
     StallMinSpeed @ 0x210A: U16, Rw, Rom, Span(1, 10_000), default 60, None, "stall minimum speed";
+    /// The current loop's power-up auto-tune (our object, seed 003's 0x2007), read at power-up,
+    /// with the drive's own power stage (the simulator's `--power-stage bridges`; on a board
+    /// whose power stage is an external STEP/DIR driver no current loop runs and 0x210B-0x210D
+    /// refuse writes as unsupported): 1 measures both windings' R and L with voltage steps (about half a second at
+    /// the phase current 0x600D, before the drive answers) into 0x2108 and 0x2109, and sets the
+    /// loop's gains 0x210C and 0x210D from them; 0 runs the loop on 0x2108, 0x2109, 0x210C and
+    /// 0x210D as they are.
+    CurrentAutoTune @ 0x210B: U8, Rw, Rom, Span(0, 1), default 1, None, "current loop auto-tune";
+    /// The current loop's proportional gain (our object, seed 003's 0x2008), read at power-up:
+    /// volts across a winding per ampere of error. Read only while 0x210B = 1 (the tune sets it).
+    CurrentKp @ 0x210C: U16, Rw, Rom, Span(50, 32_767), default 300, DeciVoltsPerAmp, "current loop KP";
+    /// The current loop's integral gain (our object, seed 003's 0x2009), read at power-up: volts
+    /// added each PWM period per ampere of error. Read only while 0x210B = 1.
+    CurrentKi @ 0x210D: U16, Rw, Rom, Span(10, 2_000), default 30, CentiVoltsPerAmpPeriod, "current loop KI";
+    /// The current loop's correction gain (our object, seed 003's 0x200A "Kc"): the share of
+    /// what the loop's winding model missed at the last sample that corrects its next prediction
+    /// (`drive_core::current::CORRECTION_GAIN`), fixed.
+    CurrentKc @ 0x210E: U16, Ro, Const, Any, default 250, PerMille, "current loop Kc";
     /// PVT points stored (modes 1 and 2) or queued in the FIFO (mode 3), our object: what a
     /// streaming master reads to know how many points it may send.
     PvtCount @ 0x2110: U16, Ro, Live, PVT_INDEX, default 0, None, "PVT points stored";

@@ -582,6 +582,12 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         self.margin = margin_us;
     }
 
+    /// Says that this platform's power stage is the drive's own, run by its current loop
+    /// (`windings`), which reads 0x210B-0x210D at power-up; without it those refuse writes.
+    pub fn set_current_loop(&mut self, on: bool) {
+        self.current_loop = on;
+    }
+
     /// The register maps this platform carries (bit n: 0x2190 = n; all of them unless said):
     /// 0x2190 refuses the others (04).
     pub fn set_maps(&mut self, maps: u8) {

@@ -229,6 +229,9 @@ pub struct DriveState<P = Table, G = ProgramMemory> {
     quick_check: Instant,
     /// The register maps the platform carries (bit n: 0x2190 = n).
     maps: u8,
+    /// Whether the platform's power stage is the drive's own, run by its current loop
+    /// (`windings`): the loop's objects 0x210B-0x210D act only then.
+    current_loop: bool,
     /// The power-up jog's next move (0x21D8).
     jog: command::Jog,
     /// What the signal objects left to do (`signals`).
@@ -338,6 +341,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             },
             quick_check: Instant::from_micros(0),
             maps: u8::MAX,
+            current_loop: false,
             jog: if get(Obj::PowerUpJog) == 1 { command::Jog::Start } else { command::Jog::Done },
             signals: signals::Signals::default(),
         }
@@ -372,6 +376,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             device,
             quick_check: _,
             maps: _,
+            current_loop: _,
             jog: _,
             // Set only after the write that sets it succeeded.
             signals: _,
@@ -707,7 +712,10 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             && matches!(d.storage(), Storage::Ram | Storage::Rom)
             && !has_effect(d.obj)
             && !runs_on(d.obj)
-            && !matches!(d.obj, Obj::SystemControl | Obj::RegisterMap)
+            && !matches!(
+                d.obj,
+                Obj::SystemControl | Obj::RegisterMap | Obj::CurrentAutoTune | Obj::CurrentKp | Obj::CurrentKi
+            )
             && !signals::is_signal(d.obj)
     }
 
@@ -738,6 +746,12 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             (Obj::SystemControl, 2 | 3) if !self.ctl.axis.is_still() || self.storage & STORAGE_SAVING != 0 => {
                 Err(ObjError::Busy)
             }
+            // No current loop runs them: an external driver regulates the current.
+            (Obj::CurrentAutoTune | Obj::CurrentKp | Obj::CurrentKi, _) if !self.current_loop => {
+                Err(ObjError::Unsupported)
+            }
+            // The power-up auto-tune sets the current loop's gains (seed 003: read only then).
+            (Obj::CurrentKp | Obj::CurrentKi, _) if self.read(Obj::CurrentAutoTune) != 0 => Err(ObjError::ReadOnly),
             // Their writes (`signals`) are checked as they are made.
             (obj, v) if signals::is_signal(obj) => self.check_signal(obj, v),
             (obj, _) if is_command(obj) => self.check_motion(obj, value),
