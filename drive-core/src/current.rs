@@ -294,6 +294,18 @@ impl CurrentLoopSettings {
         self.dead_share * v_bus
     }
 
+    /// The share of the dead time's voltage the loop adds for a reference of `i_ref` A: its
+    /// sign, faded linearly across the band around zero.
+    fn dead_time_share(&self, i_ref: f32) -> f32 {
+        (i_ref / self.dead_band).clamp(-1.0, 1.0)
+    }
+
+    /// The part of a winding's voltage asked for `i_ref` A at `v_bus` that the dead time takes
+    /// back before it reaches the winding, V: what the loop adds for it.
+    pub fn dead_time_feed_forward(&self, i_ref: f32, v_bus: f32) -> f32 {
+        self.dead_time_share(i_ref) * self.dead_time_volts(v_bus)
+    }
+
     /// The largest voltage across a winding at `v_bus`: [`MAX_MODULATION`]·v_bus, 0 for a bus
     /// voltage that is not a positive number.
     pub fn limit(v_bus: f32) -> f32 {
@@ -361,8 +373,7 @@ impl CurrentLoopSettings {
     fn phase(&self, st: &mut PhaseState, i_ref: f32, i_meas: f32, emf: f32, limit: f32, dead: f32) -> f32 {
         let (predicted, model, correction) = self.predict_phase(st, i_meas);
         let error = i_ref - predicted;
-        let fade = i_ref / self.dead_band;
-        let feed_forward = emf + dead * fade.clamp(-1.0, 1.0);
+        let feed_forward = emf + self.dead_time_share(i_ref) * dead;
         let integral = st.integral + self.ki * error;
         let wanted = feed_forward + self.kp * error + integral;
         if !(wanted.is_finite() && feed_forward.is_finite()) {

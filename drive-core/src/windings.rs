@@ -61,8 +61,13 @@ pub const OPEN_PERIODS: u16 = 20;
 /// noise and the dead time decide.
 pub const OPEN_MIN_MA: f32 = 100.0;
 /// The share of its reference under which a winding's current, at the supply's limit, means the
-/// winding is open: a winding the back-EMF starves at speed still carries far more.
+/// winding is open.
 pub const OPEN_SHARE: f32 = 0.1;
+/// The fastest the electrical angle turns, rad a period, while a winding can be told open: 1 turn
+/// a second of a 1.8° motor at 20 kHz. Faster, a back-EMF beyond the supply (the NEMA 23 from 4
+/// turns a second at 12 V) starves the windings as an open one would; the check waits for the
+/// motor to slow down.
+pub const OPEN_MAX_TURN: f32 = 0.016;
 
 /// Counts the periods in a row a winding has looked open: driven at the supply's `limit` with
 /// `volts` towards `reference` A, and `measured` A under [`OPEN_SHARE`] of it.
@@ -120,10 +125,10 @@ impl WindingState {
         self.applied_mv
     }
 
-    /// Whether each winding is open: for [`OPEN_PERIODS`] in a row the loop has driven it at the
-    /// supply's limit towards a reference of [`OPEN_MIN_MA`] or more, and its current stayed
-    /// under [`OPEN_SHARE`] of that reference. The board has no open-load flag of its own; this
-    /// is its `coil_open`.
+    /// Whether each winding is open: for [`OPEN_PERIODS`] in a row, turning no faster than
+    /// [`OPEN_MAX_TURN`], the loop has driven it at the supply's limit towards a reference of
+    /// [`OPEN_MIN_MA`] or more, and its current stayed under [`OPEN_SHARE`] of that reference.
+    /// The board has no open-load flag of its own; this is its `coil_open`.
     pub fn open(&self) -> [bool; 2] {
         self.open_for.map(|n| n >= OPEN_PERIODS)
     }
@@ -171,8 +176,11 @@ impl WindingSettings {
         let v_bus = supply_mv as f32 * 1e-3;
         let measured = phase_ma.map(|ma| ma as f32 * 1e-3);
         let volts = self.current.step(&mut state.current, reference, measured, state.back_emf, v_bus);
+        // What reaches the windings: the dead time takes back what the loop added for it.
+        let ([va, vb], [ra, rb]) = (volts, reference);
+        let reach = |v: f32, i_ref: f32| v - self.current.dead_time_feed_forward(i_ref, v_bus);
         // To the mV below (a truncation: the FPU's conversion, not a rounding routine).
-        state.next_mv = volts.map(|v| (v * 1e3) as i32);
+        state.next_mv = [(reach(va, ra) * 1e3) as i32, (reach(vb, rb) * 1e3) as i32];
         // What the model still misses is mostly the back-EMF, a vector turning with the rotor:
         // the correction's current as a voltage (−c/b) integrated into the estimate fed forward,
         // which is turned with the rotor to the next period, as is the correction, so that both
@@ -186,6 +194,8 @@ impl WindingSettings {
         state.back_emf = turn([ea - EMF_GAIN * missed[0] / per_volt, eb - EMF_GAIN * missed[1] / per_volt]);
         [pa.correction, pb.correction] = turn(missed);
         let limit = CurrentLoopSettings::limit(v_bus);
+        // Too fast to tell: no reference counts as starved.
+        let reference = if state.turn.sin.abs() > OPEN_MAX_TURN { [0.0; 2] } else { reference };
         let ([open_a, open_b], [va, vb], [ra, rb], [ia, ib]) = (&mut state.open_for, volts, reference, measured);
         looks_open(open_a, va, ra, ia, limit);
         looks_open(open_b, vb, rb, ib, limit);
