@@ -91,10 +91,31 @@ fn small_turn(angle: f32) -> CosSin {
     CosSin { cos: 1.0 - a2 * (0.5 - a2 / 24.0), sin: angle * (1.0 - a2 / 6.0) }
 }
 
-/// The winding regulation's settings: the current loop's, validated (worked out off the tick).
+/// How much the loop's gains are scaled for each of 0x6010's decays (0-3: 0 %, 50 %, 75 % and
+/// 87.5 % of fast decay in a chopper's off-time): the drive's bridges have no chopper and no
+/// decay, and 0x6010 sets how fast the loop is instead, as more fast decay makes a chopper's
+/// current follow faster at the cost of ripple. The closed loop's pole per period is 0.5, 0.35,
+/// 0.2 (the factory decay 2: [`crate::current::RECOMMENDED_POLE`]) and 0.1; the PI's gains scale
+/// with 1 − pole, so by these shares of the factory decay's.
+pub const DECAY_GAINS: [f32; 4] = [0.625, 0.8125, 1.0, 1.125];
+
+/// The decay 0x6010 gives as its share of fast decay (`Outputs::fast_decay`), 0-3.
+fn decay_index(fast: fixed::types::U0F16) -> u8 {
+    // Half-way between 0x6010's shares: 0.25, 0.625, 0.8125.
+    match fast.to_bits() {
+        0..0x4000 => 0,
+        0x4000..0xA000 => 1,
+        0xA000..0xD000 => 2,
+        _ => 3,
+    }
+}
+
+/// The winding regulation's settings: the current loop's, validated (worked out off the tick),
+/// one for each decay of 0x6010 ([`DECAY_GAINS`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct WindingSettings {
-    current: CurrentLoopSettings,
+    /// By decay; the factory decay's (2) is the loop's own.
+    current: [CurrentLoopSettings; 4],
 }
 
 /// What the regulation remembers from period to period.
@@ -110,6 +131,8 @@ pub struct WindingState {
     /// The back-EMF the windings meet over the coming period, V: what the model has missed,
     /// integrated and turned with the rotor (fed forward to the current loop).
     back_emf: [f32; 2],
+    /// The decay the last tick gave (0x6010, 0-3), which picks the loop's gains.
+    decay: u8,
     /// The voltages asked for the coming period, mV (0 while off).
     next_mv: [i32; 2],
     /// The voltages across the windings over the period that just ended, mV (0 while off).
@@ -140,14 +163,17 @@ impl WindingState {
 }
 
 impl WindingSettings {
-    /// The regulation with the current loop `current`.
+    /// The regulation with the current loop `current` at the factory decay, its gains scaled
+    /// for the others ([`DECAY_GAINS`]).
     pub fn new(current: CurrentLoopSettings) -> Self {
-        Self { current }
+        let scaled = |k: f32| current.with_gains(current.kp() * k, current.ki() * k).unwrap_or(current);
+        Self { current: DECAY_GAINS.map(scaled) }
     }
 
-    /// The current loop's settings.
+    /// The current loop's settings at the factory decay (2).
     pub fn current_loop(&self) -> &CurrentLoopSettings {
-        &self.current
+        let [_, _, factory, _] = &self.current;
+        factory
     }
 
     /// Takes one tick's outputs: the reference of the next period, or off.
@@ -160,8 +186,9 @@ impl WindingSettings {
         let at = CosSin::of(electrical_angle(&out.commutation, out.microsteps));
         state.reference = Some([amps * at.cos, amps * at.sin]);
         let per_turn = (STEPS_PER_ELECTRICAL_TURN * u32::from(out.microsteps.max(1))) as f32;
-        let step = out.commutation.velocity * core::f32::consts::TAU / per_turn * self.current.period();
+        let step = out.commutation.velocity * core::f32::consts::TAU / per_turn * self.current_loop().period();
         state.turn = small_turn(step);
+        state.decay = decay_index(out.fast_decay);
     }
 
     /// One PWM period from the currents measured now, `phase_ma`, and the bus, `supply_mv`: each
@@ -175,10 +202,11 @@ impl WindingSettings {
         };
         let v_bus = supply_mv as f32 * 1e-3;
         let measured = phase_ma.map(|ma| ma as f32 * 1e-3);
-        let volts = self.current.step(&mut state.current, reference, measured, state.back_emf, v_bus);
+        let current = self.current.get(usize::from(state.decay)).unwrap_or(self.current_loop());
+        let volts = current.step(&mut state.current, reference, measured, state.back_emf, v_bus);
         // What reaches the windings: the dead time takes back what the loop added for it.
         let ([va, vb], [ra, rb]) = (volts, reference);
-        let reach = |v: f32, i_ref: f32| v - self.current.dead_time_feed_forward(i_ref, v_bus);
+        let reach = |v: f32, i_ref: f32| v - current.dead_time_feed_forward(i_ref, v_bus);
         // To the mV below (a truncation: the FPU's conversion, not a rounding routine).
         state.next_mv = [(reach(va, ra) * 1e3) as i32, (reach(vb, rb) * 1e3) as i32];
         // What the model still misses is mostly the back-EMF, a vector turning with the rotor:
@@ -189,7 +217,7 @@ impl WindingSettings {
             |[x, y]: [f32; 2]| [state.turn.cos * x - state.turn.sin * y, state.turn.sin * x + state.turn.cos * y];
         let [pa, pb] = &mut state.current.phases;
         let missed = [pa.correction, pb.correction];
-        let per_volt = self.current.volt_gain();
+        let per_volt = current.volt_gain();
         let [ea, eb] = state.back_emf;
         state.back_emf = turn([ea - EMF_GAIN * missed[0] / per_volt, eb - EMF_GAIN * missed[1] / per_volt]);
         [pa.correction, pb.correction] = turn(missed);
@@ -283,8 +311,9 @@ pub enum TuneStep {
     /// Put these shares of the bus across the windings over the next period
     /// ([`bridge_shares`]).
     Apply([i16; 2]),
-    /// Over (the bridges to 0 V): the loop's settings and the two estimates, or why not.
-    Done(Result<(WindingSettings, [Estimate; 2]), autotune::Error>),
+    /// Over (the bridges to 0 V): the loop's settings ([`WindingSettings::new`] takes them) and
+    /// the two estimates, or why not.
+    Done(Result<(CurrentLoopSettings, [Estimate; 2]), autotune::Error>),
 }
 
 impl PowerUpTune {
@@ -331,13 +360,13 @@ impl PowerUpTune {
         &self,
         a: Result<Estimate, autotune::Error>,
         b: Result<Estimate, autotune::Error>,
-    ) -> Result<(WindingSettings, [Estimate; 2]), autotune::Error> {
+    ) -> Result<(CurrentLoopSettings, [Estimate; 2]), autotune::Error> {
         let (a, b) = (a?, b?);
         let (r, l) = (0.5 * (a.resistance + b.resistance), 0.5 * (a.inductance + b.inductance));
         let current = CurrentLoopSettings::new(r, l, self.v_bus, self.pwm_hz, recommended_bandwidth(self.pwm_hz))
             .and_then(|s| s.with_dead_time(DEAD_TIME_S, DEAD_BAND_A))
             .map_err(|_| autotune::Error::OutOfRange)?;
-        Ok((WindingSettings::new(current), [a, b]))
+        Ok((current, [a, b]))
     }
 }
 
@@ -360,7 +389,8 @@ mod tests {
             gpio: 0,
             pins: Default::default(),
             microsteps: 16,
-            fast_decay: U0F16::ZERO,
+            // The factory decay (0x6010 = 2): the loop's own gains.
+            fast_decay: U0F16::from_bits(0xC000),
             pulse: Default::default(),
         }
     }
@@ -439,7 +469,7 @@ mod tests {
         let mut tune = PowerUpTune::new(1000, 20_000.0).unwrap_or_else(|e| unreachable!("{e:?}"));
         let (mut i, mut acting) = ([0.0f32; 2], [0.0f32; 2]);
         let mut periods = 0u32;
-        let (settings, estimates) = loop {
+        let (current, estimates) = loop {
             periods += 1;
             let ma = i.map(|x| 5 * libm::roundf(x * 200.0) as i32);
             let next = match tune.step(ma, 24_000) {
@@ -452,7 +482,7 @@ mod tests {
             }
             acting = next;
         };
-        let loop_ = settings.current_loop();
+        let loop_ = current;
         assert!((loop_.resistance() - 1.4).abs() < 0.03, "{}", loop_.resistance());
         assert!((loop_.inductance() - 3.045e-3).abs() < 0.05e-3, "{}", loop_.inductance());
         assert!((estimates[1].inductance / estimates[0].inductance - 1.03).abs() < 0.01, "{estimates:?}");
@@ -467,5 +497,22 @@ mod tests {
             TuneStep::Apply(_) => None,
         });
         assert_eq!(result, Some(Err(autotune::Error::NoCurrent)));
+    }
+
+    #[test]
+    fn the_decay_picks_the_loops_speed() {
+        let s = settings();
+        let factory = *s.current_loop();
+        for (fast, k) in [(0x0000u16, 0.625f32), (0x8000, 0.8125), (0xC000, 1.0), (0xE000, 1.125)] {
+            let mut st = WindingState::default();
+            let mut out = outputs(100, 0, 0.0);
+            out.fast_decay = U0F16::from_bits(fast);
+            s.command(&mut st, &out);
+            // From rest, the first period's voltage is the proportional step (no dead time here).
+            let v = s.period(&mut st, [0, 0], 24_000).unwrap_or_default();
+            // 0.1 A from rest: (kp + ki)·0.1 A, 4.9 V at the factory decay, within the bridge.
+            let expected = (factory.kp() + factory.ki()) * k * 0.1 * 32_768.0 / 24.0;
+            assert!((f32::from(v[0]) - expected).abs() < 2.0, "{fast:#x}: {v:?} {expected}");
+        }
     }
 }

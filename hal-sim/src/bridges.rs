@@ -357,7 +357,7 @@ fn tune(motor: &Motor, sensing: &mut Sensing, test_ma: u16) -> Result<WindingSet
         let ma = sensing.read([a, b]).map(|i| (i * 1e3).round() as i32);
         let next = match tune.step(ma, supply_mv) {
             TuneStep::Apply(shares) => Some(pwm_volts(shares, v_bus)),
-            TuneStep::Done(done) => return done.map(|(settings, _)| settings),
+            TuneStep::Done(done) => return done.map(|(current, _)| WindingSettings::new(current)),
         };
         let volts = std::mem::replace(&mut acting, next);
         m.advance_bridges(&BridgeVolts { volts, dead_volts, trip_a: f64::INFINITY }, 1.0 / PWM_HZ);

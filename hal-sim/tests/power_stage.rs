@@ -253,3 +253,27 @@ fn an_open_winding_at_power_up_fails_the_tune_and_the_drive_reads_it_open() {
     assert_eq!(p.drive().state().read(Obj::ErrorStatus) & 0b110, 0b110);
     assert_eq!(p.motor().phase_currents(), (0.0, 0.0));
 }
+
+#[test]
+fn the_decay_sets_how_fast_the_current_follows_through_the_bridges() {
+    // A step of 0x600D from 500 to 1000 mA at rest on a full step (phase A carries it): the
+    // share of the step made, summed over the six periods after the write (the faster the loop,
+    // the more), by decay.
+    let mut made = Vec::new();
+    for decay in [0, 2, 3] {
+        let mut p = plant(hal_sim::DEFAULT_MOTOR, PowerStage::Bridges);
+        for (obj, v) in [(Obj::Microsteps, 16), (Obj::PhaseCurrent, 500), (Obj::CurrentDecay, decay)] {
+            assert_eq!(p.write(obj, v), Ok(()));
+        }
+        run(&mut p, 0.05);
+        assert_eq!(p.write(Obj::PhaseCurrent, 1000), Ok(()));
+        let mut sum = 0.0;
+        for _ in 0..6 {
+            p.advance_to(p.next_tick());
+            sum += (p.motor().phase_currents().0 - 0.5) / 0.5;
+        }
+        made.push(sum);
+    }
+    println!("shares of the step made over six periods, decay 0, 2, 3: {made:.3?}");
+    assert!(made[0] < made[1] - 0.2 && made[1] < made[2] - 0.01, "{made:?}");
+}

@@ -177,7 +177,8 @@ objects! {
     /// 0x210D as they are.
     CurrentAutoTune @ 0x210B: U8, Rw, Rom, Span(0, 1), default 1, None, "current loop auto-tune";
     /// The current loop's proportional gain (our object, seed 003's 0x2008), read at power-up:
-    /// volts across a winding per ampere of error. Read only while 0x210B = 1 (the tune sets it).
+    /// volts across a winding per ampere of error, at the factory decay (0x6010 scales it). Read
+    /// only while 0x210B = 1 (the tune sets it).
     CurrentKp @ 0x210C: U16, Rw, Rom, Span(50, 32_767), default 300, DeciVoltsPerAmp, "current loop KP";
     /// The current loop's integral gain (our object, seed 003's 0x2009), read at power-up: volts
     /// added each PWM period per ampere of error. Read only while 0x210B = 1.
@@ -700,7 +701,10 @@ objects! {
     Position @ 0x600E: S32, Rw, Live, S32_ANY, default 0, Steps, "motor position";
     /// Current decay: the share of fast decay in the chopper's off-time, 0 0 % (slow decay only),
     /// 1 50 %, 2 75 %, 3 87.5 %. More fast decay lets the current fall faster at speed, at the
-    /// cost of ripple. (The standstill current reduction is 0x2102/0x2103.)
+    /// cost of ripple. The drive's own bridges have no chopper: there it sets how fast the current
+    /// loop follows, 0 slowest and quietest to 3 fastest (`windings::DECAY_GAINS`: the gains of
+    /// 0x210C and 0x210D, which are the factory decay's, times 0.625, 0.8125, 1 and 1.125). (The
+    /// standstill current reduction is 0x2102/0x2103.)
     CurrentDecay @ 0x6010: U8, Rw, Rom, Span(0, 3), default 2, None, "current decay";
     /// Motor enable: 0 frees the motor (current off) and ignores moves until 1.
     Enable @ 0x6011: U8, Rw, Ram, Span(0, 1), default 1, None, "motor enable";
