@@ -84,6 +84,7 @@ pub mod pulses;
 pub mod script;
 pub mod soak;
 pub mod thermal;
+pub mod torque_speed;
 pub mod trace;
 
 /// Where masters reach the simulated drive.

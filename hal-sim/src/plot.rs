@@ -5,6 +5,9 @@
 //! the two phase currents with the current vector's magnitude (which falls at speed, when the
 //! supply can no longer push the commanded current through the winding).
 //!
+//! Pull-out torque against speed ([`plot_torque_speed`], [`crate::torque_speed`]): a panel a
+//! motor, the chopper's and the bridges' curves at each supply.
+//!
 //! Text is drawn with `plotters`' `ab_glyph` feature and the DejaVu Sans font compiled in (the
 //! `dejavu` crate), so plotting needs no system font, fontconfig or freetype.
 
@@ -14,9 +17,12 @@ use std::path::Path;
 use std::sync::OnceLock;
 
 use plotters::coord::types::RangedCoordf64;
+use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use plotters::style::register_font;
 
+use crate::bridges::PowerStage;
+use crate::torque_speed::Curve;
 use crate::trace::{TraceRow, load_csv};
 
 /// Why a plot could not be drawn.
@@ -201,6 +207,102 @@ pub fn plot_xy(x: &[TraceRow], y: &[TraceRow], png: impl AsRef<Path>, title: &st
         .map_err(err)?;
     let series = [("commanded", COMMANDED, 4, commanded), ("rotor", ROTOR, 1, rotor)];
     draw_lines(&mut chart, &series, SeriesLabelPosition::UpperRight)?;
+    root.present().map_err(err)
+}
+
+/// A supply's colour in [`plot_torque_speed`], in the order of the supplies.
+const SUPPLY_COLOURS: [RGBColor; 4] =
+    [RGBColor(30, 90, 200), RGBColor(20, 150, 60), RGBColor(220, 50, 30), RGBColor(120, 60, 160)];
+
+/// Draws pull-out torque against speed ([`crate::torque_speed`]) to a PNG (1400 × 650 pixels),
+/// titled `title`: a panel a motor, a colour a supply, the chopper's curves solid and the
+/// bridges' dashed.
+pub fn plot_torque_speed(curves: &[Curve], png: impl AsRef<Path>, title: &str) -> Result<(), PlotError> {
+    if curves.iter().all(|c| c.points.is_empty()) {
+        return Err(PlotError("no curve has a point".into()));
+    }
+    register_fonts()?;
+    let mut motors: Vec<&str> = Vec::new();
+    let mut supplies: Vec<f64> = Vec::new();
+    for c in curves {
+        if !motors.contains(&c.setup.motor.name.as_str()) {
+            motors.push(&c.setup.motor.name);
+        }
+        if !supplies.contains(&c.setup.supply_v) {
+            supplies.push(c.setup.supply_v);
+        }
+    }
+    supplies.sort_by(f64::total_cmp);
+    let root = BitMapBackend::new(png.as_ref(), (1400, 650)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let root = root.titled(title, (FONT, 24).into_font().style(FontStyle::Bold)).map_err(err)?;
+    for (area, &motor) in root.split_evenly((1, motors.len())).iter().zip(&motors) {
+        let mine: Vec<&Curve> = curves.iter().filter(|c| c.setup.motor.name == motor).collect();
+        let points = || mine.iter().flat_map(|c| c.points.iter());
+        // Room above the curves for the legend.
+        let top = points().map(|p| p.torque_nm).fold(0.0, f64::max).max(1e-3) * 1.45;
+        let right = points().map(|p| p.speed_rps).fold(0.0, f64::max).max(1.0);
+        let holding = mine.first().map_or(0.0, |c| c.setup.holding_nm());
+        let current = mine.first().map_or(0.0, |c| f64::from(c.setup.current_ma()) * 1e-3);
+        let mut chart = ChartBuilder::on(area)
+            .caption(format!("{motor}: K_m·I = {holding:.3} N·m at {current:.1} A"), (FONT, 20))
+            .margin(14)
+            .x_label_area_size(45)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0..right, 0.0..top)
+            .map_err(err)?;
+        chart
+            .configure_mesh()
+            .x_desc("speed (rev/s)")
+            .y_desc("pull-out torque (N·m)")
+            .x_label_formatter(&|v: &f64| format!("{v:.0}"))
+            .y_label_formatter(&|v: &f64| format!("{v:.2}"))
+            .label_style((FONT, 15))
+            .axis_desc_style((FONT, 16))
+            .light_line_style(RGBColor(235, 235, 235))
+            .draw()
+            .map_err(err)?;
+        for curve in mine {
+            let k = supplies.iter().position(|&v| v == curve.setup.supply_v).unwrap_or(0);
+            let colour = SUPPLY_COLOURS[k % SUPPLY_COLOURS.len()];
+            let line: Vec<(f64, f64)> = curve.points.iter().map(|p| (p.speed_rps, p.torque_nm)).collect();
+            let label = format!(
+                "{} V, {}",
+                curve.setup.supply_v,
+                match curve.setup.stage {
+                    PowerStage::Chopper => "chopper",
+                    PowerStage::Bridges => "bridges",
+                }
+            );
+            let style = colour.stroke_width(2);
+            match curve.setup.stage {
+                PowerStage::Chopper => {
+                    chart
+                        .draw_series(LineSeries::new(line.iter().copied(), style))
+                        .map_err(err)?
+                        .label(label)
+                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 28, y)], style));
+                }
+                PowerStage::Bridges => {
+                    chart
+                        .draw_series(DashedLineSeries::new(line.iter().copied(), 9, 6, style))
+                        .map_err(err)?
+                        .label(label)
+                        .legend(move |(x, y)| DashedPathElement::new(vec![(x, y), (x + 28, y)], 9, 6, style));
+                }
+            }
+            let marker = |&(v, t): &(f64, f64)| Circle::new((v, t), 3, colour.filled());
+            chart.draw_series(line.iter().map(marker)).map_err(err)?;
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .label_font((FONT, 15))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()
+            .map_err(err)?;
+    }
     root.present().map_err(err)
 }
 
