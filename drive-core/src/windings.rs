@@ -77,8 +77,11 @@ fn looks_open(periods: &mut u16, volts: f32, reference: f32, measured: f32, limi
     *periods = if starved && at_limit { periods.saturating_add(1) } else { 0 };
 }
 
-/// The share of the correction's voltage that goes into the back-EMF's estimate each period.
-pub const EMF_GAIN: f32 = 0.1;
+/// The share of the correction's voltage that goes into the back-EMF's estimate each period: slow
+/// beside the correction (0.25), so that the two do not ring with the rotor (at 0.1 the NEMA 17
+/// at 48 V lost a third of its pull-out torque around 12 turns a second; `docs/current-loop.md`,
+/// *Torque-speed*).
+pub const EMF_GAIN: f32 = 0.03;
 
 /// The cosine and sine of an angle of at most a few tenths of a radian (the electrical angle's
 /// turn in a period), by their series to the fourth and third order: within 5e-5 up to 0.35 rad

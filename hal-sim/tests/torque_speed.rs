@@ -8,15 +8,13 @@ use hal_sim::torque_speed::{SPEEDS_RPS, SUPPLIES_V, compare, csv_row, measure, s
 
 /// The speeds (rev/s) of each motor and supply at which the bridges are not within 10 % of the
 /// chopper.
-const OUTSIDE: [(&str, f64, &[f64]); 6] = [
+const OUTSIDE: [(&str, f64, &[f64]); 5] = [
     // Past the chopper's corner the bridges carry more, 1.5 times to all (the chopper loses
     // the speed unloaded: from 10 rev/s at 12 V, 16 rev/s at 24 V).
     ("17HS19-2004S1", 12.0, &[6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 18.0, 20.0]),
     ("17HS19-2004S1", 24.0, &[12.0, 14.0, 16.0, 18.0, 20.0]),
-    // The bridges below the chopper: 0.883, 0.713, 0.680 and 0.802 of its torque.
-    ("17HS19-2004S1", 48.0, &[8.0, 10.0, 12.0, 14.0]),
     // The NEMA 23's back-EMF is beyond 12 V from 3 rev/s: both carry under 0.3 N·m, the
-    // bridges 0.24 to 2.1 times the chopper.
+    // bridges 0.2 to 2 times the chopper.
     ("23HS30-3004S", 12.0, &[4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 18.0, 20.0]),
     // Past the chopper's corner, as the NEMA 17's (the chopper loses 8 and 12 rev/s unloaded).
     ("23HS30-3004S", 24.0, &[6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 18.0, 20.0]),
