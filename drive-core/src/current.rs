@@ -596,10 +596,13 @@ mod tests {
             let rest = PhaseState { integral: s.resistance() * i, applied: s.resistance() * i, predicted: i, correction: 0.0 };
             let mut state = CurrentLoopState { phases: [rest, rest] };
             let plain = CurrentLoopSettings { dead_share: 0.0, ..s };
+            // The prediction's rounding (a few ulps of the current) comes out times kp: 1 500 V/A
+            // for a slow winding on a fast loop.
+            let rounding = s.kp() * 1e-6 * (1.0 + i.abs());
             for _ in 0..5 {
                 let v = plain.step(&mut state, [i, i], [i, i], [0.0, 0.0], 60.0);
                 let want = s.resistance() * i;
-                prop_assert!((v[0] - want).abs() <= 1e-4 * (1.0 + want.abs()), "{} {}", v[0], want);
+                prop_assert!((v[0] - want).abs() <= 1e-4 * (1.0 + want.abs()) + rounding, "{} {}", v[0], want);
             }
         }
 
