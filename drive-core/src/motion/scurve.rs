@@ -1344,8 +1344,9 @@ mod tests {
             let (v0, vf) = (v0 * v_max * d.signum(), vf * v_max * d.signum());
             if let Ok(Some((_, fast))) = cruise_shortcut(v0, 0.0, vf, d, &lim) {
                 let (_, full) = search_position(v0, 0.0, vf, d, &lim).unwrap_or((super::Cand::Turn { vp: super::Vel::of(0.0), cruise: 0.0 }, fast));
-                // The search considers the same cruise: equal, up to rounding.
-                proptest::prop_assert!((fast.t - full.t).abs() <= super::ROUNDING * full.t, "{} vs {}", fast.t, full.t);
+                // The search considers the same cruise: equal, up to rounding (each a sum of phases
+                // rounded apart: a 17 ms move at 85 % of the top speed came out 33 ulps apart).
+                proptest::prop_assert!((fast.t - full.t).abs() <= 2.0 * super::ROUNDING * full.t, "{} vs {}", fast.t, full.t);
             }
         }
 
