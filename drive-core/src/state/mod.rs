@@ -746,6 +746,8 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             (Obj::SystemControl, 2 | 3) if !self.ctl.axis.is_still() || self.storage & STORAGE_SAVING != 0 => {
                 Err(ObjError::Busy)
             }
+            // The value it holds changes nothing: taken whatever the state (a dump loaded back).
+            (Obj::CurrentAutoTune | Obj::CurrentKp | Obj::CurrentKi, v) if v == self.read(d.obj) => Ok(()),
             // No current loop runs them: an external driver regulates the current.
             (Obj::CurrentAutoTune | Obj::CurrentKp | Obj::CurrentKi, _) if !self.current_loop => {
                 Err(ObjError::Unsupported)
