@@ -271,8 +271,11 @@ impl Axis {
     /// is: the caller joins segments end to start), with what was prepared of it in `ahead`
     /// (the rest is built now).
     pub fn follow(&mut self, start: Instant, cubic: Cubic, ahead: Option<Ahead>) {
-        let ahead = ahead.filter(|a| a.cubic == cubic).unwrap_or(Ahead::new(cubic));
-        let (walk, rates) = ahead.finish();
+        // Built from scratch only if what was prepared is another segment's.
+        let (walk, rates) = match ahead {
+            Some(a) if a.cubic == cubic => a.finish(),
+            _ => Ahead::new(cubic).finish(),
+        };
         self.changed();
         self.anchor = cubic.p0;
         self.segment = Segment::Cubic { start, cubic, walk, rates };
