@@ -665,6 +665,7 @@ impl Sim<'_> {
             if serve_request(plant.drive_mut(), &mut p.store) {
                 // Seed 004's 0541h: powered up again from the store, as after a power cycle.
                 *plant.drive_mut() = boot(&mut p.store, p.config, false, p.map);
+                plant.restarted();
             }
         }
     }

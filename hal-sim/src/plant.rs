@@ -63,6 +63,8 @@ pub struct Plant {
     last_turns: i64,
     /// The G474's bridges, with [`PowerStage::Bridges`]; `None`: the ideal chopper.
     bridges: Option<Bridges>,
+    /// The bridges' sensing, for their power-up again after a restart.
+    sensing: SensingOptions,
 }
 
 /// Ambient and driver temperature at power-up, °C.
@@ -158,6 +160,7 @@ impl Plant {
             last_inputs: None,
             last_turns: 0,
             bridges: None,
+            sensing: SensingOptions::default(),
         }
     }
 
@@ -167,10 +170,20 @@ impl Plant {
         if self.last.is_some() {
             return;
         }
+        self.sensing = sensing;
         self.bridges = match stage {
             PowerStage::Chopper => None,
             PowerStage::Bridges => Some(self.power_up_bridges(sensing)),
         };
+    }
+
+    /// The drive has powered up again (a restart: it was built anew from its store): the
+    /// bridges power up with it, their current loop from its objects as they now are (tuned
+    /// again, or as set), as at power-up.
+    pub fn restarted(&mut self) {
+        if self.bridges.is_some() {
+            self.bridges = Some(self.power_up_bridges(self.sensing));
+        }
     }
 
     /// The bridges as the drive powers them up: its current loop from its objects (0x210B,

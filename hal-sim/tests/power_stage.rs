@@ -277,3 +277,22 @@ fn the_decay_sets_how_fast_the_current_follows_through_the_bridges() {
     println!("shares of the step made over six periods, decay 0, 2, 3: {made:.3?}");
     assert!(made[0] < made[1] - 0.2 && made[1] < made[2] - 0.01, "{made:?}");
 }
+
+#[test]
+fn after_a_restart_the_bridges_power_up_again_with_the_drive() {
+    let mut p = powered_up(hal_sim::DEFAULT_MOTOR, 24.0, drive_core::Params::factory());
+    // The drive powers up again from a store where the tune is off and the gains set by hand.
+    let mut params = drive_core::Params::factory();
+    for (obj, v) in [(Obj::CurrentAutoTune, 0), (Obj::CurrentKp, 400), (Obj::CurrentKi, 90)] {
+        assert!(params.set(obj, v));
+    }
+    *p.drive_mut() = hal_sim::plant::IntoDrive::into_drive(Drive::boot(drive_core::DriveConfig::default(), &params, 0));
+    p.restarted();
+    let loop_ = p.bridges().and_then(|b| b.settings()).copied().expect("a loop");
+    assert!((loop_.kp() - 40.0).abs() < 1e-4, "{loop_:?}");
+    // The platform's current loop is the new drive's too: its gains take writes.
+    assert_eq!(p.write(Obj::CurrentKp, 500), Ok(()));
+    assert_eq!(p.write(Obj::PhaseCurrent, 1000), Ok(()));
+    p.run_for(0.05);
+    assert!((p.motor().phase_currents().0 - 1.0).abs() < 0.02);
+}
