@@ -151,6 +151,8 @@ pub struct CurrentLoopSettings {
     dead_share: f32,
     /// The reference current over which the dead-time compensation is whole, A.
     dead_band: f32,
+    /// Its reciprocal, 1/A (the share is worked out each period, a multiplication).
+    per_band: f32,
 }
 
 impl CurrentLoopSettings {
@@ -202,6 +204,7 @@ impl CurrentLoopSettings {
             ki: r * one_minus_p,
             dead_share: 0.0,
             dead_band: 1.0,
+            per_band: 1.0,
         })
     }
 
@@ -222,7 +225,7 @@ impl CurrentLoopSettings {
         if !(fine && band.is_finite() && band > 0.0) {
             return Err(Error::DeadTime);
         }
-        Ok(Self { dead_share: 2.0 * dead_time / self.period, dead_band: band, ..self })
+        Ok(Self { dead_share: 2.0 * dead_time / self.period, dead_band: band, per_band: 1.0 / band, ..self })
     }
 
     /// The same settings with the PI's gains set rather than worked out from R, L and the
@@ -297,7 +300,7 @@ impl CurrentLoopSettings {
     /// The share of the dead time's voltage the loop adds for a reference of `i_ref` A: its
     /// sign, faded linearly across the band around zero.
     fn dead_time_share(&self, i_ref: f32) -> f32 {
-        (i_ref / self.dead_band).clamp(-1.0, 1.0)
+        (i_ref * self.per_band).clamp(-1.0, 1.0)
     }
 
     /// The part of a winding's voltage asked for `i_ref` A at `v_bus` that the dead time takes
@@ -454,8 +457,11 @@ impl CosSin {
         let k = quarter as f32;
         let r = (angle - k * HI) - k * LO;
         let r2 = r * r;
-        let sin = r * (1.0 - r2 / 6.0 * (1.0 - r2 / 20.0 * (1.0 - r2 / 42.0 * (1.0 - r2 / 72.0))));
-        let cos = 1.0 - r2 / 2.0 * (1.0 - r2 / 12.0 * (1.0 - r2 / 30.0 * (1.0 - r2 / 56.0)));
+        // Multiplications by the factorials' reciprocals: a division is 14 cycles of the FPU.
+        let sin = r
+            * (1.0
+                - r2 * (1.0 / 6.0) * (1.0 - r2 * (1.0 / 20.0) * (1.0 - r2 * (1.0 / 42.0) * (1.0 - r2 * (1.0 / 72.0)))));
+        let cos = 1.0 - r2 * 0.5 * (1.0 - r2 * (1.0 / 12.0) * (1.0 - r2 * (1.0 / 30.0) * (1.0 - r2 * (1.0 / 56.0))));
         match quarter & 3 {
             0 => Self { cos, sin },
             1 => Self { cos: -sin, sin: cos },

@@ -50,7 +50,8 @@ pub fn electrical_angle(at: &Setpoint, microsteps: u16) -> f32 {
     } else {
         at.whole.rem_euclid(i64::from(per_turn)) as u32
     };
-    let within = turn as f32 + at.fraction.to_num::<f32>();
+    // The fraction's bits as a u32, scaled: one conversion of the FPU, rounded as `to_num` does.
+    let within = turn as f32 + at.fraction.to_bits() as f32 * (1.0 / 4_294_967_296.0);
     within * (core::f32::consts::TAU / per_turn as f32)
 }
 
@@ -91,7 +92,7 @@ fn small_turn(angle: f32) -> CosSin {
         return if angle.is_finite() { CosSin::of(angle) } else { CosSin { cos: 1.0, sin: 0.0 } };
     }
     let a2 = angle * angle;
-    CosSin { cos: 1.0 - a2 * (0.5 - a2 / 24.0), sin: angle * (1.0 - a2 / 6.0) }
+    CosSin { cos: 1.0 - a2 * (0.5 - a2 * (1.0 / 24.0)), sin: angle * (1.0 - a2 * (1.0 / 6.0)) }
 }
 
 /// How much the loop's gains are scaled for each of 0x6010's decays (0-3: 0 %, 50 %, 75 % and
@@ -220,9 +221,9 @@ impl WindingSettings {
             |[x, y]: [f32; 2]| [state.turn.cos * x - state.turn.sin * y, state.turn.sin * x + state.turn.cos * y];
         let [pa, pb] = &mut state.current.phases;
         let missed = [pa.correction, pb.correction];
-        let per_volt = current.volt_gain();
+        let gain = EMF_GAIN / current.volt_gain();
         let [ea, eb] = state.back_emf;
-        state.back_emf = turn([ea - EMF_GAIN * missed[0] / per_volt, eb - EMF_GAIN * missed[1] / per_volt]);
+        state.back_emf = turn([ea - gain * missed[0], eb - gain * missed[1]]);
         [pa.correction, pb.correction] = turn(missed);
         let limit = CurrentLoopSettings::limit(v_bus);
         // Too fast to tell: no reference counts as starved.
