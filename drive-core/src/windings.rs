@@ -143,6 +143,8 @@ pub struct WindingState {
     applied_mv: [i32; 2],
     /// Periods in a row each winding has looked open ([`OPEN_PERIODS`]).
     open_for: [u16; 2],
+    /// The last tick asked a current of bridges with no loop ([`command_or_open`]).
+    asked_without_loop: bool,
 }
 
 impl WindingState {
@@ -155,9 +157,10 @@ impl WindingState {
     /// Whether each winding is open: for [`OPEN_PERIODS`] in a row, turning no faster than
     /// [`OPEN_MAX_TURN`], the loop has driven it at the supply's limit towards a reference of
     /// [`OPEN_MIN_MA`] or more, and its current stayed under [`OPEN_SHARE`] of that reference.
-    /// The board has no open-load flag of its own; this is its `coil_open`.
+    /// The board has no open-load flag of its own; this is its `coil_open`. With no loop (a
+    /// tune that failed), both while the tick asks a current ([`command_or_open`]).
     pub fn open(&self) -> [bool; 2] {
-        self.open_for.map(|n| n >= OPEN_PERIODS)
+        if self.asked_without_loop { [true; 2] } else { self.open_for.map(|n| n >= OPEN_PERIODS) }
     }
 
     /// The reference currents of the coming period, A; `None` while the bridges are off.
@@ -232,6 +235,17 @@ impl WindingSettings {
         looks_open(open_a, va, ra, ia, limit);
         looks_open(open_b, vb, rb, ib, limit);
         Some(bridge_shares(volts, v_bus))
+    }
+}
+
+/// Takes one tick's outputs into `state` for the loop `settings` ([`WindingSettings::command`]),
+/// or for none (a power-up tune that failed: an open winding, no motor): then the bridges stay
+/// off, and while the tick asks a current both windings read open ([`WindingState::open`]), so
+/// that the drive latches the phase loss (alarm 11).
+pub fn command_or_open(settings: Option<&WindingSettings>, state: &mut WindingState, out: &Outputs) {
+    match settings {
+        Some(s) => s.command(state, out),
+        None => state.asked_without_loop = out.enabled && out.current_ma != 0,
     }
 }
 

@@ -30,7 +30,7 @@ use std::str::FromStr;
 use drive_core::autotune;
 use drive_core::control::Outputs;
 use drive_core::current::{CurrentLoopSettings, V_BUS_RANGE};
-use drive_core::windings::{LoopObjects, PowerUpTune, TuneStep, WindingSettings, WindingState};
+use drive_core::windings::{LoopObjects, PowerUpTune, TuneStep, WindingSettings, WindingState, command_or_open};
 
 use crate::motor::{BridgeVolts, ChopperConfig, Motor};
 
@@ -176,8 +176,6 @@ pub struct Bridges {
     /// What the power-up tune found.
     tuned: Option<LoopObjects>,
     state: WindingState,
-    /// Whether the last tick asked a current (with no loop, the windings then read open).
-    asked: bool,
     sensing: Sensing,
     /// The currents the ADC read at the last period's centre, A.
     measured: [f64; 2],
@@ -223,7 +221,6 @@ impl Bridges {
             unreported: None,
             trips: Vec::new(),
             reading_ma: [0; 2],
-            asked: false,
         }
     }
 
@@ -267,10 +264,9 @@ impl Bridges {
         self.state.applied_mv()
     }
 
-    /// Whether the drive's regulation finds each winding open (`WindingState::open`); both,
-    /// while a current is asked of bridges with no loop.
+    /// Whether the drive's regulation finds each winding open (`WindingState::open`).
     pub fn open(&self) -> [bool; 2] {
-        if self.settings.is_none() && self.asked { [true; 2] } else { self.state.open() }
+        self.state.open()
     }
 
     /// The phase currents the drive reads at this tick, mA: the ADC's, and a phase that tripped
@@ -303,10 +299,7 @@ impl Bridges {
             .as_ref()
             .and_then(|w| w.period(&mut self.state, measured_ma, supply_mv))
             .map(|shares| pwm_volts(shares, v_bus));
-        self.asked = out.enabled && out.current_ma != 0;
-        if let Some(w) = &self.settings {
-            w.command(&mut self.state, out);
-        }
+        command_or_open(self.settings.as_ref(), &mut self.state, out);
         let next = if self.state.reference().is_none() {
             // The drive turned its bridges off: the outputs go off at once, the latch clears.
             self.latched = None;
