@@ -1,6 +1,9 @@
 //! The drive driving the physical motor model in simulated time: the seed examples lose no step
 //! with the defaults and the NEMA 17; a load or an acceleration beyond the motor's torque does.
 
+mod common;
+
+use common::{send, write};
 use drive_core::od::Obj;
 use drive_core::{Drive, Instant};
 use hal_sim::DEFAULT_MOTOR;
@@ -10,18 +13,6 @@ use hal_sim::plant::Plant;
 fn plant(inputs: MotorInputs) -> Plant {
     let params = MotorCatalog::builtin().get(DEFAULT_MOTOR).cloned().expect("catalogue motor");
     Plant::new(Drive::factory(), Motor::new(params, inputs))
-}
-
-/// Sends a request (CRC appended) at the plant's time and runs until it is answered.
-fn send(plant: &mut Plant, body: &[u8]) -> Vec<u8> {
-    plant.request(body).unwrap_or_else(|| panic!("no reply to {body:02X?}"))
-}
-
-fn write(plant: &mut Plant, reg: u16, value: u16) {
-    let [rh, rl] = reg.to_be_bytes();
-    let [vh, vl] = value.to_be_bytes();
-    let r = send(plant, &[0x01, 0x06, rh, rl, vh, vl]);
-    assert_eq!(r[1], 0x06, "{reg:04X}: {r:02X?}");
 }
 
 /// Runs for `secs` of simulated time; the largest |rotor - setpoint| in microsteps on the way.
