@@ -53,9 +53,20 @@ fn split() -> (Drive, TickSide) {
 /// Ticks `tick` at tick `k`, syncing first if `lent`; the handover if it synced.
 fn tick_at(d: &mut Drive, tick: &mut TickSide, k: u64, lent: bool, inputs: &Inputs) -> (Outputs, Option<Handover>) {
     let now = tick_time(k);
-    let h = lent.then(|| d.sync_here(tick, now));
+    let h = lent.then(|| synced(d, tick, now));
     let out = tick.tick(now, inputs, d.state().table());
     (out, h)
+}
+
+/// Syncs `d`'s model into `tick` at `now`; once synced, the model's axis is the tick's (the
+/// sync copies back only what the tick changed).
+fn synced(d: &mut Drive, tick: &mut TickSide, now: Instant) -> Handover {
+    let h = d.sync_here(tick, now);
+    if h != Handover::Waiting {
+        let walk = |a: &drive_core::motion::axis::Axis| (a.setpoint(), a.target(), a.version(), a.activation());
+        assert_eq!(walk(d.state().controller().axis()), walk(tick.controller().axis()), "after {h:?} at {now:?}");
+    }
+    h
 }
 
 #[test]
@@ -88,7 +99,7 @@ fn a_plan_takes_over_at_its_tick_as_if_requested_a_margin_later() {
     }
     assert_eq!(planned_at, Some(request_at + margin_ticks + 1));
     // A sync before a request refreshes the model.
-    assert_eq!(d.sync_here(&mut tick, tick_time(40_000)), Handover::Done);
+    assert_eq!(synced(&mut d, &mut tick, tick_time(40_000)), Handover::Done);
     let position = |d: &Drive| d.state().read(drive_core::od::Obj::Position);
     assert!(position(&d) > 0);
     assert_eq!(position(&d), position(&shared), "the model learns where the axis is");
@@ -174,13 +185,13 @@ fn retargets(margin_us: u64, deliver: u64) -> (i64, i64, Vec<Handover>) {
         }
         if lend_at.is_none() && !requests.is_empty() {
             // Synced at this tick: the model is fresh; serve one request, hand it over later.
-            assert_eq!(d.sync_here(&mut tick, tick_time(k + 1)), Handover::Done);
+            assert_eq!(synced(&mut d, &mut tick, tick_time(k + 1)), Handover::Done);
             let r = requests.remove(0);
             assert!(serve(&mut d, tick_time(k).plus_micros(10), &r));
             lend_at = Some(k + deliver);
         }
     }
-    assert_eq!(d.sync_here(&mut tick, tick_time(200_000)), Handover::Done);
+    assert_eq!(synced(&mut d, &mut tick, tick_time(200_000)), Handover::Done);
     (emitted, d.state().position(), handovers)
 }
 
@@ -200,13 +211,15 @@ fn re_targets_handed_over_late_still_end_where_the_model_says() {
 }
 
 /// Serves `requests` (each at its tick) as the firmware does, handing each over `deliver`
-/// ticks later; the handovers that were not plain syncs.
-fn served(requests: &[(u64, Vec<u8>)], ticks: u64, deliver: u64) -> Vec<Handover> {
+/// ticks later; the handovers that were not plain syncs, the steps the tick emitted and the
+/// model's position at the end.
+fn served(requests: &[(u64, Vec<u8>)], ticks: u64, deliver: u64) -> (Vec<Handover>, i64, i64) {
     let (mut d, mut tick) = split();
-    let (mut handovers, mut lend_at) = (Vec::new(), None);
+    let (mut handovers, mut lend_at, mut emitted) = (Vec::new(), None, 0);
     for k in 0..ticks {
         let lent = lend_at.is_some_and(|at| k >= at);
-        let (_, h) = tick_at(&mut d, &mut tick, k, lent, &Inputs::default());
+        let (out, h) = tick_at(&mut d, &mut tick, k, lent, &Inputs::default());
+        emitted += out.steps;
         if let Some(h) = h.filter(|&h| h != Handover::Waiting) {
             if h != Handover::Done {
                 handovers.push(h);
@@ -215,12 +228,25 @@ fn served(requests: &[(u64, Vec<u8>)], ticks: u64, deliver: u64) -> Vec<Handover
         }
         if let Some((_, r)) = requests.iter().find(|(at, _)| *at == k) {
             assert!(lend_at.is_none(), "a request while one is handed over");
-            assert_eq!(d.sync_here(&mut tick, tick_time(k + 1)), Handover::Done);
+            assert_eq!(synced(&mut d, &mut tick, tick_time(k + 1)), Handover::Done);
             assert!(serve(&mut d, tick_time(k).plus_micros(10), r), "request at tick {k}");
             lend_at = Some(k + deliver);
         }
     }
-    handovers
+    assert_eq!(synced(&mut d, &mut tick, tick_time(ticks)), Handover::Done);
+    (handovers, emitted, d.state().position())
+}
+
+/// A stop (0x6053) handed over while the axis moves halts it where the tick has it, and the
+/// model learns that halt; a move after it starts from there.
+#[test]
+fn a_stop_handed_over_while_moving_halts_the_tick_and_the_model_learns_it() {
+    let requests = [(10, w32(0x6005, 200_000)), (20_000, w16(0x6053, 0)), (30_000, w32(0x6005, 1_000))];
+    let (handovers, emitted, position) = served(&requests, 60_000, 30);
+    // The stop is taken as a plan that halts the moving tick (not its plan whole).
+    assert_eq!(handovers, [Handover::Planned, Handover::Planned, Handover::Planned]);
+    assert!(position > 1_000 && position < 200_000, "stopped on the way: {position}");
+    assert_eq!(emitted, position, "the tick emitted what the model says");
 }
 
 #[test]
@@ -235,7 +261,7 @@ fn a_buffered_set_point_appended_to_the_running_one_is_never_late() {
         // Buffered behind the running one: appended to its track, handed over ticks later.
         (400, w16(0x6070, 0x10)),
     ];
-    let handovers = served(&requests, 20_000, 5);
+    let (handovers, ..) = served(&requests, 20_000, 5);
     assert_eq!(handovers, [Handover::Planned, Handover::Planned]);
 }
 

@@ -3,17 +3,20 @@
 //! read, and what they plan on).
 //!
 //! Neither waits for the other. The bus side lends its model to the tick ([`Lent`]) and leaves
-//! it alone until the tick has synced it ([`Controller::sync`], at the start of a tick: about
-//! 900 instructions on the Cortex-M4, 3 000 when it takes a plan over; no planning). A sync first takes in what the bus side changed since
-//! the last one, merged against what it learned then ([`Base`]), then tells the model what the
-//! tick did since:
+//! it alone until the tick has synced it ([`Controller::sync`], at the start of a tick; no
+//! planning: such a tick costs at most 3 206 Cortex-M4 instructions, a plan taken over and the
+//! tick's own work included, `cargo xtask tick-cost`). A sync first
+//! takes in what the bus side changed since the last one, merged against what it learned then
+//! ([`Base`]), then tells the model what the tick did since:
 //!
-//! - the settings are the bus side's: the tick takes them whole;
+//! - the settings are the bus side's: the tick takes them whole when they changed
+//!   ([`Orders`]);
 //! - the axis: a plan the bus side made (its [`Axis::version`] moved) replaces the tick's axis
 //!   at the plan's first tick (the sync waits for it), if the tick has not changed course on its
 //!   own since (a fault, a stop, the watchdog: then the plan is dropped, the tick's stop wins);
-//!   the bus side plans from the axis extrapolated to that tick, so the handover is seamless.
-//!   Otherwise the model takes the tick's walk;
+//!   the bus side plans from the axis extrapolated to that tick, so the handover is seamless
+//!   (the plan's track is copied as far as it is used, and the model learns only the tick's
+//!   last setpoint back). Otherwise the model takes the tick's walk;
 //! - status bits: the bits the bus side cleared (or set) are cleared (or set), the tick's
 //!   others kept; the measurements are the tick's;
 //! - a PVT run the bus side started or ended, PVT points it pushed or cleared, an ordered stop,
@@ -93,16 +96,18 @@ impl Controller {
         if starts.is_some_and(|at| now < at) {
             return Handover::Waiting;
         }
-        let Orders { stop, settings: _ } = core::mem::take(*orders);
+        let Orders { stop, settings } = core::mem::take(*orders);
         if core::mem::take(&mut model.clear_history) {
             self.faults.clear_history();
         }
         // What the tick set in the settings (the zero offset at the closed loop's first reading)
-        // goes up before the bus side's settings come down.
+        // goes up before the bus side's settings come down, whole, when they changed.
         if self.events.has(Events::ZERO_OFFSET) {
             model.settings.zero_offset = self.settings.zero_offset;
         }
-        self.settings = model.settings;
+        if settings {
+            self.settings = model.settings;
+        }
         self.heard |= core::mem::take(&mut model.heard);
         // A watch belongs to its plan (its version): one that fired here meanwhile stays
         // spent, as the stop it made changed the axis' version.
@@ -133,6 +138,7 @@ impl Controller {
         }
         pvt.last = model_pvt.last;
         pvt.fault = merge(pvt.fault, base.pvt.fault, model_pvt.fault);
+        let mut took = false;
         let handover = if stop {
             self.axis.stop_ramp(self.settings.stop_decel);
             Handover::Done
@@ -149,10 +155,10 @@ impl Controller {
                 (Some(at), Some(last)) if last >= at && !model.axis.appends() => Some(last.since(at) / TICK_MICROS + 1),
                 _ => None,
             };
-            self.axis.take_plan(&model.axis);
+            took = self.axis.take_plan(&model.axis);
             late.map_or(Handover::Planned, |n| Handover::Late(n as u32))
         };
-        self.up(model);
+        self.up(model, took);
         (model_pvt.head, model_pvt.len, model_pvt.fault) = (pvt.head, pvt.len, pvt.fault);
         **base = Base { status: self.status, run: self.run, pvt: **model_pvt, version: self.axis.version() };
         handover
@@ -161,11 +167,16 @@ impl Controller {
 
 impl Controller {
     /// The tick's state into the bus side's `model` (the track stays the model's: the tick's is
-    /// the same, or a dropped plan's that nothing walks). Out of line: as arguments the two are
-    /// known apart, and their fields copy as plain copies, not as moves of what may overlap.
+    /// the same, or a dropped plan's that nothing walks; of an axis that just `took` the model's
+    /// plan, only the last tick). Out of line: as arguments the two are known apart, and their
+    /// fields copy as plain copies, not as moves of what may overlap.
     #[inline(never)]
-    fn up(&mut self, model: &mut Controller) {
-        model.axis.follow_walk_of(&self.axis);
+    fn up(&mut self, model: &mut Controller, took: bool) {
+        if took {
+            model.axis.follow_tick_of(&self.axis);
+        } else {
+            model.axis.follow_walk_of(&self.axis);
+        }
         model.status = self.status;
         model.faults = self.faults;
         model.commanded = self.commanded;

@@ -148,7 +148,7 @@ impl Controller {
             (index, to) = (i, p);
         }
         let at = self.axis.next_tick(now);
-        self.axis.follow(at, cubic, None);
+        self.axis.follow(at, cubic, &mut None);
         self.run = Some(Run { source, to });
         self.status.pvt_pointer = index;
     }
@@ -162,6 +162,7 @@ impl Controller {
             self.run = None;
             return;
         };
+        let mut started = false;
         for _ in 0..SEGMENTS_PER_TICK {
             let length = cubic.ticks() * TICK_MICROS;
             if now.since(start) < length || now < start {
@@ -172,9 +173,10 @@ impl Controller {
                 Some((i, p)) => {
                     cubic = Cubic::new(cubic.p1(), run.to.velocity, p);
                     start = end;
-                    self.axis.follow(start, cubic, self.ahead.take());
+                    self.axis.follow(start, cubic, &mut self.ahead);
                     run.to = p;
                     self.status.pvt_pointer = i;
+                    started = true;
                 }
                 None => {
                     self.run = None;
@@ -189,11 +191,15 @@ impl Controller {
             }
         }
         // The next segment, if its point is there already, is built a piece a tick before it
-        // starts (its first tick would otherwise build it all: three times a tick's work). Once
+        // starts (its first tick would otherwise build it all: three times a tick's work), from
+        // the tick after this one starts (a tick that starts a segment has done its share). Once
         // built from this segment's end, nothing is left to do until it starts (`follow` checks
         // that it is the segment that starts).
         let built = self.ahead.is_some_and(|a| a.is_built() && a.cubic.p0 == cubic.p1());
-        if !built && let Some(p) = pvt.peek_point(&run.source, table) {
+        if !started
+            && !built
+            && let Some(p) = pvt.peek_point(&run.source, table)
+        {
             let next = Cubic::new(cubic.p1(), run.to.velocity, p);
             match &mut self.ahead {
                 Some(a) if a.cubic == next => {

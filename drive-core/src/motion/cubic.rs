@@ -585,7 +585,7 @@ impl Walk {
 /// let c = Cubic::new(7, 300, Point { position: 1234, velocity: -700, time_ms: 37 });
 /// let mut ahead = Ahead::new(c);
 /// assert!(!ahead.advance()); // the rates; three differences (two divisions each) to go
-/// assert_eq!(ahead.finish(), (Walk::new(&c, 0), c.rates()));
+/// assert_eq!(ahead.built(), (&Walk::new(&c, 0), &c.rates()));
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ahead {
@@ -633,9 +633,9 @@ impl Ahead {
     }
 
     /// The walk from the segment's start and its rates, the pieces not built yet built now.
-    pub fn finish(mut self) -> (Walk, Rates) {
+    pub fn built(&mut self) -> (&Walk, &Rates) {
         while !self.advance() {}
-        (self.walk, self.rates)
+        (&self.walk, &self.rates)
     }
 }
 
@@ -787,7 +787,7 @@ mod tests {
             for _ in 0..pieces {
                 ahead.advance();
             }
-            proptest::prop_assert_eq!(ahead.finish(), (Walk::new(&c, 0), c.rates()));
+            proptest::prop_assert_eq!(ahead.built(), (&Walk::new(&c, 0), &c.rates()));
         }
     }
 }

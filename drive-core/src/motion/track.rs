@@ -266,6 +266,15 @@ impl Track {
     }
 
     /// The pieces in use.
+    /// Becomes `other`, copying only the pieces it uses.
+    pub(crate) fn copy_from(&mut self, other: &Self) {
+        let used = other.used();
+        if let Some(to) = self.pieces.get_mut(..used.len()) {
+            to.copy_from_slice(used);
+        }
+        (self.n, self.end) = (other.n, other.end);
+    }
+
     fn used(&self) -> &[Piece] {
         self.pieces.get(..usize::from(self.n)).unwrap_or(&[])
     }
