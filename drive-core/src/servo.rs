@@ -423,7 +423,8 @@ impl Servo {
     /// rotor. `error` is the following error in microsteps.
     pub(crate) fn position_loop(&self, rotor: Micro, error: f32, per_step: u32) -> Drive {
         let lead = per_step.max(1) as f32;
-        Drive { angle: rotor.plus(error.clamp(-lead, lead)), current: 1.0 }
+        // Not `clamp`: with bounds it cannot prove ordered, that is a panic (and float formatting).
+        Drive { angle: rotor.plus(error.max(-lead).min(lead)), current: 1.0 }
     }
 
     /// The servo loop: the PID on `error` (full steps), a full step of lead in its direction.

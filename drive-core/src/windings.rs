@@ -290,7 +290,8 @@ impl LoopObjects {
     /// The objects of `settings`, rounded into their units and ranges.
     pub fn of(settings: &WindingSettings) -> Self {
         let c = settings.current_loop();
-        let unit = |x: f32, (lo, hi): (u16, u16)| libm::roundf(x).clamp(f32::from(lo), f32::from(hi)) as u16;
+        // Not `clamp`: with bounds it cannot prove ordered, that is a panic (and float formatting).
+        let unit = |x: f32, (lo, hi): (u16, u16)| libm::roundf(x).max(f32::from(lo)).min(f32::from(hi)) as u16;
         Self {
             r_mohm: unit(c.resistance() * 1e3, Self::R_L),
             l_uh: unit(c.inductance() * 1e6, Self::R_L),
