@@ -101,10 +101,13 @@ mod run {
     #[embassy_executor::main]
     async fn main(spawner: Spawner) {
         crate::stack::paint();
-        let Board { flash, mut uart, stage, mut inputs, encoder, sense, mut watchdog } = board::init();
+        let Board { flash, mut uart, mut stage, mut inputs, encoder, sense, mut watchdog } = board::init();
         // Power-up, before the drive answers anything: the FSET check and the parameters from
         // flash, then the drive, then the UART at their baud rate and parity.
         let (store, mut loaded) = power_up(flash, &mut inputs.fset);
+        // The bridges' over-current trip from the saved setting (a change takes effect at the
+        // next power-up).
+        stage.bridges.set_over_current(loaded.params.get(drive_core::od::Obj::OverCurrent));
         let (drive, baud, parity) = app::start(&mut loaded.params, loaded.status, true);
         board::set_serial(&mut uart, baud, parity);
         info!("drive up: {} baud, parity {}, storage status {:#x}", baud.get(), parity, loaded.status);
@@ -155,9 +158,9 @@ mod run {
         matches!(select(fset.wait_for_high(), Timer::after(FSET_HOLD)).await, Either::Second(()))
     }
 
-    /// Every 10 ms: the ADC, its bus voltage and temperature to the control tick (which also
-    /// reads the encoder itself) and its analog input into 0x605F; the watchdog is fed only while
-    /// the control tick runs.
+    /// Every 10 ms: the ADCs' last bus voltage and bridge temperature to the control tick (which
+    /// also reads the encoder itself) and the analog input into 0x605F; the watchdog is fed only
+    /// while the control tick runs.
     async fn sense_loop(
         mut sense: Sense,
         mut watchdog: embassy_stm32::wdg::IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
@@ -173,9 +176,10 @@ mod run {
             if n.is_multiple_of(100) {
                 let cost = board::TICK_CYCLES_MAX.load(Ordering::Relaxed);
                 info!(
-                    "bus {} mV, die {} °C, longest tick {} cycles, stack peak {} B",
+                    "bus {} mV, bridges {} °C{}, longest tick {} cycles, stack peak {} B",
                     board::supply_mv(v),
-                    board::temperature_c(t),
+                    board::bridge_temperature_c(t),
+                    if board::power_stage::tripped() { " (over-current trip)" } else { "" },
                     cost,
                     crate::stack::peak()
                 );

@@ -6,8 +6,9 @@
 //! ```
 //!
 //! The fixture: the board's RS-485 transceiver with /RE held low (jumper off DE), so it echoes
-//! what it drives; STEP (PB0) wired to encoder A (PA0), where TIM2 counts its rising edges.
-//! The flash test writes the parameter store's pages and puts back what they held.
+//! what it drives. The power stage's tests need the board's shunt bias networks (each shunt pin
+//! at VDDA/16 with no current) and no motor current: the bridges run at zero voltage. The flash
+//! test writes the parameter store's pages and puts back what they held.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 /// Host stub: the suite runs on the board only.
@@ -124,23 +125,10 @@ mod tests {
         assert!(cost < nominal * 3 / 4, "a tick leaves a quarter of its period to the rest");
     }
 
-    /// TIM2 counts the rising edges on TI1 (PA0, wired to STEP) from zero: external clock mode 1.
-    fn count_step_edges() {
-        let t = pac::TIM2;
-        t.cr1().modify(|w| w.set_cen(false));
-        t.smcr().write(|w| {
-            w.set_sms(pac::timer::vals::Sms::EXT_CLOCK_MODE);
-            w.set_ts(pac::timer::vals::Ts::TI1FP1);
-        });
-        t.arr().write_value(u32::MAX);
-        t.cnt().write_value(0);
-        t.cr1().modify(|w| w.set_cen(true));
-    }
-
-    /// Once the move has ended (within 5 s) and its last pulse train is out: the pulses TIM2
-    /// counted ([`count_step_edges`]) and the drive's position, as the Modbus task learns them
-    /// (by syncs with the tick).
-    async fn steps_when_still(drive: &mut Drive) -> (u32, i64) {
+    /// Once the move has ended (within 5 s): the microsteps the tick handed the power stage since
+    /// power-up (`board::commanded_steps`) and the drive's position, as the Modbus task learns
+    /// them (by syncs with the tick).
+    async fn steps_when_still(drive: &mut Drive) -> (i64, i64) {
         let start = Instant::now();
         loop {
             app::sync(drive).await;
@@ -150,18 +138,16 @@ mod tests {
             assert!(start.elapsed() < Duration::from_secs(5), "move ends");
             Timer::after_millis(5).await;
         }
-        Timer::after_millis(5).await; // the last pulse train
-        (pac::TIM2.cnt().read(), drive.state().position())
+        let Some(steps) = board::commanded_steps() else { defmt::panic!("the tick has the stage") };
+        (steps, drive.state().position())
     }
 
-    /// A relative move at seed 000's top speed: the output timer's pulses, counted by TIM2 from
-    /// the STEP wire, are exactly the move's steps, and the drive's position agrees.
+    /// A relative move at seed 000's top speed: the power stage is handed exactly the move's
+    /// microsteps, and the drive's position agrees.
     #[test]
     #[timeout(10)]
-    async fn step_count_on_the_output_timer(hil: Hil) {
+    async fn the_stage_gets_every_step_of_a_move(hil: Hil) {
         let Hil { board, drive } = hil;
-        count_step_edges();
-
         board::start_tick(board.stage, board.encoder);
         const STEPS: u32 = 40_000;
         let s = drive.state_mut();
@@ -172,21 +158,19 @@ mod tests {
         s.apply(Obj::RelativeMove, STEPS);
         app::sync(drive).await;
         let start = Instant::now();
-        let (counted, position) = steps_when_still(drive).await;
-        info!("{} pulses counted, position {}, in {} ms", counted, position, start.elapsed().as_millis());
-        assert_eq!(counted, STEPS);
+        let (steps, position) = steps_when_still(drive).await;
+        info!("{} steps to the stage, position {}, in {} ms", steps, position, start.elapsed().as_millis());
+        assert_eq!(steps, i64::from(STEPS));
         assert_eq!(position, i64::from(STEPS));
     }
 
     /// A re-target while cruising: the Modbus task plans it (about a millisecond, `cargo
     /// xtask tick-cost`) while the tick runs on, and hands it over at the tick it was planned
-    /// for; the pulses counted on the STEP wire are exactly the drive's final position.
+    /// for; the microsteps handed to the power stage are exactly the drive's final position.
     #[test]
     #[timeout(10)]
     async fn a_retarget_while_cruising_loses_no_step(hil: Hil) {
         let Hil { board, drive } = hil;
-        count_step_edges();
-
         board::start_tick(board.stage, board.encoder);
         // Ramped (factory levels), 40 kpps: two steps a tick while cruising.
         let s = drive.state_mut();
@@ -202,14 +186,55 @@ mod tests {
         drive.state_mut().apply(Obj::AbsoluteMove, 60_000);
         app::sync(drive).await;
         let after = [handed(0), handed(1), handed(2)];
-        let (counted, position) = steps_when_still(drive).await;
+        let (steps, position) = steps_when_still(drive).await;
         info!(
-            "handovers planned/late/dropped {} -> {}; {} pulses counted, position {}",
-            before, after, counted, position
+            "handovers planned/late/dropped {} -> {}; {} steps to the stage, position {}",
+            before, after, steps, position
         );
         assert_eq!(after, [before[0] + 1, before[1], before[2]], "the re-target taken over at its tick");
-        assert_eq!(counted, 60_000);
+        assert_eq!(steps, 60_000);
         assert_eq!(position, 60_000);
+    }
+
+    /// The bridges' timers count in step (TIM1 started by TIM8), at the PWM frequency.
+    #[test]
+    #[timeout(5)]
+    async fn the_bridges_timers_count_in_step(hil: Hil) {
+        let _bridges = hil.board.stage.bridges;
+        let (tim8, tim1) = (pac::TIM8.cnt().read().cnt(), pac::TIM1.cnt().read().cnt());
+        info!("TIM8 at {}, TIM1 at {}", tim8, tim1);
+        // Read one after the other: a few counts apart, and the trigger's resynchronisation.
+        assert!(tim8.abs_diff(tim1) <= 8, "in step");
+        assert_eq!(pac::TIM8.arr().read().arr(), board::power_stage::PERIOD, "the PWM period");
+        assert_eq!(u32::from(board::power_stage::PERIOD) * 2 * board::power_stage::PWM_HZ, board::TIMER_HZ);
+    }
+
+    /// The over-current trip acts with no software in its path: COMP2's threshold put under its
+    /// shunt's bias (as a short's current would raise the shunt over it) turns both timers'
+    /// outputs off, and they stay off until the trip is cleared. The legs run at 50 % meanwhile:
+    /// no voltage across the windings.
+    #[test]
+    #[timeout(5)]
+    async fn the_over_current_comparator_turns_the_bridges_off(hil: Hil) {
+        let mut bridges = hil.board.stage.bridges;
+        bridges.set_phase_voltages([0, 0]);
+        assert!(!bridges.tripped(), "no trip at power-up");
+        assert!(bridges.enable(), "the bridges on");
+        Timer::after_millis(1).await;
+        assert!(bridges.enabled(), "still on");
+        // DAC3 channel 2, COMP2's threshold, at 0 V: under the shunt's VDDA/16.
+        pac::DAC3.dhr12r(1).write(|w| w.set_dhr(0));
+        Timer::after_millis(1).await;
+        assert!(bridges.tripped(), "the break flagged");
+        assert!(!bridges.enabled(), "MOE cleared on both timers by the hardware");
+        bridges.clear_trip();
+        assert!(!bridges.enable(), "not on while the comparator is high");
+        bridges.set_over_current(8_000);
+        Timer::after_millis(1).await;
+        bridges.clear_trip();
+        assert!(bridges.enable(), "on again once the current is under the trip and the trip cleared");
+        bridges.disable();
+        assert!(!bridges.enabled(), "off");
     }
 
     /// A changed set, saved the way the Modbus task saves (the drive's request taken under the

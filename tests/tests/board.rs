@@ -1,7 +1,8 @@
-//! The board's tables against the chip and the docs: every pin's alternate function against the
-//! STM32G474CE's data (stm32-metapac's, generated from ST's), `memory.x` against the flash map,
-//! and `docs/board-g474.md`'s pin and flash tables generated from both (`UPDATE_DOCS=1` rewrites
-//! them; otherwise a stale table fails).
+//! The board's tables against the chip and the docs: every pin's alternate function, and every
+//! analog pin's ADC channel, op-amp or comparator input, against the STM32G474CE's data
+//! (stm32-metapac's, generated from ST's), the power stage's half-bridges as complementary pairs
+//! of the advanced timers, `memory.x` against the flash map, and `docs/board-g474.md`'s pin and
+//! flash tables generated from both (`UPDATE_DOCS=1` rewrites them; otherwise a stale table fails).
 
 #[path = "../../firmware/src/flash_map.rs"]
 #[allow(dead_code, reason = "the firmware's table, read whole here")]
@@ -16,22 +17,34 @@ use stm32_metapac::metadata::{METADATA, MemoryRegionKind};
 
 const ROOT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
 
+/// Whether the row is an analog input: a peripheral's signal on the pin with no alternate
+/// function (the pin in analog mode).
+fn analog(p: &pins::Pin) -> bool {
+    !p.function.is_empty() && p.af.is_none()
+}
+
 #[test]
 fn every_pin_has_the_function_the_board_gives_it_on_the_g474ce() {
+    // The 48-pin package: the chip's data lists its pins, and only those.
     assert_eq!(METADATA.name, "STM32G474CE");
+    assert_eq!(METADATA.pins.len(), 42, "the LQFP48/UFQFPN48 package's I/Os (PG10 is NRST)");
     for p in pins::PINS.iter().filter(|p| !p.pin.is_empty()) {
         assert!(METADATA.pins.iter().any(|c| c.name == p.pin), "{}: the chip has no pin {}", p.signal, p.pin);
         if p.function.is_empty() {
             continue; // plain GPIO: every pin is one
         }
+        // The signal exactly as the chip's data names it: `IN11` is not `INN11` (a differential
+        // input's negative side), `VINP1` is the op-amp's non-inverting input selector 1.
         let found: Vec<_> = METADATA
             .peripherals
             .iter()
             .filter(|q| q.name == p.peripheral)
             .flat_map(|q| q.pins.iter())
-            .filter(|c| c.pin == p.pin && (c.signal == p.function || c.signal.ends_with(p.function)))
+            .filter(|c| c.pin == p.pin && c.signal == p.function)
             .collect();
         assert!(!found.is_empty(), "{}: {} is not {}_{} on the G474CE", p.signal, p.pin, p.peripheral, p.function);
+        // An alternate function's number; an analog signal (ADC channel, op-amp or comparator
+        // input) has none in the data, and the board sets none.
         assert!(
             found.iter().any(|c| c.af == p.af),
             "{}: {} {}_{} is on alternate function {:?}, the board says {:?}",
@@ -42,6 +55,16 @@ fn every_pin_has_the_function_the_board_gives_it_on_the_g474ce() {
             found.iter().map(|c| c.af).collect::<Vec<_>>(),
             p.af
         );
+        if analog(p) {
+            let kind = METADATA.peripherals.iter().find(|q| q.name == p.peripheral).and_then(|q| q.registers.as_ref());
+            assert!(
+                kind.is_some_and(|r| ["adc", "opamp", "comp", "dac"].contains(&r.kind)),
+                "{}: {} is analog on {}, which is not an analog peripheral",
+                p.signal,
+                p.pin,
+                p.peripheral
+            );
+        }
     }
 }
 
@@ -49,10 +72,49 @@ fn every_pin_has_the_function_the_board_gives_it_on_the_g474ce() {
 fn no_pin_serves_two_signals() {
     let mut seen = std::collections::BTreeMap::new();
     for p in pins::PINS.iter().filter(|p| !p.pin.is_empty()) {
-        if let Some(other) = seen.insert(p.pin, p.signal) {
-            panic!("{} carries both {other} and {}", p.pin, p.signal);
+        if let Some(other) = seen.insert(p.pin, p) {
+            // An analog pin may feed several peripherals (a shunt: op-amp and comparator), as one
+            // signal; a pin on an alternate function has that function only.
+            assert!(
+                other.signal == p.signal && analog(other) && analog(p),
+                "{} carries both {} ({}_{}) and {} ({}_{})",
+                p.pin,
+                other.signal,
+                other.peripheral,
+                other.function,
+                p.signal,
+                p.peripheral,
+                p.function
+            );
         }
     }
+}
+
+#[test]
+fn every_half_bridge_is_a_complementary_pair_of_an_advanced_timer() {
+    // Each leg: a channel's output for the high side, its complementary output for the low
+    // side, of a timer with dead time and a break input (TIM1, TIM8: TIM_ADV in the data).
+    let legs: Vec<_> = pins::BRIDGES.chunks(2).collect();
+    assert_eq!(legs.len(), 4, "two H-bridges");
+    for leg in &legs {
+        let (high, low) = (leg[0], leg[1]);
+        assert_eq!(high.peripheral, low.peripheral, "{} and {}: one timer", high.signal, low.signal);
+        assert!(high.function.starts_with("CH") && !high.function.ends_with('N'), "{}: a channel", high.signal);
+        assert_eq!(low.function, format!("{}N", high.function), "{}: the complement of {}", low.signal, high.signal);
+        let block = METADATA
+            .peripherals
+            .iter()
+            .find(|q| q.name == high.peripheral)
+            .and_then(|q| q.registers.as_ref())
+            .map(|r| r.block);
+        assert_eq!(block, Some("TIM_ADV"), "{}: {} is not an advanced-control timer", high.signal, high.peripheral);
+        assert!(pins::PINS.contains(&high) && pins::PINS.contains(&low), "{}: in the table", high.signal);
+    }
+    // Four different outputs: no channel drives two legs.
+    let mut channels: Vec<_> = legs.iter().map(|l| (l[0].peripheral, l[0].function)).collect();
+    channels.sort_unstable();
+    channels.dedup();
+    assert_eq!(channels.len(), 4, "four different timer channels");
 }
 
 #[test]
@@ -128,7 +190,7 @@ fn pin_table() -> String {
             (q, "") => q.to_string(),
             (q, f) => format!("{q}_{f}"),
         };
-        let af = p.af.map_or(String::from(if p.peripheral == "ADC1" { "analog" } else { "-" }), |a| a.to_string());
+        let af = p.af.map_or(String::from(if analog(&p) { "analog" } else { "-" }), |a| a.to_string());
         let pin = if p.pin.is_empty() { "-" } else { p.pin };
         t.push_str(&format!("| {} | {pin} | {function} | {af} | {} |\n", p.signal, p.notes));
     }

@@ -13,9 +13,15 @@
 //!
 //! Timers: TIM15 is embassy-time's free-running 1 MHz clock (the time stamps of received bytes
 //! and the t3.5 timer); TIM6 is the 20 kHz control tick (interrupt priority 0, above all
-//! others); TIM1 emits step pulses; TIM4 the current reference; TIM2 counts the encoder; TIM3
-//! the pulse input (its encoder interface in the format 0x21B7 asks for); TIM17 the coil
+//! others); TIM8 and TIM1 drive the two H-bridges ([`power_stage`]); TIM2 counts the encoder;
+//! TIM3 the pulse input (its encoder interface in the format 0x21B7 asks for); TIM17 the coil
 //! output's PWM.
+//!
+//! The power stage is the drive's own ([`power_stage`]: two H-bridges, their currents sampled
+//! at the PWM centre, the bus voltage, the bridges' NTC, the over-current trip in hardware); the
+//! external STEP/DIR driver's outputs (STEP, DIR, ENABLE, the current reference) are gone. The
+//! control tick hands it the electrical angle and the current ([`Stage`]); the current loop that
+//! turns them into the bridges' voltages is not written yet, and until it is the bridges stay off.
 
 use core::cell::{Cell, RefCell};
 use core::ops::Range;
@@ -29,19 +35,20 @@ use drive_core::faults::Inputs as Measured;
 use drive_core::modes::PulseFormat;
 use drive_core::store::Store;
 use embassy_embedded_hal::adapter::BlockingAsync;
-use embassy_stm32::adc::{Adc, AdcConfig, SampleTime, Temperature};
+use embassy_stm32::comp;
 use embassy_stm32::exti::{self, ExtiInput};
 use embassy_stm32::flash::{Blocking, Flash};
-use embassy_stm32::gpio::{Level, Output, Pull, Speed};
+use embassy_stm32::gpio::Pull;
 use embassy_stm32::interrupt::{self, InterruptExt, Priority};
 use embassy_stm32::mode::Async;
 use embassy_stm32::pac;
-use embassy_stm32::peripherals::{ADC1, PB12, PB14, TIM2};
+use embassy_stm32::peripherals::TIM2;
+use embassy_stm32::rcc::mux::Adcsel;
 use embassy_stm32::rcc::{Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk};
 use embassy_stm32::timer::qei::{Config as QeiConfig, Qei};
 use embassy_stm32::usart::{self, BufferedUart};
 use embassy_stm32::wdg::IndependentWatchdog;
-use embassy_stm32::{Peri, bind_interrupts, peripherals};
+use embassy_stm32::{bind_interrupts, peripherals};
 
 use crate::flash_map;
 #[path = "pins.rs"]
@@ -50,12 +57,20 @@ use crate::flash_map;
     reason = "the whole table is read by the tests and the doc; the code uses the pins it sets up itself"
 )]
 pub mod pins;
+#[path = "power_stage.rs"]
+pub mod power_stage;
+use power_stage::Bridges;
+
 use crate::power::PowerStage;
 
 bind_interrupts!(struct Irqs {
     USART1 => usart::BufferedInterruptHandler<peripherals::USART1>;
     EXTI15_10 => exti::InterruptHandler<interrupt::typelevel::EXTI15_10>;
     TIM6_DAC => TickHandler;
+    // The over-current comparators' own interrupts (an output edge through EXTI), not used:
+    // the comparators act on the timers' break input. embassy's `Comp` wants them bound.
+    COMP1_2_3 => comp::InterruptHandler<peripherals::COMP2>;
+    COMP4_5_6 => comp::InterruptHandler<peripherals::COMP5>;
 });
 
 /// What the 0x1022 hardware version says.
@@ -67,14 +82,9 @@ pub const PLAN_MARGIN_US: u64 = 2_000;
 pub const TIMER_HZ: u32 = 170_000_000;
 /// Timer counts (and core cycles) in one control tick.
 pub const TICK_COUNTS: u32 = TIMER_HZ / TICK_HZ;
-/// The share of a tick step pulses may fill: the rest is margin for the tick's own jitter.
-const PULSE_WINDOW: u32 = TICK_COUNTS * 15 / 16;
-/// Shortest step period in timer counts (1 µs: 1 Mpps, five times seed 000's 200 kpps).
-const MIN_STEP_PERIOD: u32 = TIMER_HZ / 1_000_000;
-/// Current reference PWM period in timer counts (100 kHz).
-const CURRENT_PWM_PERIOD: u32 = TIMER_HZ / 100_000;
-/// Phase current at 100 % reference duty (3.3 V on VREF).
-const FULL_SCALE_MA: u32 = 3000;
+/// The over-current trip until the drive's setting (0x2133) is loaded from flash: the top of the
+/// setting's range. The bridges are off meanwhile.
+const OVER_CURRENT_UNTIL_LOADED_MA: u32 = 10_000;
 
 /// Receive ring: two requests of the longest (an ASCII line, 513 characters; an RTU frame is
 /// 256 bytes), so that requests sent back to back (to other drives on the bus, broadcasts) are
@@ -101,13 +111,13 @@ pub struct Board {
     pub flash: Flash<'static, Blocking>,
     /// The RS-485 port (USART1, driver enable in hardware).
     pub uart: Serial,
-    /// The step/direction power stage.
-    pub stage: StepDir,
+    /// The power stage, with the pins the control tick sets.
+    pub stage: Stage,
     /// The digital inputs.
     pub inputs: Inputs,
     /// The encoder's quadrature counter (TIM2), for the control tick.
     pub encoder: Qei<'static, TIM2>,
-    /// The analog inputs.
+    /// The slow analog readings.
     pub sense: Sense,
     /// The independent watchdog, not yet started.
     pub watchdog: IndependentWatchdog<'static, peripherals::IWDG>,
@@ -119,17 +129,9 @@ pub struct Inputs {
     pub fset: ExtiInput<'static, Async>,
 }
 
-/// The ADC with its channels.
-pub struct Sense {
-    /// ADC1.
-    pub adc: Adc<'static, ADC1>,
-    /// Bus voltage divider.
-    pub bus_voltage: Peri<'static, PB12>,
-    /// The analog input.
-    pub analog_in: Peri<'static, PB14>,
-    /// The internal temperature sensor.
-    pub temperature: Temperature,
-}
+/// The slow analog readings: the bus voltage, the bridges' NTC and the analog input, which the
+/// ADCs convert every PWM period after the phase currents ([`power_stage`]).
+pub struct Sense;
 
 /// The ADC's reference, VDDA, mV.
 const VDDA_MV: u32 = 3300;
@@ -137,27 +139,18 @@ const VDDA_MV: u32 = 3300;
 const DIVIDER_TOP_OHM: u32 = 100_000;
 /// See [`DIVIDER_TOP_OHM`].
 const DIVIDER_BOTTOM_OHM: u32 = 4_700;
-/// The temperature sensor's factory calibration (RM0440 §21.4.32): its readings at 30 °C and
-/// 130 °C with VDDA = 3.0 V, in system memory.
-const TS_CAL1: *const u16 = 0x1FFF_75A8 as *const u16;
-/// See [`TS_CAL1`].
-const TS_CAL2: *const u16 = 0x1FFF_75CA as *const u16;
 
 impl Sense {
-    /// Raw 12-bit readings of the bus voltage, the temperature sensor and the analog input.
+    /// The last raw 12-bit readings of the bus voltage, the bridges' NTC and the analog input.
     pub fn read_adc(&mut self) -> (u16, u16, u16) {
-        let t = SampleTime::CYCLES247_5; // high-impedance dividers, and the sensor's minimum 5 µs
-        let v = self.adc.blocking_read(&mut self.bus_voltage, t);
-        let temp = self.adc.blocking_read(&mut self.temperature, t);
-        let a = self.adc.blocking_read(&mut self.analog_in, t);
-        (v, temp, a)
+        power_stage::slow_samples()
     }
 
     /// Hands the bus voltage and temperature readings to the control tick, which checks them
     /// (under- and over-voltage, power loss, over-temperature), and the analog input's code.
-    pub fn publish(supply_code: u16, temperature_code: u16, analog_code: u16) {
+    pub fn publish(supply_code: u16, ntc_code: u16, analog_code: u16) {
         let supply = supply_mv(supply_code);
-        let temperature = temperature_c(temperature_code);
+        let temperature = bridge_temperature_c(ntc_code);
         critical_section::with(|cs| {
             let m = MEASURED.borrow(cs);
             let analog = Some(analog_code);
@@ -173,22 +166,10 @@ pub fn supply_mv(code: u16) -> u32 {
     mv as u32
 }
 
-/// The die temperature, °C, of a temperature sensor reading, from the factory calibration; `None`
-/// if the calibration is not there (erased words).
-///
-/// The board has no sensor on the bridge: the die sits next to it on the same board and stands
-/// for it, which makes the over-temperature alarm (0x6000 bit 0) react late to a bridge heating
-/// alone. A board with a thermistor on the bridge reads that instead.
-pub fn temperature_c(code: u16) -> Option<i16> {
-    // SAFETY: factory calibration words in system memory, readable at any time.
-    let (cal1, cal2) = unsafe { (core::ptr::read_volatile(TS_CAL1), core::ptr::read_volatile(TS_CAL2)) };
-    let span = i32::from(cal2) - i32::from(cal1);
-    if span <= 0 || cal2 == u16::MAX {
-        return None;
-    }
-    // The calibration was taken at VDDA = 3.0 V.
-    let at_3v0 = i32::from(code) * VDDA_MV as i32 / 3000;
-    i16::try_from(30 + (at_3v0 - i32::from(cal1)) * 100 / span).ok()
+/// The bridges' temperature, °C, of an NTC reading; `None` if the NTC is open or shorted (then
+/// the over-temperature alarm, 0x6000 bit 0, has nothing to act on).
+pub fn bridge_temperature_c(code: u16) -> Option<i16> {
+    power_stage::bridge_temperature_c(code)
 }
 
 /// What the control tick gives the drive: the last supply and temperature of the sense task (none
@@ -238,53 +219,48 @@ fn measure(cs: critical_section::CriticalSection<'_>) -> Measured {
     Measured { encoder, levels, index, pulses, ..MEASURED.borrow(cs).get() }
 }
 
-/// STEP (TIM1 pulses), DIR and ENABLE to an external step/direction driver, and its current
-/// reference on TIM4's PWM.
-pub struct StepDir {
-    dir: Output<'static>,
-    enable: Output<'static>,
-    /// Steps asked for and not yet started (signed).
-    pending: i64,
+/// The power stage as the control tick drives it: the two H-bridges ([`Bridges`]) and what the
+/// tick asks of them, with the board's pins, coil output and pulse input that its outputs set too.
+///
+/// The current loop (another part, not written yet) runs once a PWM period on the ADCs' end of
+/// sequence: it reads [`Bridges::samples`], turns the electrical angle and the current the tick
+/// asked for ([`Stage::commanded`]) into the two windings' voltages, writes them with
+/// [`Bridges::set_phase_voltages`], and turns the bridges on ([`Bridges::enable`]) while the
+/// current is not 0. Until it exists the bridges stay off; the tick turns them off whenever it
+/// frees the motor.
+pub struct Stage {
+    /// The two H-bridges.
+    pub bridges: Bridges,
+    /// The electrical angle: whole microsteps of the commutation the tick stepped since
+    /// power-up (signed), four full steps an electrical turn.
+    steps: i64,
+    /// The phase current amplitude the tick asks for, mA; 0 frees the motor.
+    current_ma: u16,
     /// The pins as last set up, and the outputs' levels (set again only when they change).
     pins: Option<(PinConfig, u16)>,
     /// The pulse input as last set up.
     pulse: Option<PulseInput>,
 }
 
-impl StepDir {
-    /// Whether TIM1 is still emitting the previous tick's pulses.
-    fn busy() -> bool {
-        pac::TIM1.cr1().read().cen()
+impl Stage {
+    /// What the tick asks of the bridges: the electrical angle in whole microsteps since
+    /// power-up, and the phase current amplitude in mA (0: off).
+    #[allow(dead_code, reason = "the current loop's input (issue 39): its caller is not written yet")]
+    pub fn commanded(&self) -> (i64, u16) {
+        (self.steps, self.current_ma)
     }
 }
 
-impl PowerStage for StepDir {
+impl PowerStage for Stage {
     fn step(&mut self, steps: i64) {
-        self.pending = self.pending.saturating_add(steps);
-        if self.pending == 0 || Self::busy() {
-            return;
-        }
-        // DIR changes only between pulse trains, at least one period before the next rising edge.
-        self.dir.set_level(if self.pending < 0 { Level::High } else { Level::Low });
-        let max = u64::from(PULSE_WINDOW / MIN_STEP_PERIOD);
-        let n = self.pending.unsigned_abs().min(max);
-        let period = (u64::from(PULSE_WINDOW) / n.max(1)) as u32;
-        let t = pac::TIM1;
-        t.arr().write(|w| w.set_arr((period - 1) as u16));
-        // PWM mode 2: low for the first half of each period, rising edge mid-period.
-        t.ccr(1).write(|w| w.set_ccr((period / 2) as u16));
-        // One-pulse mode stops the counter after RCR + 1 periods: exactly n pulses.
-        t.rcr().write(|w| w.set_rep((n - 1) as u16));
-        t.egr().write(|w| w.set_ug(true));
-        t.cr1().modify(|w| w.set_cen(true));
-        let done = n as i64;
-        self.pending -= if self.pending < 0 { -done } else { done };
+        self.steps = self.steps.wrapping_add(steps);
     }
 
     fn set_current(&mut self, milliamps: u16) {
-        let duty = (u32::from(milliamps).min(FULL_SCALE_MA) * CURRENT_PWM_PERIOD / FULL_SCALE_MA) as u16;
-        pac::TIM4.ccr(0).write(|w| w.set_ccr(duty));
-        self.enable.set_level(if milliamps == 0 { Level::High } else { Level::Low });
+        self.current_ma = milliamps;
+        if milliamps == 0 {
+            self.bridges.disable();
+        }
     }
 
     fn set_pins(&mut self, pins: &PinConfig, levels: u16) {
@@ -359,18 +335,23 @@ const GPIO8: u16 = 1 << 11;
 /// Timer counts in a period of the coil output's PWM: 20 kHz at 170 MHz.
 const COIL_PWM_PERIOD: u32 = 8500;
 
-/// Cuts the power stage with raw register writes, whatever state the drivers are in: ENABLE
-/// high (off), pulse timer stopped, current reference 0. For the panic and fault handlers.
+/// Cuts the power stage with raw register writes, whatever state the drivers are in: every
+/// switch of the bridges off (MOE off on TIM8 and TIM1). For the panic and fault handlers.
 pub fn power_off() {
-    pac::GPIOB.bsrr().write(|w| w.set_bs(pins::ENABLE.number(), true));
-    pac::TIM1.cr1().modify(|w| w.set_cen(false));
-    pac::TIM4.ccr(0).write(|w| w.set_ccr(0));
+    power_stage::off();
     // The coil off too: a brake applies, a valve or magnet drops.
     pac::TIM17.ccr(0).write(|w| w.set_ccr(0));
 }
 
 /// The power stage the tick interrupt drives, handed over by [`start_tick`].
-static STAGE: Mutex<RefCell<Option<StepDir>>> = Mutex::new(RefCell::new(None));
+static STAGE: Mutex<RefCell<Option<Stage>>> = Mutex::new(RefCell::new(None));
+
+/// The electrical angle the tick has stepped the stage through, whole microsteps since
+/// power-up ([`Stage::commanded`]); `None` before [`start_tick`].
+#[allow(dead_code, reason = "read by the HIL suite")]
+pub fn commanded_steps() -> Option<i64> {
+    critical_section::with(|cs| STAGE.borrow_ref(cs).as_ref().map(|s| s.commanded().0))
+}
 
 /// Cycles the last control tick took (DWT cycle counter), and the most any took.
 pub static TICK_CYCLES: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
@@ -409,7 +390,7 @@ impl interrupt::typelevel::Handler<interrupt::typelevel::TIM6_DAC> for TickHandl
 }
 
 /// Hands the power stage and the encoder to the control tick and starts TIM6 at [`TICK_HZ`].
-pub fn start_tick(stage: StepDir, encoder: Qei<'static, TIM2>) {
+pub fn start_tick(stage: Stage, encoder: Qei<'static, TIM2>) {
     let last = encoder.count();
     critical_section::with(|cs| {
         STAGE.borrow_ref_mut(cs).replace(stage);
@@ -459,6 +440,36 @@ pub fn init() -> Board {
         core.DWT.enable_cycle_counter();
     }
 
+    // The bridges first: their outputs driven off and the over-current trip armed.
+    let bridges = Bridges::new(
+        power_stage::Parts {
+            tim8: p.TIM8,
+            tim1: p.TIM1,
+            a1_high: p.PC6,
+            a1_low: p.PC10,
+            a2_high: p.PB8,
+            a2_low: p.PC11,
+            b1_high: p.PB9,
+            b1_low: p.PB1,
+            b2_high: p.PA8,
+            b2_low: p.PA11,
+            shunt_a: p.PA3,
+            shunt_b: p.PB13,
+            opamp_a: p.OPAMP1,
+            opamp_b: p.OPAMP3,
+            comp_a: p.COMP2,
+            comp_b: p.COMP5,
+            dac_a: p.DAC3,
+            dac_b: p.DAC4,
+            adc1: p.ADC1,
+            adc2: p.ADC2,
+            bus_voltage: p.PB12,
+            ntc: p.PB2,
+            analog_in: p.PB14,
+        },
+        OVER_CURRENT_UNTIL_LOADED_MA,
+    );
+
     let uart_config = uart_config(Baud::FACTORY, 0);
     // Each singleton! yields once; a second `init` already panicked in `embassy_stm32::init`.
     let (Some(tx_buf), Some(rx_buf)) =
@@ -472,17 +483,8 @@ pub fn init() -> Board {
     interrupt::USART1.set_priority(Priority::P2);
     interrupt::EXTI15_10.set_priority(Priority::P3);
 
-    // Held by the stage, not dropped: a dropped pin returns to analog and the driver's inputs float.
-    let stage = StepDir {
-        dir: Output::new(p.PB1, Level::Low, Speed::Low),
-        enable: Output::new(p.PB2, Level::High, Speed::Low), // motor off until told otherwise
-        pending: 0,
-        pins: None,
-        pulse: None,
-    };
-    let _ = (p.TIM1, p.TIM4, p.TIM17, p.PB0, p.PB6, p.PA7); // owned by the raw timer setup below
-    setup_step_timer();
-    setup_current_pwm();
+    let stage = Stage { bridges, steps: 0, current_ma: 0, pins: None, pulse: None };
+    let _ = (p.TIM17, p.PA7); // owned by the raw timer setup below
     setup_coil_pwm();
     let _ = (p.TIM3, p.PB4, p.PB5);
     setup_pulse_input();
@@ -490,8 +492,6 @@ pub fn init() -> Board {
     let _ = (p.PA4, p.PA5, p.PA6, p.PB7);
 
     let inputs = Inputs { fset: ExtiInput::new(p.PC13, p.EXTI13, Pull::Up, Irqs) };
-    let adc = Adc::new(p.ADC1, AdcConfig::default());
-    let temperature = adc.enable_temperature();
     let encoder = Qei::new(p.TIM2, p.PA0, p.PA1, QeiConfig::default());
     // The encoder's index (Z) on PA2, TIM2 channel 3: a rising edge sets CC3IF, which the tick
     // reads and clears (`measure`), so that a pulse shorter than a tick is not missed.
@@ -501,9 +501,8 @@ pub fn init() -> Board {
     let z = pins::ENCODER_Z.number();
     pac::GPIOA.afr(z / 8).modify(|w| w.set_afr(z % 8, pins::ENCODER_Z.af_number()));
     pac::GPIOA.moder().modify(|w| w.set_moder(z, pac::gpio::vals::Moder::ALTERNATE));
-    let sense = Sense { adc, bus_voltage: p.PB12, analog_in: p.PB14, temperature };
     let watchdog = IndependentWatchdog::new(p.IWDG, 500_000);
-    Board { flash: Flash::new_blocking(p.FLASH), uart, stage, inputs, encoder, sense, watchdog }
+    Board { flash: Flash::new_blocking(p.FLASH), uart, stage, inputs, encoder, sense: Sense, watchdog }
 }
 
 /// Halts, before any peripheral is set up (the power stage off), unless the option bytes put
@@ -543,30 +542,6 @@ pub fn set_serial(uart: &mut Serial, baud: Baud, parity: u32) {
     }
 }
 
-/// Puts `pin` of GPIOB on alternate function `af`, fast.
-fn gpiob_af(pin: usize, af: u8) {
-    let g = pac::GPIOB;
-    g.ospeedr().modify(|w| w.set_ospeedr(pin, pac::gpio::vals::Ospeedr::VERY_HIGH_SPEED));
-    g.afr(pin / 8).modify(|w| w.set_afr(pin % 8, af));
-    g.moder().modify(|w| w.set_moder(pin, pac::gpio::vals::Moder::ALTERNATE));
-}
-
-/// TIM1 channel 2N on PB0: one-pulse mode with the repetition counter, PWM mode 2.
-fn setup_step_timer() {
-    pac::RCC.apb2enr().modify(|w| w.set_tim1en(true));
-    let t = pac::TIM1;
-    t.cr1().write(|w| w.set_opm(true));
-    t.psc().write_value(0);
-    t.ccmr_output(0).modify(|w| {
-        w.set_ocm(1, pac::timer::vals::Ocm::PWM_MODE2);
-        w.set_ocpe(1, true);
-    });
-    // Only the N output enabled: it follows OC2REF uninverted.
-    t.ccer().modify(|w| w.set_ccne(1, true));
-    t.bdtr().modify(|w| w.set_moe(true));
-    gpiob_af(pins::STEP.number(), pins::STEP.af_number());
-}
-
 /// TIM3 on PB4 (CH1) and PB5 (CH2): the pulse input's counter, both channels inputs on their
 /// own lines; the format and filter are the drive's (`set_pulse_input`, at the first tick).
 fn setup_pulse_input() {
@@ -604,21 +579,4 @@ fn setup_coil_pwm() {
     let n = pins::COIL.number();
     g.afr(n / 8).modify(|w| w.set_afr(n % 8, pins::COIL.af_number()));
     g.moder().modify(|w| w.set_moder(n, pac::gpio::vals::Moder::ALTERNATE));
-}
-
-/// TIM4 channel 1 on PB6: 100 kHz PWM, duty 0 until the drive asks for current.
-fn setup_current_pwm() {
-    pac::RCC.apb1enr1().modify(|w| w.set_tim4en(true));
-    let t = pac::TIM4;
-    t.psc().write_value(0);
-    t.arr().write(|w| w.set_arr((CURRENT_PWM_PERIOD - 1) as u16));
-    t.ccr(0).write(|w| w.set_ccr(0));
-    t.ccmr_output(0).modify(|w| {
-        w.set_ocm(0, pac::timer::vals::Ocm::PWM_MODE1);
-        w.set_ocpe(0, true);
-    });
-    t.ccer().modify(|w| w.set_cce(0, true));
-    t.egr().write(|w| w.set_ug(true));
-    t.cr1().modify(|w| w.set_cen(true));
-    gpiob_af(pins::CURRENT_REF.number(), pins::CURRENT_REF.af_number());
 }
