@@ -108,6 +108,8 @@ mod run {
         // The bridges' over-current trip from the saved setting (a change takes effect at the
         // next power-up).
         stage.bridges.set_over_current(loaded.params.get(drive_core::od::Obj::OverCurrent));
+        // The windings' R and L for the current loop, at the running current.
+        stage.tune(loaded.params.get(drive_core::od::Obj::PhaseCurrent).min(u32::from(u16::MAX)) as u16);
         let (drive, baud, parity) = app::start(&mut loaded.params, loaded.status, true);
         board::set_serial(&mut uart, baud, parity);
         info!("drive up: {} baud, parity {}, storage status {:#x}", baud.get(), parity, loaded.status);

@@ -20,8 +20,13 @@ pub trait PowerStage {
     /// input ignores it.
     fn set_pulse_input(&mut self, _input: &PulseInput) {}
 
+    /// Takes one tick's outputs whole: a stage with its own current loop sets its next
+    /// period's reference from them (`drive_core::windings`). A board without one ignores it.
+    fn command(&mut self, _out: &Outputs) {}
+
     /// Applies one tick's outputs: current first, so a freed motor takes no step.
     fn apply(&mut self, out: &Outputs) {
+        self.command(out);
         self.set_current(out.current_ma);
         self.step(out.steps);
         self.set_pins(&out.pins, out.gpio);

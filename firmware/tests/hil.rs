@@ -218,14 +218,14 @@ mod tests {
     async fn the_over_current_comparator_turns_the_bridges_off(hil: Hil) {
         let mut bridges = hil.board.stage.bridges;
         bridges.set_phase_voltages([0, 0]);
-        assert!(!bridges.tripped(), "no trip at power-up");
+        assert!(!board::power_stage::tripped(), "no trip at power-up");
         assert!(bridges.enable(), "the bridges on");
         Timer::after_millis(1).await;
         assert!(bridges.enabled(), "still on");
         // DAC3 channel 2, COMP2's threshold, at 0 V: under the shunt's VDDA/16.
         pac::DAC3.dhr12r(1).write(|w| w.set_dhr(0));
         Timer::after_millis(1).await;
-        assert!(bridges.tripped(), "the break flagged");
+        assert!(board::power_stage::tripped(), "the break flagged");
         assert!(!bridges.enabled(), "MOE cleared on both timers by the hardware");
         bridges.clear_trip();
         assert!(!bridges.enable(), "not on while the comparator is high");

@@ -12,16 +12,18 @@
 //! APB2 undivided, so USART1 and every timer count at 170 MHz.
 //!
 //! Timers: TIM15 is embassy-time's free-running 1 MHz clock (the time stamps of received bytes
-//! and the t3.5 timer); TIM6 is the 20 kHz control tick (interrupt priority 0, above all
-//! others); TIM8 and TIM1 drive the two H-bridges ([`power_stage`]); TIM2 counts the encoder;
+//! and the t3.5 timer); TIM8 and TIM1 drive the two H-bridges at 20 kHz ([`power_stage`]), and
+//! the end of their ADC sequence each period is the control tick (interrupt priority 0, above
+//! all others: the current loop, then the tick); TIM2 counts the encoder;
 //! TIM3 the pulse input (its encoder interface in the format 0x21B7 asks for); TIM17 the coil
 //! output's PWM.
 //!
 //! The power stage is the drive's own ([`power_stage`]: two H-bridges, their currents sampled
 //! at the PWM centre, the bus voltage, the bridges' NTC, the over-current trip in hardware); the
-//! external STEP/DIR driver's outputs (STEP, DIR, ENABLE, the current reference) are gone. The
-//! control tick hands it the electrical angle and the current ([`Stage`]); the current loop that
-//! turns them into the bridges' voltages is not written yet, and until it is the bridges stay off.
+//! external STEP/DIR driver's outputs (STEP, DIR, ENABLE, the current reference) are gone. Each
+//! PWM period the current loop (`drive_core::windings`) sets the windings' voltages from the
+//! currents just sampled and the electrical angle and current the last tick asked ([`Stage`]),
+//! with its gains from the power-up auto-tune ([`Stage::tune`]).
 
 use core::cell::{Cell, RefCell};
 use core::ops::Range;
@@ -59,6 +61,7 @@ use crate::flash_map;
 pub mod pins;
 #[path = "power_stage.rs"]
 pub mod power_stage;
+use drive_core::windings::{PowerUpTune, TuneStep, WindingSettings, WindingState};
 use power_stage::Bridges;
 
 use crate::power::PowerStage;
@@ -66,7 +69,7 @@ use crate::power::PowerStage;
 bind_interrupts!(struct Irqs {
     USART1 => usart::BufferedInterruptHandler<peripherals::USART1>;
     EXTI15_10 => exti::InterruptHandler<interrupt::typelevel::EXTI15_10>;
-    TIM6_DAC => TickHandler;
+    ADC1_2 => TickHandler;
     // The over-current comparators' own interrupts (an output edge through EXTI), not used:
     // the comparators act on the timers' break input. embassy's `Comp` wants them bound.
     COMP1_2_3 => comp::InterruptHandler<peripherals::COMP2>;
@@ -81,6 +84,7 @@ pub const PLAN_MARGIN_US: u64 = 2_000;
 /// Timer clock (PCLK1 = PCLK2 = SYSCLK).
 pub const TIMER_HZ: u32 = 170_000_000;
 /// Timer counts (and core cycles) in one control tick.
+#[allow(dead_code, reason = "the HIL suite's nominal tick period")]
 pub const TICK_COUNTS: u32 = TIMER_HZ / TICK_HZ;
 /// The over-current trip until the drive's setting (0x2133) is loaded from flash: the top of the
 /// setting's range. The bridges are off meanwhile.
@@ -200,7 +204,7 @@ static ENCODER: Mutex<RefCell<Option<Encoder>>> = Mutex::new(RefCell::new(None))
 
 /// This tick's measurements: [`MEASURED`] with the encoder's count now. TIM2 counts at most a
 /// few hundred counts in a tick, so the signed 16-bit difference extends it.
-fn measure(cs: critical_section::CriticalSection<'_>) -> Measured {
+fn measure(cs: critical_section::CriticalSection<'_>, stage: Regulated) -> Measured {
     let encoder = ENCODER.borrow_ref_mut(cs).as_mut().map(|e| {
         let raw = e.qei.count();
         e.count = e.count.wrapping_add(raw.wrapping_sub(e.last) as i16 as u32);
@@ -216,49 +220,147 @@ fn measure(cs: critical_section::CriticalSection<'_>) -> Measured {
         pac::TIM2.sr().modify(|w| w.set_ccif(2, false));
     }
     let pulses = pac::TIM3.cnt().read().cnt();
-    Measured { encoder, levels, index, pulses, ..MEASURED.borrow(cs).get() }
+    Measured {
+        encoder,
+        levels,
+        index,
+        pulses,
+        supply_mv: Some(stage.supply_mv),
+        phase_ma: Some(stage.phase_ma),
+        phase_mv: Some(stage.applied_mv),
+        coil_open: stage.open,
+        ..MEASURED.borrow(cs).get()
+    }
 }
 
-/// The power stage as the control tick drives it: the two H-bridges ([`Bridges`]) and what the
-/// tick asks of them, with the board's pins, coil output and pulse input that its outputs set too.
+/// The power stage as the control tick drives it: the two H-bridges ([`Bridges`]) under the
+/// windings' regulation, with the board's pins, coil output and pulse input that the tick's
+/// outputs set too.
 ///
-/// The current loop (another part, not written yet) runs once a PWM period on the ADCs' end of
-/// sequence: it reads [`Bridges::samples`], turns the electrical angle and the current the tick
-/// asked for ([`Stage::commanded`]) into the two windings' voltages, writes them with
-/// [`Bridges::set_phase_voltages`], and turns the bridges on ([`Bridges::enable`]) while the
-/// current is not 0. Until it exists the bridges stay off; the tick turns them off whenever it
-/// frees the motor.
+/// Each PWM period, at the end of the ADCs' sequence, [`Stage::regulate`] runs the current loop
+/// on the currents just sampled towards the reference the last tick set, and writes the
+/// voltages for the next period; then the tick runs and its outputs become the next reference
+/// (`PowerStage::command`). The bridges are on while the tick asks a current and the tune gave
+/// the loop its gains.
 pub struct Stage {
     /// The two H-bridges.
     pub bridges: Bridges,
-    /// The electrical angle: whole microsteps of the commutation the tick stepped since
-    /// power-up (signed), four full steps an electrical turn.
+    /// The current loop's settings from the power-up tune; `None` before it, or if it failed
+    /// (no motor, an open winding): the bridges stay off and the tick reads both windings open.
+    windings: Option<WindingSettings>,
+    /// The current loop's memory and reference.
+    regulation: WindingState,
+    /// Whether the last tick asked a current.
+    asked: bool,
+    /// Whole microsteps of the commutation the tick stepped since power-up (signed).
     steps: i64,
-    /// The phase current amplitude the tick asks for, mA; 0 frees the motor.
-    current_ma: u16,
     /// The pins as last set up, and the outputs' levels (set again only when they change).
     pins: Option<(PinConfig, u16)>,
     /// The pulse input as last set up.
     pulse: Option<PulseInput>,
 }
 
+/// What the stage measured in a period, for the tick.
+#[derive(Clone, Copy)]
+struct Regulated {
+    phase_ma: [i32; 2],
+    supply_mv: u32,
+    applied_mv: [i32; 2],
+    open: [bool; 2],
+}
+
 impl Stage {
-    /// What the tick asks of the bridges: the electrical angle in whole microsteps since
-    /// power-up, and the phase current amplitude in mA (0: off).
-    #[allow(dead_code, reason = "the current loop's input (issue 39): its caller is not written yet")]
-    pub fn commanded(&self) -> (i64, u16) {
-        (self.steps, self.current_ma)
+    /// The commutation the tick has stepped through, whole microsteps since power-up.
+    pub fn commanded(&self) -> i64 {
+        self.steps
+    }
+
+    /// The power-up auto-tune of both windings at `test_current_ma` (`drive_core::windings::
+    /// PowerUpTune`), a PWM period at a time on the ADCs' end of sequence, about half a second;
+    /// before the tick starts (nothing else drives the bridges). Its result is logged; failed,
+    /// the bridges stay off.
+    pub fn tune(&mut self, test_current_ma: u16) {
+        let Ok(mut tune) = PowerUpTune::new(test_current_ma.clamp(100, 10_000), power_stage::PWM_HZ as f32) else {
+            return;
+        };
+        self.bridges.set_phase_voltages([0, 0]);
+        if !self.bridges.enable() {
+            defmt::warn!("auto-tune: the bridges do not turn on (over-current trip)");
+            return;
+        }
+        let result = loop {
+            if !power_stage::wait_for_sample() {
+                break Err(drive_core::autotune::Error::NoCurrent);
+            }
+            let samples = self.bridges.samples();
+            let phase_ma = self.bridges.phase_ma(&samples);
+            match tune.step(phase_ma, supply_mv(samples.bus)) {
+                TuneStep::Apply(shares) => self.bridges.set_phase_voltages(shares),
+                TuneStep::Done(done) => break done,
+            }
+        };
+        self.bridges.set_phase_voltages([0, 0]);
+        self.bridges.disable();
+        match result {
+            Ok((settings, [a, b])) => {
+                let l = settings.current_loop();
+                defmt::info!(
+                    "auto-tune: A {} mΩ {} µH, B {} mΩ {} µH; the loop's kp {} V/A",
+                    (a.resistance * 1e3) as u32,
+                    (a.inductance * 1e6) as u32,
+                    (b.resistance * 1e3) as u32,
+                    (b.inductance * 1e6) as u32,
+                    l.kp()
+                );
+                self.windings = Some(settings);
+            }
+            Err(e) => defmt::warn!("auto-tune failed: {}; the bridges stay off", defmt::Debug2Format(&e)),
+        }
+    }
+
+    /// One PWM period, before the tick: the currents and the bus just sampled, the current loop's
+    /// voltages for the next period (the bridges on while it gives some).
+    fn regulate(&mut self) -> Regulated {
+        let samples = self.bridges.samples();
+        let phase_ma = self.bridges.phase_ma(&samples);
+        let supply_mv = supply_mv(samples.bus);
+        let shares = self.windings.as_ref().and_then(|w| w.period(&mut self.regulation, phase_ma, supply_mv));
+        match shares {
+            Some(shares) => {
+                self.bridges.set_phase_voltages(shares);
+                if !self.bridges.enabled() {
+                    // Off after a trip until the tick turns the bridges off (its fault reaction).
+                    self.bridges.enable();
+                }
+            }
+            None if self.bridges.enabled() => {
+                self.bridges.disable();
+                self.bridges.set_phase_voltages([0, 0]);
+            }
+            None => {}
+        }
+        // Asked a current with no loop to drive it: both windings read as open (alarm 11).
+        let untuned = self.windings.is_none() && self.asked;
+        let open = if untuned { [true; 2] } else { self.regulation.open() };
+        Regulated { phase_ma, supply_mv, applied_mv: self.regulation.applied_mv(), open }
     }
 }
 
 impl PowerStage for Stage {
+    fn command(&mut self, out: &drive_core::control::Outputs) {
+        self.asked = out.enabled && out.current_ma != 0;
+        if let Some(w) = &self.windings {
+            w.command(&mut self.regulation, out);
+        }
+    }
+
     fn step(&mut self, steps: i64) {
         self.steps = self.steps.wrapping_add(steps);
     }
 
     fn set_current(&mut self, milliamps: u16) {
-        self.current_ma = milliamps;
         if milliamps == 0 {
+            // Off at once, not at the next period.
             self.bridges.disable();
         }
     }
@@ -350,7 +452,7 @@ static STAGE: Mutex<RefCell<Option<Stage>>> = Mutex::new(RefCell::new(None));
 /// power-up ([`Stage::commanded`]); `None` before [`start_tick`].
 #[allow(dead_code, reason = "read by the HIL suite")]
 pub fn commanded_steps() -> Option<i64> {
-    critical_section::with(|cs| STAGE.borrow_ref(cs).as_ref().map(|s| s.commanded().0))
+    critical_section::with(|cs| STAGE.borrow_ref(cs).as_ref().map(Stage::commanded))
 }
 
 /// Cycles the last control tick took (DWT cycle counter), and the most any took.
@@ -364,13 +466,13 @@ pub static TICK_PERIOD_MAX: core::sync::atomic::AtomicU32 = core::sync::atomic::
 /// Cycle count at the start of the last tick (0: none yet).
 static TICK_LAST_START: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
 
-/// The 20 kHz control tick on TIM6's update interrupt.
+/// The 20 kHz control tick on the ADCs' end of sequence, each PWM period: the current loop, then
+/// the tick.
 struct TickHandler;
 
-impl interrupt::typelevel::Handler<interrupt::typelevel::TIM6_DAC> for TickHandler {
+impl interrupt::typelevel::Handler<interrupt::typelevel::ADC1_2> for TickHandler {
     unsafe fn on_interrupt() {
         use core::sync::atomic::Ordering::Relaxed;
-        pac::TIM6.sr().write(|w| w.set_uif(false));
         let start = cortex_m::peripheral::DWT::cycle_count();
         let last = TICK_LAST_START.swap(start, Relaxed);
         if last != 0 {
@@ -380,7 +482,11 @@ impl interrupt::typelevel::Handler<interrupt::typelevel::TIM6_DAC> for TickHandl
         }
         critical_section::with(|cs| {
             if let Some(stage) = STAGE.borrow_ref_mut(cs).as_mut() {
-                crate::app::control_tick(crate::app::now(), || measure(cs), stage);
+                // `samples` clears the end-of-sequence flag that raised this interrupt.
+                let regulated = stage.regulate();
+                crate::app::control_tick(crate::app::now(), || measure(cs, regulated), stage);
+            } else {
+                pac::ADC1.isr().write(|w| w.set_jeos(true));
             }
         });
         let cycles = cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start);
@@ -389,25 +495,20 @@ impl interrupt::typelevel::Handler<interrupt::typelevel::TIM6_DAC> for TickHandl
     }
 }
 
-/// Hands the power stage and the encoder to the control tick and starts TIM6 at [`TICK_HZ`].
+/// Hands the power stage and the encoder to the control tick and starts it: the ADCs' end of
+/// sequence each PWM period ([`TICK_HZ`]).
 pub fn start_tick(stage: Stage, encoder: Qei<'static, TIM2>) {
     let last = encoder.count();
     critical_section::with(|cs| {
         STAGE.borrow_ref_mut(cs).replace(stage);
         ENCODER.borrow_ref_mut(cs).replace(Encoder { qei: encoder, count: 0, last });
     });
-    pac::RCC.apb1enr1().modify(|w| w.set_tim6en(true));
-    let t = pac::TIM6;
-    t.psc().write_value(0);
-    t.arr().write(|w| w.set_arr((TICK_COUNTS - 1) as u16));
-    t.egr().write(|w| w.set_ug(true));
-    t.sr().write(|w| w.set_uif(false));
-    t.dier().write(|w| w.set_uie(true));
-    interrupt::TIM6_DAC.set_priority(Priority::P0);
-    interrupt::TIM6_DAC.unpend();
+    pac::ADC1.isr().write(|w| w.set_jeos(true));
+    pac::ADC1.ier().modify(|w| w.set_jeosie(true));
+    interrupt::ADC1_2.set_priority(Priority::P0);
+    interrupt::ADC1_2.unpend();
     // SAFETY: the handler (TickHandler) only touches STAGE and the drive through their mutexes.
-    unsafe { interrupt::TIM6_DAC.enable() };
-    t.cr1().modify(|w| w.set_cen(true));
+    unsafe { interrupt::ADC1_2.enable() };
 }
 
 /// Sets up clocks and peripherals; the UART runs 8N1 at the factory 9600 baud until
@@ -483,7 +584,15 @@ pub fn init() -> Board {
     interrupt::USART1.set_priority(Priority::P2);
     interrupt::EXTI15_10.set_priority(Priority::P3);
 
-    let stage = Stage { bridges, steps: 0, current_ma: 0, pins: None, pulse: None };
+    let stage = Stage {
+        bridges,
+        windings: None,
+        regulation: WindingState::default(),
+        asked: false,
+        steps: 0,
+        pins: None,
+        pulse: None,
+    };
     let _ = (p.TIM17, p.PA7); // owned by the raw timer setup below
     setup_coil_pwm();
     let _ = (p.TIM3, p.PB4, p.PB5);

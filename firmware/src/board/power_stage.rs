@@ -354,7 +354,6 @@ impl Bridges {
 
     /// Turns the bridges on (MOE of both timers) at the duties last set; false, and still off, if
     /// the over-current trip has acted ([`Self::clear_trip`] first) or a comparator is still high.
-    #[allow(dead_code, reason = "the current loop's interface (issue 39): its caller is not written yet")]
     pub fn enable(&mut self) -> bool {
         if tripped() {
             return false;
@@ -377,16 +376,8 @@ impl Bridges {
     }
 
     /// Whether the bridges are on.
-    #[allow(dead_code, reason = "the current loop's interface (issue 39): its caller is not written yet")]
     pub fn enabled(&self) -> bool {
         self.tim8.get_master_output_enable() || self.tim1.get_master_output_enable()
-    }
-
-    /// Whether the over-current trip (or a core lockup) has turned the bridges off since the
-    /// last [`Self::clear_trip`].
-    #[allow(dead_code, reason = "the current loop's interface (issue 39): its caller is not written yet")]
-    pub fn tripped(&self) -> bool {
-        tripped()
     }
 
     /// Forgets a trip, so that [`Self::enable`] may turn the bridges on again.
@@ -406,8 +397,8 @@ impl Bridges {
 
     /// Sets the four half-bridges' duties, the share of the period each high side conducts in
     /// 1/65536 (0: the low side conducts throughout), in the order A1, A2, B1, B2; capped at
-    /// [`MAX_CCR`]. The timers take them at the next top or bottom of the count (preloaded).
-    #[allow(dead_code, reason = "the current loop's interface (issue 39): its caller is not written yet")]
+    /// [`MAX_CCR`]. The timers take them at the next top of the count (preloaded, one update a
+    /// period).
     pub fn set_duties(&mut self, duties: [u16; 4]) {
         let ccr = |d: u16| ((u32::from(d) * u32::from(PERIOD)) >> 16).min(u32::from(MAX_CCR));
         self.tim8.set_duty(Channel::Ch1, ccr(duties[0]));
@@ -419,7 +410,6 @@ impl Bridges {
     /// Sets the voltage across each phase's winding as a signed share of the bus voltage, in
     /// 1/32768 (32767: the bus voltage from leg 1 to leg 2, -32768: reversed), centred on half
     /// the bus: leg 1 at 1/2 + v/2, leg 2 at 1/2 − v/2. What the current loop calls every period.
-    #[allow(dead_code, reason = "the current loop's interface (issue 39): its caller is not written yet")]
     pub fn set_phase_voltages(&mut self, volts: [i16; 2]) {
         let leg = |v: i32| (32_768 + v).clamp(0, 65_535) as u16;
         let [a, b] = volts.map(i32::from);
@@ -435,7 +425,6 @@ impl Bridges {
 
     /// The phase currents of `samples`, mA: positive out of leg 1 into the winding (the
     /// winding's current comes up through leg 1's low side and its shunt at the top).
-    #[allow(dead_code, reason = "the current loop's interface (issue 39): its caller is not written yet")]
     pub fn phase_ma(&self, samples: &Samples) -> [i32; 2] {
         let ma = |zero: u16, code: u16| ((i32::from(zero) - i32::from(code)) * MA_PER_CODE_Q16) >> 16;
         [ma(self.zero[0], samples.current[0]), ma(self.zero[1], samples.current[1])]
@@ -472,6 +461,10 @@ fn stop_and_align() {
     for t in [pac::TIM8, pac::TIM1] {
         t.cr1().modify(|w| w.set_cen(false));
         t.arr().write(|w| w.set_arr(PERIOD));
+        // One update a period: with an odd repetition count written before the counter starts,
+        // at the overflow (RM0440, the repetition counter), the top of the count, where the
+        // currents are sampled: the voltages written in a period act over the whole of the next.
+        t.rcr().write(|w| w.set_rep(1));
         t.egr().write(|w| w.set_ug(true));
     }
 }
@@ -503,6 +496,14 @@ fn set_thresholds(dacs: &mut [DacChannel<'static, Blocking>; 2], setting_ma: u32
     for dac in dacs {
         dac.set(Value::Bit12Right(code));
     }
+}
+
+/// Waits for the end of the ADCs' next sequence (a PWM period, 50 µs), its flag cleared first;
+/// false if it does not come within a millisecond. For the power-up tune, before the tick takes
+/// the ADCs' interrupt.
+pub fn wait_for_sample() -> bool {
+    pac::ADC1.isr().write(|w| w.set_jeos(true));
+    (0..TIMER_HZ / 1000).any(|_| pac::ADC1.isr().read().jeos())
 }
 
 /// Whether a break (the over-current trip, a core lockup) has acted on either timer since the
