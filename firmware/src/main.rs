@@ -108,9 +108,10 @@ mod run {
         // The bridges' over-current trip from the saved setting (a change takes effect at the
         // next power-up).
         stage.bridges.set_over_current(loaded.params.get(drive_core::od::Obj::OverCurrent));
-        // The windings' R and L for the current loop, at the running current.
-        stage.tune(loaded.params.get(drive_core::od::Obj::PhaseCurrent).min(u32::from(u16::MAX)) as u16);
+        // The current loop from its objects: tuned (the measurements written into them) or as set.
+        stage.power_up_loop(&mut loaded.params);
         let (drive, baud, parity) = app::start(&mut loaded.params, loaded.status, true);
+        drive.state_mut().set_current_loop(true);
         board::set_serial(&mut uart, baud, parity);
         info!("drive up: {} baud, parity {}, storage status {:#x}", baud.get(), parity, loaded.status);
         board::start_tick(stage, encoder);

@@ -45,7 +45,6 @@ use embassy_stm32::interrupt::{self, InterruptExt, Priority};
 use embassy_stm32::mode::Async;
 use embassy_stm32::pac;
 use embassy_stm32::peripherals::TIM2;
-use embassy_stm32::rcc::mux::Adcsel;
 use embassy_stm32::rcc::{Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk};
 use embassy_stm32::timer::qei::{Config as QeiConfig, Qei};
 use embassy_stm32::usart::{self, BufferedUart};
@@ -61,7 +60,7 @@ use crate::flash_map;
 pub mod pins;
 #[path = "power_stage.rs"]
 pub mod power_stage;
-use drive_core::windings::{PowerUpTune, TuneStep, WindingSettings, WindingState};
+use drive_core::windings::{LoopObjects, PowerUpTune, TuneStep, WindingSettings, WindingState};
 use power_stage::Bridges;
 
 use crate::power::PowerStage;
@@ -275,11 +274,39 @@ impl Stage {
         self.steps
     }
 
+    /// The current loop as the parameters `params` say at power-up (0x210B, 0x2108, 0x2109,
+    /// 0x210C, 0x210D): tuned ([`Stage::tune`], its results written into them) or from them.
+    /// With no loop (a failed tune, objects the loop refuses) the bridges stay off.
+    pub fn power_up_loop(&mut self, params: &mut drive_core::Params) {
+        use drive_core::od::Obj;
+        let word = |obj: Obj| params.get(obj).min(u32::from(u16::MAX)) as u16;
+        let objects = LoopObjects {
+            r_mohm: word(Obj::MotorResistance),
+            l_uh: word(Obj::MotorInductance),
+            kp: word(Obj::CurrentKp),
+            ki: word(Obj::CurrentKi),
+        };
+        if params.get(Obj::CurrentAutoTune) == 0 {
+            let v_bus = supply_mv(power_stage::slow_samples().0) as f32 * 1e-3;
+            self.windings = objects.settings(v_bus, power_stage::PWM_HZ as f32).ok();
+            return;
+        }
+        self.tune(word(Obj::PhaseCurrent));
+        if let Some(settings) = &self.windings {
+            let t = LoopObjects::of(settings);
+            for (obj, v) in
+                [(Obj::MotorResistance, t.r_mohm), (Obj::MotorInductance, t.l_uh), (Obj::CurrentKp, t.kp), (Obj::CurrentKi, t.ki)]
+            {
+                params.set(obj, u32::from(v));
+            }
+        }
+    }
+
     /// The power-up auto-tune of both windings at `test_current_ma` (`drive_core::windings::
-    /// PowerUpTune`), a PWM period at a time on the ADCs' end of sequence, about half a second;
-    /// before the tick starts (nothing else drives the bridges). Its result is logged; failed,
-    /// the bridges stay off.
-    pub fn tune(&mut self, test_current_ma: u16) {
+    /// PowerUpTune`: one winding, then the other), a PWM period at a time on the ADCs' end of
+    /// sequence, about a second; before the tick starts (nothing else drives the bridges). Its
+    /// result is logged; failed, the bridges stay off.
+    fn tune(&mut self, test_current_ma: u16) {
         let Ok(mut tune) = PowerUpTune::new(test_current_ma.clamp(100, 10_000), power_stage::PWM_HZ as f32) else {
             return;
         };
@@ -303,14 +330,12 @@ impl Stage {
         self.bridges.disable();
         match result {
             Ok((settings, [a, b])) => {
-                let l = settings.current_loop();
                 defmt::info!(
-                    "auto-tune: A {} mΩ {} µH, B {} mΩ {} µH; the loop's kp {} V/A",
+                    "auto-tune: A {} mΩ {} µH, B {} mΩ {} µH",
                     (a.resistance * 1e3) as u32,
                     (a.inductance * 1e6) as u32,
                     (b.resistance * 1e3) as u32,
                     (b.inductance * 1e6) as u32,
-                    l.kp()
                 );
                 self.windings = Some(settings);
             }
