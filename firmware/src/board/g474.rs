@@ -337,7 +337,7 @@ impl Stage {
                     (b.resistance * 1e3) as u32,
                     (b.inductance * 1e6) as u32,
                 );
-                self.windings = Some(settings);
+                self.windings = Some(WindingSettings::new(settings));
             }
             Err(e) => defmt::warn!("auto-tune failed: {}; the bridges stay off", defmt::Debug2Format(&e)),
         }
