@@ -294,9 +294,12 @@ impl Stage {
         self.tune(word(Obj::PhaseCurrent));
         if let Some(settings) = &self.windings {
             let t = LoopObjects::of(settings);
-            for (obj, v) in
-                [(Obj::MotorResistance, t.r_mohm), (Obj::MotorInductance, t.l_uh), (Obj::CurrentKp, t.kp), (Obj::CurrentKi, t.ki)]
-            {
+            for (obj, v) in [
+                (Obj::MotorResistance, t.r_mohm),
+                (Obj::MotorInductance, t.l_uh),
+                (Obj::CurrentKp, t.kp),
+                (Obj::CurrentKi, t.ki),
+            ] {
                 params.set(obj, u32::from(v));
             }
         }
@@ -385,8 +388,10 @@ impl PowerStage for Stage {
 
     fn set_current(&mut self, milliamps: u16) {
         if milliamps == 0 {
-            // Off at once, not at the next period.
+            // Off at once, not at the next period; a trip is forgotten with the fault that
+            // reported it (the drive turns the bridges on again only once that is cleared).
             self.bridges.disable();
+            self.bridges.clear_trip();
         }
     }
 

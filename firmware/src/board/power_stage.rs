@@ -197,6 +197,8 @@ pub struct Bridges {
     _comparators: (Comp<'static, COMP2>, Comp<'static, COMP5>),
     /// The currents' codes at zero current, measured at power-up with the bridges off.
     zero: [u16; 2],
+    /// The comparators' trip, mA ([`TRIP_PERCENT`] of the drive's setting).
+    trip_ma: i32,
 }
 
 impl Bridges {
@@ -319,7 +321,16 @@ impl Bridges {
         );
 
         start_in_step();
-        let mut bridges = Self { tim8, tim1, adc1, adc2, thresholds, _comparators: comparators, zero: [0; 2] };
+        let mut bridges = Self {
+            tim8,
+            tim1,
+            adc1,
+            adc2,
+            thresholds,
+            _comparators: comparators,
+            zero: [0; 2],
+            trip_ma: trip_ma(over_current_ma),
+        };
         bridges.zero = bridges.measure_zero();
         // A comparator may have flagged a break while its threshold and input settled.
         bridges.clear_trip();
@@ -393,6 +404,7 @@ impl Bridges {
     /// that direction (`docs/board-g474.md`, *The power stage*).
     pub fn set_over_current(&mut self, setting_ma: u32) {
         set_thresholds(&mut self.thresholds, setting_ma);
+        self.trip_ma = trip_ma(setting_ma);
     }
 
     /// Sets the four half-bridges' duties, the share of the period each high side conducts in
@@ -425,7 +437,15 @@ impl Bridges {
 
     /// The phase currents of `samples`, mA: positive out of leg 1 into the winding (the
     /// winding's current comes up through leg 1's low side and its shunt at the top).
+    ///
+    /// While the over-current trip holds the bridges off (their currents then decay to
+    /// nothing), both phases read the trip's current, so that the drive's supervision latches
+    /// the over-current (alarm 10) and turns its bridges off, which clears the trip
+    /// ([`Self::clear_trip`]).
     pub fn phase_ma(&self, samples: &Samples) -> [i32; 2] {
+        if tripped() {
+            return [self.trip_ma; 2];
+        }
         let ma = |zero: u16, code: u16| ((i32::from(zero) - i32::from(code)) * MA_PER_CODE_Q16) >> 16;
         [ma(self.zero[0], samples.current[0]), ma(self.zero[1], samples.current[1])]
     }
@@ -504,6 +524,11 @@ fn set_thresholds(dacs: &mut [DacChannel<'static, Blocking>; 2], setting_ma: u32
 pub fn wait_for_sample() -> bool {
     pac::ADC1.isr().write(|w| w.set_jeos(true));
     (0..TIMER_HZ / 1000).any(|_| pac::ADC1.isr().read().jeos())
+}
+
+/// The comparators' trip for the drive's over-current setting `setting_ma`, mA.
+fn trip_ma(setting_ma: u32) -> i32 {
+    (u64::from(setting_ma) * u64::from(TRIP_PERCENT) / 100).min(i32::MAX as u64) as i32
 }
 
 /// Whether a break (the over-current trip, a core lockup) has acted on either timer since the
