@@ -60,7 +60,7 @@ use crate::flash_map;
 pub mod pins;
 #[path = "power_stage.rs"]
 pub mod power_stage;
-use drive_core::windings::{LoopObjects, PowerUpTune, TuneStep, WindingSettings, WindingState};
+use drive_core::windings::{LoopObjects, PowerUpTune, TuneStep, WindingSettings, WindingState, command_or_open};
 use power_stage::Bridges;
 
 use crate::power::PowerStage;
@@ -249,8 +249,6 @@ pub struct Stage {
     windings: Option<WindingSettings>,
     /// The current loop's memory and reference.
     regulation: WindingState,
-    /// Whether the last tick asked a current.
-    asked: bool,
     /// Whole microsteps of the commutation the tick stepped since power-up (signed).
     steps: i64,
     /// The pins as last set up, and the outputs' levels (set again only when they change).
@@ -367,19 +365,15 @@ impl Stage {
             }
             None => {}
         }
-        // Asked a current with no loop to drive it: both windings read as open (alarm 11).
-        let untuned = self.windings.is_none() && self.asked;
-        let open = if untuned { [true; 2] } else { self.regulation.open() };
+        let open = self.regulation.open();
         Regulated { phase_ma, supply_mv, applied_mv: self.regulation.applied_mv(), open }
     }
 }
 
 impl PowerStage for Stage {
     fn command(&mut self, out: &drive_core::control::Outputs) {
-        self.asked = out.enabled && out.current_ma != 0;
-        if let Some(w) = &self.windings {
-            w.command(&mut self.regulation, out);
-        }
+        // With no loop (a failed tune) the windings read open while a current is asked.
+        command_or_open(self.windings.as_ref(), &mut self.regulation, out);
     }
 
     fn step(&mut self, steps: i64) {
@@ -614,15 +608,8 @@ pub fn init() -> Board {
     interrupt::USART1.set_priority(Priority::P2);
     interrupt::EXTI15_10.set_priority(Priority::P3);
 
-    let stage = Stage {
-        bridges,
-        windings: None,
-        regulation: WindingState::default(),
-        asked: false,
-        steps: 0,
-        pins: None,
-        pulse: None,
-    };
+    let stage =
+        Stage { bridges, windings: None, regulation: WindingState::default(), steps: 0, pins: None, pulse: None };
     let _ = (p.TIM17, p.PA7); // owned by the raw timer setup below
     setup_coil_pwm();
     let _ = (p.TIM3, p.PB4, p.PB5);
