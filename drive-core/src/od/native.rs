@@ -169,13 +169,14 @@ objects! {
     /// second) the back-EMF is too small to tell a stall, and nothing is detected.
     StallMinSpeed @ 0x210A: U16, Rw, Rom, Span(1, 10_000), default 60, None, "stall minimum speed";
     /// The current loop's power-up auto-tune (our object, seed 003's 0x2007), read at power-up,
-    /// with the drive's own power stage (the simulator's `--power-stage bridges`): 1 measures
+    /// with the drive's own power stage (the G474 board's bridges, the simulator's `--power-stage
+    /// bridges`): 1 measures
     /// both windings' R and L with voltage steps (about a second at the phase current 0x600D,
     /// one winding then the other, before the drive answers) into 0x2108 and 0x2109, and sets
     /// the loop's gains 0x210C and 0x210D from them; 0 runs the loop on 0x2108, 0x2109, 0x210C
-    /// and 0x210D as they are. On a board whose power stage is an external STEP/DIR driver no
-    /// current loop runs, and 0x210B-0x210D refuse changes as unsupported; a write of the value
-    /// an object holds is taken in any state.
+    /// and 0x210D as they are. Where the power stage has no current loop (the simulator's
+    /// chopper, the firmware under QEMU) none runs, and 0x210B-0x210D refuse changes as
+    /// unsupported; a write of the value an object holds is taken in any state.
     CurrentAutoTune @ 0x210B: U8, Rw, Rom, Span(0, 1), default 1, None, "current loop auto-tune";
     /// The current loop's proportional gain (our object, seed 003's 0x2008), read at power-up:
     /// volts across a winding per ampere of error, at the factory decay (0x6010 scales it). Read
