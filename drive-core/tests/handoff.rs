@@ -289,3 +289,25 @@ fn a_cleared_fault_history_reaches_the_tick() {
     assert_eq!(code(&d), 14, "a new alarm in the emptied history");
     assert_eq!(d.state().read(drive_core::od::Obj::FaultHistory1), 0);
 }
+
+/// A fault the master clears (0x6000, write 1 to clear) once its cause is gone is cleared in
+/// the tick's controller at the next sync (an order: the tick's other bits stay its own).
+#[test]
+fn a_fault_cleared_over_the_bus_is_cleared_in_the_tick() {
+    let (mut d, mut tick) = split();
+    let hot = Inputs { temperature_c: Some(150), ..Inputs::default() };
+    for k in 0..10 {
+        tick_at(&mut d, &mut tick, k, false, &hot);
+    }
+    assert_eq!(synced(&mut d, &mut tick, tick_time(10)), Handover::Done);
+    let error = |t: &TickSide| t.controller().status().error;
+    assert_ne!(error(&tick), 0, "over-temperature latched");
+    for k in 10..20 {
+        tick_at(&mut d, &mut tick, k, false, &Inputs::default());
+    }
+    assert_ne!(error(&tick), 0, "latched after its cause is gone");
+    assert!(serve(&mut d, tick_time(20), &w16(0x6000, 0x3F)));
+    assert_eq!(d.state().read(drive_core::od::Obj::ErrorStatus), 0, "the reply's model");
+    tick_at(&mut d, &mut tick, 21, true, &Inputs::default());
+    assert_eq!(error(&tick), 0, "the tick's own");
+}

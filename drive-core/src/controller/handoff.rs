@@ -4,10 +4,10 @@
 //!
 //! Neither waits for the other. The bus side lends its model to the tick ([`Lent`]) and leaves
 //! it alone until the tick has synced it ([`Controller::sync`], at the start of a tick; no
-//! planning: such a tick costs at most 3 206 Cortex-M4 instructions, a plan taken over and the
-//! tick's own work included, `cargo xtask tick-cost`). A sync first
-//! takes in what the bus side changed since the last one, merged against what it learned then
-//! ([`Base`]), then tells the model what the tick did since:
+//! planning: `cargo xtask tick-cost` measures such a tick, a plan taken over and the tick's own
+//! work included). A sync first takes in what the bus side ordered since the last one
+//! ([`Orders`]) and what it changed against what it learned then ([`Base`]: a plan, a PVT run,
+//! PVT points), then tells the model what the tick did since:
 //!
 //! - the settings are the bus side's: the tick takes them whole when they changed
 //!   ([`Orders`]);
@@ -17,13 +17,11 @@
 //!   the bus side plans from the axis extrapolated to that tick, so the handover is seamless
 //!   (the plan's track is copied as far as it is used, and the model learns only the tick's
 //!   last setpoint back). Otherwise the model takes the tick's walk;
-//! - status bits: the bits the bus side cleared (or set) are cleared (or set), the tick's
-//!   others kept; the measurements are the tick's;
+//! - status bits are the tick's: the bus side orders the ones it cleared cleared, and the
+//!   output pins' levels the master wrote written ([`Orders`]);
 //! - a PVT run the bus side started or ended, PVT points it pushed or cleared, an ordered stop,
 //!   a frame heard (the watchdog);
 //! - the events the tick raised go up, for the bus side to act on.
-
-use core::ops::{BitAnd, BitOr, BitXor, Not};
 
 use super::run::{Pvt, Run};
 use super::{Controller, Events, Outputs, Status};
@@ -32,23 +30,81 @@ use crate::motion::cubic::Table;
 use crate::units::{Instant, TICK_MICROS};
 
 /// What the bus side learned of the tick's controller at the last sync: what its own changes
-/// are told apart by.
+/// (a plan, a PVT run started or ended, points pushed) are told apart by.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Base {
-    pub(crate) status: Status,
     pub(crate) run: Option<Run>,
     pub(crate) pvt: Pvt,
     pub(crate) version: u32,
 }
 
-/// What the bus side orders the tick to do on its own state (a stop ramp from wherever the axis
-/// is when the order arrives: a PVT stop), or tells it (new settings).
+/// Status bits the bus side cleared (a master's write-1-to-clear, an alarm clear, a homing's
+/// fresh start, input edges it carried out): masks of [`Status`]'s fields and of 0x2111.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Clears {
+    pub(crate) error: u8,
+    pub(crate) controller: u8,
+    pub(crate) notify: u8,
+    pub(crate) faults: u8,
+    pub(crate) comm: u8,
+    pub(crate) probes: u8,
+    pub(crate) input_edges: u8,
+    pub(crate) pvt_fault: u8,
+}
+
+impl Clears {
+    /// Clears nothing.
+    pub(crate) const NONE: Self =
+        Self { error: 0, controller: 0, notify: 0, faults: 0, comm: 0, probes: 0, input_edges: 0, pvt_fault: 0 };
+
+    /// Both sets of bits.
+    pub(crate) fn or(self, o: Self) -> Self {
+        Self {
+            error: self.error | o.error,
+            controller: self.controller | o.controller,
+            notify: self.notify | o.notify,
+            faults: self.faults | o.faults,
+            comm: self.comm | o.comm,
+            probes: self.probes | o.probes,
+            input_edges: self.input_edges | o.input_edges,
+            pvt_fault: self.pvt_fault | o.pvt_fault,
+        }
+    }
+
+    /// Clears the bits in `s` and `pvt`.
+    pub(crate) fn clear(&self, s: &mut Status, pvt: &mut Pvt) {
+        s.error &= !self.error;
+        s.controller &= !self.controller;
+        s.notify &= !self.notify;
+        s.faults &= !self.faults;
+        s.comm &= !self.comm;
+        s.probes &= !self.probes;
+        s.input_edges &= !self.input_edges;
+        pvt.fault &= !self.pvt_fault;
+    }
+}
+
+/// What the bus side orders the tick to do on its own state since the last sync: a stop ramp
+/// from wherever the axis is when the order arrives (a PVT stop), status bits to clear, the
+/// output pins' levels the master wrote, new settings to take.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Orders {
     /// Stop: a ramp at the stop deceleration, and the PVT run ends.
     pub(crate) stop: bool,
     /// The settings changed.
     pub(crate) settings: bool,
+    /// Status bits to clear.
+    pub(crate) clear: Clears,
+    /// The output pins' levels the master wrote (0x6031): the pins' mask, their levels.
+    pub(crate) outputs: Option<(u16, u16)>,
+}
+
+impl Orders {
+    /// The output pins `mask` written to `levels`, after what was written before.
+    pub(crate) fn write_outputs(&mut self, mask: u16, levels: u16) {
+        let (m, l) = self.outputs.unwrap_or((0, 0));
+        self.outputs = Some((m | mask, (l & !mask) | (levels & mask)));
+    }
 }
 
 /// The bus side's model of the controller, lent to the tick until a sync has taken it in.
@@ -77,15 +133,6 @@ pub enum Handover {
     Dropped,
 }
 
-/// Bits of `tick` with those the bus side changed from `base` to `model` changed so.
-fn merge<T>(tick: T, base: T, model: T) -> T
-where
-    T: Copy + BitAnd<Output = T> + BitOr<Output = T> + BitXor<Output = T> + Not<Output = T>,
-{
-    let changed = base ^ model;
-    (tick & !changed) | (model & changed)
-}
-
 impl Controller {
     /// Takes in the bus side's model `lent` at `now` (before this tick's work) and tells it what
     /// the tick did; `pvt` is the tick's own queue. See the module.
@@ -96,7 +143,7 @@ impl Controller {
         if starts.is_some_and(|at| now < at) {
             return Handover::Waiting;
         }
-        let Orders { stop, settings } = core::mem::take(*orders);
+        let Orders { stop, settings, clear, outputs } = core::mem::take(*orders);
         if core::mem::take(&mut model.clear_history) {
             self.faults.clear_history();
         }
@@ -112,19 +159,11 @@ impl Controller {
         // A watch belongs to its plan (its version): one that fired here meanwhile stays
         // spent, as the stop it made changed the axis' version.
         (self.watch, self.suspend) = (model.watch, model.suspend);
-        let s = &mut self.status;
-        let (b, m) = (&base.status, &model.status);
-        s.error = merge(s.error, b.error, m.error);
-        s.controller = merge(s.controller, b.controller, m.controller);
-        s.notify = merge(s.notify, b.notify, m.notify);
-        s.gpio = merge(s.gpio, b.gpio, m.gpio);
-        s.gpio_out = merge(s.gpio_out, b.gpio_out, m.gpio_out);
-        s.faults = merge(s.faults, b.faults, m.faults);
-        s.comm = merge(s.comm, b.comm, m.comm);
-        s.input_edges = merge(s.input_edges, b.input_edges, m.input_edges);
-        s.probes = merge(s.probes, b.probes, m.probes);
-        if m.analog_in != b.analog_in {
-            s.analog_in = m.analog_in;
+        clear.clear(&mut self.status, pvt);
+        if let Some((mask, levels)) = outputs {
+            let s = &mut self.status;
+            s.gpio_out = (s.gpio_out & !mask) | (levels & mask);
+            s.gpio = (s.gpio & !mask) | (levels & mask);
         }
         if model.run != base.run {
             self.run = model.run;
@@ -137,7 +176,6 @@ impl Controller {
             pvt.len = pvt.len.saturating_add(model_pvt.len - base.pvt.len);
         }
         pvt.last = model_pvt.last;
-        pvt.fault = merge(pvt.fault, base.pvt.fault, model_pvt.fault);
         let mut took = false;
         let handover = if stop {
             self.axis.stop_ramp(self.settings.stop_decel);
@@ -160,7 +198,7 @@ impl Controller {
         };
         self.up(model, took);
         (model_pvt.head, model_pvt.len, model_pvt.fault) = (pvt.head, pvt.len, pvt.fault);
-        **base = Base { status: self.status, run: self.run, pvt: **model_pvt, version: self.axis.version() };
+        **base = Base { run: self.run, pvt: **model_pvt, version: self.axis.version() };
         handover
     }
 }
@@ -235,11 +273,13 @@ impl TickSide {
 
 #[cfg(test)]
 mod tests {
-    use super::merge;
+    use super::Orders;
 
     #[test]
-    fn merge_keeps_the_tick_bits_the_bus_side_left() {
-        // The tick set bit 0 since; the bus side cleared bit 2 and set bit 4.
-        assert_eq!(merge::<u8>(0b0000_0101, 0b0000_0100, 0b0001_0000), 0b0001_0001);
+    fn output_writes_add_up_the_latest_level_winning() {
+        let mut o = Orders::default();
+        o.write_outputs(0b0011, 0b0001);
+        o.write_outputs(0b0110, 0b0110);
+        assert_eq!(o.outputs, Some((0b0111, 0b0111)));
     }
 }

@@ -570,7 +570,6 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         c.axis.version() != b.version
             || self.orders != Orders::default()
             || c.heard
-            || c.status != b.status
             || c.run != b.run
             || self.pvt != b.pvt
     }

@@ -37,6 +37,7 @@
 use super::DriveState;
 use super::inputs::{INPUT_HOME, INPUT_LIMIT_NEGATIVE, INPUT_LIMIT_POSITIVE};
 use super::memory::ProgramMemory;
+use crate::controller::handoff::Clears;
 use crate::controller::io::IN_PINS;
 use crate::controller::{Events, STATUS_STALL, Watch, WatchOn};
 use crate::faults::FAULT_POSITION;
@@ -300,7 +301,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             }
             Method::HardStop { up } => {
                 // A stall bit left from before is not the stop this homing will feel.
-                self.ctl.status.controller &= !STATUS_STALL;
+                self.clear_status(Clears { controller: STATUS_STALL, ..Clears::NONE });
                 self.homing.steps = one(Step { up, fast: false, until: Until::Stall, home: true, reverse: false })
             }
             Method::Switch { input, above, up, index } => {
@@ -395,8 +396,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             if step.is_some_and(|s| s.until == Until::Stall) {
                 // The stall at the hard stop is what was searched for, not a fault: cleared
                 // now, before the closed loop's position error keeps the power stage off.
-                self.ctl.status.controller &= !STATUS_STALL;
-                self.ctl.status.faults &= !FAULT_POSITION;
+                self.clear_status(Clears { controller: STATUS_STALL, faults: FAULT_POSITION, ..Clears::NONE });
             }
             // An edge method's search that was moving away from the final direction when it
             // caught the switch stopped inside it or past it on that side: no passing back.

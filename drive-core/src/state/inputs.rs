@@ -15,6 +15,7 @@
 
 use super::DriveState;
 use super::memory::ProgramMemory;
+use crate::controller::handoff::Clears;
 use crate::modes::Command;
 use crate::motion::cubic::Table;
 use crate::od::Obj;
@@ -102,8 +103,10 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// enable input's level.
     pub(crate) fn inputs_service(&mut self) {
         let pseudo = self.param(Obj::PseudoInputs) as u8;
-        let edges = self.ctl.status.input_edges | (pseudo & !self.inputs.pseudo_seen);
-        (self.ctl.status.input_edges, self.inputs.pseudo_seen) = (0, pseudo);
+        let taken = self.ctl.status.input_edges;
+        let edges = taken | (pseudo & !self.inputs.pseudo_seen);
+        self.clear_status(Clears { input_edges: taken, ..Clears::NONE });
+        self.inputs.pseudo_seen = pseudo;
         for k in 0..INPUT_FUNCTION_OBJECTS.len() {
             let function = self.input_function(k);
             if edges & (1 << k) == 0 || !Command::from_raw(function).is_some_and(|c| c != Command::None) {

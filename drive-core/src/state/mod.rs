@@ -15,7 +15,7 @@ pub mod program;
 pub mod pvt;
 pub mod signals;
 
-use crate::controller::handoff::{Base, Orders};
+use crate::controller::handoff::{Base, Clears, Orders};
 use crate::controller::{Controller, Pvt};
 use crate::faults::{FAULT_POSITION, FaultLog};
 use crate::faults::{FaultHistory, HISTORY_LEN};
@@ -840,36 +840,44 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         }
     }
 
+    /// Clears status bits here and orders the tick's controller to clear them too.
+    pub(crate) fn clear_status(&mut self, clears: Clears) {
+        clears.clear(&mut self.ctl.status, &mut self.pvt);
+        self.orders.clear = self.orders.clear.or(clears);
+    }
+
     /// Writes `value` to `obj`, which [`DriveState::check`] accepted.
     pub fn apply(&mut self, obj: Obj, value: u32) {
-        let s = &mut self.ctl.status;
+        let bits = value as u8;
+        // A closed-loop stall latches the position error too (0x2135 bit 2): clearing the stall
+        // as §5.5.2 says clears both, and the other way round.
+        let position = |stall: bool| if stall { FAULT_POSITION } else { 0 };
+        let stall = |position: bool| if position { STATUS_STALL } else { 0 };
         match obj {
-            Obj::ErrorStatus => s.error &= !(value as u8),
-            Obj::ControllerStatus => {
-                s.controller &= !(value as u8 & !STATUS_BUSY);
-                // A closed-loop stall latches the position error too (0x2135 bit 2): clearing
-                // the stall as §5.5.2 says clears both, and the other way round.
-                if value as u8 & STATUS_STALL != 0 {
-                    s.faults &= !FAULT_POSITION;
-                }
-            }
-            Obj::NotifyStatus => s.notify &= !(value as u8),
-            Obj::StorageStatus => self.storage &= !(value as u8 & !STORAGE_SAVING),
-            Obj::DriveFaults => {
-                s.faults &= !(value as u8);
-                if value as u8 & FAULT_POSITION != 0 {
-                    s.controller &= !STATUS_STALL;
-                }
-            }
-            Obj::CommStatus => s.comm &= !(value as u8),
+            Obj::ErrorStatus => self.clear_status(Clears { error: bits, ..Clears::NONE }),
+            Obj::ControllerStatus => self.clear_status(Clears {
+                controller: bits & !STATUS_BUSY,
+                faults: position(bits & STATUS_STALL != 0),
+                ..Clears::NONE
+            }),
+            Obj::NotifyStatus => self.clear_status(Clears { notify: bits, ..Clears::NONE }),
+            Obj::StorageStatus => self.storage &= !(bits & !STORAGE_SAVING),
+            Obj::DriveFaults => self.clear_status(Clears {
+                faults: bits,
+                controller: stall(bits & FAULT_POSITION != 0),
+                ..Clears::NONE
+            }),
+            Obj::CommStatus => self.clear_status(Clears { comm: bits, ..Clears::NONE }),
             Obj::CommandCount => self.command_base = self.ctl.commanded,
-            Obj::ProbeStatus => s.probes &= !(value as u8),
-            Obj::PvtFault => self.pvt.fault &= !(value as u8),
+            Obj::ProbeStatus => self.clear_status(Clears { probes: bits, ..Clears::NONE }),
+            Obj::PvtFault => self.clear_status(Clears { pvt_fault: bits, ..Clears::NONE }),
             Obj::GpioValue => {
                 // Only outputs take the written level (§5.7.2).
                 let outputs = self.ctl.settings.pins.outputs;
+                let s = &mut self.ctl.status;
                 s.gpio_out = (s.gpio_out & !outputs) | (value as u16 & outputs);
                 s.gpio = (s.gpio & !outputs) | (value as u16 & outputs);
+                self.orders.write_outputs(outputs, value as u16);
             }
             Obj::Position => {
                 let position = i64::from(value as i32);
