@@ -428,7 +428,7 @@ fn the_native_map_drops_spoilt_frames() {
 #[test]
 fn the_position_error_threshold_is_the_following_error_limit_in_encoder_counts() {
     let mut r = cls9_rig();
-    let limit = |r: &Rig| r.drive.state().controller().settings().following_limit;
+    let limit = |r: &Rig| r.drive.state().settings().following_limit;
     assert_eq!(limit(&r), 64, "0258 = 0: 0x605C's 64 microsteps");
     // A 1000-line encoder (4000 counts a revolution) at 3200 pulses a revolution.
     assert_eq!(r.set(246, 4000), Ok(()));

@@ -6,6 +6,7 @@
 use drive_core::control::{Outputs, TICK_MICROS};
 use drive_core::controller::handoff::{Handover, TickSide};
 use drive_core::faults::Inputs;
+use drive_core::od::Obj;
 use drive_core::{Drive, Instant};
 
 mod common;
@@ -310,4 +311,40 @@ fn a_fault_cleared_over_the_bus_is_cleared_in_the_tick() {
     assert_eq!(d.state().read(drive_core::od::Obj::ErrorStatus), 0, "the reply's model");
     tick_at(&mut d, &mut tick, 21, true, &Inputs::default());
     assert_eq!(error(&tick), 0, "the tick's own");
+}
+
+/// The closed loop's first reading takes the zero offset from the power-down position (§5.5.15,
+/// 0x605E on, an incremental encoder): that offset is the tick's own state, which a later
+/// change of other settings leaves alone and a write of 0x6087 replaces; the model reads what
+/// the tick uses.
+#[test]
+fn the_zero_offset_set_by_the_first_reading_survives_other_settings_and_yields_to_0x6087() {
+    let mut params = drive_core::Params::factory();
+    for (obj, v) in [(Obj::Feedback, 1), (Obj::AutoSave, 1)] {
+        assert!(params.set(obj, v), "{obj:?}");
+    }
+    params.set_saved_position(5_000);
+    let mut d = Drive::boot(drive_core::DriveConfig::default(), &params, 0);
+    d.state_mut().set_plan_margin(MARGIN_US);
+    let mut tick = d.state().tick_side();
+    let reading = Inputs { encoder: Some(0), ..Inputs::default() };
+    let offset = |d: &Drive| d.state().read(Obj::ZeroOffset) as i32;
+    let (out, _) = tick_at(&mut d, &mut tick, 0, false, &reading);
+    assert_eq!(out.setpoint.whole, 5_000, "measured: the encoder's 0 plus the power-down position");
+    // Another setting, served before the model learned the offset, handed over: the tick keeps
+    // its offset, and the setpoint stays where it stood.
+    assert!(serve(&mut d, tick_time(0).plus_micros(10), &w16(0x600D, 800)));
+    let (out, h) = tick_at(&mut d, &mut tick, 1, true, &reading);
+    assert_eq!(h, Some(Handover::Done));
+    assert_eq!(tick.settings().phase_current_ma, 800);
+    assert_eq!(out.setpoint.whole, 5_000);
+    assert_eq!(offset(&d), 5_000, "the model learns the tick's offset");
+    let (out, _) = tick_at(&mut d, &mut tick, 2, true, &reading);
+    assert_eq!(out.setpoint.whole, 5_000);
+    // The master's zero offset replaces it: the measured position moves with it.
+    assert!(serve(&mut d, tick_time(2), &w32(0x6087, 1_000)));
+    tick_at(&mut d, &mut tick, 3, true, &reading);
+    let (out, _) = tick_at(&mut d, &mut tick, 4, false, &reading);
+    assert_eq!(out.setpoint.whole, 1_000);
+    assert_eq!(offset(&d), 1_000);
 }

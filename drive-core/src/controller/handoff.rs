@@ -11,7 +11,8 @@
 //!
 //! - the settings are the bus side's: the tick takes them whole when they changed
 //!   ([`Orders`]);
-//! - the axis: a plan the bus side made (its [`Axis::version`] moved) replaces the tick's axis
+//! - the axis: a plan the bus side made (its
+//!   [`Axis::version`](crate::motion::axis::Axis::version) moved) replaces the tick's axis
 //!   at the plan's first tick (the sync waits for it), if the tick has not changed course on its
 //!   own since (a fault, a stop, the watchdog: then the plan is dropped, the tick's stop wins);
 //!   the bus side plans from the axis extrapolated to that tick, so the handover is seamless
@@ -24,7 +25,7 @@
 //! - the events the tick raised go up, for the bus side to act on.
 
 use super::run::{Pvt, Run};
-use super::{Controller, Events, Outputs, Status};
+use super::{Controller, Events, Outputs, Settings, Status};
 use crate::faults::Inputs;
 use crate::motion::cubic::Table;
 use crate::units::{Instant, TICK_MICROS};
@@ -111,6 +112,8 @@ impl Orders {
 #[derive(Debug)]
 pub struct Lent<'a> {
     pub(crate) model: &'a mut Controller,
+    /// The bus side's settings: the tick takes them when they changed ([`Orders::settings`]).
+    pub(crate) settings: &'a Settings,
     pub(crate) pvt: &'a mut Pvt,
     pub(crate) base: &'a mut Base,
     pub(crate) orders: &'a mut Orders,
@@ -135,25 +138,26 @@ pub enum Handover {
 
 impl Controller {
     /// Takes in the bus side's model `lent` at `now` (before this tick's work) and tells it what
-    /// the tick did; `pvt` is the tick's own queue. See the module.
-    pub fn sync(&mut self, pvt: &mut Pvt, now: Instant, lent: &mut Lent<'_>) -> Handover {
-        let Lent { model, pvt: model_pvt, base, orders } = lent;
+    /// the tick did; `settings` and `pvt` are the tick's own. See the module.
+    pub fn sync(&mut self, settings: &mut Settings, pvt: &mut Pvt, now: Instant, lent: &mut Lent<'_>) -> Handover {
+        let Lent { model, settings: bus_settings, pvt: model_pvt, base, orders } = lent;
         let planned = model.axis.version() != base.version && !orders.stop;
         let starts = if planned { model.axis.activation() } else { None };
         if starts.is_some_and(|at| now < at) {
             return Handover::Waiting;
         }
-        let Orders { stop, settings, clear, outputs } = core::mem::take(*orders);
+        let Orders { stop, settings: changed, clear, outputs } = core::mem::take(*orders);
         if core::mem::take(&mut model.clear_history) {
             self.faults.clear_history();
         }
-        // What the tick set in the settings (the zero offset at the closed loop's first reading)
-        // goes up before the bus side's settings come down, whole, when they changed.
-        if self.events.has(Events::ZERO_OFFSET) {
-            model.settings.zero_offset = self.settings.zero_offset;
-        }
-        if settings {
-            self.settings = model.settings;
+        // The bus side's settings, whole, when they changed. The zero offset is the tick's own
+        // once its closed loop set it at its first reading: the settings' only if the bus side
+        // changed that one.
+        if changed {
+            if bus_settings.zero_offset != settings.zero_offset {
+                self.zero_offset = bus_settings.zero_offset;
+            }
+            *settings = **bus_settings;
         }
         self.heard |= core::mem::take(&mut model.heard);
         // A watch belongs to its plan (its version): one that fired here meanwhile stays
@@ -178,7 +182,7 @@ impl Controller {
         pvt.last = model_pvt.last;
         let mut took = false;
         let handover = if stop {
-            self.axis.stop_ramp(self.settings.stop_decel);
+            self.axis.stop_ramp(settings.stop_decel);
             Handover::Done
         } else if !planned {
             Handover::Done
@@ -210,6 +214,7 @@ impl Controller {
     /// fields copy as plain copies, not as moves of what may overlap.
     #[inline(never)]
     fn up(&mut self, model: &mut Controller, took: bool) {
+        model.zero_offset = self.zero_offset;
         if took {
             model.axis.follow_tick_of(&self.axis);
         } else {
@@ -228,10 +233,12 @@ impl Controller {
     }
 }
 
-/// What the control tick owns where it runs apart from the bus side: its controller and its
-/// PVT queue (the points themselves are in the shared [`Table`]).
+/// What the control tick owns where it runs apart from the bus side: the settings it runs (a
+/// copy of the bus side's, replaced whole when they change), its controller and its PVT queue
+/// (the points themselves are in the shared [`Table`]).
 #[derive(Clone, Debug)]
 pub struct TickSide {
+    settings: Settings,
     ctl: Controller,
     pvt: Pvt,
     /// The alarm count at the last tick, to tell a new alarm.
@@ -239,20 +246,26 @@ pub struct TickSide {
 }
 
 impl TickSide {
-    /// The tick's side of a drive whose state holds the model `ctl` and the queue `pvt`, before
-    /// the first tick (both still equal).
-    pub fn new(ctl: &Controller, pvt: &Pvt) -> Self {
-        Self { ctl: ctl.clone(), pvt: *pvt, alarms: ctl.faults.count }
+    /// The tick's side of a drive whose state holds the settings `settings`, the model `ctl`
+    /// and the queue `pvt`, before the first tick (all still equal).
+    pub fn new(settings: &Settings, ctl: &Controller, pvt: &Pvt) -> Self {
+        Self { settings: *settings, ctl: ctl.clone(), pvt: *pvt, alarms: ctl.faults.count }
     }
 
     /// [`Controller::sync`] with the model `lent`.
     pub fn sync(&mut self, now: Instant, lent: &mut Lent<'_>) -> Handover {
-        self.ctl.sync(&mut self.pvt, now, lent)
+        self.ctl.sync(&mut self.settings, &mut self.pvt, now, lent)
     }
 
-    /// One control tick ([`Controller::tick`]) with the PVT points of `table`.
+    /// One control tick ([`Controller::tick`]) of the settings in force with the PVT points of
+    /// `table`.
     pub fn tick(&mut self, now: Instant, inputs: &Inputs, table: &Table) -> Outputs {
-        self.ctl.tick(now, inputs, &mut self.pvt, table)
+        self.ctl.tick(&self.settings, now, inputs, &mut self.pvt, table)
+    }
+
+    /// The settings the tick runs.
+    pub fn settings(&self) -> &Settings {
+        &self.settings
     }
 
     /// Whether the bus side should sync soon without waiting for a request: power is failing

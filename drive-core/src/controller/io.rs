@@ -12,7 +12,7 @@
 //! A master that needs a shorter stop sets a harder deceleration (level 0 of 0x600B stops at
 //! once).
 
-use super::{Controller, STATUS_EXT1, STATUS_EXT2, STATUS_EXT3};
+use super::{Controller, STATUS_EXT1, STATUS_EXT2, STATUS_EXT3, Settings};
 use crate::units::Instant;
 
 /// 0x6031's bits of pins that exist (bits 0-11).
@@ -267,10 +267,10 @@ impl Controller {
     /// but for those heading into an active limit switch. The count is a 16-bit counter's: at
     /// the top speed of 300 kpps a tick counts 15.
     #[inline]
-    pub(crate) fn count_pulses(&mut self, now: Instant, count: u16) {
+    pub(crate) fn count_pulses(&mut self, s: &Settings, now: Instant, count: u16) {
         let last = self.io.pulses.replace(count).unwrap_or(count);
         let pulses = count.wrapping_sub(last) as i16;
-        let (io, active) = (&self.settings.io, self.status.inputs);
+        let (io, active) = (&s.io, self.status.inputs);
         let blocked =
             (pulses > 0 && active & io.limit_positive != 0) || (pulses < 0 && active & io.limit_negative != 0);
         self.axis.add_pulses(now, if blocked { 0 } else { pulses });
@@ -281,9 +281,9 @@ impl Controller {
     /// The touch probes among the inputs that `rose`: each not yet captured takes the position
     /// (the encoder's in closed loop, the setpoint's in open loop). Out of line: an edge's work.
     #[inline(never)]
-    fn probe(&mut self, rose: u8) {
+    fn probe(&mut self, s: &Settings, rose: u8) {
         let at = if self.servo.feedback.encoder().is_some() { self.measured() } else { self.axis.setpoint().whole };
-        for (k, (&inputs, slot)) in self.settings.io.probes.iter().zip(self.probe.iter_mut()).enumerate() {
+        for (k, (&inputs, slot)) in s.io.probes.iter().zip(self.probe.iter_mut()).enumerate() {
             let bit = 1 << k;
             if rose & inputs != 0 && self.status.probes & bit == 0 {
                 *slot = at as i32;
@@ -294,22 +294,21 @@ impl Controller {
 
     /// The input pins at `now`: 0x6031's input levels and the external stops.
     #[inline]
-    pub(crate) fn pins(&mut self, now: Instant, levels: u16) {
-        let s = &self.settings;
+    pub(crate) fn pins(&mut self, s: &Settings, now: Instant, levels: u16) {
         let inputs = PINS & !s.pins.outputs;
         self.status.gpio = (self.status.gpio_out & s.pins.outputs) | (!levels & inputs);
         if s.ext_enable != 0 {
-            self.external_stops(now, levels);
+            self.external_stops(s, now, levels);
         }
-        self.functions(levels);
+        self.functions(s, levels);
     }
 
     /// IN1-IN7: which are active, the activations for the bus side (an input's function acts
     /// there), and the limit switches, which stop a motion heading into them.
     #[inline]
-    fn functions(&mut self, levels: u16) {
-        let (inputs, input_low) = (self.settings.io.inputs, self.settings.io.input_low);
-        if inputs | self.settings.io.overtravel == 0 {
+    fn functions(&mut self, s: &Settings, levels: u16) {
+        let (inputs, input_low) = (s.io.inputs, s.io.input_low);
+        if inputs | s.io.overtravel == 0 {
             return;
         }
         // IN1-IN3 are 0x6031's bits 7-9, IN4-IN7 its bits 0-3 (`IN_PINS`).
@@ -320,10 +319,10 @@ impl Controller {
         if rose != 0 {
             self.status.input_edges |= rose;
             self.events.set(super::Events::INPUT);
-            self.probe(rose);
+            self.probe(s, rose);
         }
         let v = self.axis.setpoint().velocity;
-        let io = &self.settings.io;
+        let io = &s.io;
         let (up, down) = (active & io.limit_positive != 0, active & io.limit_negative != 0);
         let into = (v > 0.0 && (up || io.overtravel & 1 != 0)) || (v < 0.0 && (down || io.overtravel & 2 != 0));
         // The pulse following drops the pulses heading into a limit instead (`count_pulses`).
@@ -331,14 +330,14 @@ impl Controller {
             self.io.limit_stop = false;
         } else if into && !self.io.limit_stop && !self.axis.follows_pulses() {
             self.io.limit_stop = true;
-            self.decelerate_to_stop();
+            self.decelerate_to_stop(s);
         }
     }
 
     /// Whether the axis stands on its target: within 0x21C9's window of the encoder in closed
     /// loop.
-    fn in_position(&self) -> bool {
-        let window = i64::from(self.settings.io.in_position);
+    fn in_position(&self, s: &Settings) -> bool {
+        let window = i64::from(s.io.in_position);
         self.axis.is_still() && (self.servo.feedback.encoder().is_none() || self.servo.following.abs() <= window)
     }
 
@@ -381,8 +380,7 @@ impl Controller {
 
     /// The enabled external stops: an edge confirmed stops the motor and latches its bit.
     #[inline(never)]
-    fn external_stops(&mut self, now: Instant, levels: u16) {
-        let s = &self.settings;
+    fn external_stops(&mut self, s: &Settings, now: Instant, levels: u16) {
         let position = self.axis.setpoint().whole;
         let mut stop = false;
         for (d, &(pin, bit, status)) in self.io.ext.iter_mut().zip(EXT.iter()) {
@@ -394,54 +392,53 @@ impl Controller {
             }
         }
         if stop {
-            self.decelerate_to_stop();
+            self.decelerate_to_stop(s);
         }
     }
 
     /// Step notifications: a bit for each position 0x6062/0x6064 the setpoint (at `position`
     /// now) reached or crossed since the last tick, and the notification output's pulse.
     #[inline]
-    pub(crate) fn notify(&mut self, position: i64) {
+    pub(crate) fn notify(&mut self, s: &Settings, position: i64) {
         self.io.pulse_ticks = self.io.pulse_ticks.saturating_sub(1);
         let last = core::mem::replace(&mut self.io.last_position, position);
         if last != position {
-            self.notify_between(last, position);
+            self.notify_between(s, last, position);
         }
     }
 
     /// The notifications the setpoint reached or crossed going from `last` to `position`: the
     /// start of the step excluded, its end included.
     #[inline(never)]
-    fn notify_between(&mut self, last: i64, position: i64) {
-        let [a, b] = self.settings.notify;
+    fn notify_between(&mut self, s: &Settings, last: i64, position: i64) {
+        let [a, b] = s.notify;
         let (lo, hi) = if last < position { (last + 1, position) } else { (position, last - 1) };
         let hit = u8::from(lo <= a && a <= hi) | u8::from(lo <= b && b <= hi) << 1;
         if hit != 0 {
             self.status.notify |= hit;
-            self.io.pulse_ticks = self.settings.notify_output.pulse_ticks;
+            self.io.pulse_ticks = s.notify_output.pulse_ticks;
         }
     }
 
     /// The output pins' levels (1 high, bit as 0x6031): what 0x6031 holds for them (inverted),
     /// and the notification output high during its pulse.
     #[inline]
-    pub(crate) fn output_levels(&self) -> u16 {
-        let s = &self.settings;
+    pub(crate) fn output_levels(&self, s: &Settings) -> u16 {
         let pulse = if self.io.pulse_ticks != 0 { s.notify_output.pin } else { 0 };
         let mut levels = (!self.status.gpio_out | pulse) & s.pins.outputs;
         if s.io.output_pins == 0 {
             return levels;
         }
-        let (alarm, ready) = (self.faulted(), self.power_stage_on());
+        let (alarm, ready) = (self.faulted(), self.power_stage_on(s));
         for (k, (&pin, &function)) in OUT_PINS.iter().zip(&s.io.outputs).enumerate() {
             let on = match function {
                 OutputFunction::None => continue,
                 OutputFunction::General => s.io.general & (1 << k) != 0,
                 OutputFunction::Alarm => !alarm,
-                OutputFunction::InPosition => self.in_position(),
+                OutputFunction::InPosition => self.in_position(s),
                 OutputFunction::Free => !ready,
                 OutputFunction::Ready => ready,
-                OutputFunction::Coincidence => self.speed_coincides(),
+                OutputFunction::Coincidence => self.speed_coincides(s),
             };
             let high = on != (s.io.output_low & (1 << k) != 0);
             levels = if high { levels | pin } else { levels & !pin };
@@ -451,8 +448,8 @@ impl Controller {
 
     /// The outputs whose function is on (bit k: OUT k+1), before 0x21C8 inverts them: from the
     /// levels the last tick drove (0x6031 shows them inverted).
-    pub(crate) fn outputs_on(&self) -> u8 {
-        let io = &self.settings.io;
+    pub(crate) fn outputs_on(&self, s: &Settings) -> u8 {
+        let io = &s.io;
         let mut on = 0u8;
         for (k, (&pin, &function)) in OUT_PINS.iter().zip(&io.outputs).enumerate() {
             let high = self.status.gpio & pin == 0;
@@ -465,20 +462,19 @@ impl Controller {
     /// Whether the speed is the commanded one within 0x21F2; in a position move and at rest,
     /// whether the axis is in position.
     #[inline(never)]
-    fn speed_coincides(&self) -> bool {
+    fn speed_coincides(&self, s: &Settings) -> bool {
         if self.axis.is_still() || self.axis.target().is_some() {
-            return self.in_position();
+            return self.in_position(s);
         }
         let error = self.real_speed() as f32 - self.axis.setpoint().velocity;
-        error.abs() <= self.settings.io.speed_window as f32
+        error.abs() <= s.io.speed_window as f32
     }
 
     /// The coil output's duty (0x6038): in brake mode released only while the power stage is on
     /// and power loss does not apply it; as a general output (valve, magnet, DC load) the duty
     /// written, cut while a fault is latched.
-    pub(crate) fn coil_duty(&self) -> u8 {
-        let s = &self.settings;
-        let on = if s.coil_general { !self.faulted() } else { self.power_stage_on() && !self.faults.braked };
+    pub(crate) fn coil_duty(&self, s: &Settings) -> u8 {
+        let on = if s.coil_general { !self.faulted() } else { self.power_stage_on(s) && !self.faults.braked };
         if on { s.brake_duty } else { 0 }
     }
 }

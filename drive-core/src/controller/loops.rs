@@ -1,7 +1,7 @@
 //! The encoder, the closed loops and stall detection at each tick (see [`crate::servo`] for what
 //! they do).
 
-use super::{Controller, STATUS_STALL};
+use super::{Controller, STATUS_STALL, Settings};
 use crate::faults::{FAULT_POSITION, Inputs};
 use crate::motion::axis::Setpoint;
 use crate::servo::{Encoder, Feedback, Micro, STEPS_PER_REV, SensorlessInput, small};
@@ -11,9 +11,9 @@ use fixed::types::U0F32;
 impl Controller {
     /// The encoder reading of this tick: 0x6089, and in closed loop the measured position. The
     /// first reading of a closed loop places the standing axis on the measured position.
-    pub(crate) fn sense(&mut self, inputs: &Inputs) {
+    pub(crate) fn sense(&mut self, s: &Settings, inputs: &Inputs) {
         let Some(raw) = inputs.encoder else { return };
-        let kind = self.servo.encoder_kind(self.settings.encoder_cpr);
+        let kind = self.servo.encoder_kind(s.encoder_cpr);
         // A reversed motor's encoder counts the other way.
         let raw = match (self.reversed, kind) {
             (false, _) => raw,
@@ -23,14 +23,14 @@ impl Controller {
         let first = self.servo.read(kind, raw);
         self.status.encoder = self.servo.encoder as i32;
         let Feedback::Closed(encoder) = self.servo.feedback else { return };
-        if first && matches!(encoder, Encoder::Incremental { .. }) && self.settings.auto_save {
+        if first && matches!(encoder, Encoder::Incremental { .. }) && s.auto_save {
             // §5.5.15: the incremental closed loop starts from the power-down position.
-            self.settings.zero_offset = self.settings.saved_position;
+            self.zero_offset = s.saved_position;
             self.raise(super::Events::ZERO_OFFSET);
         }
         // While the power stage is off the setpoint follows the rotor (turned by hand, say), so
         // that enabling does not jump back.
-        if (first || !self.power_stage_on()) && self.axis.is_still() {
+        if (first || !self.power_stage_on(s)) && self.axis.is_still() {
             let measured = self.measured();
             if measured != self.axis.setpoint().whole {
                 self.axis.set_position(measured);
@@ -46,7 +46,7 @@ impl Controller {
 
     /// The measured position (closed loop): encoder position + zero offset 0x6087.
     pub(crate) fn measured(&self) -> i64 {
-        self.servo.encoder.wrapping_add(i64::from(self.settings.zero_offset))
+        self.servo.encoder.wrapping_add(i64::from(self.zero_offset))
     }
 
     /// 0x607F: the measured speed in closed loop, the commanded one in open loop.
@@ -62,8 +62,15 @@ impl Controller {
     /// with the stall detection of the loop in force.
     /// `moved` is the whole microsteps the setpoint moved this tick: in open loop the angle
     /// advances by them, so that declaring a position (0x600E) does not turn the motor.
-    pub(crate) fn commutate(&mut self, now: Instant, sp: &Setpoint, moved: i64, inputs: &Inputs) -> (Setpoint, f32) {
-        let per_step = u32::from(self.settings.microsteps).max(1);
+    pub(crate) fn commutate(
+        &mut self,
+        s: &Settings,
+        now: Instant,
+        sp: &Setpoint,
+        moved: i64,
+        inputs: &Inputs,
+    ) -> (Setpoint, f32) {
+        let per_step = u32::from(s.microsteps).max(1);
         if per_step != self.servo.last_per_step {
             // A new resolution: the same electrical angle in the new microsteps.
             let (new, old) = (i64::from(per_step), i64::from(self.servo.last_per_step.max(1)));
@@ -71,7 +78,7 @@ impl Controller {
             self.servo.last_per_step = per_step;
         }
         let Feedback::Closed(encoder) = self.servo.feedback else {
-            self.detect_stall_sensorless(now, sp, inputs, per_step);
+            self.detect_stall_sensorless(s, now, sp, inputs, per_step);
             return (Setpoint { whole: self.servo.last_angle.saturating_add(moved), ..*sp }, 1.0);
         };
         let per_rev = encoder.counts_per_rev();
@@ -87,11 +94,11 @@ impl Controller {
             velocity,
             acceleration: 0.0,
         };
-        if !self.power_stage_on() {
+        if !self.power_stage_on(s) {
             self.servo.relax();
             return (at(rotor, 0.0), 0.0);
         }
-        if libm::fabsf(error) > self.settings.following_limit as f32 {
+        if libm::fabsf(error) > s.following_limit as f32 {
             // A following error beyond 0x605C: the position error alarm (25) and the stall bit.
             self.status.controller |= STATUS_STALL;
             self.latch(now, 0, FAULT_POSITION);
@@ -101,8 +108,8 @@ impl Controller {
             self.servo.relax();
             return (at(rotor, 0.0), 0.0);
         }
-        let drive = if self.settings.servo_loop {
-            let g = self.settings.gains;
+        let drive = if s.servo_loop {
+            let g = s.gains;
             self.servo.servo_loop(rotor, error / per_step as f32, per_step, &g)
         } else {
             self.servo.position_loop(rotor, error, per_step)
@@ -111,7 +118,7 @@ impl Controller {
     }
 
     /// Open loop: the sensorless stall detection (0x2107), from the phase currents and voltages.
-    fn detect_stall_sensorless(&mut self, now: Instant, sp: &Setpoint, inputs: &Inputs, per_step: u32) {
+    fn detect_stall_sensorless(&mut self, s: &Settings, now: Instant, sp: &Setpoint, inputs: &Inputs, per_step: u32) {
         let (Some(mut ma), Some(mut mv)) = (inputs.phase_ma, inputs.phase_mv) else {
             return self.servo.sensorless.reset();
         };
@@ -119,8 +126,7 @@ impl Controller {
             // A reversed motor's phase B is driven inverted.
             (ma[1], mv[1]) = (ma[1].saturating_neg(), mv[1].saturating_neg());
         }
-        let s = &self.settings;
-        if !s.stall_detect || !self.power_stage_on() {
+        if !s.stall_detect || !self.power_stage_on(s) {
             return self.servo.sensorless.reset();
         }
         let x = SensorlessInput {
@@ -134,7 +140,7 @@ impl Controller {
         };
         if self.servo.sensorless.update(now, &x) && self.status.controller & STATUS_STALL == 0 {
             self.status.controller |= STATUS_STALL;
-            if !self.stall_caught() && self.settings.stall_stop {
+            if !self.stall_caught() && s.stall_stop {
                 self.stop_motion();
             }
         }

@@ -2,10 +2,11 @@
 //! (an [`Axis`] walking a plan or a PVT run), supervision (faults, power loss, the communication
 //! watchdog), the closed loop with stall detection, and the output stage's orders.
 //!
-//! The controller plans nothing and reads no register: it runs [`Settings`], checked values the
-//! bus side builds from the dictionary whenever one of them changes and hands over whole (the
-//! tick sets one itself, the closed loop's zero offset at its first reading, and reports it as
-//! [`Events::ZERO_OFFSET`]), and what it measures ([`Inputs`]). What it decides on its own and
+//! The controller plans nothing and reads no register: each tick runs [`Settings`], checked
+//! values the bus side builds from the dictionary whenever one of them changes and hands over
+//! whole, which the tick never writes, over the [`Controller`]'s own state, with what it
+//! measures ([`Inputs`]). The closed loop's zero offset is state: the first reading may set it
+//! ([`Events::ZERO_OFFSET`]), and a zero offset the bus side writes replaces it. What it decides on its own and
 //! the bus side must know (a stop it started, a set-point it joined, power failing) it reports
 //! as [`Events`].
 
@@ -230,11 +231,14 @@ impl Events {
 /// Fast-decay shares of 0x6010's values 0..=3: 0, 1/2, 3/4, 7/8.
 pub const DECAY: [U0F16; 4] = [U0F16::ZERO, U0F16::lit("0.5"), U0F16::lit("0.75"), U0F16::lit("0.875")];
 
-/// What the control tick owns.
+/// What the control tick owns: the state its ticks carry from one to the next. What it runs is
+/// [`Settings`], handed to each tick apart (the owner of the controller keeps them).
 #[derive(Clone, Debug)]
 pub struct Controller {
-    /// What it runs.
-    pub(crate) settings: Settings,
+    /// Zero offset (0x6087), closed loop: the measured position is the encoder's plus this.
+    /// The settings' value, but for the closed loop's first reading, which sets it from the
+    /// power-down position ([`Events::ZERO_OFFSET`]).
+    pub(crate) zero_offset: i32,
     /// The motion being executed.
     pub(crate) axis: Axis,
     /// The running status bits and measurements.
@@ -321,16 +325,16 @@ pub enum WatchOn {
 }
 
 impl Controller {
-    /// A controller at power-up, standing at 0, with no fault history: what a test or a tool
-    /// runs on its own, without a drive around it.
-    pub fn new(settings: Settings, feedback: Feedback) -> Self {
+    /// A controller at power-up with `settings`, standing at 0, with no fault history: what a
+    /// test or a tool runs on its own, without a drive around it.
+    pub fn new(settings: &Settings, feedback: Feedback) -> Self {
         Self::restored(settings, feedback, FaultLog::default(), false)
     }
 
     /// The controller at power-up, standing at 0, with the fault history loaded.
-    pub(crate) fn restored(settings: Settings, feedback: Feedback, faults: FaultLog, reversed: bool) -> Self {
+    pub(crate) fn restored(settings: &Settings, feedback: Feedback, faults: FaultLog, reversed: bool) -> Self {
         Self {
-            settings,
+            zero_offset: settings.zero_offset,
             axis: Axis::new(0),
             status: Status::default(),
             faults,
@@ -362,11 +366,6 @@ impl Controller {
         &self.axis
     }
 
-    /// The settings in force.
-    pub fn settings(&self) -> &Settings {
-        &self.settings
-    }
-
     /// The motion being executed, for the bus side that plans it.
     pub fn axis_mut(&mut self) -> &mut Axis {
         &mut self.axis
@@ -382,11 +381,12 @@ impl Controller {
         self.events.set(e);
     }
 
-    /// What the power stage does: a fault first, then the master's enable, then power loss.
-    pub fn power_state(&self) -> PowerState {
+    /// What the power stage does with `s`: a fault first, then the master's enable, then power
+    /// loss.
+    pub fn power_state(&self, s: &Settings) -> PowerState {
         if self.faulted() {
             PowerState::Faulted
-        } else if !self.settings.enabled {
+        } else if !s.enabled {
             PowerState::Disabled
         } else if self.faults.freed {
             PowerState::Freed
@@ -396,13 +396,13 @@ impl Controller {
     }
 
     /// Whether the power stage drives the motor.
-    pub(crate) fn power_stage_on(&self) -> bool {
-        self.power_state() == PowerState::On
+    pub(crate) fn power_stage_on(&self, s: &Settings) -> bool {
+        self.power_state(s) == PowerState::On
     }
 
     /// Decelerates to rest at the stop deceleration (a ramp of closed form) and ends a PVT run.
-    pub(crate) fn decelerate_to_stop(&mut self) {
-        self.axis.stop_ramp(self.settings.stop_decel);
+    pub(crate) fn decelerate_to_stop(&mut self, s: &Settings) {
+        self.axis.stop_ramp(s.stop_decel);
         self.run = None;
         self.events.set(Events::STOPPED);
     }
@@ -414,38 +414,37 @@ impl Controller {
         self.events.set(Events::STOPPED);
     }
 
-    /// One control tick at `now` with what the drive measures: supervision, the next PVT
+    /// One control tick of `s` at `now` with what the drive measures: supervision, the next PVT
     /// segment (its points from `pvt` and `table`), the motion, the loops; what the output stage
     /// does.
-    pub fn tick(&mut self, now: Instant, inputs: &Inputs, pvt: &mut Pvt, table: &Table) -> Outputs {
-        self.sense(inputs);
-        self.supervise(now, inputs);
-        self.pins(now, inputs.levels);
+    pub fn tick(&mut self, s: &Settings, now: Instant, inputs: &Inputs, pvt: &mut Pvt, table: &Table) -> Outputs {
+        self.sense(s, inputs);
+        self.supervise(s, now, inputs);
+        self.pins(s, now, inputs.levels);
         if self.watch.is_some() {
             self.check_watch(inputs);
         }
         if let Some(code) = inputs.analog {
             self.status.analog_in = code;
         }
-        self.pvt_tick(now, pvt, table);
-        self.count_pulses(now, inputs.pulses);
+        self.pvt_tick(s, now, pvt, table);
+        self.count_pulses(s, now, inputs.pulses);
         let (setpoint, moved) = self.axis.tick(now);
         self.commanded = self.commanded.wrapping_add(moved as u32);
-        self.notify(setpoint.whole);
+        self.notify(s, setpoint.whole);
         if self.axis.take_joined() {
             self.events.set(Events::JOINED);
         }
-        let (commutation, share) = self.commutate(now, &setpoint, moved, inputs);
+        let (commutation, share) = self.commutate(s, now, &setpoint, moved, inputs);
         let steps = commutation.whole.saturating_sub(self.servo.last_angle);
         self.servo.last_angle = commutation.whole;
         // Standstill current reduction once the motor has stood for the delay.
-        let s = &self.settings;
         let still = self.axis.is_still();
         let since = *self.still_since.get_or_insert(now);
         if !still {
             self.still_since = None;
         }
-        let state = self.power_state();
+        let state = self.power_state(s);
         // Held while disabled (0x21DA): at the standstill current, where it stands.
         let held = state == PowerState::Disabled && s.hold_disabled;
         let idle = held || (still && now.since(since) >= s.idle_delay_us);
@@ -464,8 +463,8 @@ impl Controller {
             // dip the current.
             self.energised = if s.soft_start_ticks == 0 { u16::MAX } else { self.energised.saturating_add(1) };
         }
-        let gpio = self.output_levels();
-        let function_pins = self.settings.io.output_pins;
+        let gpio = self.output_levels(s);
+        let function_pins = s.io.output_pins;
         if function_pins != 0 {
             // 0x6031 shows what an output with a function drives (inverted, as the manual has it).
             self.status.gpio = (self.status.gpio & !function_pins) | (!gpio & function_pins);
@@ -480,12 +479,12 @@ impl Controller {
             steps,
             current_ma: if enabled { current as u16 } else { 0 },
             enabled,
-            coil_duty: self.coil_duty(),
+            coil_duty: self.coil_duty(s),
             gpio,
-            pins: self.settings.pins,
-            microsteps: self.settings.microsteps,
-            fast_decay: self.settings.fast_decay,
-            pulse: self.settings.pulse,
+            pins: s.pins,
+            microsteps: s.microsteps,
+            fast_decay: s.fast_decay,
+            pulse: s.pulse,
         }
     }
 }

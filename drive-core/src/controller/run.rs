@@ -1,7 +1,7 @@
 //! The PVT run at each tick: the next segment when the running one ends, taken from the table
 //! (modes 1 and 2) or the FIFO (mode 3) that the bus side fills (see the `pvt` module).
 
-use super::Controller;
+use super::{Controller, Settings};
 use crate::motion::cubic::{Ahead, Cubic, Point, TABLE_SIZE, Table};
 use crate::units::{Instant, TICK_MICROS};
 
@@ -155,7 +155,7 @@ impl Controller {
 
     /// The PVT part of a control tick at `now`: the next segment whenever the running one has
     /// ended (starting exactly at its end, so time does not drift either).
-    pub(crate) fn pvt_tick(&mut self, now: Instant, pvt: &mut Pvt, table: &Table) {
+    pub(crate) fn pvt_tick(&mut self, s: &Settings, now: Instant, pvt: &mut Pvt, table: &Table) {
         let Some(mut run) = self.run else { return };
         let Some((mut start, mut cubic)) = self.axis.cubic() else {
             // Stopped by something else (0x6053, disable).
@@ -184,7 +184,7 @@ impl Controller {
                         self.axis.stand_on_cubic_end();
                     } else {
                         pvt.fault |= FAULT_UNDERFLOW;
-                        self.decelerate_to_stop();
+                        self.decelerate_to_stop(s);
                     }
                     return;
                 }

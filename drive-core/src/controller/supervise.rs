@@ -1,7 +1,7 @@
 //! Supervision at each tick: faults latched from the measurements, power loss, the
 //! communication watchdog (see [`crate::faults`] for what each one means).
 
-use super::Controller;
+use super::{Controller, Settings};
 use crate::faults::{
     COMM_TIMEOUT, ERR_A_OVER_CURRENT, ERR_B_OVER_CURRENT, ERR_COIL_A_OPEN, ERR_COIL_B_OPEN, ERR_OVER_TEMPERATURE,
     ERR_UNDER_VOLTAGE, ERROR_ALARMS, FAULT_ALARMS, FAULT_ENCODER, FAULT_OVER_VOLTAGE, FAULT_OVERLOAD, Inputs,
@@ -26,7 +26,7 @@ impl Controller {
 
     /// Checks the measurements at `now`: latches faults, records them, and applies the fault and
     /// power-loss reactions to the motion.
-    pub(crate) fn supervise(&mut self, now: Instant, inputs: &Inputs) {
+    pub(crate) fn supervise(&mut self, s: &Settings, now: Instant, inputs: &Inputs) {
         if let Some(mv) = inputs.supply_mv {
             self.status.supply_mv = mv.min(u32::from(u16::MAX)) as u16;
         }
@@ -36,10 +36,10 @@ impl Controller {
         if core::mem::take(&mut self.clear_history) {
             self.faults.clear_history();
         }
-        let (error, faults) = self.detect(now, inputs);
+        let (error, faults) = self.detect(s, now, inputs);
         self.latch(now, error, faults);
-        self.power_loss(inputs);
-        self.watchdog(now);
+        self.power_loss(s, inputs);
+        self.watchdog(s, now);
         if self.faulted() || self.faults.freed {
             // The power stage is off: the setpoint stops where it is, and a run or set-point
             // accepted before the fault does not start.
@@ -69,8 +69,7 @@ impl Controller {
     }
 
     /// The fault bits the measurements show at `now` (0x6000, 0x2135).
-    fn detect(&mut self, now: Instant, inputs: &Inputs) -> (u8, u8) {
-        let s = &self.settings;
+    fn detect(&mut self, s: &Settings, now: Instant, inputs: &Inputs) -> (u8, u8) {
         let (mut error, mut faults) = (0u8, 0u8);
         if let Some(mv) = inputs.supply_mv {
             if mv < s.under_voltage_mv {
@@ -120,8 +119,8 @@ impl Controller {
     }
 
     /// The communication watchdog (0x2137): when it runs out, the status bit and a stop.
-    fn watchdog(&mut self, now: Instant) {
-        let limit = self.settings.comm_timeout_us;
+    fn watchdog(&mut self, s: &Settings, now: Instant) {
+        let limit = s.comm_timeout_us;
         if core::mem::take(&mut self.heard) {
             self.faults.last_frame = Some(now);
         }
@@ -131,18 +130,17 @@ impl Controller {
         if limit != 0 && since >= limit && self.status.comm & COMM_TIMEOUT == 0 {
             self.status.comm |= COMM_TIMEOUT;
             self.faults.record(crate::faults::alarm::COMM_TIMEOUT, now);
-            self.decelerate_to_stop();
+            self.decelerate_to_stop(s);
         }
     }
 
     /// Power-loss behaviour (0x6082..0x6084): the motor freed, the brake applied, and the event
     /// for the power-down position save.
-    fn power_loss(&mut self, inputs: &Inputs) {
+    fn power_loss(&mut self, s: &Settings, inputs: &Inputs) {
         let Some(mv) = inputs.supply_mv else {
             (self.faults.freed, self.faults.braked) = (false, false);
             return;
         };
-        let s = &self.settings;
         self.faults.freed = mv < s.free_below_mv;
         self.faults.braked = mv < s.brake_below_mv;
         let failing = mv < s.free_below_mv.max(s.brake_below_mv).max(s.under_voltage_mv);

@@ -120,7 +120,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
 
     /// 0x21AE: 1 the power stage off, 2 energised and standing, 3 moving.
     pub(crate) fn run_state(&self) -> u8 {
-        if self.ctl.power_state() != PowerState::On {
+        if self.ctl.power_state(&self.settings) != PowerState::On {
             1
         } else if self.ctl.axis.is_still() {
             2

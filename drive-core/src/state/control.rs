@@ -319,11 +319,11 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     pub(crate) fn may_move(&self) -> Result<(), ObjError> {
         let s = &self.ctl.status;
         // An external stop latched, or a stall that stopped the motor: the master clears it first.
-        let stall = if self.ctl.settings.stall_stop { STATUS_STALL } else { 0 };
+        let stall = if self.settings.stall_stop { STATUS_STALL } else { 0 };
         refuse(s.controller & (STATUS_EXT | stall) == 0 && s.comm == 0, ObjError::Faulted)?;
         // A quick stop holds the axis until the master enables the operation again.
         refuse(self.device != crate::power::DeviceState::QuickStopActive, ObjError::NotNow)?;
-        match self.ctl.power_state() {
+        match self.ctl.power_state(&self.settings) {
             PowerState::On => Ok(()),
             PowerState::Faulted => Err(ObjError::Faulted),
             PowerState::Disabled | PowerState::Freed => Err(ObjError::Disabled),
@@ -483,7 +483,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             self.power_lost();
         }
         if events.has(Events::ZERO_OFFSET) {
-            self.set_param(Obj::ZeroOffset, self.ctl.settings.zero_offset as u32);
+            self.set_param(Obj::ZeroOffset, self.ctl.zero_offset as u32);
         }
         self.homing_events(events);
         self.homing_service();
@@ -541,13 +541,19 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// for [`Controller::sync`](crate::controller::Controller::sync); then
     /// [`DriveState::synced`]. See [`crate::controller::handoff`].
     pub(crate) fn lend(&mut self) -> Lent<'_> {
-        Lent { model: &mut self.ctl, pvt: &mut self.pvt, base: &mut self.base, orders: &mut self.orders }
+        Lent {
+            model: &mut self.ctl,
+            settings: &self.settings,
+            pvt: &mut self.pvt,
+            base: &mut self.base,
+            orders: &mut self.orders,
+        }
     }
 
     /// The tick's side of this drive, where the tick runs apart from the bus side: a copy of the
     /// controller and the PVT queue, before the first tick.
     pub fn tick_side(&self) -> TickSide {
-        TickSide::new(&self.ctl, &self.pvt)
+        TickSide::new(&self.settings, &self.ctl, &self.pvt)
     }
 
     /// The PVT point table, which the tick's side reads.
@@ -611,7 +617,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// reports.
     pub fn tick_with(&mut self, now: Instant, inputs: &Inputs) -> Outputs {
         self.now = now;
-        let out = self.ctl.tick(now, inputs, &mut self.pvt, self.table.borrow());
+        let out = self.ctl.tick(&self.settings, now, inputs, &mut self.pvt, self.table.borrow());
         if !self.ctl.events.is_empty() {
             let events = self.ctl.take_events();
             self.take_events(events);

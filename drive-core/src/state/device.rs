@@ -165,7 +165,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         let mut sw = self.device_state().statusword();
         let cw = self.param(Obj::DeviceControl) as u16;
         let still = self.ctl.axis.is_still();
-        sw |= bit(self.ctl.power_state() == PowerState::Freed, 7);
+        sw |= bit(self.ctl.power_state(&self.settings) == PowerState::Freed, 7);
         sw |= bit(cw & CW_HALT != 0, 8) | bit(!still, 9);
         let [home, negative, positive] = self.switches();
         sw |= bit(home, 11) | bit(negative, 14) | bit(positive, 15);

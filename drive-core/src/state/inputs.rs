@@ -128,7 +128,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// Whether a motion heading up (`up`) runs into an active limit switch (the settings know
     /// which inputs are limits).
     pub(crate) fn limit_ahead(&self, up: bool) -> bool {
-        let io = &self.ctl.settings.io;
+        let io = &self.settings.io;
         let limits = if up { io.limit_positive } else { io.limit_negative };
         self.active_inputs() & limits != 0 || io.overtravel & if up { 1 } else { 2 } != 0
     }

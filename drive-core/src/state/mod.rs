@@ -16,7 +16,7 @@ pub mod pvt;
 pub mod signals;
 
 use crate::controller::handoff::{Base, Clears, Orders};
-use crate::controller::{Controller, Pvt};
+use crate::controller::{Controller, Pvt, Settings};
 use crate::faults::{FAULT_POSITION, FaultLog};
 use crate::faults::{FaultHistory, HISTORY_LEN};
 use crate::ident::Identity;
@@ -195,6 +195,9 @@ pub struct DriveState<P = Table, G = ProgramMemory> {
     /// The multi-segment programs (1 KB: kept out of [`Checkpoint`]; a program write is one
     /// object's, refused whole or done).
     pub(crate) programs: G,
+    /// The settings the controller runs, built from the objects whenever one of them changes
+    /// ([`DriveState::refresh_settings`]) and handed to the tick whole.
+    pub(crate) settings: Settings,
     /// What the control tick owns: the motion, supervision, the loops and the running status.
     pub(crate) ctl: Controller,
     /// The alarm count when the platform was last asked to save the history (changed only by
@@ -311,11 +314,13 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     ) -> Self {
         let get = |obj: Obj| params.get(obj as usize).copied().unwrap_or(0);
         let feedback = Feedback::from_objects(get(Obj::Feedback), get(Obj::EncoderCpr));
+        let settings = settings_of(params);
         Self {
             faults_saved: faults.count,
             history_unsaved: false,
             command_base: 0,
-            ctl: Controller::restored(settings_of(params), feedback, faults, get(Obj::MotorDirection) == 1),
+            ctl: Controller::restored(&settings, feedback, faults, get(Obj::MotorDirection) == 1),
+            settings,
             params: *params,
             storage,
             identity,
@@ -361,6 +366,8 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             pvt,
             table: _,
             programs: _,
+            // Built again from the objects by the restore.
+            settings: _,
             ctl,
             faults_saved: _,
             history_unsaved,
@@ -471,7 +478,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
 
     /// What the power stage does ([`Controller::power_state`]).
     pub fn power_state(&self) -> crate::modes::PowerState {
-        self.ctl.power_state()
+        self.ctl.power_state(&self.settings)
     }
 
     /// Whether a fault is latched ([`Controller::faulted`]).
@@ -489,11 +496,21 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         &self.ctl
     }
 
-    /// Builds the controller's settings again from the objects.
+    /// Builds the controller's settings again from the objects. A zero offset (0x6087) written
+    /// is the controller's from then on.
     #[inline(never)]
     pub(crate) fn refresh_settings(&mut self) {
-        self.ctl.settings = settings_of(&self.params);
+        let new = settings_of(&self.params);
+        if new.zero_offset != self.settings.zero_offset {
+            self.ctl.zero_offset = new.zero_offset;
+        }
+        self.settings = new;
         self.orders.settings = true;
+    }
+
+    /// The settings the controller runs.
+    pub fn settings(&self) -> &Settings {
+        &self.settings
     }
 
     /// The storage status bits (0x2120): `STORAGE_*`.
@@ -633,7 +650,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             Obj::AnalogSpeed => self.analog_speed() as u32,
             Obj::CurrentCommand => self.current_command(),
             Obj::Load => percent(s.current_ma, self.param(Obj::PhaseCurrent)),
-            Obj::OutputStates => u32::from(self.ctl.outputs_on()),
+            Obj::OutputStates => u32::from(self.ctl.outputs_on(&self.settings)),
             Obj::EncoderSignals | Obj::EncoderAngle | Obj::EncoderTurns => self.encoder_live(obj),
             Obj::ActualPosition => self.ctl.axis.setpoint().whole.wrapping_sub(self.ctl.servo.following) as u32,
             Obj::SerialFormat => self.serial_format(),
@@ -650,8 +667,8 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// once the axis has stood for the standstill delay (or is held while disabled), 100 while
     /// it moves, 0 de-energised (the soft start's ramp aside).
     fn current_command(&self) -> u32 {
-        let s = &self.ctl.settings;
-        let state = self.ctl.power_state();
+        let s = &self.settings;
+        let state = self.ctl.power_state(&self.settings);
         let held = state == crate::modes::PowerState::Disabled && s.hold_disabled;
         if state != crate::modes::PowerState::On && !held {
             return 0;
@@ -873,7 +890,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             Obj::PvtFault => self.clear_status(Clears { pvt_fault: bits, ..Clears::NONE }),
             Obj::GpioValue => {
                 // Only outputs take the written level (§5.7.2).
-                let outputs = self.ctl.settings.pins.outputs;
+                let outputs = self.settings.pins.outputs;
                 let s = &mut self.ctl.status;
                 s.gpio_out = (s.gpio_out & !outputs) | (value as u16 & outputs);
                 s.gpio = (s.gpio & !outputs) | (value as u16 & outputs);

@@ -291,7 +291,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
                 self.orders.stop = true;
                 // 0x600B's ramp, without its jerk limit: a PVT segment may end with more
                 // acceleration than the jerk could take back in time.
-                self.ctl.axis.stop_ramp(self.ctl.settings.stop_decel);
+                self.ctl.axis.stop_ramp(self.settings.stop_decel);
             }
             Ok(Effect::None) | Err(_) => {}
         }
