@@ -162,12 +162,31 @@ impl Sense {
     }
 }
 
-/// The supply voltage, mV, of a bus voltage reading.
-pub fn supply_mv(code: u16) -> u32 {
-    let mv = u64::from(code) * u64::from(VDDA_MV) * u64::from(DIVIDER_TOP_OHM + DIVIDER_BOTTOM_OHM)
-        / (4095 * u64::from(DIVIDER_BOTTOM_OHM));
-    mv as u32
+/// Millivolts of supply a code of the bus voltage reading, Q15 (17.95 mV a code): the current
+/// loop converts a reading every PWM period, and a multiplication is what the exact formula's
+/// 64-bit division (a library call) is not.
+const SUPPLY_MV_PER_CODE_Q15: u32 = ((VDDA_MV as u64 * (DIVIDER_TOP_OHM + DIVIDER_BOTTOM_OHM) as u64 * 32_768
+    + 4_095 * DIVIDER_BOTTOM_OHM as u64 / 2)
+    / (4_095 * DIVIDER_BOTTOM_OHM as u64)) as u32;
+
+/// The supply voltage, mV, of a bus voltage reading (12 bits).
+pub const fn supply_mv(code: u16) -> u32 {
+    // 4095 codes of 588 245: within 32 bits.
+    let code = if code > 4_095 { 4_095 } else { code as u32 };
+    (code * SUPPLY_MV_PER_CODE_Q15) >> 15
 }
+
+// Within a millivolt of the exact division at every code.
+const _: () = {
+    let mut code = 0u16;
+    while code <= 4_095 {
+        let exact = code as u64 * VDDA_MV as u64 * (DIVIDER_TOP_OHM + DIVIDER_BOTTOM_OHM) as u64
+            / (4_095 * DIVIDER_BOTTOM_OHM as u64);
+        let q = supply_mv(code) as u64;
+        assert!(q + 1 >= exact && q <= exact + 1);
+        code += 1;
+    }
+};
 
 /// The bridges' temperature, °C, of an NTC reading; `None` if the NTC is open or shorted (then
 /// the over-temperature alarm, 0x6000 bit 0, has nothing to act on).
