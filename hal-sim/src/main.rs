@@ -108,10 +108,10 @@ struct Args {
     /// a manual's routine in a test's time.
     #[arg(long, value_name = "N", default_value_t = 1)]
     time_scale: u32,
-    /// How the motor's windings are driven: `chopper` (ideal: each current brought to its
-    /// reference every period) or `bridges` (the G474's power stage: the current loop on the
-    /// ADC's view, one period of PWM delay, dead time, the comparators' trip).
-    #[arg(long, value_name = "KIND", default_value = "chopper")]
+    /// How the motor's windings are driven: `bridges` (the G474's power stage, as the board:
+    /// the current loop on the ADC's view, one period of PWM delay, dead time, the comparators'
+    /// trip) or `chopper` (ideal: each current brought to its reference every period).
+    #[arg(long, value_name = "KIND", default_value = "bridges")]
     power_stage: hal_sim::bridges::PowerStage,
     /// Record time, commanded and rotor position and velocity, and phase currents as CSV.
     #[arg(long, value_name = "FILE.csv")]
