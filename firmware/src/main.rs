@@ -110,6 +110,9 @@ mod run {
         stage.bridges.set_over_current(loaded.params.get(drive_core::od::Obj::OverCurrent));
         // The current loop from its objects: tuned (the measurements written into them) or as set.
         stage.power_up_loop(&mut loaded.params);
+        if !stage.has_loop() {
+            defmt::warn!("no current loop: the bridges stay off, and the drive reads both windings open");
+        }
         let (drive, baud, parity) = app::start(&mut loaded.params, loaded.status, true);
         drive.state_mut().set_current_loop(true);
         board::set_serial(&mut uart, baud, parity);

@@ -237,6 +237,31 @@ mod tests {
         assert!(!bridges.enabled(), "off");
     }
 
+    /// The power-up tune on the fixture, which has no motor: no current answers the probe's
+    /// voltage, so the tune fails (an open winding) and leaves the bridges off and the loop's
+    /// objects as they were; the drive, enabled, then reads both windings open (alarm 11).
+    #[test]
+    #[timeout(10)]
+    async fn the_power_up_tune_with_no_motor_leaves_the_bridges_off(hil: Hil) {
+        let Hil { board, drive } = hil;
+        let mut stage = board.stage;
+        let mut params = Params::factory();
+        let objects = [Obj::MotorResistance, Obj::MotorInductance, Obj::CurrentKp, Obj::CurrentKi];
+        let before = objects.map(|o| params.get(o));
+        stage.power_up_loop(&mut params);
+        assert!(!stage.has_loop(), "no loop from a failed tune");
+        assert!(!stage.bridges.enabled(), "the bridges off");
+        assert_eq!(objects.map(|o| params.get(o)), before, "the objects as they were");
+        board::start_tick(stage, board.encoder);
+        drive.state_mut().apply(Obj::Enable, 1);
+        app::sync(drive).await;
+        Timer::after_millis(20).await;
+        app::sync(drive).await;
+        let error = drive.state().read(Obj::ErrorStatus);
+        info!("error status {:#x}", error);
+        assert_eq!(error & 0b110, 0b110, "coils A and B open");
+    }
+
     /// A changed set, saved the way the Modbus task saves (the drive's request taken under the
     /// lock, the flash written without it, the control tick running), is what a new store on the
     /// same pages loads. The pages get back what they held before.

@@ -291,6 +291,12 @@ impl Stage {
         self.steps
     }
 
+    /// Whether the current loop has its settings (from the tune or the objects): without them
+    /// the bridges stay off.
+    pub fn has_loop(&self) -> bool {
+        self.windings.is_some()
+    }
+
     /// The current loop as the parameters `params` say at power-up (0x210B, 0x2108, 0x2109,
     /// 0x210C, 0x210D): tuned ([`Stage::tune`], its results written into them) or from them.
     /// With no loop (a failed tune, objects the loop refuses) the bridges stay off.
