@@ -39,6 +39,7 @@ use drive_core::od::{Access, OBJECTS, Obj, Storage};
 use drive_core::store::Store;
 use drive_core::{Baud, DriveConfig, Instant, Params, SlaveAddr};
 
+use crate::bridges::{PowerStage, SensingOptions};
 use crate::flash::{PAGES, SimFlash, Tear, block_on};
 use crate::inject::Change;
 use crate::motor::{Motor, MotorCatalog, MotorInputs, MotorParams};
@@ -57,6 +58,8 @@ pub struct Config {
     pub progress_s: u64,
     /// Print every operation to stderr as it is done.
     pub trace: bool,
+    /// How the drives' windings are driven (each drive's ADC noise seeded by its address).
+    pub power_stage: PowerStage,
 }
 
 /// What a soak did.
@@ -362,24 +365,30 @@ impl Soak {
                 still_ms: 0,
                 pending: Vec::new(),
             };
-            axis.plant = soak.boot(&mut axis.store, addr);
-            // The boot configuration (address, baud) is part of what the drive holds and saves.
+            let (plant, loaded) = soak.boot(&mut axis.store, addr);
+            axis.plant = plant;
+            // The boot configuration (address, baud) is part of what the drive holds and saves;
+            // what it holds also has the power-up tune's results.
             axis.rom = axis.plant.drive().state().params();
-            axis.saved = axis.rom.clone();
+            axis.saved = loaded;
             soak.axes.push(axis);
         }
         Ok(soak)
     }
 
-    /// A drive powered up on `store`, with a new motor at rest.
-    fn boot(&self, store: &mut Store<SimFlash>, addr: u8) -> Plant {
+    /// A drive powered up on `store`, with a new motor at rest, and the objects as it loaded
+    /// them (before a power-up tune of its bridges writes what it measured into them).
+    fn boot(&self, store: &mut Store<SimFlash>, addr: u8) -> (Plant, Params) {
         let config =
             DriveConfig { address: SlaveAddr::new(addr), baud: Baud::new(BAUD), can_save: true, ..Default::default() };
         let drive = crate::boot(store, config, false, None);
+        let loaded = drive.state().params();
         let mut plant = Plant::new(drive, Motor::new(self.motor.clone(), MotorInputs::default()));
+        let sensing = SensingOptions { seed: u64::from(addr), ..SensingOptions::default() };
+        plant.set_power_stage(self.cfg.power_stage, sensing);
         // The plant's clock starts at the bus's time.
         plant.start_at(Instant::from_micros(self.now));
-        plant
+        (plant, loaded)
     }
 
     fn main(&mut self) -> Check {
@@ -849,9 +858,8 @@ impl Soak {
         }
         let bytes = self.axes[i].store.flash().bytes().to_vec();
         let mut store = crate::store(SimFlash::from_bytes(bytes)).map_err(|e| e.to_string())?;
-        let plant = self.boot(&mut store, addr);
+        let (plant, loaded) = self.boot(&mut store, addr);
         let state = plant.drive().state();
-        let loaded = state.params();
         let storage = state.read(Obj::StorageStatus);
         let axis = &mut self.axes[i];
         if storage != 0 {
@@ -870,7 +878,7 @@ impl Soak {
                 differ.join(", ")
             ));
         }
-        axis.rom = axis.saved.clone();
+        axis.rom = plant.drive().state().params();
         axis.store = store;
         axis.plant = plant;
         axis.counts = Counts::default();

@@ -2,11 +2,23 @@
 //! traffic with disturbances and faults on the line (module `hal_sim::soak`). The day-long run is
 //! `cargo xtask soak --hours 24`.
 
+use hal_sim::bridges::PowerStage;
 use hal_sim::soak::{Config, run};
 
 #[test]
 fn three_drives_for_three_simulated_minutes() {
-    let cfg = Config { seed: 2029, duration_us: 180_000_000, axes: 3, progress_s: 0, trace: false };
+    soak_three_minutes(PowerStage::Chopper);
+}
+
+/// The same through the G474's bridges: the current loop, its power-up tune after every power
+/// cut, the sensorless stall detection on the ADC's view.
+#[test]
+fn three_drives_through_the_bridges_for_three_simulated_minutes() {
+    soak_three_minutes(PowerStage::Bridges);
+}
+
+fn soak_three_minutes(power_stage: PowerStage) {
+    let cfg = Config { seed: 2029, duration_us: 180_000_000, axes: 3, progress_s: 0, trace: false, power_stage };
     let report = match run(&cfg) {
         Ok(report) => report,
         Err(failure) => panic!("{failure}"),
@@ -22,7 +34,14 @@ fn three_drives_for_three_simulated_minutes() {
 
 #[test]
 fn the_same_seed_replays_the_same_run() {
-    let cfg = Config { seed: 5, duration_us: 20_000_000, axes: 2, progress_s: 0, trace: false };
+    let cfg = Config {
+        seed: 5,
+        duration_us: 20_000_000,
+        axes: 2,
+        progress_s: 0,
+        trace: false,
+        power_stage: PowerStage::Chopper,
+    };
     let run_once = || match run(&cfg) {
         Ok(report) => hal_sim::soak::Report { wall: std::time::Duration::ZERO, ..report },
         Err(failure) => panic!("{failure}"),

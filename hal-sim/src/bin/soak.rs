@@ -27,6 +27,9 @@ struct Args {
     /// Print every operation as it is done (to follow a replayed failure).
     #[arg(long)]
     trace: bool,
+    /// How the windings are driven: `chopper` (ideal) or `bridges` (the G474's power stage).
+    #[arg(long, value_name = "KIND", default_value = "chopper")]
+    power_stage: hal_sim::bridges::PowerStage,
 }
 
 fn main() -> ExitCode {
@@ -41,8 +44,12 @@ fn main() -> ExitCode {
         axes: args.axes,
         progress_s: args.progress,
         trace: args.trace,
+        power_stage: args.power_stage,
     };
-    eprintln!("soak: seed {}, {} drives, {minutes} simulated minutes", cfg.seed, cfg.axes);
+    eprintln!(
+        "soak: seed {}, {} drives, {minutes} simulated minutes, power stage {:?}",
+        cfg.seed, cfg.axes, cfg.power_stage
+    );
     match run(&cfg) {
         Ok(report) => {
             println!("soak passed: seed {}, {} drives: {report}", cfg.seed, cfg.axes);
