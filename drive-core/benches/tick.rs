@@ -386,6 +386,7 @@ const MEASURED: Inputs = Inputs {
     phase_ma: Some([700, -300]),
     coil_open: [false; 2],
     phase_mv: None,
+    back_emf_mv: None,
     encoder: None,
     levels: 0,
     analog: None,

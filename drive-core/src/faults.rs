@@ -103,6 +103,12 @@ pub struct Inputs {
     /// (signed; PWM duty times the supply). With `phase_ma` they feed the sensorless stall
     /// detection: the back-EMF is what the winding's resistance and inductance do not explain.
     pub phase_mv: Option<[i32; 2]>,
+    /// The windings' back-EMF as the power stage's own current loop estimates it, mV (the
+    /// G474's bridges: [`crate::windings::WindingState::back_emf_mv`]), filtered in the frame
+    /// that turns with the current. The sensorless stall detection takes it where there is one,
+    /// instead of working the back-EMF out from `phase_mv` and `phase_ma` tick by tick (whose
+    /// L·di/dt turns the currents' sampling noise into volts).
+    pub back_emf_mv: Option<[i32; 2]>,
     /// The encoder's raw reading, read by the closed loop (our object 0x2104 says which encoder):
     /// an incremental encoder's quadrature counter in ×4 counts, wrapping at 2^32 (a platform with
     /// a 16-bit counter extends it); an absolute single-turn encoder's 12-bit angle; a multi-turn

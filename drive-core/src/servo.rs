@@ -197,6 +197,8 @@ pub(crate) struct SensorlessInput {
     pub i: [f32; 2],
     /// Bridge voltages averaged over the tick, V.
     pub v: [f32; 2],
+    /// The power stage's own estimate of the back-EMF, V, if it makes one: taken as it is.
+    pub e: Option<[f32; 2]>,
     /// Winding resistance, Ω, and inductance, H.
     pub r: f32,
     pub l: f32,
@@ -232,7 +234,15 @@ impl Sensorless {
         let [la, lb] = last;
         let [va, vb] = x.v;
         let (ma, mb) = ((ia + la) * 0.5, (ib + lb) * 0.5);
-        let (ea, eb) = (va - x.r * ma - x.l * (ia - la) / TICK_S, vb - x.r * mb - x.l * (ib - lb) / TICK_S);
+        let raw = (va - x.r * ma - x.l * (ia - la) / TICK_S, vb - x.r * mb - x.l * (ib - lb) / TICK_S);
+        let length = |(a, b): (f32, f32)| crate::math::sqrt(a * a + b * b);
+        // The power stage's estimate is free of the sampling noise that puts a floor under the
+        // tick's own (what matters at low speed), but it follows a sudden stop over a couple of
+        // milliseconds: the weaker of the two counts.
+        let ((ea, eb), magnitude) = match x.e {
+            Some([a, b]) => ((a, b), length((a, b)).min(length(raw))),
+            None => (raw, length(raw)),
+        };
         let (dot, cross) = (ea * ma + eb * mb, ea * mb - eb * ma);
         // Averaged over about half a full step of travel: at low speed a stepper rings inside each
         // step, and its back-EMF dips with every ring.
@@ -240,7 +250,7 @@ impl Sensorless {
         let alpha = (1.5 * speed * TICK_S).clamp(EMF_ALPHA_MIN, EMF_ALPHA_MAX);
         self.dot += (dot - self.dot) * alpha;
         self.cross += (cross - self.cross) * alpha;
-        self.emf += (crate::math::sqrt(ea * ea + eb * eb) - self.emf) * alpha;
+        self.emf += (magnitude - self.emf) * alpha;
         self.sign = if x.speed < 0.0 { -1.0 } else { 1.0 };
         if speed < x.min_speed || x.min_speed <= 0.0 {
             (self.fast_since, self.count, self.held, self.per_speed) = (None, 0, 0.0, 0.0);

@@ -154,6 +154,12 @@ impl WindingState {
         self.applied_mv
     }
 
+    /// The back-EMF the loop estimates and feeds forward, mV: the sensorless stall detection's
+    /// `back_emf_mv`.
+    pub fn back_emf_mv(&self) -> [i32; 2] {
+        self.back_emf.map(|v| (v * 1e3) as i32)
+    }
+
     /// Whether each winding is open: for [`OPEN_PERIODS`] in a row, turning no faster than
     /// [`OPEN_MAX_TURN`], the loop has driven it at the supply's limit towards a reference of
     /// [`OPEN_MIN_MA`] or more, and its current stayed under [`OPEN_SHARE`] of that reference.

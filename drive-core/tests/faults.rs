@@ -15,6 +15,7 @@ const NOMINAL: Inputs = Inputs {
     phase_ma: Some([0, 0]),
     coil_open: [false; 2],
     phase_mv: None,
+    back_emf_mv: None,
     encoder: None,
     levels: 0,
     analog: None,

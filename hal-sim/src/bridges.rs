@@ -264,6 +264,11 @@ impl Bridges {
         self.state.applied_mv()
     }
 
+    /// The back-EMF the loop estimates, mV (`WindingState::back_emf_mv`).
+    pub fn back_emf_mv(&self) -> [i32; 2] {
+        self.state.back_emf_mv()
+    }
+
     /// Whether the drive's regulation finds each winding open (`WindingState::open`).
     pub fn open(&self) -> [bool; 2] {
         self.state.open()

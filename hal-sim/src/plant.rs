@@ -304,6 +304,7 @@ impl Plant {
                 Some(bridges) => bridges.applied_mv(),
                 None => self.bridge.volts.map(milli),
             }),
+            back_emf_mv: self.bridges.as_ref().map(|b| b.back_emf_mv()),
             encoder: self.encoder.reading(&self.motor, self.next_tick.as_micros() / TICK_MICROS),
             // The pins and the analog input: the machine's, at the tick (`Plant::tick`).
             levels: 0,

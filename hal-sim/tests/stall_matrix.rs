@@ -9,11 +9,16 @@
 //! point, in full steps. The drive sees only what a real drive measures (phase currents, bridge
 //! voltages, encoder); the true rotor angle is used only here, to score it.
 //!
-//! `cargo test -p hal-sim --test stall_matrix -- --nocapture` prints the table.
+//! Both power stages: the ideal chopper, and the G474's bridges, where the drive's current
+//! loop reads the currents as its ADC does (noise, offsets) and its back-EMF estimate feeds the
+//! sensorless detection.
+//!
+//! `cargo test -p hal-sim --test stall_matrix -- --nocapture` prints the tables.
 
 use drive_core::od::Obj;
 use drive_core::{Drive, DriveConfig, Params};
 use hal_sim::DEFAULT_MOTOR;
+use hal_sim::bridges::{PowerStage, SensingOptions};
 use hal_sim::inject::Change;
 use hal_sim::motor::{Motor, MotorCatalog, MotorInputs};
 use hal_sim::plant::Plant;
@@ -34,7 +39,7 @@ enum Load {
 
 /// A plant in open (`closed` false, sensorless detection `detect`) or closed loop (position
 /// loop; `detect` false sets the largest 0x605C).
-fn plant(closed: bool, detect: bool) -> Plant {
+fn plant(stage: PowerStage, closed: bool, detect: bool) -> Plant {
     let mut params = Params::factory();
     let settings: &[(Obj, u32)] = if closed {
         &[(Obj::Feedback, 1), (Obj::EncoderCpr, 1000), (Obj::StallLength, if detect { 24 } else { 255 })]
@@ -46,7 +51,9 @@ fn plant(closed: bool, detect: bool) -> Plant {
     }
     let motor = MotorCatalog::builtin().get(DEFAULT_MOTOR).cloned().expect("catalogue motor");
     let inputs = MotorInputs { load_inertia_kgm2: 3.3e-5, ..MotorInputs::default() };
-    Plant::new(Drive::boot(DriveConfig::default(), &params, 0), Motor::new(motor, inputs))
+    let mut p = Plant::new(Drive::boot(DriveConfig::default(), &params, 0), Motor::new(motor, inputs));
+    p.set_power_stage(stage, SensingOptions::default());
+    p
 }
 
 fn set(plant: &mut Plant, obj: Obj, value: u32) {
@@ -82,8 +89,8 @@ struct Run {
 }
 
 /// Cruises at `speed` full steps a second, puts the load on, and watches 300 ms.
-fn run(closed: bool, detect: bool, speed: f64, load: Load) -> Run {
-    let mut p = plant(closed, detect);
+fn run(stage: PowerStage, closed: bool, detect: bool, speed: f64, load: Load) -> Run {
+    let mut p = plant(stage, closed, detect);
     let per_step = if closed { COUNTS_PER_STEP } else { MICRO };
     set(&mut p, Obj::MaxSpeed, (speed * per_step) as u32);
     set(&mut p, Obj::RelativeMove, 1_000_000);
@@ -116,20 +123,30 @@ fn run(closed: bool, detect: bool, speed: f64, load: Load) -> Run {
 
 #[test]
 fn every_real_stall_is_caught_within_two_full_steps_and_nothing_else_is() {
+    matrix(PowerStage::Chopper);
+}
+
+#[test]
+fn through_the_bridges_every_real_stall_is_caught_within_two_full_steps_and_nothing_else_is() {
+    matrix(PowerStage::Bridges);
+}
+
+fn matrix(stage: PowerStage) {
     let speeds = [("low", 150.0), ("middle", 600.0), ("near limit", 1400.0)];
     let loads = [Load::None, Load::Share(0.5), Load::Share(0.9), Load::Blocked];
     let mut failures = Vec::new();
-    eprintln!("loop   | speed fs/s | load    | real | pull-out ms | detected ms | lost full steps");
+    let mut table =
+        format!("{stage:?}\nloop   | speed fs/s | load    | real | pull-out ms | detected ms | lost full steps\n");
     for closed in [false, true] {
         for (name, speed) in speeds {
             for load in loads {
-                let truth = run(closed, false, speed, load);
-                let seen = run(closed, true, speed, load);
+                let truth = run(stage, closed, false, speed, load);
+                let seen = run(stage, closed, true, speed, load);
                 let real = truth.max_lag > 2.0;
                 let lost = (seen.lag_at_detection - 1.0).max(0.0);
                 let fmt = |t: Option<f64>| t.map_or("-".to_string(), |t| format!("{t:.2}"));
-                eprintln!(
-                    "{:6} | {name:10} {speed:5} | {:7} | {real:5} | {:>11} | {:>11} | {}",
+                table.push_str(&format!(
+                    "{:6} | {name:10} {speed:5} | {:7} | {real:5} | {:>11} | {:>11} | {}\n",
                     if closed { "closed" } else { "open" },
                     match load {
                         Load::None => "none".to_string(),
@@ -139,7 +156,7 @@ fn every_real_stall_is_caught_within_two_full_steps_and_nothing_else_is() {
                     fmt(truth.pull_out_ms),
                     fmt(seen.detected_ms),
                     if seen.detected_ms.is_some() { format!("{lost:.2}") } else { "-".to_string() },
-                );
+                ));
                 let case = format!("{} {name} {load:?}", if closed { "closed" } else { "open" });
                 match (real, seen.detected_ms) {
                     (true, None) => failures.push(format!("{case}: missed")),
@@ -150,6 +167,7 @@ fn every_real_stall_is_caught_within_two_full_steps_and_nothing_else_is() {
             }
         }
     }
+    eprintln!("{table}");
     assert!(failures.is_empty(), "{failures:#?}");
 }
 
@@ -158,9 +176,18 @@ fn every_real_stall_is_caught_within_two_full_steps_and_nothing_else_is() {
 /// and every move ends where it should.
 #[test]
 fn normal_moves_raise_no_stall() {
+    normal_moves(PowerStage::Chopper);
+}
+
+#[test]
+fn through_the_bridges_normal_moves_raise_no_stall() {
+    normal_moves(PowerStage::Bridges);
+}
+
+fn normal_moves(stage: PowerStage) {
     for closed in [false, true] {
         let per_step = if closed { COUNTS_PER_STEP } else { MICRO };
-        let mut p = plant(closed, true);
+        let mut p = plant(stage, closed, true);
         let mut target = 0i64;
         for (speed, level, distance) in
             [(100.0, 8, 40.0), (400.0, 1, 1000.0), (1000.0, 4, -3000.0), (2000.0, 1, 4000.0), (1400.0, 8, -200.0)]

@@ -122,9 +122,13 @@ impl Controller {
         let (Some(mut ma), Some(mut mv)) = (inputs.phase_ma, inputs.phase_mv) else {
             return self.servo.sensorless.reset();
         };
+        let mut emf = inputs.back_emf_mv;
         if self.reversed {
             // A reversed motor's phase B is driven inverted.
             (ma[1], mv[1]) = (ma[1].saturating_neg(), mv[1].saturating_neg());
+            if let Some([_, b]) = &mut emf {
+                *b = b.saturating_neg();
+            }
         }
         if !s.stall_detect || !self.power_stage_on(s) {
             return self.servo.sensorless.reset();
@@ -132,6 +136,7 @@ impl Controller {
         let x = SensorlessInput {
             i: ma.map(|m| m as f32 * 1e-3),
             v: mv.map(|m| m as f32 * 1e-3),
+            e: emf.map(|e| e.map(|m| m as f32 * 1e-3)),
             r: s.motor_r,
             l: s.motor_l,
             speed: sp.velocity / per_step as f32,

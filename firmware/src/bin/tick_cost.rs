@@ -23,8 +23,9 @@
 //! - `position_loop` / `servo_loop`: closed loop (0x2104 = 1, a 1000-line encoder) with 0x605D =
 //!   0 / 1, the encoder following the setpoint exactly;
 //! - `servo_loop_ramp`: the servo loop in the ramp, as `open_ramp` (the costliest tick of a move);
-//! - `sensorless`: open loop with the stall detection (0x2107 = 1), fed the phase currents and
-//!   bridge voltages of a motor turning 30° electrical behind its current.
+//! - `sensorless`: open loop with the stall detection (0x2107 = 1), fed the phase currents,
+//!   bridge voltages and the current loop's back-EMF estimate of a motor turning 30° electrical
+//!   behind its current.
 //!
 //! - `io_functions`: open loop with every input and output given a function (0x21BA-0x21C6:
 //!   limit and home switches, commands; alarm, in position, general, ready), the inputs
@@ -68,6 +69,7 @@ const MEASURED: Inputs = Inputs {
     phase_ma: Some([700, -300]),
     coil_open: [false; 2],
     phase_mv: None,
+    back_emf_mv: None,
     encoder: None,
     levels: 0,
     analog: None,
@@ -168,10 +170,16 @@ impl Case {
                 let (ia, ib) = (i * co, i * s);
                 let (dia, dib) = (-i * w * s, i * w * co);
                 let emf = km * w / 50.0;
-                let va = r * ia + l * dia - emf * libm::sinf(rotor);
-                let vb = r * ib + l * dib + emf * libm::cosf(rotor);
+                let (ea, eb) = (-emf * libm::sinf(rotor), emf * libm::cosf(rotor));
+                let (va, vb) = (r * ia + l * dia + ea, r * ib + l * dib + eb);
                 let m = |x: f32| libm::roundf(x * 1e3) as i32;
-                Inputs { phase_ma: Some([m(ia), m(ib)]), phase_mv: Some([m(va), m(vb)]), ..MEASURED }
+                // The current loop's back-EMF estimate too, as the board's stage gives it.
+                Inputs {
+                    phase_ma: Some([m(ia), m(ib)]),
+                    phase_mv: Some([m(va), m(vb)]),
+                    back_emf_mv: Some([m(ea), m(eb)]),
+                    ..MEASURED
+                }
             }
         }
     }

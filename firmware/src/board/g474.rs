@@ -202,6 +202,7 @@ static MEASURED: Mutex<Cell<Measured>> = Mutex::new(Cell::new(Measured {
     phase_ma: None,
     coil_open: [false; 2],
     phase_mv: None,
+    back_emf_mv: None,
     encoder: None,
     levels: 0,
     analog: None,
@@ -246,6 +247,7 @@ fn measure(cs: critical_section::CriticalSection<'_>, stage: Regulated) -> Measu
         supply_mv: Some(stage.supply_mv),
         phase_ma: Some(stage.phase_ma),
         phase_mv: Some(stage.applied_mv),
+        back_emf_mv: Some(stage.back_emf_mv),
         coil_open: stage.open,
         ..MEASURED.borrow(cs).get()
     }
@@ -282,6 +284,7 @@ struct Regulated {
     phase_ma: [i32; 2],
     supply_mv: u32,
     applied_mv: [i32; 2],
+    back_emf_mv: [i32; 2],
     open: [bool; 2],
 }
 
@@ -391,7 +394,8 @@ impl Stage {
             None => {}
         }
         let open = self.regulation.open();
-        Regulated { phase_ma, supply_mv, applied_mv: self.regulation.applied_mv(), open }
+        let (applied_mv, back_emf_mv) = (self.regulation.applied_mv(), self.regulation.back_emf_mv());
+        Regulated { phase_ma, supply_mv, applied_mv, back_emf_mv, open }
     }
 }
 
