@@ -353,20 +353,25 @@ async fn refusals_change_nothing_and_an_ext_stop_is_a_fault_until_reset() {
     panic!("not moving back: {}", d.rotor() / 16.0);
 }
 
-/// An over-voltage from the simulator's fault injection (70 V from 60 s to 120 s of simulated
-/// time) while the motor runs: the fault state, the power stage off; a fault reset while the
-/// supply is still high leaves it there; once the supply is back, a fault reset, and the drive
-/// runs again.
+/// An over-voltage from the simulator's fault injection (70 V from 200 s to 260 s of simulated
+/// time: 2 s of wall time at `SCALE` for the master to start the motor first, on a loaded
+/// machine too) while the motor runs: the fault state, the power stage off; a fault reset while
+/// the supply is still high leaves it there; once the supply is back, a fault reset, and the
+/// drive runs again.
 #[tokio::test(flavor = "current_thread")]
 async fn an_injected_over_voltage_is_a_fault_until_reset() {
-    let mut d = jmc_with(&[], &["60000:supply=70", "120000:supply=24"]).await;
+    let mut d = jmc_with(&[], &["200000:supply=70", "260000:supply=24"]).await;
     d.enable().await;
     d.set(0x6060, 3).await;
     d.set(0x6040, 0x010F).await;
     d.set32(0x6081, 10).await;
     d.set(0x6040, 0x000F).await;
     let time = |d: &Jmc| d.snapshot.lock().expect("snapshot").time_us;
-    assert!(time(&d) < 60_000_000, "running before the fault");
+    assert!(time(&d) < 200_000_000, "running before the fault");
+    d.wait_speed(10).await;
+    while time(&d) < 200_000_000 {
+        sleep(Duration::from_millis(10)).await;
+    }
     let mut sw = 0;
     for _ in 0..200 {
         sw = d.get(0x6041).await;
@@ -379,10 +384,10 @@ async fn an_injected_over_voltage_is_a_fault_until_reset() {
     assert_ne!(d.get(0x1001).await & 0b101, 0, "error register: a voltage fault");
     assert!(!d.snapshot.lock().expect("snapshot").enabled, "the power stage is off");
     d.set(0x6040, 0x0080).await;
-    if time(&d) < 119_000_000 {
+    if time(&d) < 259_000_000 {
         assert_eq!(d.get(0x6041).await & 0x4F, 0x08, "still over-voltage: still the fault state");
     }
-    while time(&d) < 121_000_000 {
+    while time(&d) < 261_000_000 {
         sleep(Duration::from_millis(10)).await;
     }
     d.set(0x6040, 0x0000).await;
