@@ -652,7 +652,7 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
             return;
         }
         counters.slave_messages = counters.slave_messages.wrapping_add(1);
-        state.ctl.heard();
+        state.frame_heard();
         let pdu = rest.get(..rest.len().saturating_sub(check)).unwrap_or_default();
         let function = pdu.first().copied().unwrap_or(0);
         if function & 0x80 != 0 {

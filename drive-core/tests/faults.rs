@@ -336,6 +336,24 @@ fn the_watchdog_decelerates_a_moving_axis_and_sets_its_bit() {
     assert_eq!(write32(&mut bus, 0x6005, 100), None);
 }
 
+/// A refused write is still a frame for this drive: the watchdog restarts, though the write's
+/// checkpoint undoes everything else it did.
+#[test]
+fn a_refused_multi_object_write_restarts_the_watchdog() {
+    let mut bus = drive();
+    assert!(write(&mut bus, 0x2137, 5));
+    for _ in 0..5 {
+        run(&mut bus, &NOMINAL, 390_000);
+        // 0x2137 = 5 (as it is), then 0x2138 = 2 (not a bit it has): refused whole.
+        let reply = bus.request(&[1, 0x10, 0x21, 0x37, 0, 2, 4, 0, 5, 0, 2]).unwrap_or_default();
+        assert_eq!(reply.get(1), Some(&0x90), "{reply:02X?}");
+    }
+    run(&mut bus, &NOMINAL, 390_000);
+    assert_eq!(read(&bus, Obj::CommStatus), 0);
+    run(&mut bus, &NOMINAL, 120_000);
+    assert_eq!(read(&bus, Obj::CommStatus), 1);
+}
+
 #[test]
 fn the_watchdog_counts_from_power_up() {
     let mut params = Params::factory();

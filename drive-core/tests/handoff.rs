@@ -291,6 +291,29 @@ fn a_cleared_fault_history_reaches_the_tick() {
     assert_eq!(d.state().read(drive_core::od::Obj::FaultHistory1), 0);
 }
 
+/// A refused write is still a frame for this drive: the tick's watchdog (0x2137, 500 ms)
+/// restarts, though the write's checkpoint undoes everything else it did.
+#[test]
+fn a_refused_multi_object_write_restarts_the_tick_watchdog() {
+    let (mut d, mut tick) = split();
+    assert!(serve(&mut d, tick_time(0), &w16(0x2137, 5)));
+    let fine = Inputs { supply_mv: Some(24_000), ..Inputs::default() };
+    // 0x2137 = 5 (as it is), then 0x2138 = 2 (not a bit it has): refused whole.
+    let refused = frame(&[1, 0x10, 0x21, 0x37, 0, 2, 4, 0, 5, 0, 2]);
+    let per_400_ms = 400_000 / TICK_MICROS;
+    for k in 1..=5 * per_400_ms {
+        if k % per_400_ms == 0 {
+            assert!(!serve(&mut d, tick_time(k), &refused));
+        }
+        tick_at(&mut d, &mut tick, k, true, &fine);
+    }
+    assert_eq!(d.state().read(Obj::CommStatus), 0, "heard every 400 ms");
+    for k in 5 * per_400_ms + 1..=5 * per_400_ms + 600_000 / TICK_MICROS {
+        tick_at(&mut d, &mut tick, k, true, &fine);
+    }
+    assert_eq!(d.state().read(Obj::CommStatus), 1, "600 ms after the last frame: timed out");
+}
+
 /// A fault the master clears (0x6000, write 1 to clear) once its cause is gone is cleared in
 /// the tick's controller at the next sync (an order: the tick's other bits stay its own).
 #[test]

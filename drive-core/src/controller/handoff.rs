@@ -117,6 +117,8 @@ pub struct Lent<'a> {
     pub(crate) pvt: &'a mut Pvt,
     pub(crate) base: &'a mut Base,
     pub(crate) orders: &'a mut Orders,
+    /// A frame for the drive arrived since the last sync (the watchdog restarts).
+    pub(crate) heard: &'a mut bool,
 }
 
 /// How a sync went.
@@ -140,7 +142,7 @@ impl Controller {
     /// Takes in the bus side's model `lent` at `now` (before this tick's work) and tells it what
     /// the tick did; `settings` and `pvt` are the tick's own. See the module.
     pub fn sync(&mut self, settings: &mut Settings, pvt: &mut Pvt, now: Instant, lent: &mut Lent<'_>) -> Handover {
-        let Lent { model, settings: bus_settings, pvt: model_pvt, base, orders } = lent;
+        let Lent { model, settings: bus_settings, pvt: model_pvt, base, orders, heard } = lent;
         let planned = model.axis.version() != base.version && !orders.stop;
         let starts = if planned { model.axis.activation() } else { None };
         if starts.is_some_and(|at| now < at) {
@@ -159,7 +161,7 @@ impl Controller {
             }
             *settings = **bus_settings;
         }
-        self.heard |= core::mem::take(&mut model.heard);
+        self.heard |= core::mem::take(*heard);
         // A watch belongs to its plan (its version): one that fired here meanwhile stays
         // spent, as the stop it made changed the axis' version.
         (self.watch, self.suspend) = (model.watch, model.suspend);

@@ -547,6 +547,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             pvt: &mut self.pvt,
             base: &mut self.base,
             orders: &mut self.orders,
+            heard: &mut self.heard,
         }
     }
 
@@ -575,7 +576,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         let (c, b) = (&self.ctl, &self.base);
         c.axis.version() != b.version
             || self.orders != Orders::default()
-            || c.heard
+            || self.heard
             || c.run != b.run
             || self.pvt != b.pvt
     }
@@ -617,6 +618,9 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// reports.
     pub fn tick_with(&mut self, now: Instant, inputs: &Inputs) -> Outputs {
         self.now = now;
+        if core::mem::take(&mut self.heard) {
+            self.ctl.heard();
+        }
         let out = self.ctl.tick(&self.settings, now, inputs, &mut self.pvt, self.table.borrow());
         if !self.ctl.events.is_empty() {
             let events = self.ctl.take_events();

@@ -212,6 +212,10 @@ pub struct DriveState<P = Table, G = ProgramMemory> {
     base: Base,
     /// Orders for the tick's controller since the last sync.
     orders: Orders,
+    /// A frame for this drive arrived since the tick last learned of one (its watchdog
+    /// restarts): a message for the tick, not part of its model, and kept out of
+    /// [`Checkpoint`] (a refused write was still a frame heard).
+    heard: bool,
     /// The built-in homing.
     pub(crate) homing: homing::Homing,
     /// The analog input's follower.
@@ -261,28 +265,25 @@ fn plans_motion(obj: Obj) -> bool {
 }
 
 /// Everything of a [`DriveState`] but the PVT point table and the programs' memory: what a
-/// multi-object write restores when a later object of it is refused. (A table slot written by such a write lies beyond the
-/// restored count of points, so it is not a point.)
+/// multi-object write restores when a later object of it is refused. (A table slot written by
+/// such a write lies beyond the restored count of points, so it is not a point.) The model of
+/// the controller is taken whole: no sync runs inside a request, so all of it is the bus side's
+/// until the request ends.
 #[derive(Clone, Debug)]
 pub struct Checkpoint {
     params: [u32; Obj::COUNT],
     storage: u8,
-    status: Status,
     request: Option<SystemRequest>,
     now: Instant,
-    axis: crate::motion::axis::Axis,
+    ctl: Controller,
     pp: Pp,
     pvt: Pvt,
-    run: Option<crate::controller::run::Run>,
     orders: Orders,
     homing: homing::Homing,
-    watch: Option<crate::controller::Watch>,
-    suspend: u16,
     device: crate::power::DeviceState,
     program: program::Program,
     history_unsaved: bool,
     command_base: u32,
-    clear_history: bool,
 }
 
 impl DriveState {
@@ -333,6 +334,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             programs,
             base: Base::default(),
             orders: Orders::default(),
+            heard: false,
             homing: homing::Homing::default(),
             analog: analog::Analog::default(),
             inputs: inputs::Inputs::default(),
@@ -374,6 +376,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             command_base,
             base: _,
             orders,
+            heard: _,
             homing,
             analog: _,
             inputs: _,
@@ -391,22 +394,17 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         Checkpoint {
             params: *params,
             storage: *storage,
-            status: ctl.status,
             request: *request,
             now: *now,
-            axis: ctl.axis,
+            ctl: ctl.clone(),
             pp: *pp,
             pvt: *pvt,
-            run: ctl.run,
             orders: *orders,
             homing: *homing,
-            watch: ctl.watch,
-            suspend: ctl.suspend,
             device: *device,
             program: *program,
             history_unsaved: *history_unsaved,
             command_base: *command_base,
-            clear_history: ctl.clear_history,
         }
     }
 
@@ -437,29 +435,21 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         let Checkpoint {
             params,
             storage,
-            status,
             request,
             now,
-            axis,
+            ctl,
             pp,
             pvt,
-            run,
             orders,
             homing,
-            watch,
-            suspend,
             device,
             program,
             history_unsaved,
             command_base,
-            clear_history,
         } = c;
         (self.params, self.storage, self.request, self.now, self.orders) = (params, storage, request, now, orders);
-        (self.ctl.status, self.ctl.axis, self.ctl.run, self.pp, self.pvt) = (status, axis, run, pp, pvt);
-        (self.homing, self.ctl.watch, self.ctl.suspend, self.device) = (homing, watch, suspend, device);
-        self.program = program;
-        (self.history_unsaved, self.command_base, self.ctl.clear_history) =
-            (history_unsaved, command_base, clear_history);
+        (self.ctl, self.pp, self.pvt, self.homing, self.device) = (ctl, pp, pvt, homing, device);
+        (self.program, self.history_unsaved, self.command_base) = (program, history_unsaved, command_base);
         // A factory reset undone with the rest: the map's own factory values are not set over
         // the restored ones (a request starts with none pending: the slave takes it at its end).
         self.factory_restored = false;
@@ -855,6 +845,11 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         } else {
             self.apply(d.obj, value);
         }
+    }
+
+    /// Says that a frame for this drive arrived: the tick's watchdog restarts.
+    pub(crate) fn frame_heard(&mut self) {
+        self.heard = true;
     }
 
     /// Clears status bits here and orders the tick's controller to clear them too.
