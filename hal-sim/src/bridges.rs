@@ -264,6 +264,12 @@ impl Bridges {
         self.state.applied_mv()
     }
 
+    /// The voltages the loop asked at the last sample, as the timers take them, V: they act over
+    /// the coming period (`None` while off or tripped).
+    pub fn asked_volts(&self) -> Option<[f64; 2]> {
+        self.pending
+    }
+
     /// The back-EMF the loop estimates, mV (`WindingState::back_emf_mv`).
     pub fn back_emf_mv(&self) -> [i32; 2] {
         self.state.back_emf_mv()

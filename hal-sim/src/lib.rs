@@ -86,6 +86,7 @@ pub mod soak;
 pub mod thermal;
 pub mod torque_speed;
 pub mod trace;
+pub mod tracking;
 
 /// Where masters reach the simulated drive.
 #[derive(Clone, Debug, PartialEq, Eq)]

@@ -58,7 +58,7 @@ const RELATIVE_TOLERANCE: f64 = 0.01;
 /// ... or of the holding torque, whichever is larger.
 const ABSOLUTE_TOLERANCE: f64 = 0.001;
 /// The control ticks a second.
-const TICKS_PER_S: f64 = 20_000.0;
+pub const TICKS_PER_S: f64 = 20_000.0;
 
 /// What a curve is measured on: the catalogue's motor, a supply and a power stage.
 #[derive(Clone, Debug)]
@@ -131,11 +131,33 @@ fn tick(plant: &mut Plant, limit: f64, worst: &mut f64) -> bool {
     out.enabled && lag.abs() < limit
 }
 
-/// Runs `setup` at `speed_rps` under `load_nm` as the module documentation describes.
+/// A drive on `setup`'s motor run up to a speed, unloaded.
+pub struct SpunUp {
+    /// The drive and its motor, at speed (or where the run-up failed).
+    pub plant: Plant,
+    /// Whether the rotor kept within [`SLIP_FULL_STEPS`] of the setpoint and the drive kept its
+    /// bridges on ([`HOLD_FULL_STEPS`] standing).
+    pub carried: bool,
+    /// The largest lag of the rotor behind the setpoint so far, microsteps.
+    pub worst_lag: f64,
+    /// The lag beyond which the motor has lost synchronism, microsteps.
+    pub limit: f64,
+}
+
+impl SpunUp {
+    /// Runs one control tick ([`tick`]): whether the motor still carries its load.
+    pub fn tick(&mut self) -> bool {
+        self.carried = self.carried && tick(&mut self.plant, self.limit, &mut self.worst_lag);
+        self.carried
+    }
+}
+
+/// A factory drive on `setup`'s motor and supply, set as the module documentation describes,
+/// its setpoint run up to `speed_rps` in velocity mode, unloaded (standing for 0).
 ///
 /// # Panics
 /// If the drive refuses a setting, or its setpoint does not reach the speed.
-pub fn trial(setup: &Setup, speed_rps: f64, load_nm: f64) -> Trial {
+pub fn spin_up(setup: &Setup, speed_rps: f64) -> SpunUp {
     let inputs = MotorInputs { supply_v: setup.supply_v, ..MotorInputs::default() };
     let mut plant = Plant::new(drive_core::Drive::factory(), Motor::new(setup.motor.clone(), inputs));
     plant.set_power_stage(setup.stage, SensingOptions::default());
@@ -145,36 +167,45 @@ pub fn trial(setup: &Setup, speed_rps: f64, load_nm: f64) -> Trial {
     let per_rev = f64::from(setup.motor.steps_per_rev) * f64::from(MICROSTEPS);
     let pps = (speed_rps * per_rev).round() as i32;
     let limit = f64::from(MICROSTEPS) * if pps == 0 { HOLD_FULL_STEPS } else { SLIP_FULL_STEPS };
-    let mut worst = 0.0;
-    let mut carried = true;
+    let mut run = SpunUp { plant, carried: true, worst_lag: 0.0, limit };
     if pps != 0 {
         // Velocity mode: the speed's sign is the direction (0x6003 high word, 0x6004 low).
-        write(&mut plant, 0x6007, 1);
+        write(&mut run.plant, 0x6007, 1);
         let [h0, h1, l0, l1] = pps.to_be_bytes();
-        write(&mut plant, 0x6003, u16::from_be_bytes([h0, h1]));
-        write(&mut plant, 0x6004, u16::from_be_bytes([l0, l1]));
+        write(&mut run.plant, 0x6003, u16::from_be_bytes([h0, h1]));
+        write(&mut run.plant, 0x6004, u16::from_be_bytes([l0, l1]));
         let ramp_s = f64::from(pps) / f64::from(drive_core::control::LEVELS[0]);
         let mut at_speed = false;
         for _ in 0..((ramp_s + 0.5) * TICKS_PER_S) as u32 {
-            carried = tick(&mut plant, limit, &mut worst);
-            at_speed = plant.outputs().is_some_and(|o| (f64::from(o.setpoint.velocity) - f64::from(pps)).abs() < 1.0);
+            let carried = run.tick();
+            at_speed =
+                run.plant.outputs().is_some_and(|o| (f64::from(o.setpoint.velocity) - f64::from(pps)).abs() < 1.0);
             if !carried || at_speed {
                 break;
             }
         }
-        assert!(!carried || at_speed, "{}: the setpoint did not reach {pps} pps", setup.motor.name);
+        assert!(!run.carried || at_speed, "{}: the setpoint did not reach {pps} pps", setup.motor.name);
     }
+    run
+}
+
+/// Runs `setup` at `speed_rps` under `load_nm` as the module documentation describes.
+///
+/// # Panics
+/// If the drive refuses a setting, or its setpoint does not reach the speed.
+pub fn trial(setup: &Setup, speed_rps: f64, load_nm: f64) -> Trial {
+    let mut run = spin_up(setup, speed_rps);
     for (secs, from, to) in [(SETTLE_S, 0.0, 0.0), (RAMP_S, 0.0, load_nm), (HOLD_S, load_nm, load_nm)] {
         let ticks = (secs * TICKS_PER_S).round() as u32;
         for k in 1..=ticks {
-            if !carried {
+            if !run.carried {
                 break;
             }
-            plant.inject(Change::LoadTorque(from + (to - from) * f64::from(k) / f64::from(ticks)));
-            carried = tick(&mut plant, limit, &mut worst);
+            run.plant.inject(Change::LoadTorque(from + (to - from) * f64::from(k) / f64::from(ticks)));
+            run.tick();
         }
     }
-    Trial { carried, worst_lag: worst, alarm: plant.drive().state().read(Obj::AlarmCode) }
+    Trial { carried: run.carried, worst_lag: run.worst_lag, alarm: run.plant.drive().state().read(Obj::AlarmCode) }
 }
 
 /// A point of a curve.
