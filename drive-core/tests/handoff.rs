@@ -371,3 +371,58 @@ fn the_zero_offset_set_by_the_first_reading_survives_other_settings_and_yields_t
     assert_eq!(out.setpoint.whole, 1_000);
     assert_eq!(offset(&d), 1_000);
 }
+
+/// Pushes the PVT point (`position`, `velocity`, `time_ms`) at tick `k`: its registers, then
+/// 0x6017 = 2.
+fn push(d: &mut Drive, k: u64, position: i32, velocity: i32, time_ms: u16) {
+    let ([p0, p1, p2, p3], [v0, v1, v2, v3], [t0, t1]) =
+        (position.to_be_bytes(), velocity.to_be_bytes(), time_ms.to_be_bytes());
+    let point = frame(&[1, 0x10, 0x60, 0x27, 0, 6, 12, p0, p1, p2, p3, v0, v1, v2, v3, 0, 0, t0, t1]);
+    assert!(serve(d, tick_time(k), &point), "point at {position}");
+    assert!(serve(d, tick_time(k), &w16(0x6017, 2)), "push at {position}");
+}
+
+/// PVT mode 3 (the FIFO) with the tick apart: a queue emptied and refilled between two syncs
+/// reaches the tick whole; points pushed while the tick walks the queue join what it has left;
+/// the run ends exactly on the last point.
+#[test]
+fn pvt_points_pushed_while_the_tick_walks_the_fifo_join_its_queue() {
+    let (mut d, mut tick) = split();
+    let fine = Inputs { supply_mv: Some(24_000), ..Inputs::default() };
+    assert!(serve(&mut d, tick_time(0), &w16(0x6007, 2)));
+    assert!(serve(&mut d, tick_time(0), &w16(0x6018, 2)));
+    for i in 1..=3 {
+        push(&mut d, 0, 40 * i, 2000, 20);
+    }
+    tick_at(&mut d, &mut tick, 1, true, &fine);
+    assert_eq!(d.state().read(Obj::PvtCount), 3);
+    // Emptied and two pushed before the next sync: the tick's queue is those two.
+    assert!(serve(&mut d, tick_time(2), &w16(0x6017, 3)));
+    push(&mut d, 2, 20, 2000, 20);
+    push(&mut d, 2, 60, 2000, 20);
+    tick_at(&mut d, &mut tick, 3, true, &fine);
+    assert_eq!(d.state().read(Obj::PvtCount), 2, "the queue the bus side left");
+    assert!(serve(&mut d, tick_time(4), &w16(0x6017, 1)), "start");
+    // 20 ms a point: one pushed every 10 ms keeps the queue filling, up to 30 points.
+    let (mut next, mut k, mut last) = (100, 5, None);
+    while k < 200_000 {
+        if k % 200 == 0 && next <= 60 + 40 * 28 {
+            push(&mut d, k, next, 2000, 20);
+            next += 40;
+        } else if k % 200 == 0 && next == 60 + 40 * 29 {
+            push(&mut d, k, next, 0, 20);
+            next += 40;
+        }
+        let (out, _) = tick_at(&mut d, &mut tick, k, true, &fine);
+        last = Some(out);
+        if next > 60 + 40 * 29 && d.state().read(Obj::ControllerStatus) & 0x08 == 0 {
+            break;
+        }
+        k += 1;
+    }
+    assert_eq!(d.state().read(Obj::PvtFault), 0, "no underflow");
+    let end = i64::from(60 + 40 * 29);
+    assert_eq!(last.map(|o| o.setpoint.whole), Some(end), "the tick ends on the last point");
+    assert_eq!(d.state().position(), end);
+    assert_eq!(d.state().read(Obj::PvtCount), 0);
+}

@@ -6,8 +6,8 @@
 //! it alone until the tick has synced it ([`Controller::sync`], at the start of a tick; no
 //! planning: `cargo xtask tick-cost` measures such a tick, a plan taken over and the tick's own
 //! work included). A sync first takes in what the bus side ordered since the last one
-//! ([`Orders`]) and what it changed against what it learned then ([`Base`]: a plan, a PVT run,
-//! PVT points), then tells the model what the tick did since:
+//! ([`Orders`]) and a plan it made (its axis' version moved from what it learned then:
+//! [`Base`]), then tells the model what the tick did since:
 //!
 //! - the settings are the bus side's: the tick takes them whole when they changed
 //!   ([`Orders`]);
@@ -20,8 +20,8 @@
 //!   last setpoint back). Otherwise the model takes the tick's walk;
 //! - status bits are the tick's: the bus side orders the ones it cleared cleared, and the
 //!   output pins' levels the master wrote written ([`Orders`]);
-//! - a PVT run the bus side started or ended, PVT points it pushed or cleared, an ordered stop,
-//!   a frame heard (the watchdog);
+//! - a PVT run the bus side started or ended, the PVT points it pushed or cleared, a stop
+//!   ([`Orders`]), and a frame heard (the watchdog restarts);
 //! - the events the tick raised go up, for the bus side to act on.
 
 use super::run::{Pvt, Run};
@@ -30,12 +30,10 @@ use crate::faults::Inputs;
 use crate::motion::cubic::Table;
 use crate::units::{Instant, TICK_MICROS};
 
-/// What the bus side learned of the tick's controller at the last sync: what its own changes
-/// (a plan, a PVT run started or ended, points pushed) are told apart by.
+/// What the bus side learned of the tick's controller at the last sync: the version of its
+/// axis, which a plan the bus side made moves on (and so is told apart by).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Base {
-    pub(crate) run: Option<Run>,
-    pub(crate) pvt: Pvt,
     pub(crate) version: u32,
 }
 
@@ -87,8 +85,9 @@ impl Clears {
 
 /// What the bus side orders the tick to do on its own state since the last sync: a stop ramp
 /// from wherever the axis is when the order arrives (a PVT stop), status bits to clear, the
-/// output pins' levels the master wrote, new settings to take.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// output pins' levels the master wrote, new settings to take, a PVT run started or ended, the
+/// PVT queue as the bus side left it and the points it pushed since.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Orders {
     /// Stop: a ramp at the stop deceleration, and the PVT run ends.
     pub(crate) stop: bool,
@@ -98,6 +97,13 @@ pub struct Orders {
     pub(crate) clear: Clears,
     /// The output pins' levels the master wrote (0x6031): the pins' mask, their levels.
     pub(crate) outputs: Option<(u16, u16)>,
+    /// The PVT run the bus side started or ended.
+    pub(crate) run: Option<RunOrder>,
+    /// The PVT queue as the bus side set it (its head and length: emptied, or a run's first
+    /// points taken when it started), before the points pushed since.
+    pub(crate) queue: Option<(u16, u16)>,
+    /// PVT points pushed since the last sync (after `queue`'s).
+    pub(crate) pushed: u16,
 }
 
 impl Orders {
@@ -106,6 +112,20 @@ impl Orders {
         let (m, l) = self.outputs.unwrap_or((0, 0));
         self.outputs = Some((m | mask, (l & !mask) | (levels & mask)));
     }
+
+    /// The PVT queue set to `pvt`'s head and length, the points pushed before it taken in.
+    pub(crate) fn set_queue(&mut self, pvt: &Pvt) {
+        (self.queue, self.pushed) = (Some((pvt.head, pvt.len)), 0);
+    }
+}
+
+/// A PVT run the bus side started or ended.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum RunOrder {
+    /// Started: the run, and the pointer of its first point (0x2112).
+    Start(Run, u16),
+    /// Ended: a stop, the power stage off.
+    End,
 }
 
 /// The bus side's model of the controller, lent to the tick until a sync has taken it in.
@@ -148,7 +168,7 @@ impl Controller {
         if starts.is_some_and(|at| now < at) {
             return Handover::Waiting;
         }
-        let Orders { stop, settings: changed, clear, outputs } = core::mem::take(*orders);
+        let Orders { stop, settings: changed, clear, outputs, run, queue, pushed } = core::mem::take(*orders);
         if core::mem::take(&mut model.clear_history) {
             self.faults.clear_history();
         }
@@ -171,16 +191,17 @@ impl Controller {
             s.gpio_out = (s.gpio_out & !mask) | (levels & mask);
             s.gpio = (s.gpio & !mask) | (levels & mask);
         }
-        if model.run != base.run {
-            self.run = model.run;
-            self.status.pvt_pointer = model.status.pvt_pointer;
+        match run {
+            Some(RunOrder::Start(run, pointer)) => (self.run, self.status.pvt_pointer) = (Some(run), pointer),
+            Some(RunOrder::End) => self.run = None,
+            None => {}
         }
-        // Points pushed since are appended; a queue the bus side emptied is taken whole.
-        if model_pvt.head != base.pvt.head || model_pvt.len < base.pvt.len {
-            (pvt.head, pvt.len) = (model_pvt.head, model_pvt.len);
-        } else {
-            pvt.len = pvt.len.saturating_add(model_pvt.len - base.pvt.len);
+        // A queue the bus side set is taken whole; points pushed since are appended to what the
+        // tick has left.
+        if let Some((head, len)) = queue {
+            (pvt.head, pvt.len) = (head, len);
         }
+        pvt.len = pvt.len.saturating_add(pushed);
         pvt.last = model_pvt.last;
         let mut took = false;
         let handover = if stop {
@@ -204,7 +225,7 @@ impl Controller {
         };
         self.up(model, took);
         (model_pvt.head, model_pvt.len, model_pvt.fault) = (pvt.head, pvt.len, pvt.fault);
-        **base = Base { run: self.run, pvt: **model_pvt, version: self.axis.version() };
+        base.version = self.axis.version();
         handover
     }
 }

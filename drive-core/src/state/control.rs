@@ -443,7 +443,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             && matches!(Command::from_raw(value), Some(Command::Stop | Command::EmergencyStop));
         if changed && (stops || matches!(obj, Obj::Stop | Obj::Enable)) {
             // A stop ends a PVT run too, and a program.
-            self.ctl.run = None;
+            self.end_run();
             self.program_stopped();
         }
         if obj == Obj::Enable {
@@ -573,12 +573,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// Whether the model holds something the tick's own controller has not taken in: a change
     /// to hand over by a sync.
     pub(crate) fn has_changes(&self) -> bool {
-        let (c, b) = (&self.ctl, &self.base);
-        c.axis.version() != b.version
-            || self.orders != Orders::default()
-            || self.heard
-            || c.run != b.run
-            || self.pvt != b.pvt
+        self.ctl.axis.version() != self.base.version || self.orders != Orders::default() || self.heard
     }
 
     /// Where the control tick owns a controller of its own: motion starts `margin_us` after the

@@ -100,7 +100,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// Ends the set-points, a PVT run and a homing, as a stop does.
     fn end_motion(&mut self) {
         self.pp = super::Pp::default();
-        self.ctl.run = None;
+        self.end_run();
         if self.homing_outcome() == crate::state::homing::Outcome::Running as u32 {
             self.homing_command(0);
         }

@@ -47,6 +47,7 @@
 
 use super::DriveState;
 use super::memory::ProgramMemory;
+use crate::controller::handoff::RunOrder;
 use crate::controller::run::{Phase, Source};
 use crate::modes::{PvtMode, WorkMode};
 use crate::motion::axis::Axis;
@@ -280,13 +281,15 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
                 self.table.borrow().set(slot, p);
                 pvt.len += 1;
                 pvt.last = Some(p);
+                self.orders.pushed = self.orders.pushed.saturating_add(1);
             }
             Ok(Effect::Clear) => {
                 (pvt.head, pvt.len, pvt.last) = (0, 0, None);
+                self.orders.set_queue(pvt);
             }
             Ok(Effect::Start(_)) => {}
             Ok(Effect::Stop) => {
-                self.ctl.run = None;
+                self.end_run();
                 // The tick stops from where its axis is when the order arrives.
                 self.orders.stop = true;
                 // 0x600B's ramp, without its jerk limit: a PVT segment may end with more
@@ -302,5 +305,16 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     fn start_run(&mut self) {
         let Ok((source, _, _)) = self.plan_run() else { return };
         self.ctl.start_run(self.plan_time(), source, &mut self.pvt, self.table.borrow());
+        if let Some(run) = self.ctl.run {
+            self.orders.run = Some(RunOrder::Start(run, self.ctl.status.pvt_pointer));
+            self.orders.set_queue(&self.pvt);
+        }
+    }
+
+    /// Ends the PVT run, if one runs: here, and by an order to the tick.
+    pub(crate) fn end_run(&mut self) {
+        if self.ctl.run.take().is_some() {
+            self.orders.run = Some(RunOrder::End);
+        }
     }
 }
