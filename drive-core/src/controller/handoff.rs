@@ -20,12 +20,13 @@
 //!   last setpoint back). Otherwise the model takes the tick's walk;
 //! - status bits are the tick's: the bus side orders the ones it cleared cleared, and the
 //!   output pins' levels the master wrote written ([`Orders`]);
-//! - a PVT run the bus side started or ended, the PVT points it pushed or cleared, a stop
-//!   ([`Orders`]), and a frame heard (the watchdog restarts);
+//! - a PVT run the bus side started or ended, the PVT points it pushed or cleared, a stop, a
+//!   homing's watch and suspended stops, the fault history emptied ([`Orders`]), and a frame
+//!   heard (the watchdog restarts);
 //! - the events the tick raised go up, for the bus side to act on.
 
 use super::run::{Pvt, Run};
-use super::{Controller, Events, Outputs, Settings, Status};
+use super::{Controller, Events, Outputs, Settings, Status, Watch};
 use crate::faults::Inputs;
 use crate::motion::cubic::Table;
 use crate::units::{Instant, TICK_MICROS};
@@ -86,7 +87,8 @@ impl Clears {
 /// What the bus side orders the tick to do on its own state since the last sync: a stop ramp
 /// from wherever the axis is when the order arrives (a PVT stop), status bits to clear, the
 /// output pins' levels the master wrote, new settings to take, a PVT run started or ended, the
-/// PVT queue as the bus side left it and the points it pushed since.
+/// PVT queue as the bus side left it and the points it pushed since, a homing's watch and
+/// suspended stops, the fault history emptied.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Orders {
     /// Stop: a ramp at the stop deceleration, and the PVT run ends.
@@ -104,6 +106,12 @@ pub struct Orders {
     pub(crate) queue: Option<(u16, u16)>,
     /// PVT points pushed since the last sync (after `queue`'s).
     pub(crate) pushed: u16,
+    /// The watch the bus side armed for its plan (`Some(Some(..))`) or cancelled (`Some(None)`).
+    pub(crate) watch: Option<Option<Watch>>,
+    /// The pins whose external stop a homing suspends, when the bus side changed them.
+    pub(crate) suspend: Option<u16>,
+    /// Empty the fault history (0x200F = 5).
+    pub(crate) clear_history: bool,
 }
 
 impl Orders {
@@ -168,8 +176,9 @@ impl Controller {
         if starts.is_some_and(|at| now < at) {
             return Handover::Waiting;
         }
-        let Orders { stop, settings: changed, clear, outputs, run, queue, pushed } = core::mem::take(*orders);
-        if core::mem::take(&mut model.clear_history) {
+        let Orders { stop, settings: changed, clear, outputs, run, queue, pushed, watch, suspend, clear_history } =
+            core::mem::take(*orders);
+        if clear_history {
             self.faults.clear_history();
         }
         // The bus side's settings, whole, when they changed. The zero offset is the tick's own
@@ -182,9 +191,13 @@ impl Controller {
             *settings = **bus_settings;
         }
         self.heard |= core::mem::take(*heard);
-        // A watch belongs to its plan (its version): one that fired here meanwhile stays
-        // spent, as the stop it made changed the axis' version.
-        (self.watch, self.suspend) = (model.watch, model.suspend);
+        // A watch belongs to its plan (its version), and comes with it.
+        if let Some(watch) = watch {
+            self.watch = watch;
+        }
+        if let Some(pins) = suspend {
+            self.suspend = pins;
+        }
         clear.clear(&mut self.status, pvt);
         if let Some((mask, levels)) = outputs {
             let s = &mut self.status;
@@ -202,7 +215,6 @@ impl Controller {
             (pvt.head, pvt.len) = (head, len);
         }
         pvt.len = pvt.len.saturating_add(pushed);
-        pvt.last = model_pvt.last;
         let mut took = false;
         let handover = if stop {
             self.axis.stop_ramp(settings.stop_decel);
@@ -244,7 +256,7 @@ impl Controller {
             model.axis.follow_walk_of(&self.axis);
         }
         model.status = self.status;
-        model.faults = self.faults;
+        (model.faults, model.clear_history) = (self.faults, false);
         model.commanded = self.commanded;
         model.probe = self.probe;
         model.servo = self.servo;

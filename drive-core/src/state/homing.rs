@@ -293,7 +293,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
                 if let Some(limit) = reverse {
                     (self.homing.limit, self.homing.limit_high) = field(limit);
                 }
-                self.ctl.suspend = self.homing.pin | self.homing.limit;
+                self.suspend_stops(self.homing.pin | self.homing.limit);
             }
             Method::Here => self.homing.home = Some(self.ctl.axis.setpoint().whole),
             Method::Index { up } => {
@@ -335,7 +335,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
                 self.homing.steps = plan;
                 (self.homing.pin, self.homing.active_high) = (pin, active_high);
                 // The reference switch's own external stop would stop every search on it.
-                self.ctl.suspend = pin;
+                self.suspend_stops(pin);
             }
         }
         self.homing_step();
@@ -369,8 +369,9 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         };
         // At a hard stop the axis halts: it cannot ramp down into the stop.
         let decel = if step.until == Until::Stall { 0 } else { accel };
-        h.version = self.ctl.axis.version();
-        self.ctl.watch = Some(Watch { on, version: h.version, decel, up: step.up });
+        let version = self.ctl.axis.version();
+        h.version = version;
+        self.set_watch(Some(Watch { on, version, decel, up: step.up }));
     }
 
     /// What the tick reported, for a homing that runs: a caught position (the next step), a
@@ -451,7 +452,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         let speed = self.param(Obj::HomingZeroSpeed) as f32;
         let accel = self.param(Obj::HomingAccel) as f32;
         let limits = Limits { v_max: speed, a_max: accel, d_max: accel, jerk: None };
-        self.ctl.watch = None;
+        self.set_watch(None);
         if self.ctl.axis.move_to(self.plan_time(), 0, 0.0, 0.0, &limits).is_err() {
             return self.end_homing(Outcome::Interrupted);
         }
@@ -466,8 +467,20 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// Ends the homing with `outcome`: the watch and the suspended stops go.
     fn end_homing(&mut self, outcome: Outcome) {
         self.homing = Homing { outcome, ..Homing::default() };
-        self.ctl.watch = None;
-        self.ctl.suspend = 0;
+        self.set_watch(None);
+        self.suspend_stops(0);
+    }
+
+    /// Arms `watch` for the tick, or cancels the one armed (`None`): in the model, and as an
+    /// order.
+    fn set_watch(&mut self, watch: Option<Watch>) {
+        (self.ctl.watch, self.orders.watch) = (watch, Some(watch));
+    }
+
+    /// Suspends the external stops of `pins` (none: 0) while a homing searches them: in the
+    /// model, and as an order.
+    fn suspend_stops(&mut self, pins: u16) {
+        (self.ctl.suspend, self.orders.suspend) = (pins, Some(pins));
     }
 
     /// When [`DriveState::homing_service`] has something to check: while a homing runs, every

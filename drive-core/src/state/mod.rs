@@ -915,7 +915,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
                         self.clear_alarms();
                     }
                     if value == 5 {
-                        self.ctl.clear_history = true;
+                        (self.ctl.clear_history, self.orders.clear_history) = (true, true);
                         self.history_unsaved = true;
                     }
                     if value == 3 {
