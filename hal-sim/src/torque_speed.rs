@@ -145,7 +145,8 @@ pub struct SpunUp {
 }
 
 impl SpunUp {
-    /// Runs one control tick ([`tick`]): whether the motor still carries its load.
+    /// Runs one control tick, the drive's timer served as a board's bus task does: whether the
+    /// motor still carries its load.
     pub fn tick(&mut self) -> bool {
         self.carried = self.carried && tick(&mut self.plant, self.limit, &mut self.worst_lag);
         self.carried
