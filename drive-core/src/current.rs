@@ -5,14 +5,14 @@
 //! its own stationary axis (phase A is α, phase B is β):
 //!
 //! - **the plant** is L·di/dt = v − R·i − e, with e the back-EMF; sampled with a zero-order hold
-//!   at the PWM period T, i[k+1] = a·i[k] + b·(v[k] − e[k]) with a = e^(−R·T/L) and
+//!   at the PWM period T, `i[k+1] = a·i[k] + b·(v[k] − e[k])` with a = e^(−R·T/L) and
 //!   b = (1 − a)/R;
 //! - **one period of delay**: the currents are sampled at the centre of a period and the voltage
 //!   computed from them is applied over the whole of the next one (the timers take their
-//!   preloaded compare values at the next update), so the voltage that follows from i[k] first
-//!   shows in i[k+2];
+//!   preloaded compare values at the next update), so the voltage that follows from `i[k]` first
+//!   shows in `i[k+2]`;
 //! - **a predictor** undoes that delay: the voltage applied over the current period is known (it
-//!   is the last output), so i[k+1] is predicted from i[k] and it, and the PI acts on the error of
+//!   is the last output), so `i[k+1]` is predicted from `i[k]` and it, and the PI acts on the error of
 //!   that prediction. What the model misses (a back-EMF not fed forward, R or L off) shows as
 //!   the difference between the current measured and the one predicted for now; that difference,
 //!   low-passed ([`CORRECTION_GAIN`]), corrects the prediction (a Smith predictor with a

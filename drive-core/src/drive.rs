@@ -473,8 +473,8 @@ impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> 
         if n == 0 { None } else { self.tx.get(..n) }
     }
 
-    /// [`Drive::take_reply`] and [`DriveState::lend`] at once: where the tick owns a controller
-    /// of its own, the reply goes out while the tick takes in what the request changed.
+    /// [`Drive::take_reply`] and [`Drive::lend`] at once: where the tick owns a controller of its
+    /// own, the reply goes out while the tick takes in what the request changed.
     pub fn reply_and_lend(&mut self) -> (Option<&[u8]>, Lent<'_>) {
         let n = core::mem::take(&mut self.tx_len);
         let reply = if n == 0 { None } else { self.tx.get(..n) };

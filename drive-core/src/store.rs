@@ -25,7 +25,7 @@
 //!   chunks do not make the committed CRC is not loaded (the program reads empty).
 //!
 //! The functions are async as the flash traits are; the drive state machine is not: the platform
-//! [`Store::load`]s before it builds the [`Drive`](crate::Drive) and performs the saves that
+//! [`Store::load`]s before it builds the [`Drive`] and performs the saves that
 //! [`Drive::take_system_request`](crate::Drive::take_system_request) asks for: with
 //! [`Store::serve`] if it can lend the drive for the flash operation, or as a [`Job`] taken from
 //! the drive, run on the flash without it, then reported back, if the drive sits behind a lock

@@ -2,7 +2,7 @@
 //! endpoint (raw RTU frames), and requests framed here where tokio-modbus has no master for them:
 //! seed 003's sub-indexed requests, which no standard master frames, and Modbus ASCII lines
 //! (tokio-modbus has no ASCII client). Those share one path above the framing: the request's PDU
-//! is built once ([`Link::read`], [`Link::write`], [`Link::identify`]) and [`Link::exchange`]
+//! is built once ([`Link::read`], [`Link::write`], [`Link::identify`]) and `Link::exchange`
 //! frames it as RTU (CRC, a reply ended by t3.5 of silence) or ASCII (`:`, hex, LRC, CR LF, a
 //! reply ended by its LF), then checks the reply's address and function and maps exceptions.
 

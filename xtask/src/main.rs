@@ -108,6 +108,8 @@ fn ci() -> Result<(), String> {
     run(cargo().args(["fmt", "--all", "--check"]))?;
     step("clippy (host)");
     run(cargo().args(["clippy", "--workspace", "--all-targets", "--", "-D", "warnings"]))?;
+    step("rustdoc (host): every doc link resolves and names a public item");
+    run(cargo().args(["doc", "--no-deps"]).env("RUSTDOCFLAGS", "-D warnings"))?;
     step("clippy (firmware)");
     // The G474 binary and its HIL suite.
     run(cargo().args(firmware_args("clippy", &["--bin", "firmware", "--test", "hil"])).args(["--", "-D", "warnings"]))?;

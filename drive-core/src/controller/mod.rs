@@ -207,8 +207,8 @@ impl Events {
     pub const POWER_FAILING: Self = Self(1 << 2);
     /// The closed loop's first reading set the zero offset (§5.5.15) to the settings' value.
     pub const ZERO_OFFSET: Self = Self(1 << 3);
-    /// The watch the bus side armed saw what it waited for: the position is in
-    /// [`Controller::caught`], and the axis is stopping.
+    /// The watch the bus side armed saw what it waited for: the controller holds the position
+    /// where it did, and the axis is stopping.
     pub const CAUGHT: Self = Self(1 << 4);
     /// An input turned active: its function is the bus side's to carry out.
     pub const INPUT: Self = Self(1 << 5);

@@ -456,7 +456,7 @@ fn div_digit(hi: u32, lo: u32, d: u32) -> (u32, u32) {
 const MAX_STRIDE: u64 = 64;
 
 /// A segment walked tick by tick: the same exact position as [`Cubic::at`] (floor and fraction),
-/// by forward differences of the numerator polynomial, kept as [`Mixed`] numbers over its
+/// by forward differences of the numerator polynomial, kept as mixed numbers over its
 /// denominator. Where `Cubic::at` divides 128-bit integers every tick, which a Cortex-M4 does in
 /// software at thousands of instructions, a step of the walk is three exact additions.
 ///
