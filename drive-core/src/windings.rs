@@ -293,6 +293,16 @@ impl LoopObjects {
         Ok(WindingSettings::new(current))
     }
 
+    /// The objects from their words: R, L, KP, KI (the dictionary's `CURRENT_LOOP_OBJECTS`).
+    pub fn from_words([r_mohm, l_uh, kp, ki]: [u16; 4]) -> Self {
+        Self { r_mohm, l_uh, kp, ki }
+    }
+
+    /// The objects' words, in the order [`LoopObjects::from_words`] takes them.
+    pub fn words(&self) -> [u16; 4] {
+        [self.r_mohm, self.l_uh, self.kp, self.ki]
+    }
+
     /// The objects of `settings`, rounded into their units and ranges.
     pub fn of(settings: &WindingSettings) -> Self {
         let c = settings.current_loop();

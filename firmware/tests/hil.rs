@@ -246,7 +246,7 @@ mod tests {
         let Hil { board, drive } = hil;
         let mut stage = board.stage;
         let mut params = Params::factory();
-        let objects = [Obj::MotorResistance, Obj::MotorInductance, Obj::CurrentKp, Obj::CurrentKi];
+        let objects = drive_core::od::CURRENT_LOOP_OBJECTS;
         let before = objects.map(|o| params.get(o));
         stage.power_up_loop(&mut params);
         assert!(!stage.has_loop(), "no loop from a failed tune");

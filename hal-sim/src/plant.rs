@@ -20,7 +20,7 @@ use drive_core::Instant;
 use drive_core::control::{Outputs, TICK_MICROS};
 use drive_core::controller::handoff::TickSide;
 use drive_core::faults::Inputs;
-use drive_core::od::{Obj, ObjError};
+use drive_core::od::{CURRENT_LOOP_OBJECTS, Obj, ObjError};
 use drive_core::windings::LoopObjects;
 
 use crate::encoder::{Encoder, EncoderKind};
@@ -193,24 +193,14 @@ impl Plant {
         let word = |obj: Obj| state.read(obj).min(u32::from(u16::MAX)) as u16;
         let setup = LoopSetup {
             auto_tune: state.read(Obj::CurrentAutoTune) != 0,
-            objects: LoopObjects {
-                r_mohm: word(Obj::MotorResistance),
-                l_uh: word(Obj::MotorInductance),
-                kp: word(Obj::CurrentKp),
-                ki: word(Obj::CurrentKi),
-            },
+            objects: LoopObjects::from_words(CURRENT_LOOP_OBJECTS.map(word)),
             test_ma: word(Obj::PhaseCurrent),
         };
         let bridges = Bridges::new(&mut self.motor, sensing, setup);
         let state = self.drive.state_mut();
         state.set_current_loop(true);
         if let Some(t) = bridges.tuned() {
-            for (obj, v) in [
-                (Obj::MotorResistance, t.r_mohm),
-                (Obj::MotorInductance, t.l_uh),
-                (Obj::CurrentKp, t.kp),
-                (Obj::CurrentKi, t.ki),
-            ] {
+            for (obj, v) in CURRENT_LOOP_OBJECTS.into_iter().zip(t.words()) {
                 state.apply(obj, u32::from(v));
             }
         }

@@ -12,6 +12,11 @@ pub mod native;
 pub(crate) use effects::{has_effect, is_command, is_pvt_command, is_signal};
 pub use native::{OBJECTS, Obj};
 
+/// The current loop's objects a power-up tune writes and the loop is built from at power-up:
+/// R (0x2108), L (0x2109), KP (0x210C), KI (0x210D), in the order of
+/// `windings::LoopObjects::words`.
+pub const CURRENT_LOOP_OBJECTS: [Obj; 4] = [Obj::MotorResistance, Obj::MotorInductance, Obj::CurrentKp, Obj::CurrentKi];
+
 /// How an object's value is encoded in registers.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Type {

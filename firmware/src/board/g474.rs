@@ -304,14 +304,9 @@ impl Stage {
     /// 0x210C, 0x210D): tuned ([`Stage::tune`], its results written into them) or from them.
     /// With no loop (a failed tune, objects the loop refuses) the bridges stay off.
     pub fn power_up_loop(&mut self, params: &mut drive_core::Params) {
-        use drive_core::od::Obj;
+        use drive_core::od::{CURRENT_LOOP_OBJECTS, Obj};
         let word = |obj: Obj| params.get(obj).min(u32::from(u16::MAX)) as u16;
-        let objects = LoopObjects {
-            r_mohm: word(Obj::MotorResistance),
-            l_uh: word(Obj::MotorInductance),
-            kp: word(Obj::CurrentKp),
-            ki: word(Obj::CurrentKi),
-        };
+        let objects = LoopObjects::from_words(CURRENT_LOOP_OBJECTS.map(word));
         if params.get(Obj::CurrentAutoTune) == 0 {
             let v_bus = supply_mv(power_stage::slow_samples().0) as f32 * 1e-3;
             self.windings = objects.settings(v_bus, power_stage::PWM_HZ as f32).ok();
@@ -319,13 +314,7 @@ impl Stage {
         }
         self.tune(word(Obj::PhaseCurrent));
         if let Some(settings) = &self.windings {
-            let t = LoopObjects::of(settings);
-            for (obj, v) in [
-                (Obj::MotorResistance, t.r_mohm),
-                (Obj::MotorInductance, t.l_uh),
-                (Obj::CurrentKp, t.kp),
-                (Obj::CurrentKi, t.ki),
-            ] {
+            for (obj, v) in CURRENT_LOOP_OBJECTS.into_iter().zip(LoopObjects::of(settings).words()) {
                 params.set(obj, u32::from(v));
             }
         }
