@@ -62,6 +62,7 @@ pub mod pins;
 pub mod power_stage;
 use drive_core::windings::{LoopObjects, PowerUpTune, TuneStep, WindingSettings, WindingState, command_or_open};
 use power_stage::Bridges;
+pub use power_stage::bridge_temperature_c;
 
 use crate::power::PowerStage;
 
@@ -187,12 +188,6 @@ const _: () = {
         code += 1;
     }
 };
-
-/// The bridges' temperature, °C, of an NTC reading; `None` if the NTC is open or shorted (then
-/// the over-temperature alarm, 0x6000 bit 0, has nothing to act on).
-pub fn bridge_temperature_c(code: u16) -> Option<i16> {
-    power_stage::bridge_temperature_c(code)
-}
 
 /// What the control tick gives the drive: the last supply and temperature of the sense task (none
 /// before its first reading), and the encoder, read by the tick itself.

@@ -274,7 +274,7 @@ impl Bridges {
             DacChannel::new_internal_blocking::<DAC3, Ch2>(dac_a),
             DacChannel::new_internal_blocking::<DAC4, Ch1>(dac_b),
         ];
-        set_thresholds(&mut thresholds, over_current_ma);
+        set_thresholds(&mut thresholds, trip_ma(over_current_ma));
         let config = comp::Config {
             hysteresis: Hysteresis::Hyst10M,
             // INMSEL 100: DAC3 CH2 for COMP2, DAC4 CH1 for COMP5 (RM0440, the comparators'
@@ -403,8 +403,8 @@ impl Bridges {
     /// into the shunt: a short through that switch, or the winding's current beyond the trip in
     /// that direction (`docs/board-g474.md`, *The power stage*).
     pub fn set_over_current(&mut self, setting_ma: u32) {
-        set_thresholds(&mut self.thresholds, setting_ma);
         self.trip_ma = trip_ma(setting_ma);
+        set_thresholds(&mut self.thresholds, self.trip_ma);
     }
 
     /// Sets the four half-bridges' duties, the share of the period each high side conducts in
@@ -505,10 +505,10 @@ fn start_in_step() {
     }
 }
 
-/// The comparators' DAC codes for a trip at [`TRIP_PERCENT`] of `setting_ma` through a shunt,
-/// at the op-amps' inputs (VDDA/16 + 15/16 of the shunt's voltage).
-fn set_thresholds(dacs: &mut [DacChannel<'static, Blocking>; 2], setting_ma: u32) {
-    let trip_ma = u64::from(setting_ma) * u64::from(TRIP_PERCENT) / 100;
+/// The comparators' DAC codes for a trip at `trip_ma` ([`trip_ma`]) through a shunt, at the
+/// op-amps' inputs (VDDA/16 + 15/16 of the shunt's voltage).
+fn set_thresholds(dacs: &mut [DacChannel<'static, Blocking>; 2], trip_ma: i32) {
+    let trip_ma = u64::from(trip_ma.unsigned_abs());
     // mA · mΩ = µV.
     let bias_uv = u64::from(VDDA_MV) * 1000 / u64::from(BIAS_DIV);
     let uv = bias_uv + trip_ma * u64::from(SHUNT_MOHM) * u64::from(BIAS_DIV - 1) / u64::from(BIAS_DIV);
@@ -544,7 +544,8 @@ pub fn slow_samples() -> (u16, u16, u16) {
 }
 
 /// The bridges' temperature, °C, of an NTC reading (interpolated in [`NTC_CODES`], held at the
-/// table's ends); `None` if the NTC is open or shorted.
+/// table's ends); `None` if the NTC is open or shorted (then the over-temperature alarm, 0x6000
+/// bit 0, has nothing to act on).
 pub fn bridge_temperature_c(code: u16) -> Option<i16> {
     if !(NTC_SHORT..=NTC_OPEN).contains(&code) {
         return None;
