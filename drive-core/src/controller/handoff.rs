@@ -245,8 +245,9 @@ impl Controller {
 impl Controller {
     /// The tick's state into the bus side's `model` (the track stays the model's: the tick's is
     /// the same, or a dropped plan's that nothing walks; of an axis that just `took` the model's
-    /// plan, only the last tick). Out of line: as arguments the two are known apart, and their
-    /// fields copy as plain copies, not as moves of what may overlap.
+    /// plan, only the last tick; the watch, which only the tick reads, stays as the bus side
+    /// ordered it). Out of line: as arguments the two are known apart, and their fields copy as
+    /// plain copies, not as moves of what may overlap.
     #[inline(never)]
     fn up(&mut self, model: &mut Controller, took: bool) {
         model.zero_offset = self.zero_offset;
@@ -262,7 +263,6 @@ impl Controller {
         model.servo = self.servo;
         model.run = self.run;
         model.still_since = self.still_since;
-        model.watch = self.watch;
         model.caught = self.caught.take().or(model.caught);
         model.events = Events(model.events.0 | core::mem::take(&mut self.events).0);
     }
