@@ -1,25 +1,17 @@
 //! Issue 39's acceptance: the pull-out torque through the G474's bridges within 10 % of the
 //! ideal chopper's (`hal_sim::torque_speed`), both catalogue motors at 12, 24 and 48 V, 0 to
-//! 20 rev/s. The whole sweep runs (seconds); the points where the two differ by more are listed
-//! in [`OUTSIDE`], with the reason in `docs/current-loop.md` ("Torque-speed"), and printed.
+//! 20 rev/s. The bridges are asserted at least 0.9 of the chopper at every point, and at most 1.1
+//! of it where the chopper carries its flat part of the curve ([`FLAT`]); past the chopper's
+//! corner, where it loses torque to the mid-band resonance and then the unloaded motor, the
+//! bridges damp the resonance (`drive_core::windings::DAMPING_GAIN`) and carry more
+//! (`docs/current-loop.md`, *Torque-speed*). Every point is printed.
 
 use hal_sim::motor::MotorCatalog;
 use hal_sim::torque_speed::{SPEEDS_RPS, SUPPLIES_V, compare, csv_row, measure, setups};
 
-/// The speeds (rev/s) of each motor and supply at which the bridges are not within 10 % of the
-/// chopper.
-const OUTSIDE: [(&str, f64, &[f64]); 5] = [
-    // Past the chopper's corner the bridges carry more, 1.5 times to all (the chopper loses
-    // the speed unloaded: from 10 rev/s at 12 V, 16 rev/s at 24 V).
-    ("17HS19-2004S1", 12.0, &[6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 18.0, 20.0]),
-    ("17HS19-2004S1", 24.0, &[12.0, 14.0, 16.0, 18.0, 20.0]),
-    // The NEMA 23's back-EMF is beyond 12 V from 3 rev/s: both carry under 0.3 N·m, the
-    // bridges 0.2 to 2 times the chopper.
-    ("23HS30-3004S", 12.0, &[4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 18.0, 20.0]),
-    // Past the chopper's corner, as the NEMA 17's (the chopper loses 8 and 12 rev/s unloaded).
-    ("23HS30-3004S", 24.0, &[6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 18.0, 20.0]),
-    ("23HS30-3004S", 48.0, &[10.0, 12.0, 14.0, 16.0, 18.0, 20.0]),
-];
+/// The share of the holding torque K_m·I above which the chopper's curve is flat (before its
+/// corner): there the bridges must not carry more than 1.1 times it either.
+const FLAT: f64 = 0.85;
 
 #[test]
 fn the_bridges_pull_out_torque_is_within_10_percent_of_the_choppers() {
@@ -29,15 +21,18 @@ fn the_bridges_pull_out_torque_is_within_10_percent_of_the_choppers() {
     let rows = compare(&curves);
     assert_eq!(rows.len(), 2 * SUPPLIES_V.len() * SPEEDS_RPS.len());
     let mut failed = Vec::new();
+    let mut above = 0;
     for row in &rows {
-        let outside = OUTSIDE
-            .iter()
-            .any(|(m, v, speeds)| *m == row.motor && *v == row.supply_v && speeds.contains(&row.chopper.speed_rps));
-        let within = (row.ratio() - 1.0).abs() <= 0.10;
-        println!("{}{}", csv_row(row), if outside { " (listed outside)" } else { "" });
-        if !outside && !within {
+        let holding = curves.iter().find(|c| c.setup.motor.name == row.motor).map_or(0.0, |c| c.setup.holding_nm());
+        let flat = row.chopper.torque_nm >= FLAT * holding;
+        let ratio = row.ratio();
+        let ok = ratio >= 0.9 && (!flat || ratio <= 1.1);
+        above += usize::from(ratio > 1.1);
+        println!("{}{}", csv_row(row), if ok { "" } else { " (fails)" });
+        if !ok {
             failed.push(csv_row(row));
         }
     }
-    assert!(failed.is_empty(), "beyond 10 % and not listed: {failed:#?}");
+    println!("{above} of {} points above 1.1, none under 0.9 allowed", rows.len());
+    assert!(failed.is_empty(), "under 0.9 of the chopper, or over 1.1 where its curve is flat: {failed:#?}");
 }

@@ -69,6 +69,10 @@ pub struct Outputs {
     pub fast_decay: U0F16,
     /// How the pulse input's counter counts (0x21B7, 0x21B8).
     pub pulse: io::PulseInput,
+    /// Whether `commutation` follows the measured rotor (an encoder's closed loop): the
+    /// windings then keep its angle as it is (no damping of their own,
+    /// [`crate::windings::DAMPING_GAIN`]).
+    pub closed_loop: bool,
 }
 
 /// The drive's running status bits and measurements: what the live objects report.
@@ -485,6 +489,7 @@ impl Controller {
             microsteps: s.microsteps,
             fast_decay: s.fast_decay,
             pulse: s.pulse,
+            closed_loop: matches!(self.servo.feedback, Feedback::Closed(_)),
         }
     }
 }
