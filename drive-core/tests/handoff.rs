@@ -323,7 +323,7 @@ fn a_fault_cleared_over_the_bus_is_cleared_in_the_tick() {
     for k in 0..10 {
         tick_at(&mut d, &mut tick, k, false, &hot);
     }
-    assert_eq!(synced(&mut d, &mut tick, tick_time(10)), Handover::Done);
+    assert_eq!(synced(&mut d, &mut tick, tick_time(2_001)), Handover::Done);
     let error = |t: &TickSide| t.controller().status().error;
     assert_ne!(error(&tick), 0, "over-temperature latched");
     for k in 10..20 {
@@ -425,4 +425,22 @@ fn pvt_points_pushed_while_the_tick_walks_the_fifo_join_its_queue() {
     assert_eq!(last.map(|o| o.setpoint.whole), Some(end), "the tick ends on the last point");
     assert_eq!(d.state().position(), end);
     assert_eq!(d.state().read(Obj::PvtCount), 0);
+}
+
+#[test]
+fn a_tick_side_made_after_ticks_on_the_model_itself_takes_in_nothing_twice() {
+    // Ticked on its own model (one owner), the drive's orders and plans are in that controller.
+    let mut d = drive();
+    assert!(serve(&mut d, tick_time(0), &w32(0x6005, 20_000)));
+    for k in 0..2_000 {
+        d.tick_with(tick_time(k + 1), &Inputs::default());
+    }
+    assert!(!d.has_changes(), "nothing left to hand over");
+    let moved = d.state().position();
+    assert!(moved > 0);
+    // A tick side split off now starts where the model is: its first sync replays no plan.
+    let mut tick = d.state().tick_side();
+    assert_eq!(synced(&mut d, &mut tick, tick_time(2_001)), Handover::Done);
+    let out = tick.tick(tick_time(2_001), &Inputs::default(), d.state().table());
+    assert!(out.setpoint.whole >= moved && out.setpoint.whole - moved < 10, "{} after {moved}", out.setpoint.whole);
 }

@@ -617,6 +617,9 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             self.ctl.heard();
         }
         let out = self.ctl.tick(&self.settings, now, inputs, &mut self.pvt, self.table.borrow());
+        // One owner: what the bus side ordered is in this controller already, and its plans
+        // too; nothing is left for a tick side to take in.
+        (self.orders, self.base.version) = (Orders::default(), self.ctl.axis.version());
         if !self.ctl.events.is_empty() {
             let events = self.ctl.take_events();
             self.take_events(events);
