@@ -39,6 +39,8 @@ pub const FAULT_OVERLOAD: u8 = 1 << 1;
 pub const FAULT_POSITION: u8 = 1 << 2;
 /// 0x2135 bit 3: the encoder is lost (closed loop, no reading).
 pub const FAULT_ENCODER: u8 = 1 << 3;
+/// 0x2135 bit 4: overspeed, the motor's speed beyond the overspeed limit (0x21F6).
+pub const FAULT_OVERSPEED: u8 = 1 << 4;
 
 /// 0x2138 bit 0: the communication timeout 0x2137 ran out.
 pub const COMM_TIMEOUT: u8 = 1 << 0;
@@ -63,6 +65,8 @@ pub mod alarm {
     pub const ENCODER: u8 = 27;
     /// The communication timeout 0x2137 ran out (our code: seed 004's communication error).
     pub const COMM_TIMEOUT: u8 = 30;
+    /// Overspeed: the motor's speed beyond the overspeed limit 0x21F6 (our code).
+    pub const OVERSPEED: u8 = 31;
 }
 
 /// The 0x6000 bits with their alarm codes, most severe first.
@@ -75,9 +79,10 @@ pub(crate) const ERROR_ALARMS: [(u8, u8); 6] = [
     (ERR_OVER_TEMPERATURE, alarm::OVER_TEMPERATURE),
 ];
 /// The 0x2135 bits with their alarm codes, most severe first.
-pub(crate) const FAULT_ALARMS: [(u8, u8); 4] = [
+pub(crate) const FAULT_ALARMS: [(u8, u8); 5] = [
     (FAULT_OVER_VOLTAGE, alarm::OVER_VOLTAGE),
     (FAULT_ENCODER, alarm::ENCODER),
+    (FAULT_OVERSPEED, alarm::OVERSPEED),
     (FAULT_POSITION, alarm::POSITION_ERROR),
     (FAULT_OVERLOAD, alarm::OVERLOAD),
 ];

@@ -66,10 +66,7 @@ impl Rig {
 
     fn snapshot(&self) -> (Vec<u32>, i64) {
         let s = self.drive.state();
-        (
-            OBJECTS.iter().filter(|d| d.obj != drive_core::od::Obj::CurrentCommand).map(|d| s.read_def(d)).collect(),
-            self.position(),
-        )
+        (OBJECTS.iter().filter(|d| !d.obj.is_diagnostic()).map(|d| s.read_def(d)).collect(), self.position())
     }
 }
 

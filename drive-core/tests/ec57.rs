@@ -28,14 +28,10 @@ impl MapRig {
         self.exchange(&hex(request))
     }
 
-    /// Every object's value.
+    /// Every object's value but the diagnostics' ([`Obj::is_diagnostic`]).
     fn objects(&self) -> Vec<u32> {
         let st = self.drive.state();
-        drive_core::od::OBJECTS
-            .iter()
-            .filter(|d| d.obj != drive_core::od::Obj::CurrentCommand)
-            .map(|d| st.read(d.obj))
-            .collect()
+        drive_core::od::OBJECTS.iter().filter(|d| !d.obj.is_diagnostic()).map(|d| st.read(d.obj)).collect()
     }
 
     /// Reads `n` registers from (index, sub); the values or the exception code.
@@ -382,4 +378,55 @@ fn the_current_loop_registers() {
     // The native objects they are.
     let st = r.drive.state();
     assert_eq!((st.read(Obj::CurrentAutoTune), st.read(Obj::CurrentKp), st.read(Obj::CurrentKi)), (0, 764, 112));
+}
+
+/// 0x2012 and 0x201F: a motion beyond the overspeed limit moves nothing and reads 30; one
+/// within it moves and reads 0; a limit lowered under the running speed latches the overspeed
+/// alarm (31) and stops the motor; the limit is saved with 0x2030.
+#[test]
+fn the_overspeed_limit_and_the_not_moving_code() {
+    let mut r = rig();
+    assert_eq!(r.read_sub(0x2012, 0, 1), Ok(vec![1600]), "the manual's factory value");
+    assert_eq!(r.read_sub(0x201F, 0, 1), Ok(vec![0]));
+    assert_eq!(r.write_sub(0x2012, 0, 3001), Err(0x06));
+    assert_eq!(r.write_sub(0x201F, 0, 0), Err(0x05), "read only");
+    // 60 r/min at 10 000 pulses a revolution: 10 000 pulses a second.
+    r.write_sub(0x2012, 0, 60).expect("60 r/min");
+    let speed = |r: &mut MapRig, pps: i32| {
+        let [a, b, c, d] = pps.to_be_bytes();
+        r.request(&[1, 0x10, 0x60, 0x03, 0xFF, 0x00, 0x02, 0x04, a, b, c, d]).expect("speed");
+    };
+    let relative = |r: &mut MapRig, steps: i32| {
+        let [a, b, c, d] = steps.to_be_bytes();
+        r.request(&[1, 0x10, 0x60, 0x05, 0xFF, 0x00, 0x02, 0x04, a, b, c, d]).map(|_| ())
+    };
+    speed(&mut r, 12_000);
+    let before = r.objects();
+    assert_eq!(relative(&mut r, 5_000), Err(0x06), "72 r/min asked");
+    r.run(100_000);
+    assert_eq!(r.drive.state().read_i32(Obj::Position), 0, "nothing moved");
+    assert_eq!(r.read_sub(0x201F, 0, 1), Ok(vec![30]));
+    assert_eq!(r.objects(), before, "and nothing else changed");
+    // Within it: the move runs, and the code is 0 again.
+    speed(&mut r, 9_000);
+    relative(&mut r, 5_000).expect("54 r/min");
+    assert_eq!(r.read_sub(0x201F, 0, 1), Ok(vec![0]));
+    r.run(3_000_000);
+    assert_eq!(r.drive.state().read_i32(Obj::Position), 5_000);
+    // The limit lowered under a running move's speed: the overspeed alarm stops the motor.
+    relative(&mut r, 20_000).expect("54 r/min");
+    // Cruising at 54 r/min after the ramp (0x600A's level 8, 5 210 pulses a second squared).
+    r.run(2_500_000);
+    r.write_sub(0x2012, 0, 30).expect("30 r/min");
+    r.run(20_000);
+    let stopped = r.drive.state().read_i32(Obj::Position);
+    assert!(stopped < 25_000, "{stopped}");
+    assert_eq!(r.read_sub(0x201C, 1, 1), Ok(vec![31]), "the overspeed alarm in the fault list");
+    r.run(100_000);
+    assert_eq!(r.drive.state().read_i32(Obj::Position), stopped, "stopped where it was");
+    // Saved with the rest.
+    r.write_sub(0x2012, 0, 1200).expect("1200 r/min");
+    r.write_sub(0x2030, 0, 1).expect("save");
+    assert_eq!(r.drive.take_system_request(), Some(drive_core::SystemRequest::Save));
+    assert_eq!(r.drive.state().params().get(Obj::OverspeedLimit), 1200);
 }

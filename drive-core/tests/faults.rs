@@ -287,7 +287,7 @@ fn the_new_objects_reject_bad_writes() {
         (0x2136, 0, 2),
         (0x2132, 39, 3),
         (0x2133, 10_001, 3),
-        (0x2135, 0x10, 3),
+        (0x2135, 0x20, 3),
     ] {
         let [ah, al] = addr.to_be_bytes();
         let [vh, vl] = value.to_be_bytes();
@@ -388,4 +388,37 @@ fn the_watchdog_counts_from_power_up_when_the_clock_does_not_start_at_zero() {
     assert_eq!(drive.state().read(Obj::CommStatus), 0);
     drive.tick_with(Instant::from_micros(start + 100_000), &NOMINAL);
     assert_eq!(drive.state().read(Obj::CommStatus), 1);
+}
+
+/// 0x21F6 and 0x21F7 in the native map: a move or a run beyond the overspeed limit is refused
+/// (04) with nothing moved and 0x21F7 at 30; within it the move runs and 0x21F7 is 0 again; a
+/// limit lowered under the running speed latches the overspeed alarm.
+#[test]
+fn the_overspeed_limit_refuses_faster_motion_and_says_why() {
+    let mut bus = drive();
+    run(&mut bus, &NOMINAL, 1000);
+    // 4000 full steps a second is 1200 r/min: over a limit of 600.
+    assert!(write(&mut bus, 0x21F6, 600));
+    assert!(!write(&mut bus, 0x21F6, 3001), "beyond the manual's 3000");
+    let before = bus.snapshot();
+    assert_eq!(write32(&mut bus, 0x6005, 1000), Some(4));
+    assert_eq!(read(&bus, Obj::NotMovingCode), 30);
+    run(&mut bus, &NOMINAL, 100_000);
+    assert_eq!(bus.drive.state().position(), 0);
+    assert_eq!(bus.snapshot(), before, "nothing else changed");
+    // Velocity mode: the run at 0x6003 is refused too.
+    assert!(write(&mut bus, 0x6007, 1));
+    assert_eq!(write32(&mut bus, 0x6003, 4000), Some(4));
+    // 1000 full steps a second (300 r/min) runs, and the code is 0 again.
+    assert_eq!(write32(&mut bus, 0x6003, 1000), None);
+    assert_eq!(read(&bus, Obj::NotMovingCode), 0);
+    run(&mut bus, &NOMINAL, 500_000);
+    assert!(bus.drive.state().position() > 0);
+    // A limit lowered under the running speed: the next tick latches the overspeed alarm (31),
+    // and the power stage is off.
+    assert!(write(&mut bus, 0x21F6, 100));
+    let out = run(&mut bus, &NOMINAL, 100);
+    assert!(!out.enabled);
+    assert_eq!(read(&bus, Obj::DriveFaults) & 0x10, 0x10);
+    assert_eq!(read(&bus, Obj::AlarmCode), u32::from(alarm::OVERSPEED));
 }

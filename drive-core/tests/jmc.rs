@@ -49,7 +49,7 @@ impl Rig {
     fn snapshot(&self) -> (Vec<u32>, DeviceState, i64) {
         let st = self.drive.state();
         (
-            OBJECTS.iter().filter(|d| d.obj != drive_core::od::Obj::CurrentCommand).map(|d| st.read_def(d)).collect(),
+            OBJECTS.iter().filter(|d| !d.obj.is_diagnostic()).map(|d| st.read_def(d)).collect(),
             st.device_state(),
             st.position(),
         )

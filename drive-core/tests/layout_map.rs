@@ -95,10 +95,7 @@ impl Rig {
     /// Every object's value and the position: equal snapshots mean nothing changed.
     fn snapshot(&self) -> (Vec<u32>, i64) {
         let st = self.drive.state();
-        (
-            OBJECTS.iter().filter(|d| d.obj != drive_core::od::Obj::CurrentCommand).map(|d| st.read(d.obj)).collect(),
-            st.position(),
-        )
+        (OBJECTS.iter().filter(|d| !d.obj.is_diagnostic()).map(|d| st.read(d.obj)).collect(), st.position())
     }
 }
 

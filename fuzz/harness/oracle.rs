@@ -383,10 +383,10 @@ pub fn requests<M: drive_core::maps::RegisterMap>(
     }
 }
 
-/// Whether a snapshot compares `d`: every object but the current command, which the standstill
-/// current lowers as time passes, request or none.
+/// Whether a snapshot compares `d`: every object but the diagnostics
+/// (`Obj::is_diagnostic`).
 pub fn compared(d: &&drive_core::od::ObjectDef) -> bool {
-    d.obj != drive_core::od::Obj::CurrentCommand
+    !d.obj.is_diagnostic()
 }
 
 /// `n / d` to the nearest, halves away from zero.

@@ -3,8 +3,9 @@ No stock master speaks the EC-57's sub-index byte, so its three requests are pym
 PDUs (the way pymodbus documents for a vendor's functions), framed, timed and CRC-checked by
 pymodbus's own RTU framer: every frame of §1.3 compared byte for byte on the wire, each
 exception of §1.3.4 with the state read back unchanged, settings that act (the resolution, the
-standstill current), the position commands counted while the window moves the motor, and the
-map switched back to the native one.
+standstill current), a run beyond the overspeed limit refused with 0x201F saying why, the
+position commands counted while the window moves the motor, and the map switched back to the
+native one.
 
 Usage: pymodbus_ec57.py ENDPOINT   where ENDPOINT is a pseudo-terminal path or HOST:PORT of
 `hal-sim --map ec57`. Prints one line per check and 'N passed, M failed'; exits non-zero on any
@@ -174,6 +175,19 @@ check("0x2005 reads 10000", read(0x2005) == [10000])
 check("0x2005 = 10001 refused (06)", write(0x2005, 0, 10001) == 6)
 check("native 0x600C through the window: 50", read(0x600C, 0xFF) == [50])
 check("0x2003.2 = 40", write(0x2003, 2, 40) == 0 and read(0x2102, 0xFF) == [40])
+
+# 0x2012: a run beyond the overspeed limit does not start, and 0x201F says why (30).
+check("0x2012 reads 1600 r/min (factory)", read(0x2012) == [1600])
+check("0x2012 = 3001 refused (06)", write(0x2012, 0, 3001) == 6)
+check("0x2012 = 10 r/min", write(0x2012, 0, 10) == 0)
+r = client.execute(False, WriteMany(0x21A1, 0xFF, [0, 10000]))
+check("command target 10000 (window)", not r.isError())
+at = read(0x600E, 0xFF, 2)
+check("a run at 2000 pulses/s (12 r/min) refused (06)", write(0x21A0, 0xFF, 2) == 6)
+time.sleep(0.3)
+check("nothing moved", read(0x600E, 0xFF, 2) == at)
+check("0x201F reads 30 (command overspeed)", read(0x201F) == [30])
+check("0x2012 = 1600 again", write(0x2012, 0, 1600) == 0)
 
 # The window moves the motor; 0x2010/0x2011 count the position commands.
 check("clear the count (0x2011 = 1)", write(0x2011, 0, 1) == 0)

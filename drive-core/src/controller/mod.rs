@@ -194,6 +194,9 @@ pub struct Settings {
     pub pulse: io::PulseInput,
     /// The inputs' and outputs' functions (0x21BA-0x21C9).
     pub io: io::IoFunctions,
+    /// The overspeed limit (0x21F6) as the speed the tick compares: microsteps a second in
+    /// open loop, encoder counts a second in closed loop; 0 off.
+    pub overspeed: [f32; 2],
 }
 
 /// What the controller did on its own at a tick, for the bus side to take into account: a set

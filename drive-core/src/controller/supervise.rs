@@ -4,8 +4,8 @@
 use super::{Controller, Settings};
 use crate::faults::{
     COMM_TIMEOUT, ERR_A_OVER_CURRENT, ERR_B_OVER_CURRENT, ERR_COIL_A_OPEN, ERR_COIL_B_OPEN, ERR_OVER_TEMPERATURE,
-    ERR_UNDER_VOLTAGE, ERROR_ALARMS, FAULT_ALARMS, FAULT_ENCODER, FAULT_OVER_VOLTAGE, FAULT_OVERLOAD, Inputs,
-    OVERLOAD_MICROS, code_of,
+    ERR_UNDER_VOLTAGE, ERROR_ALARMS, FAULT_ALARMS, FAULT_ENCODER, FAULT_OVER_VOLTAGE, FAULT_OVERLOAD, FAULT_OVERSPEED,
+    Inputs, OVERLOAD_MICROS, code_of,
 };
 use crate::units::Instant;
 
@@ -86,6 +86,11 @@ impl Controller {
         }
         if self.servo.feedback.encoder().is_some() && inputs.encoder.is_none() {
             faults |= FAULT_ENCODER;
+        }
+        let [open, closed] = s.overspeed;
+        let limit = if self.servo.feedback.encoder().is_some() { closed } else { open };
+        if limit > 0.0 && self.real_speed().unsigned_abs() as f32 > limit {
+            faults |= FAULT_OVERSPEED;
         }
         let [open_a, open_b] = inputs.coil_open;
         error |= if open_a { ERR_COIL_A_OPEN } else { 0 } | if open_b { ERR_COIL_B_OPEN } else { 0 };

@@ -73,7 +73,7 @@ impl Exceptions {
             ObjError::Disabled => self.disabled,
             ObjError::Faulted => self.faulted,
             ObjError::NotNow => self.not_now,
-            ObjError::Infeasible => self.infeasible,
+            ObjError::Infeasible | ObjError::Overspeed => self.infeasible,
             ObjError::Unsupported => self.unsupported,
         }
     }

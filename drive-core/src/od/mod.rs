@@ -204,6 +204,8 @@ pub enum Unit {
     CentiVoltsPerAmpPeriod,
     /// Thousandths.
     PerMille,
+    /// Revolutions of the motor shaft a minute.
+    Rpm,
 }
 
 impl Unit {
@@ -228,6 +230,7 @@ impl Unit {
             Unit::DeciVoltsPerAmp => "0.1 V/A",
             Unit::CentiVoltsPerAmpPeriod => "0.01 V/A a PWM period",
             Unit::PerMille => "‰",
+            Unit::Rpm => "r/min",
         }
     }
 }
@@ -370,6 +373,8 @@ pub enum ObjError {
     Infeasible,
     /// The drive does not do this: no boot loader to jump to, no flash to save to.
     Unsupported,
+    /// The motion asks for a speed beyond the overspeed limit (0x21F6); 0x21F7 reads 30.
+    Overspeed,
 }
 
 /// `Ok` if `ok`, else the refusal `why`.

@@ -93,6 +93,14 @@ impl Obj {
         // `self as usize < COUNT` by construction of the enum; the fallback is never taken.
         OBJECTS.get(self as usize).unwrap_or(&OBJECTS[0])
     }
+
+    /// Whether the object moves with no request changing the drive's settings or motion: the
+    /// current command (the standstill current lowers it as time passes) and the not-moving
+    /// code (a refused motion command says why in it, as its exception does). What a check that
+    /// a refused request changed nothing leaves out.
+    pub const fn is_diagnostic(self) -> bool {
+        matches!(self, Obj::CurrentCommand | Obj::NotMovingCode)
+    }
 }
 
 // Declarations are in register order and do not overlap: checked when compiling.
@@ -231,9 +239,9 @@ objects! {
     /// Drive faults beyond 0x6000 (our object), write 1 to clear: bit 0 over-voltage (alarm 14),
     /// bit 1 overload (alarm 26: a phase current above 1.5 times 0x600D for 2 s), bit 2 position
     /// error (alarm 25: closed loop, a following error beyond 0x605C), bit 3 encoder lost (alarm
-    /// 27, ours). Like the bits of 0x6000 they disable the power stage and refuse moves until
-    /// cleared.
-    DriveFaults @ 0x2135: U8, W1c, Live, Bits(0x0F), default 0, None, "drive faults";
+    /// 27, ours), bit 4 overspeed (alarm 31, ours: the speed beyond 0x21F6). Like the bits of
+    /// 0x6000 they disable the power stage and refuse moves until cleared.
+    DriveFaults @ 0x2135: U8, W1c, Live, Bits(0x1F), default 0, None, "drive faults";
     /// Alarms raised (our object), wrapping, kept in flash with the fault history across power
     /// cycles: a master polls it to see new entries in the fault history.
     AlarmCount @ 0x2136: U16, Ro, Live, Any, default 0, None, "alarm count";
@@ -661,6 +669,17 @@ objects! {
     /// Signal inputs 2 (our object; seed 004's P□513), as 0x21F4: .0 /POS0 (function 25), .1
     /// /POS1 (26), .2 /POS2 (27), .3 /SON (the enable, 20).
     SignalInputs2 @ 0x21F5: U16, Rw, Live, Bits(0x7777), default 0, None, "signal inputs 2";
+    /// Overspeed limit (our object; seed 003's 0x2012), revolutions of the shaft a minute; 0
+    /// off. A motion planned on the bus side whose speed is beyond it is refused (the map's
+    /// "no trajectory" code, 04 here) and 0x21F7 reads 30; the speed the motor runs at (the
+    /// encoder's in closed loop, the command's in open loop: a PVT segment, the pulse input)
+    /// beyond it latches 0x2135 bit 4, the overspeed alarm (31). A stop or a slow-down is never
+    /// refused.
+    OverspeedLimit @ 0x21F6: U16, Rw, Rom, Span(0, 3000), default 0, Rpm, "overspeed limit";
+    /// Not-moving code (our object; seed 003's 0x201F): why the last motion command did not
+    /// move the motor: 30 its speed is beyond the overspeed limit 0x21F6, 23 the work mode in
+    /// force does not take it; 0 once a motion command is taken.
+    NotMovingCode @ 0x21F7: U8, Ro, Live, Span(0, 30), default 0, None, "not-moving code";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake

@@ -236,6 +236,8 @@ impl Planner<'_> {
     /// target it heads for.
     pub(super) fn program_move(&self, axis: &mut Axis, sp: &SetPoint) -> Result<i64, ObjError> {
         self.may_move?;
+        self.asked.set(sp.limits.v_max);
+        self.within_overspeed(libm::fabsf(axis.setpoint().velocity))?;
         self.go(axis, sp)
     }
 

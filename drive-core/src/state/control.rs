@@ -100,6 +100,7 @@ pub(crate) const fn runs_on(obj: Obj) -> bool {
             | Obj::IdleCurrent
             | Obj::IdleDelay
             | Obj::Microsteps
+            | Obj::OverspeedLimit
             | Obj::CurrentDecay
             | Obj::Brake
             | Obj::UnderVoltage
@@ -233,7 +234,24 @@ pub(crate) fn settings_of(params: &[u32; Obj::COUNT]) -> Settings {
             filter: get(Obj::PulseFilter) as u8,
         },
         io,
+        overspeed: overspeed(get(Obj::OverspeedLimit), get(Obj::Microsteps), get(Obj::EncoderCpr)),
     }
+}
+
+/// The overspeed limit of `rpm` r/min (0x21F6; 0 off) as microsteps a second at `microsteps` a
+/// full step (0x600C) and as counts a second of an encoder of `lines` (0x6054, four counts a
+/// line).
+///
+/// ```
+/// # use drive_core::state::control::overspeed;
+/// // 1600 r/min at 1/16: 85 333 microsteps a second; with a 1000-line encoder 106 667 counts.
+/// let [open, closed] = overspeed(1600, 16, 1000);
+/// assert!((open - 85_333.3).abs() < 0.1 && (closed - 106_666.7).abs() < 0.1);
+/// ```
+pub fn overspeed(rpm: u32, microsteps: u32, lines: u32) -> [f32; 2] {
+    let per_s = rpm as f32 / 60.0;
+    let steps = crate::units::FULL_STEPS_PER_REV as f32 * microsteps.max(1) as f32;
+    [per_s * steps, per_s * 4.0 * lines as f32]
 }
 
 /// The closed loop's following-error limit, microsteps: none without the `alarm` (0x21D7);
@@ -344,6 +362,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             encoder: self.encoder_position(),
             limits: self.active_limits(),
             program: self.program_runs(),
+            asked: core::cell::Cell::new(0.0),
         }
     }
 
@@ -365,7 +384,9 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     pub(crate) fn plan_motion_in_place(&mut self, obj: Obj, value: u32) -> Result<bool, ObjError> {
         let (may_move, encoder, limits) = (self.may_move(), self.encoder_position(), self.active_limits());
         let program = self.program_runs();
-        let planner = Planner { params: &self.params, now: self.plan_time(), may_move, encoder, limits, program };
+        let asked = core::cell::Cell::new(0.0);
+        let planner =
+            Planner { params: &self.params, now: self.plan_time(), may_move, encoder, limits, program, asked };
         planner.plan_motion(obj, value, &mut self.ctl.axis, &mut self.pp)
     }
 
@@ -373,7 +394,9 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// the target it heads for (within the soft limits), or why it is refused.
     pub(super) fn plan_program_move(&mut self, sp: &SetPoint) -> Result<i64, ObjError> {
         let (may_move, encoder, limits) = (self.may_move(), self.encoder_position(), self.active_limits());
-        let planner = Planner { params: &self.params, now: self.plan_time(), may_move, encoder, limits, program: true };
+        let asked = core::cell::Cell::new(0.0);
+        let planner =
+            Planner { params: &self.params, now: self.plan_time(), may_move, encoder, limits, program: true, asked };
         planner.program_move(&mut self.ctl.axis, sp)
     }
 
@@ -644,6 +667,8 @@ pub(crate) struct Planner<'a> {
     pub(super) limits: u8,
     /// A program runs: it owns the axis, and motion commands but the stops are refused.
     pub(super) program: bool,
+    /// The fastest speed the plan under way asked for ([`Planner::within_overspeed`]).
+    pub(super) asked: core::cell::Cell<f32>,
 }
 
 impl Planner<'_> {
@@ -661,6 +686,7 @@ impl Planner<'_> {
         // Level 0 disables the ramp: the motor jumps to speed and stops from it.
         let (a, d) = (level(Obj::AccelLevel).unwrap_or(1e12), level(Obj::DecelLevel).unwrap_or(1e12));
         let jerk_s = (self.param(Obj::JerkTime).max(1) as f32) * 1e-3;
+        self.ask(speed);
         Limits { v_max: libm::fabsf(speed), a_max: a, d_max: d, jerk: Some(a.max(d) / jerk_s) }
     }
 
@@ -674,6 +700,7 @@ impl Planner<'_> {
     // Out of line: eight callers would each hold a copy.
     #[inline(never)]
     pub(crate) fn pp_setpoint(&self, target: i64, speed: f32) -> SetPoint {
+        self.ask(speed);
         let limits = Limits {
             v_max: libm::fabsf(speed),
             a_max: self.param(Obj::PpAccel) as f32,
@@ -766,6 +793,30 @@ impl Planner<'_> {
     /// `Ok(true)` if the write changes them, `Ok(false)` if it leaves them as they are, or why it
     /// is refused (and they are to be dropped, or restored).
     pub(super) fn plan_motion(&self, obj: Obj, value: u32, axis: &mut Axis, pp: &mut Pp) -> Result<bool, ObjError> {
+        let before = libm::fabsf(axis.setpoint().velocity);
+        self.asked.set(0.0);
+        let changed = self.plan_motion_within(obj, value, axis, pp)?;
+        self.within_overspeed(before)?;
+        Ok(changed)
+    }
+
+    /// Records a speed the plan under way asks for, microsteps (counts in closed loop) a second.
+    fn ask(&self, speed: f32) {
+        self.asked.set(self.asked.get().max(libm::fabsf(speed)));
+    }
+
+    /// Refuses a plan that asked for a speed beyond the overspeed limit (0x21F6) and beyond
+    /// `before`, the axis' speed when it was planned: a stop or a slow-down is never refused.
+    pub(super) fn within_overspeed(&self, before: f32) -> Result<(), ObjError> {
+        let [open, closed] =
+            overspeed(self.param(Obj::OverspeedLimit), self.param(Obj::Microsteps), self.param(Obj::EncoderCpr));
+        let limit = if self.encoder.is_some() { closed } else { open };
+        let asked = self.asked.get();
+        refuse(limit == 0.0 || asked <= limit || asked <= before, ObjError::Overspeed)
+    }
+
+    /// [`Planner::plan_motion`] before the overspeed check.
+    fn plan_motion_within(&self, obj: Obj, value: u32, axis: &mut Axis, pp: &mut Pp) -> Result<bool, ObjError> {
         let now = self.now;
         let busy = !axis.is_still();
         let mode = self.mode();

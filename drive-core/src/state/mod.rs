@@ -207,6 +207,9 @@ pub struct DriveState<P = Table, G = ProgramMemory> {
     history_unsaved: bool,
     /// 0x21D4's zero: the setpoint's count of moved microsteps at its last clear.
     command_base: u32,
+    /// Why the last motion command did not move the motor (0x21F7): kept out of [`Checkpoint`],
+    /// as it says why a request was refused.
+    not_moving: u8,
     /// What the tick's controller was at the last sync, where the tick owns one of its own
     /// ([`crate::controller::handoff`]); unused where `ctl` is ticked itself.
     base: Base,
@@ -320,6 +323,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             faults_saved: faults.count,
             history_unsaved: false,
             command_base: 0,
+            not_moving: 0,
             ctl: Controller::restored(&settings, feedback, faults, get(Obj::MotorDirection) == 1),
             settings,
             params: *params,
@@ -374,6 +378,8 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             faults_saved: _,
             history_unsaved,
             command_base,
+            // Says why a refused request was refused: not undone with it.
+            not_moving: _,
             base: _,
             orders,
             heard: _,
@@ -612,6 +618,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             Obj::ErrorRegister => u32::from(self.error_register()),
             Obj::PvtPointer => u32::from(s.pvt_pointer),
             Obj::RealSpeed => self.ctl.real_speed() as u32,
+            Obj::NotMovingCode => u32::from(self.not_moving),
             Obj::FollowingError => self.ctl.servo.following as i32 as u32,
             Obj::EncoderPosition => s.encoder as u32,
             Obj::StorageStatus => u32::from(self.storage),
@@ -787,11 +794,24 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         // The objects whose check is `check_motion` and whose write is `apply_motion`.
         if plans_motion(d.obj) {
             Self::check_writable(d, value)?;
-            return self.write_motion(d.obj, value);
+            let written = self.write_motion(d.obj, value);
+            return self.moved_or_why(written);
         }
         self.check_def(d, value)?;
         self.apply_def(d, value);
         Ok(())
+    }
+
+    /// Keeps why a motion command was refused for 0x21F7 (30 beyond the overspeed limit, 23
+    /// not in the work mode or state in force), or 0 once one is taken; `written` passes on.
+    fn moved_or_why(&mut self, written: Result<(), ObjError>) -> Result<(), ObjError> {
+        self.not_moving = match written {
+            Ok(()) => 0,
+            Err(ObjError::Overspeed) => 30,
+            Err(ObjError::NotNow) => 23,
+            Err(_) => self.not_moving,
+        };
+        written
     }
 
     /// [`DriveState::write_def`] inside a write that a checkpoint undoes if refused: a motion
@@ -811,8 +831,9 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         }
         if plans_motion(d.obj) {
             Self::check_writable(d, value)?;
-            let changed = self.plan_motion_in_place(d.obj, value)?;
-            self.commit_value(d.obj, value, changed);
+            let planned = self.plan_motion_in_place(d.obj, value);
+            self.moved_or_why(planned.map(|_| ()))?;
+            self.commit_value(d.obj, value, planned == Ok(true));
             return Ok(());
         }
         self.check_def(d, value)?;

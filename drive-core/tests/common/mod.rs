@@ -61,7 +61,7 @@ impl<M: RegisterMap> Bus<M> {
     /// Every object's value and the drive's status: equal snapshots mean nothing changed.
     pub fn snapshot(&self) -> Vec<u32> {
         let st = self.drive.state();
-        OBJECTS.iter().filter(|d| d.obj != drive_core::od::Obj::CurrentCommand).map(|d| st.read(d.obj)).collect()
+        OBJECTS.iter().filter(|d| !d.obj.is_diagnostic()).map(|d| st.read(d.obj)).collect()
     }
 }
 
