@@ -392,6 +392,8 @@ const MEASURED: Inputs = Inputs {
     analog: None,
     index: false,
     pulses: 0,
+    tripped: false,
+    sensing_fault: false,
 };
 
 #[library_benchmark]

@@ -41,6 +41,35 @@ pub const FAULT_POSITION: u8 = 1 << 2;
 pub const FAULT_ENCODER: u8 = 1 << 3;
 /// 0x2135 bit 4: overspeed, the motor's speed beyond the overspeed limit (0x21F6).
 pub const FAULT_OVERSPEED: u8 = 1 << 4;
+/// 0x2135 bit 5: the parameter store failed (0x2120 bit 1 corrupt at power-up, or bit 4 a save
+/// that failed).
+pub const FAULT_STORE: u8 = 1 << 5;
+/// 0x2135 bit 6: the current sensing failed its check at power-up (`Inputs::sensing_fault`).
+pub const FAULT_SENSING: u8 = 1 << 6;
+
+/// The fault detection mask's bits (0x21F8; seed 003's 0x201B): a detection whose bit is clear
+/// latches nothing. The over-temperature, the overload, the encoder lost and the hardware
+/// over-current trip have no bit (they protect the drive and the motor); the position error and
+/// the communication timeout have their own switches (0x21D7, 0x2137 = 0).
+pub mod detect {
+    /// The over-current by the measured currents (0x2133; the hardware trip latches it all the
+    /// same).
+    pub const OVER_CURRENT: u16 = 1 << 0;
+    /// The over-voltage (0x2131).
+    pub const OVER_VOLTAGE: u16 = 1 << 1;
+    /// The parameter store's failure (the manual's EEPROM).
+    pub const STORE: u16 = 1 << 2;
+    /// The overspeed (0x21F6; the manual's command overspeed).
+    pub const OVERSPEED: u16 = 1 << 3;
+    /// The under-voltage (0x2130).
+    pub const UNDER_VOLTAGE: u16 = 1 << 6;
+    /// The phase loss (an open winding).
+    pub const PHASE_LOSS: u16 = 1 << 7;
+    /// The current sensing's check (the manual's op-amp fault).
+    pub const SENSING: u16 = 1 << 11;
+    /// Every bit with a detection behind it.
+    pub const ALL: u16 = OVER_CURRENT | OVER_VOLTAGE | STORE | OVERSPEED | UNDER_VOLTAGE | PHASE_LOSS | SENSING;
+}
 
 /// 0x2138 bit 0: the communication timeout 0x2137 ran out.
 pub const COMM_TIMEOUT: u8 = 1 << 0;
@@ -67,6 +96,10 @@ pub mod alarm {
     pub const COMM_TIMEOUT: u8 = 30;
     /// Overspeed: the motor's speed beyond the overspeed limit 0x21F6 (our code).
     pub const OVERSPEED: u8 = 31;
+    /// The parameter store failed (our code; seed 003's EEPROM detection).
+    pub const STORE: u8 = 32;
+    /// The current sensing failed its check (our code; seed 003's op-amp fault).
+    pub const SENSING: u8 = 33;
 }
 
 /// The 0x6000 bits with their alarm codes, most severe first.
@@ -79,12 +112,14 @@ pub(crate) const ERROR_ALARMS: [(u8, u8); 6] = [
     (ERR_OVER_TEMPERATURE, alarm::OVER_TEMPERATURE),
 ];
 /// The 0x2135 bits with their alarm codes, most severe first.
-pub(crate) const FAULT_ALARMS: [(u8, u8); 5] = [
+pub(crate) const FAULT_ALARMS: [(u8, u8); 7] = [
+    (FAULT_SENSING, alarm::SENSING),
     (FAULT_OVER_VOLTAGE, alarm::OVER_VOLTAGE),
     (FAULT_ENCODER, alarm::ENCODER),
     (FAULT_OVERSPEED, alarm::OVERSPEED),
     (FAULT_POSITION, alarm::POSITION_ERROR),
     (FAULT_OVERLOAD, alarm::OVERLOAD),
+    (FAULT_STORE, alarm::STORE),
 ];
 
 /// Entries in the fault history.
@@ -129,6 +164,13 @@ pub struct Inputs {
     /// The pulse input's counter (work mode 3), wrapping at 2^16: counted up and down in the
     /// format the controller's outputs ask for.
     pub pulses: u16,
+    /// The power stage's over-current trip in hardware holds its bridges off (the G474's
+    /// comparators into the timers' break): the over-current (alarm 10) latches whatever the
+    /// fault mask 0x21F8 says.
+    pub tripped: bool,
+    /// The current sensing failed its check at power-up (the op-amps' outputs at zero current
+    /// far from mid-scale): the sensing fault (alarm 33) while 0x21F8 bit 11 is set.
+    pub sensing_fault: bool,
 }
 
 /// The fault history and the supervision's memory between ticks.

@@ -368,6 +368,24 @@ impl LoopObjects {
     }
 }
 
+/// The widest the currents' zero may lie from the 12-bit ADC's mid-scale at power-up, codes
+/// (0.2 V of 3.3 V): an op-amp's own offset is tens of codes at the board's gain of 8; an
+/// amplifier or a shunt that has failed reads far off, or at a rail.
+pub const SENSING_ZERO_WINDOW: u16 = 256;
+
+/// Whether the current sensing passes its check at power-up: each phase's code at zero current
+/// (`zero`, measured with the bridges off) within [`SENSING_ZERO_WINDOW`] of mid-scale. Else
+/// the drive's sensing fault (`faults::Inputs::sensing_fault`).
+///
+/// ```
+/// use drive_core::windings::sensing_ok;
+/// assert!(sensing_ok([2048 + 7, 2048 - 5]));
+/// assert!(!sensing_ok([2048, 4095]));
+/// ```
+pub fn sensing_ok(zero: [u16; 2]) -> bool {
+    zero.iter().all(|z| z.abs_diff(2048) <= SENSING_ZERO_WINDOW)
+}
+
 /// The dead time the board's bridges have, s (`firmware/src/board/power_stage.rs`), which the
 /// current loop compensates.
 pub const DEAD_TIME_S: f32 = 300e-9;

@@ -413,14 +413,20 @@ fn the_overspeed_limit_and_the_not_moving_code() {
     assert_eq!(r.read_sub(0x201F, 0, 1), Ok(vec![0]));
     r.run(3_000_000);
     assert_eq!(r.drive.state().read_i32(Obj::Position), 5_000);
-    // The limit lowered under a running move's speed: the overspeed alarm stops the motor.
+    // The limit lowered under a running move's speed: the factory mask (0x201B = 0xC3) does not
+    // detect the command overspeed, and the motor runs on; with bit 3 set the alarm stops it.
     relative(&mut r, 20_000).expect("54 r/min");
     // Cruising at 54 r/min after the ramp (0x600A's level 8, 5 210 pulses a second squared).
     r.run(2_500_000);
     r.write_sub(0x2012, 0, 30).expect("30 r/min");
     r.run(20_000);
+    assert_eq!(r.read_sub(0x201C, 1, 1), Ok(vec![0]), "not detected");
+    let running = r.drive.state().read_i32(Obj::Position);
+    assert_eq!(r.read_sub(0x201B, 0, 1), Ok(vec![0xC3]));
+    r.write_sub(0x201B, 0, 0xC3 | 0x08).expect("detect the command overspeed");
+    r.run(20_000);
     let stopped = r.drive.state().read_i32(Obj::Position);
-    assert!(stopped < 25_000, "{stopped}");
+    assert!(running < stopped && stopped < 25_000, "{running} {stopped}");
     assert_eq!(r.read_sub(0x201C, 1, 1), Ok(vec![31]), "the overspeed alarm in the fault list");
     r.run(100_000);
     assert_eq!(r.drive.state().read_i32(Obj::Position), stopped, "stopped where it was");
@@ -429,4 +435,61 @@ fn the_overspeed_limit_and_the_not_moving_code() {
     r.write_sub(0x2030, 0, 1).expect("save");
     assert_eq!(r.drive.take_system_request(), Some(drive_core::SystemRequest::Save));
     assert_eq!(r.drive.state().params().get(Obj::OverspeedLimit), 1200);
+}
+
+/// 0x201B: a cleared bit keeps its detection from latching (the over-voltage, the EEPROM, the
+/// op-amp fault); the hardware over-current trip latches whatever the mask; the unnamed bits
+/// with no detection are refused; the mask is saved with 0x2030.
+#[test]
+fn the_fault_detection_mask() {
+    let mut r = rig();
+    assert_eq!(r.read_sub(0x201B, 0, 1), Ok(vec![0xC3]), "the manual's factory value");
+    for unnamed in [1u16 << 4, 1 << 5, 1 << 8, 1 << 10, 1 << 15] {
+        assert_eq!(r.write_sub(0x201B, 0, 0xC3 | unnamed), Err(0x06), "{unnamed:#x}");
+    }
+    // Over-voltage masked (bit 1 clear): 70 V latches nothing, and the motor stays powered.
+    r.write_sub(0x201B, 0, 0xC1).expect("mask the over-voltage");
+    r.inputs.supply_mv = Some(70_000);
+    r.run(5_000);
+    assert_eq!(r.read_sub(0x201C, 1, 1), Ok(vec![0]), "masked: no alarm");
+    assert_eq!(r.drive.state().read(Obj::AlarmCode), 0);
+    // Unmasked, the same supply latches alarm 14.
+    r.write_sub(0x201B, 0, 0xC3).expect("detect it again");
+    r.run(5_000);
+    assert_eq!(r.read_sub(0x201C, 1, 1), Ok(vec![14]));
+    r.inputs.supply_mv = Some(24_000);
+    r.write_sub(0x201E, 0, 1).expect("clear the alarm");
+    // The op-amp fault (bit 11): the sensing's check at power-up failed.
+    r.inputs.sensing_fault = true;
+    r.run(5_000);
+    assert_eq!(r.drive.state().read(Obj::AlarmCode), 0, "not detected from the factory");
+    r.write_sub(0x201B, 0, 0xC3 | 0x800).expect("detect the op-amp fault");
+    r.run(5_000);
+    assert_eq!(r.read_sub(0x201C, 1, 1), Ok(vec![33]));
+    r.inputs.sensing_fault = false;
+    r.write_sub(0x201E, 0, 1).expect("clear the alarm");
+    // The software over-current masked (bit 0 clear): 9 A read latches nothing; the hardware
+    // trip latches alarm 10 all the same.
+    r.write_sub(0x201B, 0, 0xC2).expect("mask the over-current");
+    r.inputs.phase_ma = Some([9_000, 0]);
+    r.run(5_000);
+    assert_eq!(r.drive.state().read(Obj::AlarmCode), 0);
+    r.inputs.tripped = true;
+    r.run(1_000);
+    assert_eq!(r.read_sub(0x201C, 1, 1), Ok(vec![10]), "the trip in hardware");
+    (r.inputs.tripped, r.inputs.phase_ma) = (false, None);
+    r.write_sub(0x201E, 0, 1).expect("clear the alarm");
+    // The EEPROM (bit 2): a save that fails.
+    r.write_sub(0x201B, 0, 0xC3 | 0x04).expect("detect the store's failure");
+    r.write_sub(0x2030, 0, 1).expect("save");
+    assert_eq!(r.drive.take_system_request(), Some(drive_core::SystemRequest::Save));
+    r.drive.save_done(false);
+    r.run(1_000);
+    assert_eq!(r.read_sub(0x201C, 1, 1), Ok(vec![32]), "the store's alarm");
+    assert_eq!(r.drive.state().params().get(Obj::FaultMask), 0xC7, "the mask is among the saved");
+    // Cleared in 0x2120 (the native storage status, bit 4) and then the alarm: gone.
+    r.write_sub(0x2120, 0xFF, 0x10).expect("clear the failed save");
+    r.write_sub(0x201E, 0, 1).expect("clear the alarm");
+    r.run(1_000);
+    assert_eq!(r.drive.state().read(Obj::AlarmCode), 0);
 }

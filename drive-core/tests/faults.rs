@@ -21,6 +21,8 @@ const NOMINAL: Inputs = Inputs {
     analog: None,
     index: false,
     pulses: 0,
+    tripped: false,
+    sensing_fault: false,
 };
 
 /// A factory drive with a move speed set.
@@ -287,7 +289,7 @@ fn the_new_objects_reject_bad_writes() {
         (0x2136, 0, 2),
         (0x2132, 39, 3),
         (0x2133, 10_001, 3),
-        (0x2135, 0x20, 3),
+        (0x2135, 0x80, 3),
     ] {
         let [ah, al] = addr.to_be_bytes();
         let [vh, vl] = value.to_be_bytes();

@@ -140,6 +140,11 @@ impl Sensing {
         out
     }
 
+    /// The zero codes the calibration at power-up found (the firmware's `Bridges::zero`).
+    pub fn zero_codes(&self) -> [u16; 2] {
+        self.zero.map(|z| z.clamp(0.0, 4095.0) as u16)
+    }
+
     /// The currents `i` as the drive reads them, A.
     pub fn read(&mut self, i: [f64; 2]) -> [f64; 2] {
         let codes = self.codes(i);
@@ -289,6 +294,11 @@ impl Bridges {
     /// The trips so far.
     pub fn trips(&self) -> &[Trip] {
         &self.trips
+    }
+
+    /// The sensing's zero codes at power-up ([`Sensing::zero_codes`]).
+    pub fn zero_codes(&self) -> [u16; 2] {
+        self.sensing.zero_codes()
     }
 
     /// Whether the comparators hold the bridges off.

@@ -301,6 +301,9 @@ impl Plant {
             analog: None,
             index: false,
             pulses: 0,
+            tripped: self.bridges.as_ref().is_some_and(Bridges::tripped),
+            // The bridges' sensing, its zero at power-up as the firmware checks it.
+            sensing_fault: self.bridges.as_ref().is_some_and(|b| !drive_core::windings::sensing_ok(b.zero_codes())),
         }
     }
 

@@ -7,9 +7,11 @@ standstill current), a run beyond the overspeed limit refused with 0x201F saying
 position commands counted while the window moves the motor, and the map switched back to the
 native one.
 
-Usage: pymodbus_ec57.py ENDPOINT   where ENDPOINT is a pseudo-terminal path or HOST:PORT of
-`hal-sim --map ec57`. Prints one line per check and 'N passed, M failed'; exits non-zero on any
-failure.
+Usage: pymodbus_ec57.py ENDPOINT [mask]   where ENDPOINT is a pseudo-terminal path or HOST:PORT
+of `hal-sim --map ec57`. With `mask`, the fault detection mask 0x201B alone, against a simulator
+whose supply steps to 70 V two seconds after power-up (`--fault 2000:supply=70`): masked, the
+over-voltage latches nothing; unmasked, it latches alarm 14. Prints one line per check and
+'N passed, M failed'; exits non-zero on any failure.
 """
 
 import struct
@@ -131,6 +133,23 @@ def read(index, sub=0, n=1):
 def write(index, sub, value):
     return code(client.execute(False, WriteOne(index, sub, value)))
 
+
+if sys.argv[2:] == ["mask"]:
+    check("0x201B reads 0xC3 (factory)", read(0x201B) == [0xC3])
+    check("0x201B = 0x01C3 refused (06: bit 8 has no detection)", write(0x201B, 0, 0x01C3) == 6)
+    check("0x201B = 0xC1: the over-voltage masked", write(0x201B, 0, 0xC1) == 0)
+    end = time.time() + 10
+    while time.time() < end and read(0x200D)[0] <= 60:
+        time.sleep(0.05)
+    supply = read(0x200D)
+    check("the supply rose beyond the 60 V over-voltage level (0x200D)", supply[0] > 60, supply)
+    time.sleep(0.2)
+    check("masked: no alarm in 0x201C.1", read(0x201C, 1) == [0])
+    check("masked: the drive enabled (native 0x6011 reads 1)", read(0x6011, 0xFF) == [1])
+    check("0x201B = 0xC3: detected again", write(0x201B, 0, 0xC3) == 0)
+    time.sleep(0.2)
+    check("unmasked: the over-voltage latched, alarm 14 in 0x201C.1", read(0x201C, 1) == [14])
+    finish(client, "pymodbus_ec57 mask")
 
 # §1.3's frames, byte for byte (the 4-register read needs 0x2001 = 2 and 0x2003.1 = 500).
 sent, got, _ = frames(Read(0x2000, 0, 1))

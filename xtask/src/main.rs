@@ -1022,6 +1022,10 @@ fn masters() -> Result<(), String> {
     let sim = start_sim(&["--map", "ec57", "--tcp", "127.0.0.1:0"])?;
     run(Command::new(&python).arg(script.join("pymodbus_ec57.py")).arg(&sim.1))?;
     drop(sim);
+    // Its fault detection mask, the supply stepped to 70 V after 2 s.
+    let sim = start_sim(&["--map", "ec57", "--tcp", "127.0.0.1:0", "--fault", "2000:supply=70"])?;
+    run(Command::new(&python).arg(script.join("pymodbus_ec57.py")).arg(&sim.1).arg("mask"))?;
+    drop(sim);
     // The servo map, RTU then ASCII (P□600, saved, 0541h restart), over the pseudo-terminal and
     // over TCP; two cams where its position data groups end, to see the rotor there.
     let cams = ["--switch", "ext1:pnp:3195:to=3205", "--switch", "ext2:pnp:-1605:to=-1595"];

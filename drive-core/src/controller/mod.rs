@@ -197,6 +197,10 @@ pub struct Settings {
     /// The overspeed limit (0x21F6) as the speed the tick compares: microsteps a second in
     /// open loop, encoder counts a second in closed loop; 0 off.
     pub overspeed: [f32; 2],
+    /// The detections that latch (0x21F8, [`crate::faults::detect`]).
+    pub detect: u16,
+    /// The parameter store has failed (0x2120 bit 1 or 4): the store's alarm while detected.
+    pub store_failed: bool,
 }
 
 /// What the controller did on its own at a tick, for the bus side to take into account: a set

@@ -5,7 +5,7 @@ use super::{Controller, Settings};
 use crate::faults::{
     COMM_TIMEOUT, ERR_A_OVER_CURRENT, ERR_B_OVER_CURRENT, ERR_COIL_A_OPEN, ERR_COIL_B_OPEN, ERR_OVER_TEMPERATURE,
     ERR_UNDER_VOLTAGE, ERROR_ALARMS, FAULT_ALARMS, FAULT_ENCODER, FAULT_OVER_VOLTAGE, FAULT_OVERLOAD, FAULT_OVERSPEED,
-    Inputs, OVERLOAD_MICROS, code_of,
+    FAULT_SENSING, FAULT_STORE, Inputs, OVERLOAD_MICROS, code_of, detect,
 };
 use crate::units::Instant;
 
@@ -68,14 +68,16 @@ impl Controller {
         self.status.faults |= faults;
     }
 
-    /// The fault bits the measurements show at `now` (0x6000, 0x2135).
+    /// The fault bits the measurements show at `now` (0x6000, 0x2135), the detections the
+    /// mask 0x21F8 leaves out taken off.
     fn detect(&mut self, s: &Settings, now: Instant, inputs: &Inputs) -> (u8, u8) {
+        let on = |bit: u16| s.detect & bit != 0;
         let (mut error, mut faults) = (0u8, 0u8);
         if let Some(mv) = inputs.supply_mv {
-            if mv < s.under_voltage_mv {
+            if mv < s.under_voltage_mv && on(detect::UNDER_VOLTAGE) {
                 error |= ERR_UNDER_VOLTAGE;
             }
-            if mv > s.over_voltage_mv {
+            if mv > s.over_voltage_mv && on(detect::OVER_VOLTAGE) {
                 faults |= FAULT_OVER_VOLTAGE;
             }
         }
@@ -89,16 +91,27 @@ impl Controller {
         }
         let [open, closed] = s.overspeed;
         let limit = if self.servo.feedback.encoder().is_some() { closed } else { open };
-        if limit > 0.0 && self.real_speed().unsigned_abs() as f32 > limit {
+        if limit > 0.0 && self.real_speed().unsigned_abs() as f32 > limit && on(detect::OVERSPEED) {
             faults |= FAULT_OVERSPEED;
         }
-        let [open_a, open_b] = inputs.coil_open;
-        error |= if open_a { ERR_COIL_A_OPEN } else { 0 } | if open_b { ERR_COIL_B_OPEN } else { 0 };
+        if s.store_failed && on(detect::STORE) {
+            faults |= FAULT_STORE;
+        }
+        if inputs.sensing_fault && on(detect::SENSING) {
+            faults |= FAULT_SENSING;
+        }
+        if on(detect::PHASE_LOSS) {
+            let [open_a, open_b] = inputs.coil_open;
+            error |= if open_a { ERR_COIL_A_OPEN } else { 0 } | if open_b { ERR_COIL_B_OPEN } else { 0 };
+        }
         match inputs.phase_ma {
             Some([a, b]) => {
-                let limit = i64::from(s.over_current_ma);
-                let over = |i: i32| i64::from(i).abs() > limit;
-                error |= if over(a) { ERR_A_OVER_CURRENT } else { 0 } | if over(b) { ERR_B_OVER_CURRENT } else { 0 };
+                if on(detect::OVER_CURRENT) || inputs.tripped {
+                    let limit = i64::from(s.over_current_ma);
+                    let over = |i: i32| i64::from(i).abs() > limit;
+                    error |=
+                        if over(a) { ERR_A_OVER_CURRENT } else { 0 } | if over(b) { ERR_B_OVER_CURRENT } else { 0 };
+                }
                 // Overload: either phase above 1.5 times the setting, continuously. With a
                 // setting of 0 there is no current to compare with (over-current still applies).
                 let load = i64::from(s.phase_current_ma) * 3 / 2;
@@ -112,6 +125,10 @@ impl Controller {
                 }
             }
             None => self.faults.overload_since = None,
+        }
+        // The hardware trip is an over-current whatever the currents read now.
+        if inputs.tripped && error & (ERR_A_OVER_CURRENT | ERR_B_OVER_CURRENT) == 0 {
+            error |= ERR_A_OVER_CURRENT | ERR_B_OVER_CURRENT;
         }
         (error, faults)
     }

@@ -146,7 +146,7 @@ const RPM: Scale = Scale::PerRev(1, 60);
 const FAULT_CODE: Scale = Scale::Field(24, 8);
 
 /// The table (§1.2), by (index, sub-index) as [`key`] makes them.
-pub static ENTRIES: [Entry; 52] = [
+pub static ENTRIES: [Entry; 53] = [
     Entry::new(key(0x2000, 0), Obj::NodeId, &Scale::One),
     Entry::new(key(0x2001, 0), Obj::AddressSource, &Scale::One),
     Entry::new(key(0x2002, 0), Obj::MotorDirection, &Scale::One),
@@ -175,6 +175,7 @@ pub static ENTRIES: [Entry; 52] = [
     Entry::new(key(0x201A, 1), Obj::SoftwareRevision, &Scale::One),
     Entry::new(key(0x201A, 2), Obj::HardwareRevision, &Scale::One),
     Entry::new(key(0x201A, 3), Obj::SoftwareRevision, &Scale::One),
+    Entry::new(key(0x201B, 0), Obj::FaultMask, &Scale::One),
     Entry::new(key(0x201C, 1), Obj::FaultHistory0, &FAULT_CODE).narrow(),
     Entry::new(key(0x201C, 2), Obj::FaultHistory1, &FAULT_CODE).narrow(),
     Entry::new(key(0x201C, 3), Obj::FaultHistory2, &FAULT_CODE).narrow(),
@@ -243,13 +244,14 @@ static SUB_INDEX: SubIndex = SubIndex { parse, index_of, window: WINDOW };
 /// 50 ms at 50 %, 1 A peak, 10 000 pulses a revolution (the table prints 1000, outside its own
 /// range 6400-51200; its example writes 10 000), no position error alarm, in position at the
 /// plan's end, IN1 touch probe 1, IN2-IN5 origin, the limits and custom, OUT1 and OUT2 the
-/// alarm output, an overspeed limit of 1600 r/min.
-static DEFAULTS: [(u16, i32); 14] = [
+/// alarm output, an overspeed limit of 1600 r/min, the fault detection mask 0xC3.
+static DEFAULTS: [(u16, i32); 15] = [
     (key(0x2003, 1), 50),
     (key(0x2003, 2), 50),
     (key(0x2004, 0), 1000),
     (key(0x2005, 0), 10_000),
     (key(0x2012, 0), 1600),
+    (key(0x201B, 0), 0xC3),
     (key(0x200E, 0), 0),
     (key(0x2020, 0), 0),
     (key(0x2022, 1), 32),
@@ -285,8 +287,9 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         "0x2024 bit k set: OUT k+1 is high when on (the drive's output logic inverted); 0x2025.1-3: 1 alarm output (on while no alarm is latched), 2 in position, 16 master-controlled (the drive's general output, 0x21C7 in the window), 0 none. OUT1-OUT3 are the drive's GPIO5-GPIO7.",
         "0x2030 (write only): 1 saves the parameters, 2 restores the factory ones and saves them (both refused with 06 while the motor moves); 0 does nothing. Saved parameters are kept across power cycles; the drive saves nothing on its own.",
         "0x2007-0x200A are the current loop of the drive's own power stage (the G474's bridges; the simulator's `--power-stage bridges`), read at power-up: 0x2007 = 1 (factory) measures both windings' R and L at power-up (about a second at 0x2004's current, one winding then the other, before the drive answers; the native 0x2108 and 0x2109 read them) and sets the gains from them; 0x2008 (KP, 0.1 V/A: the volts across a winding per ampere of error) and 0x2009 (KI, 0.01 V/A added each PWM period) then read what the tune set and refuse writes (05); with 0x2007 = 0 they are written and run as set, on the R and L of 0x2108 and 0x2109. 0x200A (Kc, ‰, read only) is the share of what the loop's winding model missed that corrects its next prediction, 250. The factory KP 300 and KI 30 are the manual's; a tune replaces them (a NEMA 17 of 1.4 Ω and 3 mH gets 475 and 112). Where the power stage has no current loop (the simulator's chopper, the firmware under QEMU) 0x2007-0x2009 refuse changes (06, the drive's refusal in its state) and read their stored values. A write of the value a register holds is taken in any state (a dump loaded back).",
-        "0x2012 is the overspeed limit in r/min of the shaft (0-3000, 1600 from the factory; 0, which the manual leaves open, turns it off), and it is saved with the rest (0x2030 = 1) although the table prints it R/W: a commissioned limit that fell back to 1600 at every power-up would be no limit. A motion whose speed is beyond it is refused (06) and moves nothing, and 0x201F reads 30; 0x201F reads 23 when the work mode in force does not take the command, and 0 once a motion command is taken. The speed the motor runs at (the encoder's in closed loop; the command's in open loop, where a PVT segment or the pulse input can ask more than a plan would) beyond the limit latches the overspeed alarm (31 in 0x201C's list); a stop or a slow-down is never refused.",
-        "Not in this map, answered 03: 0x201B (the fault detection mask), 0x2015 and 0x2016 (the command FIR filter), 0x2023.1-5 (the input filters).",
+        "0x2012 is the overspeed limit in r/min of the shaft (0-3000, 1600 from the factory; 0, which the manual leaves open, turns it off), and it is saved with the rest (0x2030 = 1) although the table prints it R/W: a commissioned limit that fell back to 1600 at every power-up would be no limit. A motion whose speed is beyond it is refused (06) and moves nothing, and 0x201F reads 30; 0x201F reads 23 when the work mode in force does not take the command, and 0 once a motion command is taken. The speed the motor runs at (the encoder's in closed loop; the command's in open loop, where a PVT segment or the pulse input can ask more than a plan would) beyond the limit latches the overspeed alarm (31 in 0x201C's list) while 0x201B bit 3 detects it (the factory 0xC3 does not); a stop or a slow-down is never refused.",
+        "0x201B is the fault detection mask: a detection whose bit is clear latches nothing. Bit 0 the over-current by the measured currents (the native 0x2133; the over-current trip in hardware turns the bridges off and latches the alarm whatever the mask says, as a masked trip would otherwise have the bridges switched into the short again each period), 1 the over-voltage, 2 the EEPROM: the parameter store found corrupt at power-up or a save that failed (alarm 32; the native 0x2120 bits 1 and 4), 3 the command overspeed (0x2012, alarm 31), 11 the op-amp fault: the current sensing's zero at power-up more than 256 codes of 4096 from mid-scale (alarm 33). The table leaves 4-10 and 12-15 unnamed; the drive gives 6 the under-voltage and 7 the phase loss (an open winding), which the factory value 0xC3 sets with 0 and 1, so that the manual's factory mask leaves the EEPROM, the command overspeed and the op-amp fault off and the rest on. The other unnamed bits have no detection behind them: a value that sets one is refused (06). The over-temperature, the overload and the encoder lost have no bit: they protect the drive and the motor; the position error has its own switch (0x200E).",
+        "Not in this map, answered 03: 0x2015 and 0x2016 (the command FIR filter), 0x2023.1-5 (the input filters).",
     ],
     remarks: &[],
     decimal: false,

@@ -239,9 +239,11 @@ objects! {
     /// Drive faults beyond 0x6000 (our object), write 1 to clear: bit 0 over-voltage (alarm 14),
     /// bit 1 overload (alarm 26: a phase current above 1.5 times 0x600D for 2 s), bit 2 position
     /// error (alarm 25: closed loop, a following error beyond 0x605C), bit 3 encoder lost (alarm
-    /// 27, ours), bit 4 overspeed (alarm 31, ours: the speed beyond 0x21F6). Like the bits of
-    /// 0x6000 they disable the power stage and refuse moves until cleared.
-    DriveFaults @ 0x2135: U8, W1c, Live, Bits(0x1F), default 0, None, "drive faults";
+    /// 27, ours), bit 4 overspeed (alarm 31, ours: the speed beyond 0x21F6), bit 5 the parameter
+    /// store failed (alarm 32, ours), bit 6 the current sensing failed its check (alarm 33,
+    /// ours); 0x21F8 says which are detected. Like the bits of 0x6000 they disable the power
+    /// stage and refuse moves until cleared.
+    DriveFaults @ 0x2135: U8, W1c, Live, Bits(0x7F), default 0, None, "drive faults";
     /// Alarms raised (our object), wrapping, kept in flash with the fault history across power
     /// cycles: a master polls it to see new entries in the fault history.
     AlarmCount @ 0x2136: U16, Ro, Live, Any, default 0, None, "alarm count";
@@ -673,13 +675,23 @@ objects! {
     /// off. A motion planned on the bus side whose speed is beyond it is refused (the map's
     /// "no trajectory" code, 04 here) and 0x21F7 reads 30; the speed the motor runs at (the
     /// encoder's in closed loop, the command's in open loop: a PVT segment, the pulse input)
-    /// beyond it latches 0x2135 bit 4, the overspeed alarm (31). A stop or a slow-down is never
-    /// refused.
+    /// beyond it latches 0x2135 bit 4, the overspeed alarm (31), while 0x21F8 bit 3 detects it.
+    /// A stop or a slow-down is never refused.
     OverspeedLimit @ 0x21F6: U16, Rw, Rom, Span(0, 3000), default 0, Rpm, "overspeed limit";
     /// Not-moving code (our object; seed 003's 0x201F): why the last motion command did not
     /// move the motor: 30 its speed is beyond the overspeed limit 0x21F6, 23 the work mode in
     /// force does not take it; 0 once a motion command is taken.
     NotMovingCode @ 0x21F7: U8, Ro, Live, Span(0, 30), default 0, None, "not-moving code";
+    /// Fault detection mask (our object; seed 003's 0x201B): a detection whose bit is clear
+    /// latches nothing. Bit 0 the over-current by the measured currents (0x2133; the trip in
+    /// hardware turns the bridges off and latches it whatever this says), 1 the over-voltage,
+    /// 2 the parameter store's failure (alarm 32: 0x2120 found corrupt at power-up or a save
+    /// that failed; the manual's EEPROM), 3 the overspeed (0x21F6, alarm 31), 6 the
+    /// under-voltage, 7 the phase loss, 11 the current sensing's check at power-up (alarm 33;
+    /// the manual's op-amp fault). The other bits have no detection behind them: a write that
+    /// sets one is refused. The over-temperature, the overload and the encoder lost have no bit
+    /// (they protect the drive and the motor).
+    FaultMask @ 0x21F8: U16, Rw, Rom, Bits(0x08CF), default 0x08CB, None, "fault detection mask";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake

@@ -101,6 +101,7 @@ pub(crate) const fn runs_on(obj: Obj) -> bool {
             | Obj::IdleDelay
             | Obj::Microsteps
             | Obj::OverspeedLimit
+            | Obj::FaultMask
             | Obj::CurrentDecay
             | Obj::Brake
             | Obj::UnderVoltage
@@ -235,6 +236,9 @@ pub(crate) fn settings_of(params: &[u32; Obj::COUNT]) -> Settings {
         },
         io,
         overspeed: overspeed(get(Obj::OverspeedLimit), get(Obj::Microsteps), get(Obj::EncoderCpr)),
+        detect: get(Obj::FaultMask) as u16,
+        // The store's state is the bus side's, not an object's: `refresh_settings` sets it.
+        store_failed: false,
     }
 }
 

@@ -45,6 +45,8 @@ pub const STORAGE_FSET: u8 = 1 << 2;
 pub const STORAGE_SAVING: u8 = 1 << 3;
 /// Storage status bit 4: the last save failed; the flash holds the set saved before it.
 pub const STORAGE_SAVE_FAILED: u8 = 1 << 4;
+/// The storage status bits that say the store has failed: the store's alarm (0x2135 bit 5).
+const STORE_FAILED: u8 = STORAGE_CORRUPT | STORAGE_SAVE_FAILED;
 
 /// Requests the drive makes of its platform, collected with `Drive::take_system_request`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -318,7 +320,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     ) -> Self {
         let get = |obj: Obj| params.get(obj as usize).copied().unwrap_or(0);
         let feedback = Feedback::from_objects(get(Obj::Feedback), get(Obj::EncoderCpr));
-        let settings = settings_of(params);
+        let settings = Settings { store_failed: storage & STORE_FAILED != 0, ..settings_of(params) };
         Self {
             faults_saved: faults.count,
             history_unsaved: false,
@@ -496,7 +498,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// is the controller's from then on.
     #[inline(never)]
     pub(crate) fn refresh_settings(&mut self) {
-        let new = settings_of(&self.params);
+        let new = Settings { store_failed: self.storage & STORE_FAILED != 0, ..settings_of(&self.params) };
         if new.zero_offset != self.settings.zero_offset {
             self.ctl.zero_offset = new.zero_offset;
         }
@@ -894,7 +896,10 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
                 ..Clears::NONE
             }),
             Obj::NotifyStatus => self.clear_status(Clears { notify: bits, ..Clears::NONE }),
-            Obj::StorageStatus => self.storage &= !(bits & !STORAGE_SAVING),
+            Obj::StorageStatus => {
+                self.storage &= !(bits & !STORAGE_SAVING);
+                self.refresh_settings();
+            }
             Obj::DriveFaults => self.clear_status(Clears {
                 faults: bits,
                 controller: stall(bits & FAULT_POSITION != 0),
@@ -976,6 +981,8 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         *s &= !STORAGE_SAVING;
         if !ok {
             *s |= STORAGE_SAVE_FAILED;
+            // The store's alarm, where 0x21F8 detects it.
+            self.refresh_settings();
         }
     }
 }

@@ -75,6 +75,8 @@ const MEASURED: Inputs = Inputs {
     analog: None,
     index: false,
     pulses: 0,
+    tripped: false,
+    sensing_fault: false,
 };
 
 /// The cases, in the order printed.

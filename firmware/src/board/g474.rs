@@ -60,7 +60,9 @@ use crate::flash_map;
 pub mod pins;
 #[path = "power_stage.rs"]
 pub mod power_stage;
-use drive_core::windings::{LoopObjects, PowerUpTune, TuneStep, WindingSettings, WindingState, command_or_open};
+use drive_core::windings::{
+    LoopObjects, PowerUpTune, TuneStep, WindingSettings, WindingState, command_or_open, sensing_ok,
+};
 use power_stage::Bridges;
 pub use power_stage::bridge_temperature_c;
 
@@ -203,6 +205,8 @@ static MEASURED: Mutex<Cell<Measured>> = Mutex::new(Cell::new(Measured {
     analog: None,
     index: false,
     pulses: 0,
+    tripped: false,
+    sensing_fault: false,
 }));
 
 /// The encoder's 16-bit quadrature counter, owned by the control tick, with the count extended to
@@ -244,6 +248,8 @@ fn measure(cs: critical_section::CriticalSection<'_>, stage: Regulated) -> Measu
         phase_mv: Some(stage.applied_mv),
         back_emf_mv: Some(stage.back_emf_mv),
         coil_open: stage.open,
+        tripped: stage.tripped,
+        sensing_fault: stage.sensing_fault,
         ..MEASURED.borrow(cs).get()
     }
 }
@@ -281,6 +287,8 @@ struct Regulated {
     applied_mv: [i32; 2],
     back_emf_mv: [i32; 2],
     open: [bool; 2],
+    tripped: bool,
+    sensing_fault: bool,
 }
 
 impl Stage {
@@ -379,7 +387,8 @@ impl Stage {
         }
         let open = self.regulation.open();
         let (applied_mv, back_emf_mv) = (self.regulation.applied_mv(), self.regulation.back_emf_mv());
-        Regulated { phase_ma, supply_mv, applied_mv, back_emf_mv, open }
+        let (tripped, sensing_fault) = (power_stage::tripped(), !sensing_ok(self.bridges.zero()));
+        Regulated { phase_ma, supply_mv, applied_mv, back_emf_mv, open, tripped, sensing_fault }
     }
 }
 

@@ -344,6 +344,12 @@ impl Bridges {
 
     /// The currents' codes averaged over [`ZERO_SAMPLES`] periods, the bridges off. Halts if the
     /// ADCs are not triggered (TIM8's TRGO2 not reaching them).
+    /// The currents' codes at zero current, measured at power-up with the bridges off
+    /// (`drive_core::windings::sensing_ok` checks them).
+    pub fn zero(&self) -> [u16; 2] {
+        self.zero
+    }
+
     fn measure_zero(&mut self) -> [u16; 2] {
         let mut sum = [0u32; 2];
         for _ in 0..ZERO_SAMPLES {
