@@ -562,7 +562,7 @@ mod tests {
         // An older or newer firmware's record: node id 9, an address we do not have, a value our
         // range refuses (microsteps 257), and nothing else.
         let mut rec = [FORMAT, 0, 3, 0].to_vec();
-        for (addr, v) in [(0x2028u16, 9u32), (0x21FF, 77), (0x600C, 257)] {
+        for (addr, v) in [(0x2028u16, 9u32), (0x2FFF, 77), (0x600C, 257)] {
             rec.extend(addr.to_le_bytes());
             rec.extend(v.to_le_bytes());
         }

@@ -493,3 +493,21 @@ fn the_fault_detection_mask() {
     r.run(1_000);
     assert_eq!(r.drive.state().read(Obj::AlarmCode), 0);
 }
+
+/// 0x2023.1-5: IN1-IN5's filter times, µs, 1000 from the factory, 50-60 000, read in one
+/// request, saved with 0x2030; the drive's objects take them.
+#[test]
+fn the_input_filter_times() {
+    let mut r = rig();
+    assert_eq!(r.read_sub(0x2023, 1, 5), Ok(vec![1000; 5]));
+    assert_eq!(r.write_sub(0x2023, 1, 49), Err(0x06));
+    assert_eq!(r.write_sub(0x2023, 5, 60_001), Err(0x06));
+    r.write_sub(0x2023, 2, 50).expect("one tick: no filter");
+    r.write_sub(0x2023, 5, 60_000).expect("60 ms");
+    assert_eq!(r.read_sub(0x2023, 1, 5), Ok(vec![1000, 50, 1000, 1000, 60_000]));
+    let st = r.drive.state();
+    assert_eq!((st.read(Obj::InputFilter2), st.read(Obj::InputFilter5)), (50, 60_000));
+    r.write_sub(0x2030, 0, 1).expect("save");
+    assert_eq!(r.drive.take_system_request(), Some(drive_core::SystemRequest::Save));
+    assert_eq!(r.drive.state().params().get(Obj::InputFilter5), 60_000);
+}

@@ -1,4 +1,5 @@
-//! The input debouncer of the external stops (0x6042) and the pins' setup, by property.
+//! The input debouncer of the external stops (0x6042) and the inputs (0x21F9-0x21FF), and the
+//! pins' setup, by property.
 
 use drive_core::Instant;
 use drive_core::controller::io::{Debouncer, PinConfig, PinMode};
@@ -8,14 +9,15 @@ use proptest::prelude::*;
 const TICK: u64 = 50;
 
 /// Feeds `levels` a tick apart (the position is the tick's number); the ticks at which an edge
-/// was confirmed, with the position it reports.
+/// to `active` was confirmed, with the position it reports.
 fn confirmations(levels: &[bool], active: bool, delay_ticks: u64) -> Vec<(usize, i64)> {
     let mut d = Debouncer::default();
     let mut out = Vec::new();
     for (k, &level) in levels.iter().enumerate() {
         let now = Instant::from_micros(k as u64 * TICK);
-        if let Some(at) = d.update(now, level, active, delay_ticks * TICK, k as i64) {
-            out.push((k, at));
+        let edge = d.update(now, level, (delay_ticks * TICK) as u32, k as i64);
+        if let Some(e) = edge.filter(|e| e.rising == active) {
+            out.push((k, e.at));
         }
     }
     out

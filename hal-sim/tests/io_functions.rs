@@ -235,3 +235,38 @@ fn a_touch_probe_captures_the_position_at_its_edge() {
     assert_eq!(p.drive().state().read(Obj::ProbeStatus), 1, "probe 1 again; probe 2 not wired");
     assert!((p.drive().state().read_i32(Obj::ProbePosition1) - 1600).abs() <= 1);
 }
+
+/// A contact that bounces for 5 ms when the rotor reaches it: without a filter (0x21FC = 50 µs,
+/// one tick) the drive sees IN4 turn active several times; filtered over 10 ms, once, and a
+/// touch probe on it captures where the contact first closed.
+#[test]
+fn a_bouncing_input_counts_once_through_its_filter() {
+    let activations = |filter_us: u32| {
+        // A contact to ground 10 full steps up on GPIO1 (IN4), pulled up: active low.
+        let mut p = plant(&["gpio1:contact:10:bounce=5"]);
+        set(&mut p, Obj::GpioConfig, 1);
+        set(&mut p, Obj::InputLogic, 1 << 3);
+        set(&mut p, Obj::InputFunction4, 21);
+        set(&mut p, Obj::InputFilter4, filter_us);
+        set(&mut p, Obj::MaxSpeed, 800);
+        // The pull-up reaches the pin at the next tick: the input settles before the move.
+        p.run_for(0.05);
+        assert_eq!(p.drive().state().read(Obj::InputStates), 0, "open: inactive");
+        set(&mut p, Obj::RelativeMove, 20 * PER_STEP as u32);
+        let (mut count, mut was) = (0, false);
+        for _ in 0..(0.5 / 50e-6) as u32 {
+            p.run_for(50e-6);
+            let active = p.drive().state().read(Obj::InputStates) & (1 << 3) != 0;
+            count += u32::from(active && !was);
+            was = active;
+        }
+        let probe = p.drive().state().read(Obj::ProbePosition1) as i32;
+        (count, probe)
+    };
+    let (bouncing, _) = activations(50);
+    assert!(bouncing > 1, "unfiltered: {bouncing} activations");
+    let (filtered, probe) = activations(10_000);
+    assert_eq!(filtered, 1);
+    // Where the contact closed: 10 full steps, within the switch's hysteresis.
+    assert!((probe - 10 * PER_STEP as i32).abs() <= PER_STEP as i32, "captured at {probe}");
+}

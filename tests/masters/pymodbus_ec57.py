@@ -195,6 +195,11 @@ check("0x2005 = 10001 refused (06)", write(0x2005, 0, 10001) == 6)
 check("native 0x600C through the window: 50", read(0x600C, 0xFF) == [50])
 check("0x2003.2 = 40", write(0x2003, 2, 40) == 0 and read(0x2102, 0xFF) == [40])
 
+# 0x2023.1-5: the inputs' filter times, µs, one request.
+check("0x2023.1-5 read 1000 µs each (factory)", read(0x2023, 1, 5) == [1000] * 5)
+check("0x2023.3 = 49 refused (06)", write(0x2023, 3, 49) == 6)
+check("0x2023.3 = 5000", write(0x2023, 3, 5000) == 0 and read(0x21FB, 0xFF) == [5000])
+
 # 0x2012: a run beyond the overspeed limit does not start, and 0x201F says why (30).
 check("0x2012 reads 1600 r/min (factory)", read(0x2012) == [1600])
 check("0x2012 = 3001 refused (06)", write(0x2012, 0, 3001) == 6)

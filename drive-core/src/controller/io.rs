@@ -99,6 +99,9 @@ pub struct IoFunctions {
     /// The overtravel signals of the communication IO (0x2193 bits 2 and 3, while no input is
     /// that limit switch): bit 0 positive, bit 1 negative, acting as active limit switches.
     pub overtravel: u8,
+    /// IN1-IN7's debouncers' delays, µs: the filter times 0x21F9-0x21FF less the sample of the
+    /// tick a change comes at (a level must hold that long).
+    pub input_delay_us: [u32; 7],
 }
 
 /// The three external stops: their pin, their bit in 0x6013/0x6014, their bit in 0x6001.
@@ -182,53 +185,72 @@ impl PinConfig {
     }
 }
 
-/// An edge confirmed after a delay (0x6042): an edge towards the active level starts the delay,
-/// further edges meanwhile are bounces, and when it has run out the level is read again: still
-/// active, the edge counts (once); back, it was a pulse too short to count.
+/// A pin's level against bounce, for the external stops (0x6042) and IN1-IN7 (0x21F9-0x21FF)
+/// alike: a change of level starts the delay, further changes meanwhile are bounces, and when it
+/// has run out the level is read again: changed still, the change counts (once), at the position
+/// where it began; back, it was a pulse too short to count.
 ///
 /// ```
-/// use drive_core::controller::io::Debouncer;
+/// use drive_core::controller::io::{Debouncer, Edge};
 /// use drive_core::Instant;
 /// let mut d = Debouncer::default();
 /// let t = |ms: u64| Instant::from_micros(ms * 1000);
-/// assert_eq!(d.update(t(0), false, true, 10_000, 5), None); // the first reading is no edge
-/// assert_eq!(d.update(t(1), true, true, 10_000, 7), None); // rising: the delay starts
-/// assert_eq!(d.update(t(2), false, true, 10_000, 9), None); // a bounce
-/// assert_eq!(d.update(t(3), true, true, 10_000, 11), None);
-/// assert_eq!(d.update(t(11), true, true, 10_000, 30), Some(7)); // confirmed: where the edge was
+/// assert_eq!(d.update(t(0), false, 10_000, 5), None); // the first reading is no edge
+/// assert_eq!(d.update(t(1), true, 10_000, 7), None); // rising: the delay starts
+/// assert_eq!(d.update(t(2), false, 10_000, 9), None); // a bounce
+/// assert_eq!(d.update(t(3), true, 10_000, 11), None);
+/// assert_eq!(d.update(t(11), true, 10_000, 30), Some(Edge { rising: true, at: 7 })); // where it began
+/// assert_eq!(d.update(t(12), false, 0, 31), Some(Edge { rising: false, at: 31 })); // no delay: at once
 /// ```
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Debouncer {
-    /// The position at the edge being confirmed.
+    /// The position where the change being confirmed began.
     at: i64,
-    /// When that edge came: the clock's low 32 bits, µs (a delay is at most 200 ms).
+    /// When it began: the clock's low 32 bits, µs (a delay is at most 200 ms).
     since: u32,
-    /// An edge is being confirmed.
+    /// A change is being confirmed.
     pending: bool,
-    /// The last level read, plus one (0: none yet).
+    /// The level confirmed, plus one (0: none read yet).
     level: u8,
 }
 
+/// A change of level a [`Debouncer`] confirmed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Edge {
+    /// To high (else to low).
+    pub rising: bool,
+    /// The position where it began.
+    pub at: i64,
+}
+
 impl Debouncer {
-    /// Reads `level` at `now` with the axis at `position`; `active` is the level an edge goes
-    /// to (true: a rising edge), `delay_us` 0x6042. The position at the edge once an edge is
-    /// confirmed.
-    pub fn update(&mut self, now: Instant, level: bool, active: bool, delay_us: u64, position: i64) -> Option<i64> {
+    /// Reads `level` at `now` with the axis at `position`, a change confirmed after `delay_us`:
+    /// the change once it is.
+    pub fn update(&mut self, now: Instant, level: bool, delay_us: u32, position: i64) -> Option<Edge> {
         // `Default` is all zero: "none yet" is stored as the level plus one.
-        let last = core::mem::replace(&mut self.level, u8::from(level) + 1);
-        let edge = last != 0 && (last == 2) != level && level == active;
+        let Some(confirmed) = self.level.checked_sub(1).map(|l| l == 1) else {
+            self.level = u8::from(level) + 1;
+            return None;
+        };
         let now = now.as_micros() as u32;
-        if edge && !self.pending {
+        if !self.pending {
+            if level == confirmed {
+                return None;
+            }
             (self.pending, self.since, self.at) = (true, now, position);
         }
-        if !self.pending || u64::from(now.wrapping_sub(self.since)) < delay_us {
+        if now.wrapping_sub(self.since) < delay_us {
             return None;
         }
         self.pending = false;
-        (level == active).then_some(self.at)
+        if level == confirmed {
+            return None;
+        }
+        self.level = u8::from(level) + 1;
+        Some(Edge { rising: level, at: self.at })
     }
 
-    /// Forgets an edge being confirmed (the input was disabled).
+    /// Forgets a change being confirmed (the input was disabled).
     pub fn reset(&mut self) {
         self.pending = false;
     }
@@ -248,6 +270,10 @@ pub(crate) struct Pins {
     pulses: Option<u16>,
     /// The inputs were read at least once (the first reading is no edge).
     inputs_read: bool,
+    /// IN1-IN7's debouncers (0x21F9-0x21FF).
+    inputs: [Debouncer; 7],
+    /// IN1-IN7's levels as their debouncers confirmed them, bit k IN k+1 high.
+    high: u8,
     /// A limit switch stopped the axis, which has not stood still since.
     limit_stop: bool,
 }
@@ -278,15 +304,18 @@ impl Controller {
 }
 
 impl Controller {
-    /// The touch probes among the inputs that `rose`: each not yet captured takes the position
-    /// (the encoder's in closed loop, the setpoint's in open loop). Out of line: an edge's work.
+    /// The touch probes among the inputs that `rose` (each where its change began, `at`): each
+    /// not yet captured takes that position (the encoder's in closed loop, the setpoint's in
+    /// open loop). Out of line: an edge's work.
     #[inline(never)]
-    fn probe(&mut self, s: &Settings, rose: u8) {
-        let at = if self.servo.feedback.encoder().is_some() { self.measured() } else { self.axis.setpoint().whole };
+    fn probe(&mut self, s: &Settings, rose: u8, at: &[i64; 7]) {
         for (k, (&inputs, slot)) in s.io.probes.iter().zip(self.probe.iter_mut()).enumerate() {
             let bit = 1 << k;
-            if rose & inputs != 0 && self.status.probes & bit == 0 {
-                *slot = at as i32;
+            let first = (0..7).find(|&i| rose & inputs & (1 << i) != 0);
+            if let Some(i) = first
+                && self.status.probes & bit == 0
+            {
+                *slot = at.get(i).copied().unwrap_or_default() as i32;
                 self.status.probes |= bit;
             }
         }
@@ -300,26 +329,41 @@ impl Controller {
         if s.ext_enable != 0 {
             self.external_stops(s, now, levels);
         }
-        self.functions(s, levels);
+        self.functions(s, now, levels);
     }
 
-    /// IN1-IN7: which are active, the activations for the bus side (an input's function acts
-    /// there), and the limit switches, which stop a motion heading into them.
+    /// IN1-IN7: which are active (their levels through their debouncers, 0x21F9-0x21FF), the
+    /// activations for the bus side (an input's function acts there), and the limit switches,
+    /// which stop a motion heading into them.
     #[inline]
-    fn functions(&mut self, s: &Settings, levels: u16) {
+    fn functions(&mut self, s: &Settings, now: Instant, levels: u16) {
         let (inputs, input_low) = (s.io.inputs, s.io.input_low);
         if inputs | s.io.overtravel == 0 {
             return;
         }
         // IN1-IN3 are 0x6031's bits 7-9, IN4-IN7 its bits 0-3 (`IN_PINS`).
-        let high = ((levels >> 7) & 0b111) as u8 | (((levels & 0b1111) as u8) << 3);
-        let active = (high ^ input_low) & inputs;
-        let rose = if self.io.inputs_read { active & !self.status.inputs } else { 0 };
-        (self.status.inputs, self.io.inputs_read) = (active, true);
+        let raw = ((levels >> 7) & 0b111) as u8 | (((levels & 0b1111) as u8) << 3);
+        let position =
+            if self.servo.feedback.encoder().is_some() { self.measured() } else { self.axis.setpoint().whole };
+        let mut at = [position; 7];
+        for (k, ((d, &delay), at)) in self.io.inputs.iter_mut().zip(&s.io.input_delay_us).zip(&mut at).enumerate() {
+            if let Some(e) = d.update(now, raw & (1 << k) != 0, delay, position) {
+                self.io.high = if e.rising { self.io.high | 1 << k } else { self.io.high & !(1 << k) };
+                *at = e.at;
+            }
+        }
+        // The first reading is no edge: the debouncers take it as their levels.
+        let first = !core::mem::replace(&mut self.io.inputs_read, true);
+        if first {
+            self.io.high = raw;
+        }
+        let active = (self.io.high ^ input_low) & inputs;
+        let rose = if first { 0 } else { active & !self.status.inputs };
+        self.status.inputs = active;
         if rose != 0 {
             self.status.input_edges |= rose;
             self.events.set(super::Events::INPUT);
-            self.probe(s, rose);
+            self.probe(s, rose, &at);
         }
         let v = self.axis.setpoint().velocity;
         let io = &s.io;
@@ -386,7 +430,10 @@ impl Controller {
         for (d, &(pin, bit, status)) in self.io.ext.iter_mut().zip(EXT.iter()) {
             if s.ext_enable & bit == 0 || self.suspend & pin != 0 {
                 d.reset();
-            } else if d.update(now, levels & pin != 0, s.ext_rising & bit != 0, s.ext_delay_us, position).is_some() {
+            } else if d
+                .update(now, levels & pin != 0, s.ext_delay_us, position)
+                .is_some_and(|e| e.rising == (s.ext_rising & bit != 0))
+            {
                 self.status.controller |= status;
                 stop = true;
             }

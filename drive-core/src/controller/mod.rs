@@ -142,7 +142,7 @@ pub struct Settings {
     /// External stops on the rising edge (0x6014), else the falling one.
     pub ext_rising: u8,
     /// External stop confirmation delay, µs (0x6042).
-    pub ext_delay_us: u64,
+    pub ext_delay_us: u32,
     /// The pins' directions and modes (0x602E, 0x602F, 0x6013..0x6015).
     pub pins: io::PinConfig,
     /// Step notification positions (0x6062, 0x6064).

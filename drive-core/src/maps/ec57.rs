@@ -146,7 +146,7 @@ const RPM: Scale = Scale::PerRev(1, 60);
 const FAULT_CODE: Scale = Scale::Field(24, 8);
 
 /// The table (§1.2), by (index, sub-index) as [`key`] makes them.
-pub static ENTRIES: [Entry; 53] = [
+pub static ENTRIES: [Entry; 58] = [
     Entry::new(key(0x2000, 0), Obj::NodeId, &Scale::One),
     Entry::new(key(0x2001, 0), Obj::AddressSource, &Scale::One),
     Entry::new(key(0x2002, 0), Obj::MotorDirection, &Scale::One),
@@ -195,6 +195,11 @@ pub static ENTRIES: [Entry; 53] = [
     Entry::new(key(0x2022, 3), Obj::InputFunction3, &Scale::Table(&INPUT_FUNCTIONS)),
     Entry::new(key(0x2022, 4), Obj::InputFunction4, &Scale::Table(&INPUT_FUNCTIONS)),
     Entry::new(key(0x2022, 5), Obj::InputFunction5, &Scale::Table(&INPUT_FUNCTIONS)),
+    Entry::new(key(0x2023, 1), Obj::InputFilter1, &Scale::One),
+    Entry::new(key(0x2023, 2), Obj::InputFilter2, &Scale::One),
+    Entry::new(key(0x2023, 3), Obj::InputFilter3, &Scale::One),
+    Entry::new(key(0x2023, 4), Obj::InputFilter4, &Scale::One),
+    Entry::new(key(0x2023, 5), Obj::InputFilter5, &Scale::One),
     Entry::new(key(0x2024, 0), Obj::OutputLogic, &Scale::Invert(0x7)),
     Entry::new(key(0x2025, 1), Obj::OutputFunction1, &Scale::Table(&OUTPUT_FUNCTIONS)),
     Entry::new(key(0x2025, 2), Obj::OutputFunction2, &Scale::Table(&OUTPUT_FUNCTIONS)),
@@ -244,8 +249,9 @@ static SUB_INDEX: SubIndex = SubIndex { parse, index_of, window: WINDOW };
 /// 50 ms at 50 %, 1 A peak, 10 000 pulses a revolution (the table prints 1000, outside its own
 /// range 6400-51200; its example writes 10 000), no position error alarm, in position at the
 /// plan's end, IN1 touch probe 1, IN2-IN5 origin, the limits and custom, OUT1 and OUT2 the
-/// alarm output, an overspeed limit of 1600 r/min, the fault detection mask 0xC3.
-static DEFAULTS: [(u16, i32); 15] = [
+/// alarm output, an overspeed limit of 1600 r/min, the fault detection mask 0xC3, IN1-IN5
+/// filtered over 1 ms.
+static DEFAULTS: [(u16, i32); 20] = [
     (key(0x2003, 1), 50),
     (key(0x2003, 2), 50),
     (key(0x2004, 0), 1000),
@@ -259,6 +265,11 @@ static DEFAULTS: [(u16, i32); 15] = [
     (key(0x2022, 3), 2),
     (key(0x2022, 4), 4),
     (key(0x2022, 5), 16),
+    (key(0x2023, 1), 1000),
+    (key(0x2023, 2), 1000),
+    (key(0x2023, 3), 1000),
+    (key(0x2023, 4), 1000),
+    (key(0x2023, 5), 1000),
     (key(0x2025, 1), 1),
     (key(0x2025, 2), 1),
 ];
@@ -289,7 +300,8 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         "0x2007-0x200A are the current loop of the drive's own power stage (the G474's bridges; the simulator's `--power-stage bridges`), read at power-up: 0x2007 = 1 (factory) measures both windings' R and L at power-up (about a second at 0x2004's current, one winding then the other, before the drive answers; the native 0x2108 and 0x2109 read them) and sets the gains from them; 0x2008 (KP, 0.1 V/A: the volts across a winding per ampere of error) and 0x2009 (KI, 0.01 V/A added each PWM period) then read what the tune set and refuse writes (05); with 0x2007 = 0 they are written and run as set, on the R and L of 0x2108 and 0x2109. 0x200A (Kc, ‰, read only) is the share of what the loop's winding model missed that corrects its next prediction, 250. The factory KP 300 and KI 30 are the manual's; a tune replaces them (a NEMA 17 of 1.4 Ω and 3 mH gets 475 and 112). Where the power stage has no current loop (the simulator's chopper, the firmware under QEMU) 0x2007-0x2009 refuse changes (06, the drive's refusal in its state) and read their stored values. A write of the value a register holds is taken in any state (a dump loaded back).",
         "0x2012 is the overspeed limit in r/min of the shaft (0-3000, 1600 from the factory; 0, which the manual leaves open, turns it off), and it is saved with the rest (0x2030 = 1) although the table prints it R/W: a commissioned limit that fell back to 1600 at every power-up would be no limit. A motion whose speed is beyond it is refused (06) and moves nothing, and 0x201F reads 30; 0x201F reads 23 when the work mode in force does not take the command, and 0 once a motion command is taken. The speed the motor runs at (the encoder's in closed loop; the command's in open loop, where a PVT segment or the pulse input can ask more than a plan would) beyond the limit latches the overspeed alarm (31 in 0x201C's list) while 0x201B bit 3 detects it (the factory 0xC3 does not); a stop or a slow-down is never refused.",
         "0x201B is the fault detection mask: a detection whose bit is clear latches nothing. Bit 0 the over-current by the measured currents (the native 0x2133; the over-current trip in hardware turns the bridges off and latches the alarm whatever the mask says, as a masked trip would otherwise have the bridges switched into the short again each period), 1 the over-voltage, 2 the EEPROM: the parameter store found corrupt at power-up or a save that failed (alarm 32; the native 0x2120 bits 1 and 4), 3 the command overspeed (0x2012, alarm 31), 11 the op-amp fault: the current sensing's zero at power-up more than 256 codes of 4096 from mid-scale (alarm 33). The table leaves 4-10 and 12-15 unnamed; the drive gives 6 the under-voltage and 7 the phase loss (an open winding), which the factory value 0xC3 sets with 0 and 1, so that the manual's factory mask leaves the EEPROM, the command overspeed and the op-amp fault off and the rest on. The other unnamed bits have no detection behind them: a value that sets one is refused (06). The over-temperature, the overload and the encoder lost have no bit: they protect the drive and the motor; the position error has its own switch (0x200E).",
-        "Not in this map, answered 03: 0x2015 and 0x2016 (the command FIR filter), 0x2023.1-5 (the input filters).",
+        "0x2023.1-5 are IN1-IN5's filter times in µs (50-60 000, 1000 from the factory; the manual gives no unit: a millisecond is the usual debounce of a switch, 60 ms the longest a contact bounces): a change of the input's level counts once it has held that long, counting the tick it came at (its bounces meanwhile ignored), for its function (0x2022), its state in 0x2014 and a touch probe's capture, which takes the position where the change began; 50, one control tick, takes every change at once. The drive's external stops (the native 0x6042, EXT1-EXT3 = IN1-IN3) are the same debouncer.",
+        "Not in this map, answered 03: 0x2015 and 0x2016 (the command FIR filter).",
     ],
     remarks: &[],
     decimal: false,

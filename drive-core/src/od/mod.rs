@@ -206,6 +206,8 @@ pub enum Unit {
     PerMille,
     /// Revolutions of the motor shaft a minute.
     Rpm,
+    /// Microseconds.
+    Micros,
 }
 
 impl Unit {
@@ -231,6 +233,7 @@ impl Unit {
             Unit::CentiVoltsPerAmpPeriod => "0.01 V/A a PWM period",
             Unit::PerMille => "‰",
             Unit::Rpm => "r/min",
+            Unit::Micros => "µs",
         }
     }
 }

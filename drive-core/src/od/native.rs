@@ -692,6 +692,24 @@ objects! {
     /// sets one is refused. The over-temperature, the overload and the encoder lost have no bit
     /// (they protect the drive and the motor).
     FaultMask @ 0x21F8: U16, Rw, Rom, Bits(0x08CF), default 0x08CB, None, "fault detection mask";
+    /// IN1 filter time (our object; seed 003's 0x2023.1; IN2-IN7 are 0x21FA-0x21FF), µs: a
+    /// change of the input's level counts once it has held this long, counting the tick it came
+    /// at (its bounces meanwhile ignored), for its function, its state in 0x21D3 and a touch
+    /// probe's capture (the position where the change began); the external stops' delay 0x6042
+    /// is the same debouncer's. 50, one control tick, takes every change at once.
+    InputFilter1 @ 0x21F9: U16, Rw, Rom, Span(50, 60_000), default 50, Micros, "IN1 filter time";
+    /// IN2 filter time (our object; seed 003's 0x2023.2): as 0x21F9.
+    InputFilter2 @ 0x21FA: U16, Rw, Rom, Span(50, 60_000), default 50, Micros, "IN2 filter time";
+    /// IN3 filter time (our object; seed 003's 0x2023.3): as 0x21F9.
+    InputFilter3 @ 0x21FB: U16, Rw, Rom, Span(50, 60_000), default 50, Micros, "IN3 filter time";
+    /// IN4 filter time (our object; seed 003's 0x2023.4): as 0x21F9.
+    InputFilter4 @ 0x21FC: U16, Rw, Rom, Span(50, 60_000), default 50, Micros, "IN4 filter time";
+    /// IN5 filter time (our object; seed 003's 0x2023.5): as 0x21F9.
+    InputFilter5 @ 0x21FD: U16, Rw, Rom, Span(50, 60_000), default 50, Micros, "IN5 filter time";
+    /// IN6 filter time (our object): as 0x21F9.
+    InputFilter6 @ 0x21FE: U16, Rw, Rom, Span(50, 60_000), default 50, Micros, "IN6 filter time";
+    /// IN7 filter time (our object): as 0x21F9.
+    InputFilter7 @ 0x21FF: U16, Rw, Rom, Span(50, 60_000), default 50, Micros, "IN7 filter time";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake
@@ -815,7 +833,8 @@ objects! {
     /// `drive_core::servo`); bits 7-15 reserved. Detection itself is switched by 0x2107.
     StallParams @ 0x6039: U16, Rw, Rom, Bits(0x7F), default 0, None, "stall parameters";
     /// EXT1/2/3 stabilisation delay: an edge counts only if the input still has the edge's
-    /// level this long after it (bounces in between are ignored); 0 acts on the edge.
+    /// level this long after it (bounces in between are ignored); 0 acts on the edge. The
+    /// external stops' debouncer, the one IN1-IN7's filter times set (0x21F9-0x21FF).
     ExtDebounce @ 0x6042: U16, Rw, Rom, Span(0, 200), default 100, Millis, "EXT debounce";
     /// Stop on stall (open loop): 1 stops the motor when a stall is detected.
     StallStop @ 0x6043: U8, Rw, Rom, Span(0, 1), default 0, None, "stop on stall";

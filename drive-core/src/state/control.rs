@@ -102,6 +102,13 @@ pub(crate) const fn runs_on(obj: Obj) -> bool {
             | Obj::Microsteps
             | Obj::OverspeedLimit
             | Obj::FaultMask
+            | Obj::InputFilter1
+            | Obj::InputFilter2
+            | Obj::InputFilter3
+            | Obj::InputFilter4
+            | Obj::InputFilter5
+            | Obj::InputFilter6
+            | Obj::InputFilter7
             | Obj::CurrentDecay
             | Obj::Brake
             | Obj::UnderVoltage
@@ -192,7 +199,7 @@ pub(crate) fn settings_of(params: &[u32; Obj::COUNT]) -> Settings {
         coil_general: get(Obj::CoilMode) == 1,
         ext_enable: get(Obj::ExtStopEnable) as u8,
         ext_rising: get(Obj::ExtStopTrigger) as u8,
-        ext_delay_us: u64::from(get(Obj::ExtDebounce)) * 1000,
+        ext_delay_us: get(Obj::ExtDebounce) * 1000,
         pins: PinConfig::new(
             get(Obj::GpioDirection) as u16,
             get(Obj::GpioConfig),
@@ -304,8 +311,20 @@ fn io_functions(get: &impl Fn(Obj) -> u32) -> IoFunctions {
             with(INPUT_LIMIT_POSITIVE),
             with(INPUT_LIMIT_NEGATIVE),
         ),
+        input_delay_us: INPUT_FILTER_OBJECTS.map(|o| get(o).saturating_sub(crate::units::TICK_MICROS as u32)),
     }
 }
+
+/// IN1-IN7's filter time objects.
+pub(crate) const INPUT_FILTER_OBJECTS: [Obj; 7] = [
+    Obj::InputFilter1,
+    Obj::InputFilter2,
+    Obj::InputFilter3,
+    Obj::InputFilter4,
+    Obj::InputFilter5,
+    Obj::InputFilter6,
+    Obj::InputFilter7,
+];
 
 /// OUT1-OUT4's function objects.
 pub(crate) const OUTPUT_FUNCTION_OBJECTS: [Obj; 4] =
