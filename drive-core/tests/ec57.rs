@@ -511,3 +511,22 @@ fn the_input_filter_times() {
     assert_eq!(r.drive.take_system_request(), Some(drive_core::SystemRequest::Save));
     assert_eq!(r.drive.state().params().get(Obj::InputFilter5), 60_000);
 }
+
+/// 0x2015/0x2016: the command filter's switch and time (µs, 50-25 600, factory off and 1000),
+/// refused out of range, read back, saved with 0x2030; the drive's objects take them.
+#[test]
+fn the_command_filter_registers() {
+    let mut r = rig();
+    assert_eq!(r.read_sub(0x2015, 0, 2), Ok(vec![0, 1000]));
+    assert_eq!(r.write_sub(0x2015, 0, 2), Err(0x06));
+    assert_eq!(r.write_sub(0x2016, 0, 49), Err(0x06));
+    assert_eq!(r.write_sub(0x2016, 0, 25_601), Err(0x06));
+    r.write_sub(0x2016, 0, 5_000).expect("5 ms");
+    r.write_sub(0x2015, 0, 1).expect("on");
+    assert_eq!(r.read_sub(0x2015, 0, 2), Ok(vec![1, 5_000]));
+    assert_eq!(r.drive.state().settings().shaping.ticks(), 100, "5 ms of 50 µs ticks");
+    r.write_sub(0x2030, 0, 1).expect("save");
+    assert_eq!(r.drive.take_system_request(), Some(drive_core::SystemRequest::Save));
+    let saved = r.drive.state().params();
+    assert_eq!((saved.get(Obj::CommandFilter), saved.get(Obj::CommandFilterTime)), (1, 5_000));
+}

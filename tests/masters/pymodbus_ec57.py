@@ -4,8 +4,8 @@ PDUs (the way pymodbus documents for a vendor's functions), framed, timed and CR
 pymodbus's own RTU framer: every frame of §1.3 compared byte for byte on the wire, each
 exception of §1.3.4 with the state read back unchanged, settings that act (the resolution, the
 standstill current), a run beyond the overspeed limit refused with 0x201F saying why, the
-position commands counted while the window moves the motor, and the map switched back to the
-native one.
+position commands counted while the window moves the motor, a run through the command filter
+ending on the same pulse, and the map switched back to the native one.
 
 Usage: pymodbus_ec57.py ENDPOINT [mask]   where ENDPOINT is a pseudo-terminal path or HOST:PORT
 of `hal-sim --map ec57`. With `mask`, the fault detection mask 0x201B alone, against a simulator
@@ -134,6 +134,16 @@ def write(index, sub, value):
     return code(client.execute(False, WriteOne(index, sub, value)))
 
 
+def relative_run(name):
+    """The window's relative run (0x21A0 = 2) to 0x21A1, waited for (20 s at most): the native
+    position 0x600E's two registers at its end."""
+    check(name, write(0x21A0, 0xFF, 2) == 0)
+    end = time.time() + 20
+    while time.time() < end and read(0x21AE, 0xFF) == [3]:
+        time.sleep(0.05)
+    return read(0x600E, 0xFF, 2)
+
+
 if sys.argv[2:] == ["mask"]:
     check("0x201B reads 0xC3 (factory)", read(0x201B) == [0xC3])
     check("0x201B = 0x01C3 refused (06: bit 8 has no detection)", write(0x201B, 0, 0x01C3) == 6)
@@ -217,15 +227,20 @@ check("0x2012 = 1600 again", write(0x2012, 0, 1600) == 0)
 check("clear the count (0x2011 = 1)", write(0x2011, 0, 1) == 0)
 r = client.execute(False, WriteMany(0x21A1, 0xFF, [0, 10000]))
 check("command target 10000 (window)", not r.isError())
-check("relative run (0x21A0 = 2)", write(0x21A0, 0xFF, 2) == 0)
-end = time.time() + 20
-while time.time() < end and read(0x21AE, 0xFF) == [3]:
-    time.sleep(0.05)
-position = read(0x600E, 0xFF, 2)
+position = relative_run("relative run (0x21A0 = 2)")
 check("the axis went 10000 pulses (one turn)", position == [0, 10000], position)
 check("0x2010/0x2011 count 10000", read(0x2010, 0, 2) == [0, 10000])
 speed = read(0x2017)
 check("0x2017 at rest 0 r/min", speed == [0], speed)
+
+# 0x2015/0x2016: the same run through the command filter (25.6 ms) ends on the same pulse.
+check("0x2015, 0x2016 read 0, 1000 (factory)", read(0x2015, 0, 2) == [0, 1000])
+check("0x2016 = 25601 refused (06)", write(0x2016, 0, 25601) == 6)
+check("0x2016 = 25600", write(0x2016, 0, 25600) == 0)
+check("0x2015 = 1 (filter on)", write(0x2015, 0, 1) == 0)
+position = relative_run("relative run (0x21A0 = 2) through the filter")
+check("the axis went 10000 pulses more, exactly", position == [0, 20000], position)
+check("0x2015 = 0 (filter off)", write(0x2015, 0, 0) == 0)
 
 # Back to the native map: 0x2190 in the window, saved.
 check("0x2190 = 0 (window)", write(0x2190, 0xFF, 0) == 0)

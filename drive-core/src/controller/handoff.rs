@@ -263,6 +263,7 @@ impl Controller {
         model.servo = self.servo;
         model.run = self.run;
         model.still_since = self.still_since;
+        model.shaping_settled = self.shaping_settled;
         model.caught = self.caught.take().or(model.caught);
         model.events = Events(model.events.0 | core::mem::take(&mut self.events).0);
     }

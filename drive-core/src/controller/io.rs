@@ -250,6 +250,11 @@ impl Debouncer {
         Some(Edge { rising: level, at: self.at })
     }
 
+    /// Whether a change is being confirmed.
+    pub fn pending(&self) -> bool {
+        self.pending
+    }
+
     /// Forgets a change being confirmed (the input was disabled).
     pub fn reset(&mut self) {
         self.pending = false;
@@ -274,6 +279,8 @@ pub(crate) struct Pins {
     inputs: [Debouncer; 7],
     /// IN1-IN7's levels as their debouncers confirmed them, bit k IN k+1 high.
     high: u8,
+    /// The inputs whose debouncers are confirming a change.
+    pending: u8,
     /// A limit switch stopped the axis, which has not stood still since.
     limit_stop: bool,
 }
@@ -346,14 +353,13 @@ impl Controller {
         let position =
             if self.servo.feedback.encoder().is_some() { self.measured() } else { self.axis.setpoint().whole };
         let mut at = [position; 7];
-        for (k, ((d, &delay), at)) in self.io.inputs.iter_mut().zip(&s.io.input_delay_us).zip(&mut at).enumerate() {
-            if let Some(e) = d.update(now, raw & (1 << k) != 0, delay, position) {
-                self.io.high = if e.rising { self.io.high | 1 << k } else { self.io.high & !(1 << k) };
-                *at = e.at;
-            }
-        }
         // The first reading is no edge: the debouncers take it as their levels.
         let first = !core::mem::replace(&mut self.io.inputs_read, true);
+        // Only the inputs that changed or are confirming a change (none, mostly) are looked at.
+        let busy = if first { 0x7F } else { (raw ^ self.io.high) | self.io.pending };
+        if busy != 0 {
+            self.debounce(s, now, raw, busy, position, &mut at);
+        }
         if first {
             self.io.high = raw;
         }
@@ -375,6 +381,25 @@ impl Controller {
         } else if into && !self.io.limit_stop && !self.axis.follows_pulses() {
             self.io.limit_stop = true;
             self.decelerate_to_stop(s);
+        }
+    }
+
+    /// The debouncers of the inputs `busy` with the levels `raw`: the changes they confirm
+    /// into the inputs' levels, each one's position where it began into `at`. Out of line: a
+    /// change's work.
+    #[inline(never)]
+    fn debounce(&mut self, s: &Settings, now: Instant, raw: u8, busy: u8, position: i64, at: &mut [i64; 7]) {
+        let io = &mut self.io;
+        for (k, ((d, &delay), at)) in io.inputs.iter_mut().zip(&s.io.input_delay_us).zip(at).enumerate() {
+            let bit = 1 << k;
+            if busy & bit == 0 {
+                continue;
+            }
+            if let Some(e) = d.update(now, raw & bit != 0, delay, position) {
+                io.high = if e.rising { io.high | bit } else { io.high & !bit };
+                *at = e.at;
+            }
+            io.pending = if d.pending() { io.pending | bit } else { io.pending & !bit };
         }
     }
 

@@ -20,6 +20,7 @@ use crate::faults::{FaultLog, Inputs};
 use crate::modes::PowerState;
 use crate::motion::axis::{Axis, Setpoint};
 use crate::motion::cubic::{Ahead, Table};
+use crate::motion::shaping::{MovingAverage, ShapingState};
 use crate::servo::{Feedback, Gains, Servo};
 use crate::units::Instant;
 use fixed::types::{U0F16, U0F32};
@@ -201,6 +202,8 @@ pub struct Settings {
     pub detect: u16,
     /// The parameter store has failed (0x2120 bit 1 or 4): the store's alarm while detected.
     pub store_failed: bool,
+    /// The command path's moving average (0x2210, 0x2211).
+    pub shaping: MovingAverage,
 }
 
 /// What the controller did on its own at a tick, for the bus side to take into account: a set
@@ -290,6 +293,11 @@ pub struct Controller {
     /// encoder and phase B in, mirrored (each where it is used, so that what a board never
     /// measures stays known to the compiler).
     pub(crate) reversed: bool,
+    /// The command path's shaping: the tick's own (the bus side's model keeps none of it but
+    /// whether it has settled, [`Controller::shaping_settled`]).
+    pub(crate) shaping: ShapingState,
+    /// Whether the shaping's output stood on its input at the last tick.
+    pub(crate) shaping_settled: bool,
 }
 
 /// A reversed motor's electrical angle `a` and steps: the other way round (phase B inverted).
@@ -364,7 +372,15 @@ impl Controller {
             events: Events::default(),
             heard: false,
             reversed,
+            shaping: ShapingState::default(),
+            shaping_settled: true,
         }
+    }
+
+    /// Whether the command path's shaping stood on the axis' setpoint at the last tick: a
+    /// motion the axis has finished still moves the motor until it has.
+    pub fn shaping_settled(&self) -> bool {
+        self.shaping_settled
     }
 
     /// The running status.
@@ -442,6 +458,12 @@ impl Controller {
         self.count_pulses(s, now, inputs.pulses);
         let (setpoint, moved) = self.axis.tick(now);
         self.commanded = self.commanded.wrapping_add(moved as u32);
+        // The command path's shaping (0x2210): nothing to do while it is off and settled.
+        let (setpoint, moved) = if s.shaping.ticks() > 1 || self.shaping.ticks() > 1 {
+            s.shaping.process(&mut self.shaping, &setpoint, moved)
+        } else {
+            (setpoint, moved)
+        };
         self.notify(s, setpoint.whole);
         if self.axis.take_joined() {
             self.events.set(Events::JOINED);
@@ -450,7 +472,8 @@ impl Controller {
         let steps = commutation.whole.saturating_sub(self.servo.last_angle);
         self.servo.last_angle = commutation.whole;
         // Standstill current reduction once the motor has stood for the delay.
-        let still = self.axis.is_still();
+        self.shaping_settled = self.shaping.settled();
+        let still = self.axis.is_still() && self.shaping_settled;
         let since = *self.still_since.get_or_insert(now);
         if !still {
             self.still_since = None;

@@ -89,9 +89,13 @@ impl Controller {
         if self.servo.feedback.encoder().is_some() && inputs.encoder.is_none() {
             faults |= FAULT_ENCODER;
         }
+        // The speed 0x607F reads (the encoder's in closed loop, the command's in open loop).
         let [open, closed] = s.overspeed;
-        let limit = if self.servo.feedback.encoder().is_some() { closed } else { open };
-        if limit > 0.0 && self.real_speed().unsigned_abs() as f32 > limit && on(detect::OVERSPEED) {
+        let (limit, speed) = match self.servo.feedback {
+            crate::servo::Feedback::Closed(_) => (closed, self.servo.speed),
+            crate::servo::Feedback::Open => (open, self.axis.setpoint().velocity),
+        };
+        if limit > 0.0 && libm::fabsf(speed) > limit && on(detect::OVERSPEED) {
             faults |= FAULT_OVERSPEED;
         }
         if s.store_failed && on(detect::STORE) {

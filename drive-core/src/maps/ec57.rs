@@ -146,7 +146,7 @@ const RPM: Scale = Scale::PerRev(1, 60);
 const FAULT_CODE: Scale = Scale::Field(24, 8);
 
 /// The table (§1.2), by (index, sub-index) as [`key`] makes them.
-pub static ENTRIES: [Entry; 58] = [
+pub static ENTRIES: [Entry; 60] = [
     Entry::new(key(0x2000, 0), Obj::NodeId, &Scale::One),
     Entry::new(key(0x2001, 0), Obj::AddressSource, &Scale::One),
     Entry::new(key(0x2002, 0), Obj::MotorDirection, &Scale::One),
@@ -169,6 +169,8 @@ pub static ENTRIES: [Entry; 58] = [
     Entry::new(key(0x2012, 0), Obj::OverspeedLimit, &Scale::One),
     Entry::new(key(0x2013, 0), Obj::PowerUpJog, &Scale::One),
     Entry::new(key(0x2014, 0), Obj::InputStates, &Scale::One),
+    Entry::new(key(0x2015, 0), Obj::CommandFilter, &Scale::One),
+    Entry::new(key(0x2016, 0), Obj::CommandFilterTime, &Scale::One),
     Entry::new(key(0x2017, 0), Obj::RealSpeed, &RPM).narrow(),
     Entry::new(key(0x2018, 0), Obj::FollowingError, &Scale::One).narrow(),
     Entry::new(key(0x2019, 0), Obj::Feedback, &Scale::Table(&ZERO_ONE)),
@@ -301,7 +303,7 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
         "0x2012 is the overspeed limit in r/min of the shaft (0-3000, 1600 from the factory; 0, which the manual leaves open, turns it off), and it is saved with the rest (0x2030 = 1) although the table prints it R/W: a commissioned limit that fell back to 1600 at every power-up would be no limit. A motion whose speed is beyond it is refused (06) and moves nothing, and 0x201F reads 30; 0x201F reads 23 when the work mode in force does not take the command, and 0 once a motion command is taken. The speed the motor runs at (the encoder's in closed loop; the command's in open loop, where a PVT segment or the pulse input can ask more than a plan would) beyond the limit latches the overspeed alarm (31 in 0x201C's list) while 0x201B bit 3 detects it (the factory 0xC3 does not); a stop or a slow-down is never refused.",
         "0x201B is the fault detection mask: a detection whose bit is clear latches nothing. Bit 0 the over-current by the measured currents (the native 0x2133; the over-current trip in hardware turns the bridges off and latches the alarm whatever the mask says, as a masked trip would otherwise have the bridges switched into the short again each period), 1 the over-voltage, 2 the EEPROM: the parameter store found corrupt at power-up or a save that failed (alarm 32; the native 0x2120 bits 1 and 4), 3 the command overspeed (0x2012, alarm 31), 11 the op-amp fault: the current sensing's zero at power-up more than 256 codes of 4096 from mid-scale (alarm 33). The table leaves 4-10 and 12-15 unnamed; the drive gives 6 the under-voltage and 7 the phase loss (an open winding), which the factory value 0xC3 sets with 0 and 1, so that the manual's factory mask leaves the EEPROM, the command overspeed and the op-amp fault off and the rest on. The other unnamed bits have no detection behind them: a value that sets one is refused (06). The over-temperature, the overload and the encoder lost have no bit: they protect the drive and the motor; the position error has its own switch (0x200E).",
         "0x2023.1-5 are IN1-IN5's filter times in µs (50-60 000, 1000 from the factory; the manual gives no unit: a millisecond is the usual debounce of a switch, 60 ms the longest a contact bounces): a change of the input's level counts once it has held that long, counting the tick it came at (its bounces meanwhile ignored), for its function (0x2022), its state in 0x2014 and a touch probe's capture, which takes the position where the change began; 50, one control tick, takes every change at once. The drive's external stops (the native 0x6042, EXT1-EXT3 = IN1-IN3) are the same debouncer.",
-        "Not in this map, answered 03: 0x2015 and 0x2016 (the command FIR filter).",
+        "0x2015 = 1 smooths the position command by a moving average (the manual's FIR filter) over 0x2016 µs (50-25 600, to the nearest 50 µs control tick, 1000 from the factory; the manual gives no unit, and µs is 0x2023's: the drive's tick is the shortest, 512 ticks the longest it keeps): each corner of the commanded velocity becomes a ramp that long, the motion is delayed by half of it, and a move still ends exactly on its target. Every command passes through it (the window's moves, PVT, pulse following, homing); the busy bit stays set until the motor stands on the target, and a change of either register takes effect once the filter's output stands on its input.",
     ],
     remarks: &[],
     decimal: false,

@@ -4,5 +4,6 @@
 pub mod axis;
 pub mod cubic;
 pub mod scurve;
+pub mod shaping;
 pub mod track;
 pub mod whole;

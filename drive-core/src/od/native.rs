@@ -710,6 +710,17 @@ objects! {
     InputFilter6 @ 0x21FE: U16, Rw, Rom, Span(50, 60_000), default 50, Micros, "IN6 filter time";
     /// IN7 filter time (our object): as 0x21F9.
     InputFilter7 @ 0x21FF: U16, Rw, Rom, Span(50, 60_000), default 50, Micros, "IN7 filter time";
+    /// Command filter (our object; seed 003's 0x2015): 1 smooths the position command by a
+    /// moving average over 0x2211 before the motor follows it (`motion::shaping`): a master's
+    /// position steps become motion at a bounded acceleration, delayed by half the time, and a
+    /// move still ends exactly on its target; 0 off. Every command passes through it (moves,
+    /// PVT, pulse following, homing); 0x600E reads the command, and the busy bit (0x6001 bit 3)
+    /// stays set until the motor stands on it. A change takes effect once the filter's output
+    /// stands on its input.
+    CommandFilter @ 0x2210: U8, Rw, Rom, Span(0, 1), default 0, None, "command filter";
+    /// Command filter time (our object; seed 003's 0x2016), µs: the moving average's length, to
+    /// the nearest control tick (50 µs; 25.6 ms at most, 512 ticks).
+    CommandFilterTime @ 0x2211: U16, Rw, Rom, Span(50, 25_600), default 1000, Micros, "command filter time";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake

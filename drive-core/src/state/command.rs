@@ -122,7 +122,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     pub(crate) fn run_state(&self) -> u8 {
         if self.ctl.power_state(&self.settings) != PowerState::On {
             1
-        } else if self.ctl.axis.is_still() {
+        } else if self.motor_still() {
             2
         } else {
             3

@@ -30,6 +30,7 @@ use crate::modes::{Command, PowerState, PulseFormat, Running, WorkMode};
 use crate::motion::axis::Axis;
 use crate::motion::cubic::Table;
 use crate::motion::scurve::Limits;
+use crate::motion::shaping::MovingAverage;
 use crate::od::{Obj, ObjError, refuse};
 use crate::servo::{Gains, stall_limit};
 use crate::units::Instant;
@@ -109,6 +110,8 @@ pub(crate) const fn runs_on(obj: Obj) -> bool {
             | Obj::InputFilter5
             | Obj::InputFilter6
             | Obj::InputFilter7
+            | Obj::CommandFilter
+            | Obj::CommandFilterTime
             | Obj::CurrentDecay
             | Obj::Brake
             | Obj::UnderVoltage
@@ -246,6 +249,11 @@ pub(crate) fn settings_of(params: &[u32; Obj::COUNT]) -> Settings {
         detect: get(Obj::FaultMask) as u16,
         // The store's state is the bus side's, not an object's: `refresh_settings` sets it.
         store_failed: false,
+        shaping: if get(Obj::CommandFilter) == 1 {
+            MovingAverage::over_micros(get(Obj::CommandFilterTime), crate::units::TICK_MICROS as u32)
+        } else {
+            MovingAverage::default()
+        },
     }
 }
 

@@ -164,7 +164,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         let bit = |on: bool, k: u16| if on { 1 << k } else { 0 };
         let mut sw = self.device_state().statusword();
         let cw = self.param(Obj::DeviceControl) as u16;
-        let still = self.ctl.axis.is_still();
+        let still = self.motor_still();
         sw |= bit(self.ctl.power_state(&self.settings) == PowerState::Freed, 7);
         sw |= bit(cw & CW_HALT != 0, 8) | bit(!still, 9);
         let [home, negative, positive] = self.switches();

@@ -464,6 +464,12 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         self.refresh_settings();
     }
 
+    /// Whether the motor stands: the axis has ended its motion and the command path's shaping
+    /// has brought the motor onto it (0x6001's busy bit, 0x21AE, 0x2181's target reached).
+    pub(crate) fn motor_still(&self) -> bool {
+        self.ctl.axis.is_still() && self.ctl.shaping_settled()
+    }
+
     /// The running status.
     pub fn status(&self) -> &Status {
         &self.ctl.status
@@ -607,7 +613,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             Obj::Position => self.ctl.axis.setpoint().whole as u32,
             Obj::ErrorStatus => u32::from(s.error),
             Obj::ControllerStatus => {
-                u32::from(s.controller | self.fifo_status() | if self.ctl.axis.is_still() { 0 } else { STATUS_BUSY })
+                u32::from(s.controller | self.fifo_status() | if self.motor_still() { 0 } else { STATUS_BUSY })
             }
             Obj::PvtCount => u32::from(self.pvt.count()),
             Obj::PvtFault => u32::from(self.pvt.fault),
@@ -672,8 +678,8 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         if state != crate::modes::PowerState::On && !held {
             return 0;
         }
-        let stood = self.ctl.axis.is_still()
-            && self.ctl.still_since.is_some_and(|since| self.now.since(since) >= s.idle_delay_us);
+        let stood =
+            self.motor_still() && self.ctl.still_since.is_some_and(|since| self.now.since(since) >= s.idle_delay_us);
         if held || stood { s.idle_current_pct } else { 100 }
     }
 

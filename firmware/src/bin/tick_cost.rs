@@ -29,7 +29,9 @@
 //!
 //! - `io_functions`: open loop with every input and output given a function (0x21BA-0x21C6:
 //!   limit and home switches, commands; alarm, in position, general, ready), the inputs
-//!   inactive.
+//!   inactive, each through its filter (0x21F9-0x21FF at 1 ms);
+//! - `open_filtered`: open loop through the command filter (0x2210 = 1, 0x2211 at its longest,
+//!   25.6 ms).
 //!
 //! It prints one line a case through semihosting, then ends QEMU.
 #![no_std]
@@ -91,10 +93,11 @@ enum Case {
     ServoLoopRamp,
     Sensorless,
     IoFunctions,
+    OpenFiltered,
 }
 
 impl Case {
-    const ALL: [Case; 9] = [
+    const ALL: [Case; 10] = [
         Case::Open,
         Case::OpenRamp,
         Case::OpenPvt,
@@ -104,6 +107,7 @@ impl Case {
         Case::ServoLoopRamp,
         Case::Sensorless,
         Case::IoFunctions,
+        Case::OpenFiltered,
     ];
 
     fn name(self) -> &'static str {
@@ -117,6 +121,7 @@ impl Case {
             Case::ServoLoopRamp => "servo_loop_ramp",
             Case::Sensorless => "sensorless",
             Case::IoFunctions => "io_functions",
+            Case::OpenFiltered => "open_filtered",
         }
     }
 
@@ -139,7 +144,15 @@ impl Case {
                 (Obj::OutputFunction2, 3),
                 (Obj::OutputFunction3, 1),
                 (Obj::OutputFunction4, 5),
+                (Obj::InputFilter1, 1000),
+                (Obj::InputFilter2, 1000),
+                (Obj::InputFilter3, 1000),
+                (Obj::InputFilter4, 1000),
+                (Obj::InputFilter5, 1000),
+                (Obj::InputFilter6, 1000),
+                (Obj::InputFilter7, 1000),
             ],
+            Case::OpenFiltered => &[(Obj::CommandFilter, 1), (Obj::CommandFilterTime, 25_600)],
         }
     }
 
@@ -148,13 +161,15 @@ impl Case {
         let Some(last) = last else {
             // Power-up: the encoder reads 0, nothing turns yet.
             return match self {
-                Case::Open | Case::OpenRamp | Case::OpenPvt | Case::IoFunctions => Inputs::default(),
+                Case::Open | Case::OpenRamp | Case::OpenPvt | Case::IoFunctions | Case::OpenFiltered => {
+                    Inputs::default()
+                }
                 Case::PositionLoop | Case::ServoLoop | Case::ServoLoopRamp => Inputs { encoder: Some(0), ..MEASURED },
                 Case::OpenMeasured | Case::Sensorless => MEASURED,
             };
         };
         match self {
-            Case::Open | Case::OpenRamp | Case::OpenPvt | Case::IoFunctions => Inputs::default(),
+            Case::Open | Case::OpenRamp | Case::OpenPvt | Case::IoFunctions | Case::OpenFiltered => Inputs::default(),
             Case::OpenMeasured => MEASURED,
             // Closed loop: the setpoint is in encoder counts.
             Case::PositionLoop | Case::ServoLoop | Case::ServoLoopRamp => {
@@ -375,7 +390,9 @@ fn run(case: Case, slot: &mut MaybeUninit<Drive>, tick: &mut MaybeUninit<TickSid
         most = most.max(spent);
         // What the tick's controller runs (the bus side's model is synced only for requests).
         let ctl = rig.tick.controller();
-        let accelerating = rig.last.setpoint.acceleration != 0.0;
+        // (The command filter's acceleration carries its 1/256 microstep's quantisation: a few
+        // thousand pps² either way while cruising, against the ramp's 77 440.)
+        let accelerating = rig.last.setpoint.acceleration.abs() > 5_000.0;
         moving &= ctl.status().faults == 0
             && ctl.status().error == 0
             && ctl.status().controller == 0
