@@ -392,6 +392,16 @@ fn the_watchdog_counts_from_power_up_when_the_clock_does_not_start_at_zero() {
     assert_eq!(drive.state().read(Obj::CommStatus), 1);
 }
 
+/// 0x21F8 takes exactly the bits `faults::detect` names, and its factory value all but the
+/// store's.
+#[test]
+fn the_fault_mask_takes_the_named_detections() {
+    use drive_core::faults::detect;
+    use drive_core::od::Range;
+    assert_eq!(*Obj::FaultMask.def().range, Range::Bits(u32::from(detect::ALL)));
+    assert_eq!(Obj::FaultMask.def().default, u32::from(detect::ALL & !detect::STORE));
+}
+
 /// 0x21F6 and 0x21F7 in the native map: a move or a run beyond the overspeed limit is refused
 /// (04) with nothing moved and 0x21F7 at 30; within it the move runs and 0x21F7 is 0 again; a
 /// limit lowered under the running speed latches the overspeed alarm.
@@ -408,6 +418,14 @@ fn the_overspeed_limit_refuses_faster_motion_and_says_why() {
     run(&mut bus, &NOMINAL, 100_000);
     assert_eq!(bus.drive.state().position(), 0);
     assert_eq!(bus.snapshot(), before, "nothing else changed");
+    // A homing that moves searches at 0x2163 (3200 full steps a second, 960 r/min): refused
+    // too; method 35 (the present position) moves nothing and is taken.
+    assert!(write(&mut bus, 0x2160, 33));
+    assert!(!write(&mut bus, 0x2161, 1));
+    assert_eq!(read(&bus, Obj::NotMovingCode), 30);
+    assert!(write(&mut bus, 0x2160, 35));
+    assert!(write(&mut bus, 0x2161, 1));
+    run(&mut bus, &NOMINAL, 10_000);
     // Velocity mode: the run at 0x6003 is refused too.
     assert!(write(&mut bus, 0x6007, 1));
     assert_eq!(write32(&mut bus, 0x6003, 4000), Some(4));

@@ -679,8 +679,9 @@ objects! {
     /// A stop or a slow-down is never refused.
     OverspeedLimit @ 0x21F6: U16, Rw, Rom, Span(0, 3000), default 0, Rpm, "overspeed limit";
     /// Not-moving code (our object; seed 003's 0x201F): why the last motion command did not
-    /// move the motor: 30 its speed is beyond the overspeed limit 0x21F6, 23 the work mode in
-    /// force does not take it; 0 once a motion command is taken.
+    /// move the motor: 30 its speed is beyond the overspeed limit 0x21F6, 23 the work mode or
+    /// state in force does not take it (another mode's command, a speed of 0, a PVT run's
+    /// points missing); 0 once a motion command is taken.
     NotMovingCode @ 0x21F7: U8, Ro, Live, Span(0, 30), default 0, None, "not-moving code";
     /// Fault detection mask (our object; seed 003's 0x201B): a detection whose bit is clear
     /// latches nothing. Bit 0 the over-current by the measured currents (0x2133; the trip in

@@ -230,6 +230,12 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         self.may_move()?;
         refuse(self.ctl.axis.is_still() && self.ctl.run.is_none(), ObjError::Busy)?;
         let method = Method::of(self.param(Obj::HomingMethod)).ok_or(ObjError::OutOfRange)?;
+        if method != Method::Here {
+            // Its speeds within the overspeed limit (0x21F6), as a motion command's.
+            let planner = self.planner();
+            planner.asked.set(self.param(Obj::HomingSearchSpeed).max(self.param(Obj::HomingCreepSpeed)) as f32);
+            planner.within_overspeed(0.0)?;
+        }
         match method {
             Method::Switch { input, .. } => refuse(self.homing_switch(input).is_some(), ObjError::NotNow),
             Method::HardStop { .. } => {

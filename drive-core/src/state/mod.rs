@@ -811,7 +811,8 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     }
 
     /// Keeps why a motion command was refused for 0x21F7 (30 beyond the overspeed limit, 23
-    /// not in the work mode or state in force), or 0 once one is taken; `written` passes on.
+    /// not in the work mode or state in force: `ObjError::NotNow`), or 0 once one is taken;
+    /// `written` passes on.
     fn moved_or_why(&mut self, written: Result<(), ObjError>) -> Result<(), ObjError> {
         self.not_moving = match written {
             Ok(()) => 0,
