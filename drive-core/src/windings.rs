@@ -98,16 +98,15 @@ fn small_turn(angle: f32) -> CosSin {
 /// Mid-band stability, open loop. Beyond the speed where the supply runs out the loop is at its
 /// limit and the windings are driven by a voltage, not a current; a stepper so driven is
 /// unstable about its load angle (the rotor's oscillation grows until it loses step: the
-/// mid-band resonance, which took the NEMA 23 at 12 V down to a fifth of the chopper's pull-out
+/// mid-band resonance; undamped, the NEMA 23 at 12 V keeps a fifth of the chopper's pull-out
 /// torque at 6 turns a second). The windings damp it as V/f drives of synchronous motors do
 /// (Perera, Blaabjerg et al., IEEE Trans. Ind. Appl. 39(3), 2003): the commutation is slowed by
 /// the electrical power's rise over its mean, Δθ = −g·Δθ_cmd·ΔP/(V_bus·I) a period, Δθ_cmd the
 /// commanded turn of the period: a rotor that falls behind draws more power, and the field
-/// waits for it. g = 0.25, set by the torque-speed sweep (`docs/current-loop.md`,
-/// *Torque-speed*): every point from 0.2 to 0.4 keeps the bridges within 0.95 of the chopper
-/// or above; under 0.1 the NEMA 23 at 12 V loses a quarter at 6 rev/s, from 0.4 the
-/// holding torque suffers no longer (the gain scales with the speed) but the NEMA 23 at 12 V
-/// does at 2 rev/s.
+/// waits for it. The gain scales with the speed, so a standing motor is left alone. g = 0.25,
+/// set by the torque-speed sweep (`docs/current-loop.md`, *Torque-speed*): any g from 0.2 to
+/// 0.4 keeps the bridges at 0.95 of the chopper or above at every point; at 0.1 the NEMA 23 at
+/// 12 V keeps only three quarters of it at 6 rev/s.
 pub const DAMPING_GAIN: f32 = 0.25;
 /// The share of the difference that the electrical power's mean takes each period: a corner of
 /// 3 Hz, under the rotor's oscillation at speed (10-40 Hz).
