@@ -42,6 +42,13 @@ impl MapRig {
         Ok(pdu[2..].chunks(2).map(|w| u16::from_be_bytes([w[0], w[1]])).collect())
     }
 
+    /// Saves with 0x2030 = 1: the parameters the platform is then asked to save.
+    fn saved(&mut self) -> Params {
+        self.write_sub(0x2030, 0, 1).expect("save");
+        assert_eq!(self.drive.take_system_request(), Some(drive_core::SystemRequest::Save));
+        self.drive.state().params()
+    }
+
     /// Writes one register at (index, sub); the exception code if refused.
     fn write_sub(&mut self, index: u16, sub: u8, v: u16) -> Result<(), u8> {
         let [a, b] = index.to_be_bytes();
@@ -432,9 +439,7 @@ fn the_overspeed_limit_and_the_not_moving_code() {
     assert_eq!(r.drive.state().read_i32(Obj::Position), stopped, "stopped where it was");
     // Saved with the rest.
     r.write_sub(0x2012, 0, 1200).expect("1200 r/min");
-    r.write_sub(0x2030, 0, 1).expect("save");
-    assert_eq!(r.drive.take_system_request(), Some(drive_core::SystemRequest::Save));
-    assert_eq!(r.drive.state().params().get(Obj::OverspeedLimit), 1200);
+    assert_eq!(r.saved().get(Obj::OverspeedLimit), 1200);
 }
 
 /// 0x201B: a cleared bit keeps its detection from latching (the over-voltage, the EEPROM, the
@@ -481,12 +486,10 @@ fn the_fault_detection_mask() {
     r.write_sub(0x201E, 0, 1).expect("clear the alarm");
     // The EEPROM (bit 2): a save that fails.
     r.write_sub(0x201B, 0, 0xC3 | 0x04).expect("detect the store's failure");
-    r.write_sub(0x2030, 0, 1).expect("save");
-    assert_eq!(r.drive.take_system_request(), Some(drive_core::SystemRequest::Save));
+    assert_eq!(r.saved().get(Obj::FaultMask), 0xC7, "the mask is among the saved");
     r.drive.save_done(false);
     r.run(1_000);
     assert_eq!(r.read_sub(0x201C, 1, 1), Ok(vec![32]), "the store's alarm");
-    assert_eq!(r.drive.state().params().get(Obj::FaultMask), 0xC7, "the mask is among the saved");
     // Cleared in 0x2120 (the native storage status, bit 4) and then the alarm: gone.
     r.write_sub(0x2120, 0xFF, 0x10).expect("clear the failed save");
     r.write_sub(0x201E, 0, 1).expect("clear the alarm");
@@ -507,9 +510,7 @@ fn the_input_filter_times() {
     assert_eq!(r.read_sub(0x2023, 1, 5), Ok(vec![1000, 50, 1000, 1000, 60_000]));
     let st = r.drive.state();
     assert_eq!((st.read(Obj::InputFilter2), st.read(Obj::InputFilter5)), (50, 60_000));
-    r.write_sub(0x2030, 0, 1).expect("save");
-    assert_eq!(r.drive.take_system_request(), Some(drive_core::SystemRequest::Save));
-    assert_eq!(r.drive.state().params().get(Obj::InputFilter5), 60_000);
+    assert_eq!(r.saved().get(Obj::InputFilter5), 60_000);
 }
 
 /// 0x2015/0x2016: the command filter's switch and time (µs, 50-25 600, factory off and 1000),
@@ -525,8 +526,6 @@ fn the_command_filter_registers() {
     r.write_sub(0x2015, 0, 1).expect("on");
     assert_eq!(r.read_sub(0x2015, 0, 2), Ok(vec![1, 5_000]));
     assert_eq!(r.drive.state().settings().shaping.ticks(), 100, "5 ms of 50 µs ticks");
-    r.write_sub(0x2030, 0, 1).expect("save");
-    assert_eq!(r.drive.take_system_request(), Some(drive_core::SystemRequest::Save));
-    let saved = r.drive.state().params();
+    let saved = r.saved();
     assert_eq!((saved.get(Obj::CommandFilter), saved.get(Obj::CommandFilterTime)), (1, 5_000));
 }

@@ -101,9 +101,9 @@ impl MovingAverage {
             return (*x, moved);
         }
         // This tick's motion in 1/256 microsteps, with what earlier ticks could not take in.
-        let motion = (moved << FRACTION_BITS) + fraction - i64::from(last_fraction) + i64::from(state.carry);
+        let motion = (moved << FRACTION_BITS) + fraction - i64::from(last_fraction) + state.carry;
         let delta = motion.clamp(-i64::from(MAX_DELTA), i64::from(MAX_DELTA)) as i32;
-        state.carry = (motion - i64::from(delta)) as i32;
+        state.carry = motion - i64::from(delta);
         // Lag · N (1/256 microsteps): N·x − the window's sum of x; it grows by N·Δ and falls by
         // the window's sum of Δ (the last N ticks' motion).
         let head = usize::from(state.head);
@@ -152,8 +152,8 @@ pub struct ShapingState {
     window: i32,
     /// The lag · N, 1/256 microsteps.
     lag: i32,
-    /// Motion beyond a tick's largest, for the next ticks.
-    carry: i32,
+    /// Motion beyond a tick's largest, for the next ticks (a jump of any size: 64 bits).
+    carry: i64,
     /// Ticks in a row that took in no motion.
     quiet: u16,
     /// The input's fraction at the last tick, 1/256 microsteps.

@@ -394,7 +394,15 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             limits: self.active_limits(),
             program: self.program_runs(),
             asked: core::cell::Cell::new(0.0),
+            overspeed: self.overspeed_limit(),
         }
+    }
+
+    /// The overspeed limit (0x21F6) in the unit plans are made in: microsteps a second in open
+    /// loop, encoder counts a second in closed loop; 0 off.
+    fn overspeed_limit(&self) -> f32 {
+        let [open, closed] = self.settings.overspeed;
+        if self.encoder_position().is_some() { closed } else { open }
     }
 
     /// The limit switches active now: bit 0 the positive, bit 1 the negative.
@@ -415,9 +423,9 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     pub(crate) fn plan_motion_in_place(&mut self, obj: Obj, value: u32) -> Result<bool, ObjError> {
         let (may_move, encoder, limits) = (self.may_move(), self.encoder_position(), self.active_limits());
         let program = self.program_runs();
-        let asked = core::cell::Cell::new(0.0);
-        let planner =
-            Planner { params: &self.params, now: self.plan_time(), may_move, encoder, limits, program, asked };
+        let (asked, overspeed) = (core::cell::Cell::new(0.0), self.overspeed_limit());
+        let now = self.plan_time();
+        let planner = Planner { params: &self.params, now, may_move, encoder, limits, program, asked, overspeed };
         planner.plan_motion(obj, value, &mut self.ctl.axis, &mut self.pp)
     }
 
@@ -425,9 +433,9 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// the target it heads for (within the soft limits), or why it is refused.
     pub(super) fn plan_program_move(&mut self, sp: &SetPoint) -> Result<i64, ObjError> {
         let (may_move, encoder, limits) = (self.may_move(), self.encoder_position(), self.active_limits());
-        let asked = core::cell::Cell::new(0.0);
-        let planner =
-            Planner { params: &self.params, now: self.plan_time(), may_move, encoder, limits, program: true, asked };
+        let (asked, overspeed) = (core::cell::Cell::new(0.0), self.overspeed_limit());
+        let (now, program) = (self.plan_time(), true);
+        let planner = Planner { params: &self.params, now, may_move, encoder, limits, program, asked, overspeed };
         planner.program_move(&mut self.ctl.axis, sp)
     }
 
@@ -700,6 +708,9 @@ pub(crate) struct Planner<'a> {
     pub(super) program: bool,
     /// The fastest speed the plan under way asked for ([`Planner::within_overspeed`]).
     pub(super) asked: core::cell::Cell<f32>,
+    /// The overspeed limit (0x21F6) in the plan's unit, the settings' for the loop in force;
+    /// 0 off.
+    overspeed: f32,
 }
 
 impl Planner<'_> {
@@ -839,10 +850,7 @@ impl Planner<'_> {
     /// Refuses a plan that asked for a speed beyond the overspeed limit (0x21F6) and beyond
     /// `before`, the axis' speed when it was planned: a stop or a slow-down is never refused.
     pub(super) fn within_overspeed(&self, before: f32) -> Result<(), ObjError> {
-        let [open, closed] =
-            overspeed(self.param(Obj::OverspeedLimit), self.param(Obj::Microsteps), self.param(Obj::EncoderCpr));
-        let limit = if self.encoder.is_some() { closed } else { open };
-        let asked = self.asked.get();
+        let (limit, asked) = (self.overspeed, self.asked.get());
         refuse(limit == 0.0 || asked <= limit || asked <= before, ObjError::Overspeed)
     }
 
