@@ -3,12 +3,12 @@
 
 use crate::ascii;
 use crate::controller::Outputs;
+use crate::controller::Shared;
 use crate::controller::handoff::{Handover, Lent, TickSide};
 use crate::crc;
 use crate::faults::{FaultLog, Inputs};
 use crate::ident::Identity;
 use crate::maps::{NativeMap, RegisterMap, Spoilt};
-use crate::motion::cubic::Table;
 use crate::od::Obj;
 use crate::pdu::{Exception, MAX_READ, Parser, Request, Words};
 use crate::rtu::{self, MAX_FRAME, RxError};
@@ -86,7 +86,7 @@ pub struct Counters {
 /// A drive on a serial line: the RTU slave and the drive state behind it, with its PVT point
 /// table (`P`) and its programs' memory (`G`), owned or lent ([`DriveState`]).
 #[derive(Clone, Debug)]
-pub struct Drive<M: RegisterMap = NativeMap, P = Table, G = ProgramMemory> {
+pub struct Drive<M: RegisterMap = NativeMap, P = Shared, G = ProgramMemory> {
     line: Line,
     address: SlaveAddr,
     /// The CRC register after `address`, the first byte of every reply.
@@ -162,11 +162,11 @@ impl<M: RegisterMap> Drive<M> {
     /// are those of `params` unless `config` overrides them (and the override is what the objects
     /// then show, and what a save stores).
     pub fn boot_with_map(config: DriveConfig, map: M, params: &Params, storage: u8) -> Self {
-        Self::boot_with_table(config, map, params, storage, Table::new())
+        Self::boot_with_table(config, map, params, storage, Shared::new())
     }
 }
 
-impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
+impl<M: RegisterMap, P: Borrow<Shared>> Drive<M, P> {
     /// [`Drive::boot_with_map`] with the PVT point table `table` (its points are not read: the
     /// table starts empty), and a programs' memory of its own.
     pub fn boot_with_table(config: DriveConfig, map: M, params: &Params, storage: u8, table: P) -> Self {
@@ -186,19 +186,19 @@ impl<M: RegisterMap, P: Borrow<Table>> Drive<M, P> {
     }
 }
 
-impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Drive<M, P, G> {
+impl<M: RegisterMap, P: Borrow<Shared>, G: Borrow<ProgramMemory>> Drive<M, P, G> {
     /// [`Drive::boot_with_map`] with the PVT point table `table` (its points are not read: the
     /// table starts empty) and the programs' memory `programs` (its program is kept: power-up
     /// may have loaded it). A microcontroller lends both from statics of its own
-    /// (`&'static Table`, `&'static ProgramMemory`), so the drive it builds is under 6 KB
-    /// instead of 16 KB:
+    /// (`&'static Shared`, `&'static ProgramMemory`), so the drive it builds is under 6 KB
+    /// instead of 48 KB:
     ///
     /// ```
     /// use drive_core::{Drive, DriveConfig, Params};
-    /// use drive_core::motion::cubic::Table;
+    /// use drive_core::controller::Shared;
     /// use drive_core::maps::NativeMap;
     /// use drive_core::state::ProgramMemory;
-    /// let (table, programs) = (Table::new(), ProgramMemory::new());
+    /// let (table, programs) = (Shared::new(), ProgramMemory::new());
     /// let d = Drive::boot_with_memory(DriveConfig::default(), NativeMap::new(), &Params::factory(), 0, &table, &programs);
     /// assert!(core::mem::size_of_val(&d) < 6 * 1024);
     /// ```
@@ -792,7 +792,7 @@ struct Server<'a, M, P, G> {
 /// Conformity level of device identification: regular, stream and individual access.
 const CONFORMITY: u8 = 0x82;
 
-impl<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>> Server<'_, M, P, G> {
+impl<M: RegisterMap, P: Borrow<Shared>, G: Borrow<ProgramMemory>> Server<'_, M, P, G> {
     /// Whether a request executes when it gets no answer (broadcast, listen-only mode).
     fn silent_allowed(&self, req: &Request<'_>) -> bool {
         match *req {

@@ -36,6 +36,7 @@ pub mod od;
 pub mod pdu;
 pub mod power;
 pub mod rtu;
+pub mod scope;
 pub mod servo;
 pub mod state;
 pub mod store;

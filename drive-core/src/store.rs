@@ -42,9 +42,9 @@ use crate::drive::{Drive, Params, STORAGE_CORRUPT, STORAGE_EMPTY, STORAGE_FSET, 
 pub use crate::faults::FaultHistory;
 use crate::faults::HISTORY_LEN;
 use crate::maps::RegisterMap;
-use crate::motion::cubic::Table;
 use crate::od::{Access, OBJECTS, Storage};
 use crate::state::ProgramMemory;
+use crate::state::Shared;
 use crate::state::memory::WORDS as PROGRAM_WORDS;
 
 /// Map key of the parameter record.
@@ -265,7 +265,7 @@ impl<S: NorFlash> Store<S> {
     /// and [`Job::finish`] in one call, for a platform that can lend the drive for the flash
     /// operation. Returns the request and how it went; [`SystemRequest::BootLoader`] is the
     /// platform's to act on. Call it outside the control tick, after the reply has been sent.
-    pub async fn serve<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+    pub async fn serve<M: RegisterMap, P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &mut self,
         drive: &mut Drive<M, P, G>,
     ) -> Option<(SystemRequest, Result<(), Error<S>>)> {
@@ -437,7 +437,7 @@ pub enum Job {
 impl Job {
     /// Takes the drive's pending request, if any, with a copy of its parameters for a save. The
     /// drive shows the save in progress (0x2120 bit 3) and refuses another until [`Job::finish`].
-    pub fn take<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+    pub fn take<M: RegisterMap, P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         drive: &mut Drive<M, P, G>,
     ) -> Option<Self> {
         Some(match drive.take_system_request()? {
@@ -462,7 +462,7 @@ impl Job {
 
     /// Tells the drive how the job went (`ok`: the flash holds what it was asked to hold). Only a
     /// parameter save has a status in the drive (0x2120 bits 3 and 4).
-    pub fn finish<M: RegisterMap, P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+    pub fn finish<M: RegisterMap, P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &self,
         drive: &mut Drive<M, P, G>,
         ok: bool,

@@ -5,9 +5,9 @@
 
 use std::borrow::Borrow;
 
+use drive_core::controller::Shared;
 use drive_core::drive::{Counters, LineFraming};
 use drive_core::maps::{Maps, RegisterMap};
-use drive_core::motion::cubic::Table;
 use drive_core::od::Obj;
 use drive_core::pdu::{Exception, Words};
 use drive_core::state::ProgramMemory;
@@ -108,7 +108,7 @@ impl ManualRegisters {
 }
 
 impl RegisterMap for ManualRegisters {
-    fn read<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+    fn read<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &self,
         _drive: &DriveState<P, G>,
         addr: u16,
@@ -125,7 +125,7 @@ impl RegisterMap for ManualRegisters {
         Self::slot(addr, usize::from(qty)).map(|_| ())
     }
 
-    fn write<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+    fn write<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &mut self,
         _drive: &mut DriveState<P, G>,
         addr: u16,

@@ -55,7 +55,7 @@ fn split() -> (Drive, TickSide) {
 fn tick_at(d: &mut Drive, tick: &mut TickSide, k: u64, lent: bool, inputs: &Inputs) -> (Outputs, Option<Handover>) {
     let now = tick_time(k);
     let h = lent.then(|| synced(d, tick, now));
-    let out = tick.tick(now, inputs, d.state().table());
+    let out = tick.tick(now, inputs, d.state().shared());
     (out, h)
 }
 
@@ -441,6 +441,6 @@ fn a_tick_side_made_after_ticks_on_the_model_itself_takes_in_nothing_twice() {
     // A tick side split off now starts where the model is: its first sync replays no plan.
     let mut tick = d.state().tick_side();
     assert_eq!(synced(&mut d, &mut tick, tick_time(2_001)), Handover::Done);
-    let out = tick.tick(tick_time(2_001), &Inputs::default(), d.state().table());
+    let out = tick.tick(tick_time(2_001), &Inputs::default(), d.state().shared());
     assert!(out.setpoint.whole >= moved && out.setpoint.whole - moved < 10, "{} after {moved}", out.setpoint.whole);
 }

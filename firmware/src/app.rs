@@ -22,10 +22,10 @@ use core::sync::atomic::{AtomicPtr, AtomicU32, Ordering};
 use core::task::Poll;
 
 use defmt::warn;
+use drive_core::controller::Shared;
 use drive_core::controller::handoff::{Handover, Lent, TickSide};
 use drive_core::ident::Identity;
 use drive_core::maps::Maps;
-use drive_core::motion::cubic::Table;
 use drive_core::state::ProgramMemory;
 use drive_core::{Baud, DriveConfig, Instant, Params};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
@@ -38,10 +38,11 @@ use crate::power::PowerStage;
 
 /// The drive of the firmware: every register map (0x2190 chooses one at power-up), and the PVT
 /// point table and the programs' memory in statics of their own.
-pub type Drive = drive_core::Drive<Maps, &'static Table, &'static ProgramMemory>;
+pub type Drive = drive_core::Drive<Maps, &'static Shared, &'static ProgramMemory>;
 
-/// The PVT points (9 KB), shared by the task (stores) and the tick (reads).
-static TABLE: Table = Table::new();
+/// The PVT points (9 KB: the task stores, the tick reads) and the recordings (32 KB: the
+/// tick records, the task reads out).
+static SHARED: Shared = Shared::new();
 
 /// The multi-segment programs (1 KB): loaded at power-up, then the task's.
 static PROGRAMS: ProgramMemory = ProgramMemory::new();
@@ -109,7 +110,7 @@ fn boot_into(
     status: u8,
 ) -> &'static mut Drive {
     let map = Maps::by_id(params.get(drive_core::od::Obj::RegisterMap));
-    Drive::boot_in_with_memory(slot, config, map, params, status, &TABLE, &PROGRAMS)
+    Drive::boot_in_with_memory(slot, config, map, params, status, &SHARED, &PROGRAMS)
 }
 
 /// The tick's side of `drive` in `slot`; out of line as [`boot_into`].
@@ -158,7 +159,7 @@ fn run_tick(
             SYNCED.wake();
         }
     }
-    let out = tick.tick(now, &inputs(), &TABLE);
+    let out = tick.tick(now, &inputs(), &SHARED);
     stage.apply(&out);
     if tick.needs_bus() {
         ATTENTION.signal(());

@@ -464,7 +464,7 @@ impl Plant {
         if self.drive.has_changes() {
             self.drive.sync_here(tick, now);
         }
-        let out = tick.tick(now, &inputs, self.drive.state().table());
+        let out = tick.tick(now, &inputs, self.drive.state().shared());
         self.drive.sync_here(tick, now.plus_micros(TICK_MICROS));
         self.drive.state_mut().service(now);
         out

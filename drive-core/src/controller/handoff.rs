@@ -26,9 +26,9 @@
 //! - the events the tick raised go up, for the bus side to act on.
 
 use super::run::{Pvt, Run};
-use super::{Controller, Events, Outputs, Settings, Status, Watch};
+use super::{Controller, Events, Outputs, Settings, Shared, Status, Watch};
 use crate::faults::Inputs;
-use crate::motion::cubic::Table;
+use crate::scope::Config;
 use crate::units::{Instant, TICK_MICROS};
 
 /// What the bus side learned of the tick's controller at the last sync: the version of its
@@ -112,6 +112,34 @@ pub struct Orders {
     pub(crate) suspend: Option<u16>,
     /// Empty the fault history (0x200F = 5).
     pub(crate) clear_history: bool,
+    /// What the master last did to the scope.
+    pub(crate) scope: Option<ScopeOrder>,
+    /// The black box's capture of this number was read.
+    pub(crate) black_box_read: Option<u16>,
+}
+
+/// What the master did to the scope: the last order stands.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum ScopeOrder {
+    /// Armed with a checked configuration.
+    Arm(Config),
+    /// Stopped.
+    Stop,
+    /// The capture of this number was read.
+    Read(u16),
+}
+
+impl ScopeOrder {
+    /// Carries the order out on `scope`.
+    pub(crate) fn apply(self, scope: &mut crate::scope::Recorder) {
+        match self {
+            ScopeOrder::Arm(c) => {
+                let _ = scope.arm(&c);
+            }
+            ScopeOrder::Stop => scope.stop(),
+            ScopeOrder::Read(n) => scope.acknowledge(n),
+        }
+    }
 }
 
 impl Orders {
@@ -176,10 +204,28 @@ impl Controller {
         if starts.is_some_and(|at| now < at) {
             return Handover::Waiting;
         }
-        let Orders { stop, settings: changed, clear, outputs, run, queue, pushed, watch, suspend, clear_history } =
-            core::mem::take(*orders);
+        let Orders {
+            stop,
+            settings: changed,
+            clear,
+            outputs,
+            run,
+            queue,
+            pushed,
+            watch,
+            suspend,
+            clear_history,
+            scope,
+            black_box_read,
+        } = core::mem::take(*orders);
         if clear_history {
             self.faults.clear_history();
+        }
+        if let Some(order) = scope {
+            order.apply(&mut self.scopes.scope);
+        }
+        if let Some(n) = black_box_read {
+            self.scopes.black_box.acknowledge(n);
         }
         // The bus side's settings, whole, when they changed. The zero offset is the tick's own
         // once its closed loop set it at its first reading: the settings' only if the bus side
@@ -264,6 +310,7 @@ impl Controller {
         model.run = self.run;
         model.still_since = self.still_since;
         model.shaping_settled = self.shaping_settled;
+        model.scopes = self.scopes;
         model.caught = self.caught.take().or(model.caught);
         model.events = Events(model.events.0 | core::mem::take(&mut self.events).0);
     }
@@ -271,7 +318,7 @@ impl Controller {
 
 /// What the control tick owns where it runs apart from the bus side: the settings it runs (a
 /// copy of the bus side's, replaced whole when they change), its controller and its PVT queue
-/// (the points themselves are in the shared [`Table`]).
+/// (the points themselves are in the [`Shared`] table).
 #[derive(Clone, Debug)]
 pub struct TickSide {
     settings: Settings,
@@ -293,10 +340,10 @@ impl TickSide {
         self.ctl.sync(&mut self.settings, &mut self.pvt, now, lent)
     }
 
-    /// One control tick ([`Controller::tick`]) of the settings in force with the PVT points of
-    /// `table`.
-    pub fn tick(&mut self, now: Instant, inputs: &Inputs, table: &Table) -> Outputs {
-        self.ctl.tick(&self.settings, now, inputs, &mut self.pvt, table)
+    /// One control tick ([`Controller::tick`]) of the settings in force with the PVT points
+    /// and recordings of `shared`.
+    pub fn tick(&mut self, now: Instant, inputs: &Inputs, shared: &Shared) -> Outputs {
+        self.ctl.tick(&self.settings, now, inputs, &mut self.pvt, shared)
     }
 
     /// The settings the tick runs.

@@ -13,6 +13,7 @@
 pub mod handoff;
 pub mod io;
 mod loops;
+mod record;
 pub(crate) mod run;
 mod supervise;
 
@@ -21,6 +22,7 @@ use crate::modes::PowerState;
 use crate::motion::axis::{Axis, Setpoint};
 use crate::motion::cubic::{Ahead, Table};
 use crate::motion::shaping::{MovingAverage, ShapingState};
+use crate::scope::{Recordings, Scopes};
 use crate::servo::{Feedback, Gains, Servo};
 use crate::units::Instant;
 use fixed::types::{U0F16, U0F32};
@@ -242,6 +244,24 @@ impl Events {
     }
 }
 
+/// The memories the tick and the bus side share: the PVT points the bus side stores and the
+/// tick runs, and the recordings the tick makes and the bus side reads out (41 KB: a
+/// microcontroller keeps them in a static and lends them, `&'static Shared`).
+#[derive(Clone, Debug, Default)]
+pub struct Shared {
+    /// The PVT points.
+    pub table: Table,
+    /// The scope's and the black box's memories.
+    pub recordings: Recordings,
+}
+
+impl Shared {
+    /// Empty (a `const fn`, so that a static is built in place).
+    pub const fn new() -> Self {
+        Self { table: Table::new(), recordings: Recordings::new() }
+    }
+}
+
 /// Fast-decay shares of 0x6010's values 0..=3: 0, 1/2, 3/4, 7/8.
 pub const DECAY: [U0F16; 4] = [U0F16::ZERO, U0F16::lit("0.5"), U0F16::lit("0.75"), U0F16::lit("0.875")];
 
@@ -298,6 +318,8 @@ pub struct Controller {
     pub(crate) shaping: ShapingState,
     /// Whether the shaping's output stood on its input at the last tick.
     pub(crate) shaping_settled: bool,
+    /// The scope and the black box (their rows are in [`Shared::recordings`]).
+    pub(crate) scopes: Scopes,
 }
 
 /// A reversed motor's electrical angle `a` and steps: the other way round (phase B inverted).
@@ -374,6 +396,7 @@ impl Controller {
             reversed,
             shaping: ShapingState::default(),
             shaping_settled: true,
+            scopes: Scopes::new(),
         }
     }
 
@@ -381,6 +404,11 @@ impl Controller {
     /// motion the axis has finished still moves the motor until it has.
     pub fn shaping_settled(&self) -> bool {
         self.shaping_settled
+    }
+
+    /// The scope and the black box.
+    pub fn scopes(&self) -> &Scopes {
+        &self.scopes
     }
 
     /// The running status.
@@ -442,9 +470,10 @@ impl Controller {
     }
 
     /// One control tick of `s` at `now` with what the drive measures: supervision, the next PVT
-    /// segment (its points from `pvt` and `table`), the motion, the loops; what the output stage
-    /// does.
-    pub fn tick(&mut self, s: &Settings, now: Instant, inputs: &Inputs, pvt: &mut Pvt, table: &Table) -> Outputs {
+    /// segment (its points from `pvt` and `shared`'s table), the motion, the loops, the scope's
+    /// or the black box's row into `shared`'s recordings; what the output stage does.
+    pub fn tick(&mut self, s: &Settings, now: Instant, inputs: &Inputs, pvt: &mut Pvt, shared: &Shared) -> Outputs {
+        let table = &shared.table;
         self.sense(s, inputs);
         self.supervise(s, now, inputs);
         self.pins(s, now, inputs.levels);
@@ -503,6 +532,11 @@ impl Controller {
             // 0x6031 shows what an output with a function drives (inverted, as the manual has it).
             self.status.gpio = (self.status.gpio & !function_pins) | (!gpio & function_pins);
         }
+        let current_ma = if enabled { current as u16 } else { 0 };
+        if self.scopes.due() {
+            let tick = record::Tick { setpoint: &setpoint, current_ma, share, inputs };
+            self.record(&tick, &shared.recordings);
+        }
         let (mut commutation, mut steps) = (commutation, steps);
         if self.reversed {
             mirror(&mut commutation, &mut steps);
@@ -511,7 +545,7 @@ impl Controller {
             setpoint,
             commutation,
             steps,
-            current_ma: if enabled { current as u16 } else { 0 },
+            current_ma,
             enabled,
             coil_duty: self.coil_duty(s),
             gpio,

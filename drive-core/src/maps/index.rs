@@ -72,19 +72,19 @@ const SPAN: usize = {
     last.offset + (last.end - last.first) as usize
 };
 
-/// The high byte of an [`INDEX`] entry whose register a read takes from the drive state (a
-/// live object, a text), not from a stored value; the low byte is then the object's index.
-pub(crate) const OTHER: u8 = u8::MAX;
+/// The high half of an [`INDEX`] entry whose register a read takes from the drive state (a
+/// live object, a text), not from a stored value; the low half is then the object's index.
+pub(crate) const OTHER: u16 = u16::MAX;
 
 /// Every register of every page's span. A read takes a register from the stored value of object
-/// `e >> 8` shifted right by `e as u8` (0 or 16 for the low or high word; 32, giving 0, for a
-/// reserved register, whose high byte is the object after it), unless the high byte is
+/// `e >> 16` shifted right by `e as u16` (0 or 16 for the low or high word; 32, giving 0, for a
+/// reserved register, whose high half is the object after it), unless the high half is
 /// [`OTHER`]. So reads cost one entry per register, and an out-of-range index is the only branch.
 /// (The shift in the low byte is where x86's shift instruction takes its count.)
 #[allow(clippy::indexing_slicing)]
-static INDEX: [u16; SPAN] = {
+static INDEX: [u32; SPAN] = {
     assert!(OBJECTS.len() < OTHER as usize);
-    let mut index = [0u16; SPAN];
+    let mut index = [0u32; SPAN];
     let mut p = 0;
     let mut i = 0;
     while p < N_PAGES {
@@ -97,11 +97,11 @@ static INDEX: [u16; SPAN] = {
             let d = &OBJECTS[i];
             let stored = matches!(d.storage(), Storage::Ram | Storage::Rom);
             let entry = match d.ty() {
-                _ if d.addr as u32 > reg => (i as u16) << 8 | 32,
-                Type::U8 | Type::U16 if stored => (i as u16) << 8,
+                _ if d.addr as u32 > reg => ((i as u32) << 16) | 32,
+                Type::U8 | Type::U16 if stored => (i as u32) << 16,
                 // High word first.
-                Type::U32 | Type::S32 if stored => (i as u16) << 8 | ((d.addr as u32 + 1 - reg) * 16) as u16,
-                _ => (OTHER as u16) << 8 | i as u16,
+                Type::U32 | Type::S32 if stored => ((i as u32) << 16) | ((d.addr as u32 + 1 - reg) * 16),
+                _ => ((OTHER as u32) << 16) | i as u32,
             };
             index[page.offset + (reg - page.first) as usize] = entry;
             reg += 1;
@@ -113,7 +113,7 @@ static INDEX: [u16; SPAN] = {
 
 /// The [`INDEX`] entries of `qty` registers from `addr`, if they lie in one page's span.
 #[inline(always)]
-pub(crate) fn registers(addr: u16, qty: u16) -> Option<&'static [u16]> {
+pub(crate) fn registers(addr: u16, qty: u16) -> Option<&'static [u32]> {
     let page = PAGE_OF.get(usize::from(addr >> 8)).and_then(|&p| PAGES.get(usize::from(p)))?;
     let (addr, end) = (u32::from(addr), u32::from(addr) + u32::from(qty));
     if addr < page.first || end > page.end {
@@ -138,5 +138,5 @@ pub(crate) fn registers(addr: u16, qty: u16) -> Option<&'static [u16]> {
 #[inline(always)]
 pub fn locate(addr: u16, qty: u16) -> Option<usize> {
     let e = *registers(addr, qty)?.first()?;
-    Some(usize::from(if (e >> 8) as u8 == OTHER { e & 0xFF } else { e >> 8 }))
+    Some((if (e >> 16) as u16 == OTHER { e & 0xFFFF } else { e >> 16 }) as usize)
 }

@@ -25,9 +25,9 @@
 //! ```
 
 use super::native::{NativeMap, Op, RegisterMap, Spoilt};
-use crate::motion::cubic::Table;
 use crate::od::{Access, Obj, ObjError, ObjectDef, Type};
 use crate::pdu::{Exception, Parser, Words};
+use crate::state::Shared;
 use crate::state::{DriveState, ProgramMemory};
 use core::borrow::Borrow;
 
@@ -430,7 +430,7 @@ const fn mask(width: u8) -> u32 {
 }
 
 /// Whether register `k` (0 or 1) of a 32-bit object is its high half in `order`.
-fn is_high<P: Borrow<Table>, G: Borrow<ProgramMemory>>(order: WordOrder, drive: &DriveState<P, G>, k: u32) -> bool {
+fn is_high<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(order: WordOrder, drive: &DriveState<P, G>, k: u32) -> bool {
     let high_first = match order {
         WordOrder::HighFirst => true,
         WordOrder::LowFirst => false,
@@ -440,7 +440,7 @@ fn is_high<P: Borrow<Table>, G: Borrow<ProgramMemory>>(order: WordOrder, drive: 
 }
 
 /// The position data groups' electronic gear (0x219B / 0x219C), both at least 1.
-fn gear<P: Borrow<Table>, G: Borrow<ProgramMemory>>(drive: &DriveState<P, G>) -> (i64, i64) {
+fn gear<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(drive: &DriveState<P, G>) -> (i64, i64) {
     (i64::from(drive.read(Obj::GearNumerator).max(1)), i64::from(drive.read(Obj::GearDenominator).max(1)))
 }
 
@@ -510,7 +510,7 @@ impl LayoutMap {
     }
 
     /// The map's value of `e` now, as register bits (32 at most).
-    fn map_value<P: Borrow<Table>, G: Borrow<ProgramMemory>>(&self, drive: &DriveState<P, G>, e: &Entry) -> u32 {
+    fn map_value<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(&self, drive: &DriveState<P, G>, e: &Entry) -> u32 {
         let d = e.obj.def();
         if let Scale::Field(shift, width) = *e.scale {
             return drive.read_def(d).checked_shr(u32::from(shift)).unwrap_or(0) & mask(width);
@@ -525,7 +525,7 @@ impl LayoutMap {
     }
 
     /// The drive's raw value of the map's register bits `bits` for `e`.
-    fn drive_value<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+    fn drive_value<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &self,
         drive: &DriveState<P, G>,
         e: &Entry,
@@ -558,7 +558,7 @@ impl LayoutMap {
     }
 
     /// Decodes a write into what it does to each object, or the first address error.
-    fn plan<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+    fn plan<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &self,
         drive: &DriveState<P, G>,
         addr: u16,
@@ -615,7 +615,7 @@ impl LayoutMap {
 }
 
 impl RegisterMap for LayoutMap {
-    fn read<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+    fn read<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &self,
         drive: &DriveState<P, G>,
         addr: u16,
@@ -688,7 +688,7 @@ impl RegisterMap for LayoutMap {
     // Out of line: its plan (123 objects at most) is on the stack for a layout's writes only,
     // not under every write of the maps it is a variant of.
     #[inline(never)]
-    fn write<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+    fn write<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &mut self,
         drive: &mut DriveState<P, G>,
         addr: u16,
@@ -755,7 +755,7 @@ impl RegisterMap for LayoutMap {
         usize::from(self.layout.sub_index.is_some())
     }
 
-    fn spoilt_frame<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+    fn spoilt_frame<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &self,
         drive: &DriveState<P, G>,
         spoilt: Spoilt,
@@ -772,7 +772,7 @@ impl RegisterMap for LayoutMap {
         self.layout.address
     }
 
-    fn factory_settings<P: Borrow<Table>, G: Borrow<ProgramMemory>>(&self, drive: &mut DriveState<P, G>) {
+    fn factory_settings<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(&self, drive: &mut DriveState<P, G>) {
         for &(addr, value) in self.layout.defaults {
             let Some(e) = self.layout.entries.iter().find(|e| e.addr == addr) else { continue };
             // A default the drive does not take (a unit it cannot convert) leaves its own.

@@ -13,8 +13,8 @@ pub mod layout;
 pub mod native;
 pub mod servo;
 
-use crate::motion::cubic::Table;
 use crate::pdu::{Exception, Parser, Words};
+use crate::state::Shared;
 use crate::state::{DriveState, ProgramMemory};
 use core::borrow::Borrow;
 use layout::LayoutMap;
@@ -83,7 +83,7 @@ impl Maps {
 impl RegisterMap for Maps {
     // Each map's code has one call site, so that it is inlined once: the native map's serves
     // the native map and a sub-indexed layout's window.
-    fn read<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+    fn read<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &self,
         drive: &DriveState<P, G>,
         addr: u16,
@@ -110,7 +110,7 @@ impl RegisterMap for Maps {
         native.check_read(addr, qty).map_err(|e| codes.map_or(e, |c| c.native(e)))
     }
 
-    fn write<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+    fn write<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &mut self,
         drive: &mut DriveState<P, G>,
         addr: u16,
@@ -151,7 +151,7 @@ impl RegisterMap for Maps {
         }
     }
 
-    fn factory_settings<P: Borrow<Table>, G: Borrow<ProgramMemory>>(&self, drive: &mut DriveState<P, G>) {
+    fn factory_settings<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(&self, drive: &mut DriveState<P, G>) {
         if let Self::Layout(m) = self {
             m.factory_settings(drive);
         }
@@ -182,7 +182,7 @@ impl RegisterMap for Maps {
         }
     }
 
-    fn spoilt_frame<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+    fn spoilt_frame<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &self,
         drive: &DriveState<P, G>,
         spoilt: Spoilt,

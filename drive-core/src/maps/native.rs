@@ -2,9 +2,11 @@
 
 use super::exceptions::Exceptions;
 use super::index;
-use crate::motion::cubic::Table;
 use crate::od::{Access, OBJECTS, Obj, ObjError, ObjectDef, Range, Storage, Type, is_command};
 use crate::pdu::{Exception, MAX_WRITE, Parser, Words};
+use crate::scope::WORDS;
+use crate::state::Shared;
+use crate::state::recording::{BLACK_BOX_WINDOW, SCOPE_WINDOW};
 use crate::state::{DriveState, ProgramMemory};
 use core::borrow::Borrow;
 use heapless::Vec;
@@ -12,7 +14,7 @@ use heapless::Vec;
 /// A vendor's register layout over the drive's objects.
 pub trait RegisterMap {
     /// Reads `out.len() / 2` registers from `addr` into `out`, big-endian.
-    fn read<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+    fn read<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &self,
         drive: &DriveState<P, G>,
         addr: u16,
@@ -21,7 +23,7 @@ pub trait RegisterMap {
     /// Whether `qty` registers from `addr` could be read (checked before 0x17 writes anything).
     fn check_read(&self, addr: u16, qty: u16) -> Result<(), Exception>;
     /// Writes `values` from `addr`: all of them, or none and an exception.
-    fn write<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+    fn write<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &mut self,
         drive: &mut DriveState<P, G>,
         addr: u16,
@@ -42,7 +44,7 @@ pub trait RegisterMap {
     }
     /// Sets the map's own factory settings over the drive's factory values (a drive with
     /// nothing saved, a factory reset); most maps have none.
-    fn factory_settings<P: Borrow<Table>, G: Borrow<ProgramMemory>>(&self, _drive: &mut DriveState<P, G>) {}
+    fn factory_settings<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(&self, _drive: &mut DriveState<P, G>) {}
     /// What the map's program window holds (seed 002's multi-segment programs, seed 004's
     /// position data groups), if it has one: without one the drive refuses the program commands
     /// and saves no program.
@@ -63,7 +65,7 @@ pub trait RegisterMap {
     }
     /// The exception code a frame `spoilt` is answered with, if it began with this drive's
     /// address; `None` drops it, as the Modbus serial line has it.
-    fn spoilt_frame<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+    fn spoilt_frame<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &self,
         _drive: &DriveState<P, G>,
         _spoilt: Spoilt,
@@ -193,7 +195,7 @@ impl NativeMap {
     /// the first refusal goes to `refused`: an address error anywhere in the request still comes
     /// first, and a request with commands among several objects is checked again by the caller.
     #[inline]
-    fn plan<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+    fn plan<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &self,
         drive: &DriveState<P, G>,
         addr: u16,
@@ -269,7 +271,7 @@ impl NativeMap {
     /// it in the same request (a speed, then a move), so each value is checked on the drive that
     /// has taken the ones before, all or nothing ([`DriveState::write_in_order`]).
     #[inline(never)]
-    fn commit_in_order<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+    fn commit_in_order<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &mut self,
         drive: &mut DriveState<P, G>,
         plan: &Plan,
@@ -292,7 +294,7 @@ impl NativeMap {
     /// changes, all or nothing.
     // Out of line, with its plan on the stack: a one-register write does without both.
     #[inline(never)]
-    fn write_planned<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+    fn write_planned<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &mut self,
         drive: &mut DriveState<P, G>,
         addr: u16,
@@ -336,7 +338,7 @@ static PLAIN: [(u16, u16); Obj::COUNT] = {
     while i < Obj::COUNT {
         #[allow(clippy::indexing_slicing)] // const evaluation: out of bounds is a compile error
         {
-            if DriveState::<Table>::plain(&OBJECTS[i])
+            if DriveState::<Shared>::plain(&OBJECTS[i])
                 && OBJECTS[i].words() == 1
                 && let Some(bounds) = interval(OBJECTS[i].ty(), *OBJECTS[i].range)
             {
@@ -373,7 +375,7 @@ const fn interval(ty: Type, range: Range) -> Option<(u16, u16)> {
 
 /// Register `reg` of the `i`th object, a live value or a text.
 #[inline(never)]
-fn other_word<P: Borrow<Table>, G: Borrow<ProgramMemory>>(drive: &DriveState<P, G>, i: usize, reg: u32) -> u16 {
+fn other_word<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(drive: &DriveState<P, G>, i: usize, reg: u32) -> u16 {
     let Some(d) = OBJECTS.get(i) else { return 0 };
     let Some(k) = reg.checked_sub(u32::from(d.addr)) else { return 0 };
     match d.ty() {
@@ -429,19 +431,21 @@ type Plan = Vec<Step, PLAN_CAPACITY>;
 
 impl RegisterMap for NativeMap {
     #[inline(always)]
-    fn read<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+    fn read<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &self,
         drive: &DriveState<P, G>,
         addr: u16,
         out: &mut [u8],
     ) -> Result<(), Exception> {
-        let regs = index::registers(addr, (out.len() / 2) as u16).ok_or(Exception::IllegalDataAddress)?;
+        let Some(regs) = index::registers(addr, (out.len() / 2) as u16) else {
+            return read_window(drive, addr, out);
+        };
         for ((slot, &e), reg) in out.chunks_exact_mut(2).zip(regs).zip(u32::from(addr)..) {
             // A stored value, or a reserved register (shifted out), as the index entry says;
             // OTHER is past the end of `params`.
-            let w = match drive.params.get(usize::from(e >> 8)) {
+            let w = match drive.params.get((e >> 16) as usize) {
                 Some(&p) => (u64::from(p) >> (e & 63)) as u16,
-                None => other_word(drive, usize::from(e & 0xFF), reg),
+                None => other_word(drive, (e & 0xFFFF) as usize, reg),
             };
             slot.copy_from_slice(&w.to_be_bytes());
         }
@@ -449,13 +453,18 @@ impl RegisterMap for NativeMap {
     }
 
     /// A read must lie within one page (256 registers sharing the high byte), from the page's
-    /// first object to its last; reserved registers between objects read as 0.
+    /// first object to its last (reserved registers between objects read as 0), or within a
+    /// capture window.
     fn check_read(&self, addr: u16, qty: u16) -> Result<(), Exception> {
-        index::locate(addr, qty).map(|_| ()).ok_or(Exception::IllegalDataAddress)
+        match index::locate(addr, qty) {
+            Some(_) => Ok(()),
+            None if in_window(addr, qty) => Ok(()),
+            None => Err(Exception::IllegalDataAddress),
+        }
     }
 
     #[inline(always)]
-    fn write<P: Borrow<Table>, G: Borrow<ProgramMemory>>(
+    fn write<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &mut self,
         drive: &mut DriveState<P, G>,
         addr: u16,
@@ -472,9 +481,9 @@ impl RegisterMap for NativeMap {
         // the exception to give.
         let mut plain = true;
         for (&e, &v) in regs.iter().zip(values.pairs()) {
-            let (lo, hi) = PLAIN.get(usize::from(e >> 8)).copied().unwrap_or(NOT_PLAIN);
+            let (lo, hi) = PLAIN.get((e >> 16) as usize).copied().unwrap_or(NOT_PLAIN);
             let v = u16::from_be_bytes(v);
-            plain &= (e & 0xFF == 0) & (lo <= v) & (v <= hi);
+            plain &= (e & 0xFFFF == 0) & (lo <= v) & (v <= hi);
         }
         if !plain {
             return self.write_planned(drive, addr, values);
@@ -483,12 +492,36 @@ impl RegisterMap for NativeMap {
         // entry holds its object index, which is its place in `params`. (It has one register:
         // nothing of it is ever staged.)
         for (&e, &v) in regs.iter().zip(values.pairs()) {
-            if let Some(p) = drive.params.get_mut(usize::from(e >> 8)) {
+            if let Some(p) = drive.params.get_mut((e >> 16) as usize) {
                 *p = u32::from(u16::from_be_bytes(v));
             }
         }
         Ok(())
     }
+}
+
+/// Whether `qty` registers from `addr` lie in one capture window (0x4000 the scope's,
+/// 0xA000 the black box's; 8192 registers each).
+fn in_window(addr: u16, qty: u16) -> bool {
+    let end = u32::from(addr) + u32::from(qty);
+    [SCOPE_WINDOW, BLACK_BOX_WINDOW].iter().any(|&w| addr >= w && end <= u32::from(w) + WORDS as u32)
+}
+
+/// A read of a capture window ([`in_window`]): the capture's rows in time order. Out of line:
+/// the objects' reads do not carry it.
+#[inline(never)]
+fn read_window<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
+    drive: &DriveState<P, G>,
+    addr: u16,
+    out: &mut [u8],
+) -> Result<(), Exception> {
+    if !in_window(addr, (out.len() / 2) as u16) {
+        return Err(Exception::IllegalDataAddress);
+    }
+    for (slot, reg) in out.chunks_exact_mut(2).zip(u32::from(addr)..) {
+        slot.copy_from_slice(&drive.window_word(reg).unwrap_or(0).to_be_bytes());
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -34,6 +34,31 @@ pub fn write_native(out: &mut impl Write) -> fmt::Result {
     for d in OBJECTS.iter() {
         row(out, d)?;
     }
+    write_scope(out)
+}
+
+/// The scope's signals and the capture windows.
+fn write_scope(out: &mut impl Write) -> fmt::Result {
+    use crate::scope::{BLACK_BOX, Signal, WORDS};
+    writeln!(out)?;
+    writeln!(out, "## The scope")?;
+    writeln!(out)?;
+    writeln!(
+        out,
+        "The scope (0x2220-0x2235) records up to 8 signals a row every 0x2228 control ticks (50 µs) into {WORDS} registers: 0x4000-0x{:04X} hold the capture, its rows in time order, each row its signals' registers in the order of 0x2220-0x2227 (a two-register signal high word first). The black box (0x2238-0x223D) records its signals unless the scope records; an alarm freezes the {} rows before it and the rest after it, at 0x{:04X}-0x{:04X}. A read of the windows may take 1-125 registers anywhere in them. Read 0x2230-0x2231 (0x2238-0x2239) before and after the rows: the same sequence number, state 3 both times, is a whole capture; then write that number to 0x2232 (0x223A).",
+        0x4000 + WORDS - 1,
+        (WORDS / usize::from(BLACK_BOX.row_words())) * usize::from(BLACK_BOX.pre_percent) / 100,
+        0xA000,
+        0xA000 + WORDS - 1,
+    )?;
+    writeln!(out)?;
+    writeln!(out, "| Code | Signal | Registers | Unit | Black box |")?;
+    writeln!(out, "|---|---|---|---|---|")?;
+    for s in Signal::ALL {
+        let boxed = if BLACK_BOX.signals.contains(&s) { "yes" } else { "" };
+        let sign = if s.signed() { "signed" } else { "unsigned" };
+        writeln!(out, "| {} | {} | {} ({sign}) | {} | {boxed} |", s as u8, s.name(), s.words(), s.unit())?;
+    }
     Ok(())
 }
 

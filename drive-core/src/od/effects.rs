@@ -25,6 +25,7 @@ pub(crate) const fn has_effect(obj: Obj) -> bool {
             | Obj::CommandVelocity
     ) || is_pvt_command(obj)
         || is_signal(obj)
+        || matches!(obj, Obj::ScopeControl | Obj::ScopeRead | Obj::BlackBoxRead)
 }
 
 /// Whether `obj` is one of the signal and view objects whose write is writes of other objects

@@ -51,7 +51,7 @@ macro_rules! objects {
     )*) => {
         /// An object of the drive. The discriminant is the object's index in [`OBJECTS`].
         #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-        #[repr(u8)]
+        #[repr(u16)]
         pub enum Obj {
             $( $(#[doc = $doc])* $id, )*
         }
@@ -722,6 +722,83 @@ objects! {
     /// Command filter time (our object; seed 003's 0x2016), µs: the moving average's length, to
     /// the nearest control tick (50 µs; 25.6 ms at most, 512 ticks).
     CommandFilterTime @ 0x2211: U16, Rw, Rom, Span(50, 25_600), default 1000, Micros, "command filter time";
+    /// Scope signal 1 (our object): the code of the 1st signal of a row (`scope::Signal`, listed
+    /// with their units and words under "The scope" below); 0 none. Takes effect at the next arm.
+    ScopeSignal1 @ 0x2220: U8, Rw, Ram, Span(0, 15), default 1, None, "scope signal 1";
+    /// Scope signal 2 (our object): the code of the 2nd signal of a row (`scope::Signal`, listed
+    /// with their units and words under "The scope" below); 0 none. Takes effect at the next arm.
+    ScopeSignal2 @ 0x2221: U8, Rw, Ram, Span(0, 15), default 2, None, "scope signal 2";
+    /// Scope signal 3 (our object): the code of the 3rd signal of a row (`scope::Signal`, listed
+    /// with their units and words under "The scope" below); 0 none. Takes effect at the next arm.
+    ScopeSignal3 @ 0x2222: U8, Rw, Ram, Span(0, 15), default 3, None, "scope signal 3";
+    /// Scope signal 4 (our object): the code of the 4th signal of a row (`scope::Signal`, listed
+    /// with their units and words under "The scope" below); 0 none. Takes effect at the next arm.
+    ScopeSignal4 @ 0x2223: U8, Rw, Ram, Span(0, 15), default 4, None, "scope signal 4";
+    /// Scope signal 5 (our object): the code of the 5th signal of a row (`scope::Signal`, listed
+    /// with their units and words under "The scope" below); 0 none. Takes effect at the next arm.
+    ScopeSignal5 @ 0x2224: U8, Rw, Ram, Span(0, 15), default 0, None, "scope signal 5";
+    /// Scope signal 6 (our object): the code of the 6th signal of a row (`scope::Signal`, listed
+    /// with their units and words under "The scope" below); 0 none. Takes effect at the next arm.
+    ScopeSignal6 @ 0x2225: U8, Rw, Ram, Span(0, 15), default 0, None, "scope signal 6";
+    /// Scope signal 7 (our object): the code of the 7th signal of a row (`scope::Signal`, listed
+    /// with their units and words under "The scope" below); 0 none. Takes effect at the next arm.
+    ScopeSignal7 @ 0x2226: U8, Rw, Ram, Span(0, 15), default 0, None, "scope signal 7";
+    /// Scope signal 8 (our object): the code of the 8th signal of a row (`scope::Signal`, listed
+    /// with their units and words under "The scope" below); 0 none. Takes effect at the next arm.
+    ScopeSignal8 @ 0x2227: U8, Rw, Ram, Span(0, 15), default 0, None, "scope signal 8";
+    /// Scope divider (our object): a row every this many control ticks (50 µs each).
+    ScopeDivider @ 0x2228: U16, Rw, Ram, Span(1, 10_000), default 1, None, "scope divider";
+    /// Scope trigger (our object): 0 at once, 1 a motion starts (the busy bit rises), 2 the
+    /// trigger signal 0x222A rises to the level 0x222B or above, 3 falls to it or below, 4
+    /// crosses it either way, 5 a bit of the mask 0x222B turns on in it, 6 turns off, 7 an alarm
+    /// is recorded. Watched at each row.
+    ScopeTrigger @ 0x2229: U8, Rw, Ram, Span(0, 7), default 0, None, "scope trigger";
+    /// Scope trigger signal (our object): the signal 0x2229's level and bit triggers watch.
+    ScopeTriggerSignal @ 0x222A: U8, Rw, Ram, Span(0, 15), default 0, None, "scope trigger signal";
+    /// Scope trigger level (our object): in the trigger signal's unit; the bits' mask for
+    /// triggers 5 and 6.
+    ScopeTriggerLevel @ 0x222B: S32, Rw, Ram, S32_ANY, default 0, None, "scope trigger level";
+    /// Scope pre-trigger (our object): the share of the capture before the trigger.
+    ScopePreTrigger @ 0x222D: U8, Rw, Ram, Span(0, 100), default 10, Percent, "scope pre-trigger";
+    /// Scope mode (our object): 0 one shot; 1 repeated (armed again when a capture is read,
+    /// 0x2232).
+    ScopeMode @ 0x222E: U8, Rw, Ram, Span(0, 1), default 0, None, "scope mode";
+    /// Scope control (our object): 1 arms the scope with 0x2220-0x222E (refused, 04, without a
+    /// signal or with a trigger that watches none); 0 stops it and drops its capture. While it
+    /// records, the black box pauses.
+    ScopeControl @ 0x222F: U8, Cmd, Ram, Span(0, 1), default 0, None, "scope control";
+    /// Scope state (our object): 0 idle, 1 armed, 2 triggered, 3 a capture held (rows at
+    /// 0x4000-0x5FFF).
+    ScopeState @ 0x2230: U8, Ro, Live, Span(0, 3), default 0, None, "scope state";
+    /// Scope sequence (our object): captures finished since power-up, wrapping; the number of
+    /// the capture held. Read with 0x2230 before and after the rows: the same number, 3 both
+    /// times, is a whole capture.
+    ScopeSequence @ 0x2231: U16, Ro, Live, Any, default 0, None, "scope sequence";
+    /// Scope read (our object): write the number of the capture read; a repeated scope arms
+    /// again, a one-shot one goes idle. Another number is ignored.
+    ScopeRead @ 0x2232: U16, Cmd, Ram, Any, default 0, None, "scope read";
+    /// Scope rows (our object): the rows of the capture held (0 while none is).
+    ScopeRows @ 0x2233: U16, Ro, Live, Any, default 0, None, "scope rows";
+    /// Scope row words (our object): the registers a row takes at 0x4000 (a signal's one or
+    /// two, in the order of 0x2220-0x2227).
+    ScopeRowWords @ 0x2234: U8, Ro, Live, Any, default 0, None, "scope row words";
+    /// Scope trigger row (our object): the row of the capture where it triggered.
+    ScopeTriggerRow @ 0x2235: U16, Ro, Live, Any, default 0, None, "scope trigger row";
+    /// Black box state (our object): 1 recording (paused while the scope records), 3 a capture
+    /// held (rows at 0xA000-0xBFFF) since an alarm: the second before it and a quarter after.
+    BlackBoxState @ 0x2238: U8, Ro, Live, Span(0, 3), default 1, None, "black box state";
+    /// Black box sequence (our object): as 0x2231, for the black box.
+    BlackBoxSequence @ 0x2239: U16, Ro, Live, Any, default 0, None, "black box sequence";
+    /// Black box read (our object): write the number of the capture read; the black box
+    /// records again.
+    BlackBoxRead @ 0x223A: U16, Cmd, Ram, Any, default 0, None, "black box read";
+    /// Black box rows (our object): the rows of the capture held (8 registers each).
+    BlackBoxRows @ 0x223B: U16, Ro, Live, Any, default 0, None, "black box rows";
+    /// Black box trigger row (our object): the row of the alarm.
+    BlackBoxTriggerRow @ 0x223C: U16, Ro, Live, Any, default 0, None, "black box trigger row";
+    /// Black box fault (our object): the fault history entry (as 0x213C-0x214F hold it: code and
+    /// time) of the alarm the capture holds; 0 while none is held.
+    BlackBoxFault @ 0x223D: U32, Ro, Live, Any, default 0, None, "black box fault";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake

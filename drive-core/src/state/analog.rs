@@ -14,8 +14,8 @@
 use super::DriveState;
 use super::control::Pp;
 use super::memory::ProgramMemory;
+use crate::controller::Shared;
 use crate::modes::WorkMode;
-use crate::motion::cubic::Table;
 use crate::od::Obj;
 use crate::units::Instant;
 use core::borrow::Borrow;
@@ -60,7 +60,7 @@ pub fn position_of(code: u32, start: u32, min: i64, max: i64) -> i64 {
     min + (max - min) * above.min(span) / span
 }
 
-impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
+impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// What the analog input follows now, if anything: positions in the PP mode with 0x6077 on,
     /// speeds in the velocity mode with 0x2170 on.
     fn follows(&self) -> Option<Follow> {

@@ -13,10 +13,10 @@
 use super::DriveState;
 use super::control::{Planner, Pp, SetPoint};
 use super::memory::ProgramMemory;
+use crate::controller::Shared;
 use crate::controller::{STATUS_EXT, STATUS_STALL};
 use crate::modes::{Command, PowerState, Running, WorkMode};
 use crate::motion::axis::Axis;
-use crate::motion::cubic::Table;
 use crate::od::{Obj, ObjError, refuse};
 use core::borrow::Borrow;
 
@@ -38,7 +38,7 @@ pub(crate) enum Jog {
     Back(i32),
 }
 
-impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
+impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// Checks a motion command that does not plan (set position, home, clear the alarms).
     pub(crate) fn check_other_command(&self, value: u32) -> Result<(), ObjError> {
         let command = Command::from_raw(value).ok_or(ObjError::OutOfRange)?;

@@ -22,13 +22,13 @@
 use super::DriveState;
 use super::inputs::{INPUT_FUNCTION_OBJECTS, INPUT_LIMIT_NEGATIVE, INPUT_LIMIT_POSITIVE, INPUT_PROBE_1, INPUT_PROBE_2};
 use super::memory::ProgramMemory;
+use crate::controller::Shared;
 use crate::controller::handoff::{Lent, Orders, TickSide};
 use crate::controller::io::{IoFunctions, NotifyOutput, OUT_PINS, OutputFunction, PinConfig, PulseInput};
 use crate::controller::{DECAY, Events, STATUS_EXT, STATUS_STALL, Settings};
 use crate::faults::Inputs;
 use crate::modes::{Command, PowerState, PulseFormat, Running, WorkMode};
 use crate::motion::axis::Axis;
-use crate::motion::cubic::Table;
 use crate::motion::scurve::Limits;
 use crate::motion::shaping::MovingAverage;
 use crate::od::{Obj, ObjError, refuse};
@@ -344,7 +344,7 @@ fn stop_deceleration(mode: WorkMode, pp_decel: u32, level: u32) -> u32 {
     if mode.is_profile() { pp_decel } else { LEVELS.get((level as usize).wrapping_sub(1)).copied().unwrap_or(0) }
 }
 
-impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
+impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     pub(crate) fn param(&self, obj: Obj) -> u32 {
         self.params.get(obj as usize).copied().unwrap_or(0)
     }
@@ -619,9 +619,10 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         TickSide::new(&self.settings, &self.ctl, &self.pvt)
     }
 
-    /// The PVT point table, which the tick's side reads.
-    pub fn table(&self) -> &Table {
-        self.table.borrow()
+    /// The memories the tick's side shares: the PVT point table it reads, the recordings it
+    /// writes.
+    pub fn shared(&self) -> &Shared {
+        self.shared.borrow()
     }
 
     /// After a sync: acts on what the tick reported (as [`DriveState::tick_with`] does).
@@ -678,7 +679,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         if core::mem::take(&mut self.heard) {
             self.ctl.heard();
         }
-        let out = self.ctl.tick(&self.settings, now, inputs, &mut self.pvt, self.table.borrow());
+        let out = self.ctl.tick(&self.settings, now, inputs, &mut self.pvt, self.shared.borrow());
         // One owner: what the bus side ordered is in this controller already, and its plans
         // too; nothing is left for a tick side to take in.
         (self.orders, self.base.version) = (Orders::default(), self.ctl.axis.version());

@@ -9,9 +9,9 @@
 
 use super::DriveState;
 use super::memory::ProgramMemory;
+use crate::controller::Shared;
 use crate::faults::{FAULT_OVER_VOLTAGE, FAULT_OVERLOAD, FAULT_POSITION};
 use crate::modes::{PowerState, WorkMode};
-use crate::motion::cubic::Table;
 use crate::od::{Obj, ObjError};
 use crate::power::{Command, DeviceState, QuickStopOption};
 use crate::state::control::{SW_SETPOINT_ACK, SW_TARGET_REACHED};
@@ -30,7 +30,7 @@ const CW_PROFILE: u16 = 0x0370;
 /// How often a quick stop is checked for rest, µs.
 const QUICK_STOP_CHECK: u64 = 1_000;
 
-impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
+impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// The power state, a latched fault first.
     pub fn device_state(&self) -> DeviceState {
         if self.may_move() == Err(ObjError::Faulted) { DeviceState::Fault } else { self.device }

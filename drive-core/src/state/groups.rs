@@ -24,7 +24,7 @@
 use super::DriveState;
 use super::control::SetPoint;
 use super::memory::ProgramMemory;
-use crate::motion::cubic::Table;
+use crate::controller::Shared;
 use crate::motion::scurve::Limits;
 use crate::od::{Obj, ObjError, refuse};
 use crate::units::Instant;
@@ -126,7 +126,7 @@ pub(crate) struct Chain {
     step: Step,
 }
 
-impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
+impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// The group a start runs: the inputs' segment-select bits 0-2, or else POS0-2.
     fn selected_group(&self) -> u8 {
         match self.input_segment() {

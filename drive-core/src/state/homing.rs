@@ -37,11 +37,11 @@
 use super::DriveState;
 use super::inputs::{INPUT_HOME, INPUT_LIMIT_NEGATIVE, INPUT_LIMIT_POSITIVE};
 use super::memory::ProgramMemory;
+use crate::controller::Shared;
 use crate::controller::handoff::Clears;
 use crate::controller::io::IN_PINS;
 use crate::controller::{Events, STATUS_STALL, Watch, WatchOn};
 use crate::faults::FAULT_POSITION;
-use crate::motion::cubic::Table;
 use crate::motion::scurve::Limits;
 use crate::od::{Obj, ObjError, refuse};
 use crate::servo::Feedback;
@@ -189,7 +189,7 @@ fn pin_of(k: u32) -> Option<u16> {
     }
 }
 
-impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
+impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// The pin of the home switch (`field` 0), the negative (1) or the positive limit switch (2),
     /// and whether it is active high: an input whose function (0x21BA-0x21C0) is that switch (11,
     /// 10, 9) with its level of 0x21C1, else 0x216C's input and 0x216D's level.

@@ -15,9 +15,9 @@
 
 use super::DriveState;
 use super::memory::ProgramMemory;
+use crate::controller::Shared;
 use crate::controller::handoff::Clears;
 use crate::modes::Command;
-use crate::motion::cubic::Table;
 use crate::od::Obj;
 use crate::units::Instant;
 use core::borrow::Borrow;
@@ -66,7 +66,7 @@ pub(crate) struct Inputs {
     enable_seen: Option<bool>,
 }
 
-impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
+impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// The function of IN k+1 (0x21BA-0x21C0).
     pub(crate) fn input_function(&self, k: usize) -> u32 {
         INPUT_FUNCTION_OBJECTS.get(k).map_or(0, |&obj| self.param(obj))

@@ -13,6 +13,7 @@ mod inputs;
 pub mod memory;
 pub mod program;
 pub mod pvt;
+pub mod recording;
 pub mod signals;
 
 use crate::controller::handoff::{Base, Clears, Orders};
@@ -20,7 +21,6 @@ use crate::controller::{Controller, Pvt, Settings};
 use crate::faults::{FAULT_POSITION, FaultLog};
 use crate::faults::{FaultHistory, HISTORY_LEN};
 use crate::ident::Identity;
-use crate::motion::cubic::Table;
 use crate::od::has_effect;
 use crate::od::is_command;
 use crate::od::{Access, OBJECTS, Obj, ObjError, ObjectDef, Storage};
@@ -29,7 +29,7 @@ use crate::units::Instant;
 use control::{Pp, runs_on, settings_of};
 use core::borrow::Borrow;
 
-pub use crate::controller::{STATUS_BUSY, STATUS_STALL, Status};
+pub use crate::controller::{STATUS_BUSY, STATUS_STALL, Shared, Status};
 pub use memory::ProgramMemory;
 pub use program::ProgramKind;
 
@@ -174,12 +174,13 @@ impl Default for Params {
 
 /// Everything the object dictionary reads and writes.
 ///
-/// `P` holds the PVT point table (9 KB) and `G` the multi-segment programs' memory (1 KB): the
-/// state owns them by default; a microcontroller keeps each in a static of its own and lends it
-/// (`&'static Table`, `&'static ProgramMemory`), so that building the state never passes them
+/// `P` holds the memories shared with the tick (the PVT point table and the recordings, 41 KB)
+/// and `G` the multi-segment programs' memory (1 KB): the state owns them by default; a
+/// microcontroller keeps each in a static of its own and lends it (`&'static Shared`,
+/// `&'static ProgramMemory`), so that building the state never passes them
 /// through its stack.
 #[derive(Clone, Debug)]
-pub struct DriveState<P = Table, G = ProgramMemory> {
+pub struct DriveState<P = Shared, G = ProgramMemory> {
     pub(crate) params: [u32; Obj::COUNT],
     /// Storage status bits (0x2120): `STORAGE_*`.
     storage: u8,
@@ -192,8 +193,8 @@ pub struct DriveState<P = Table, G = ProgramMemory> {
     pub(crate) pp: Pp,
     /// Which slots of `table` hold PVT points.
     pub(crate) pvt: Pvt,
-    /// The PVT points (9 KB: kept out of [`Checkpoint`]).
-    pub(crate) table: P,
+    /// The PVT points and the recordings (41 KB: kept out of [`Checkpoint`]).
+    pub(crate) shared: P,
     /// The multi-segment programs (1 KB: kept out of [`Checkpoint`]; a program write is one
     /// object's, refused whole or done).
     pub(crate) programs: G,
@@ -267,6 +268,7 @@ fn plans_motion(obj: Obj) -> bool {
         && has_effect(obj)
         && !crate::od::is_pvt_command(obj)
         && !matches!(obj, Obj::Position | Obj::HomingControl)
+        && !recording::is_order(obj)
 }
 
 /// Everything of a [`DriveState`] but the PVT point table and the programs' memory: what a
@@ -294,19 +296,19 @@ pub struct Checkpoint {
 impl DriveState {
     /// Factory state.
     pub fn new(identity: &'static Identity, can_save: bool) -> Self {
-        let (table, programs) = (Table::new(), ProgramMemory::new());
+        let (table, programs) = (Shared::new(), ProgramMemory::new());
         Self::booted(identity, can_save, &Params::factory().values, 0, FaultLog::default(), table, programs)
     }
 }
 
-impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
+impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// The state at power-up with the object values `params`, the storage status `storage`, the
-    /// fault history `faults` (as saved: not to be saved again), the PVT point table `table` and
+    /// fault history `faults` (as saved: not to be saved again), the shared memories `shared` and
     /// the programs' memory `programs` (their contents kept).
     ///
     /// One struct expression, out of line: built in a local and then modified, the state would
     /// be copied once more. (The compiler still builds it in a temporary and copies it to the
-    /// caller's place, which is why a microcontroller lends the 9 KB table: see
+    /// caller's place, which is why a microcontroller lends the shared memories: see
     /// `Drive::boot_with_table`.)
     #[inline(never)]
     pub(crate) fn booted(
@@ -315,7 +317,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         params: &[u32; Obj::COUNT],
         storage: u8,
         faults: FaultLog,
-        table: P,
+        shared: P,
         programs: G,
     ) -> Self {
         let get = |obj: Obj| params.get(obj as usize).copied().unwrap_or(0);
@@ -336,7 +338,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             now: Instant::from_micros(0),
             pp: Pp::default(),
             pvt: Pvt::default(),
-            table,
+            shared,
             programs,
             base: Base::default(),
             orders: Orders::default(),
@@ -372,7 +374,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             now,
             pp,
             pvt,
-            table: _,
+            shared: _,
             programs: _,
             // Built again from the objects by the restore.
             settings: _,
@@ -660,6 +662,16 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             Obj::ActualPosition => self.ctl.axis.setpoint().whole.wrapping_sub(self.ctl.servo.following) as u32,
             Obj::SerialFormat => self.serial_format(),
             Obj::SignalInputs1 | Obj::SignalInputs2 => self.signal_inputs(obj),
+            Obj::ScopeState
+            | Obj::ScopeSequence
+            | Obj::ScopeRows
+            | Obj::ScopeRowWords
+            | Obj::ScopeTriggerRow
+            | Obj::BlackBoxState
+            | Obj::BlackBoxSequence
+            | Obj::BlackBoxRows
+            | Obj::BlackBoxTriggerRow
+            | Obj::BlackBoxFault => self.recording_live(obj),
             // The ten entries are consecutive objects.
             h if (Obj::FaultHistory0 as usize..=Obj::FaultHistory9 as usize).contains(&(h as usize)) => {
                 self.history(h as usize - Obj::FaultHistory0 as usize)
@@ -778,6 +790,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             (Obj::CurrentKp | Obj::CurrentKi, _) if self.read(Obj::CurrentAutoTune) != 0 => Err(ObjError::ReadOnly),
             // Their writes (`signals`) are checked as they are made.
             (obj, v) if signals::is_signal(obj) => self.check_signal(obj, v),
+            (obj, v) if recording::is_order(obj) => self.check_order(obj, v),
             (obj, _) if is_command(obj) => self.check_motion(obj, value),
             _ => Ok(()),
         }
@@ -940,6 +953,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             Obj::MotionCommand if !plans_motion_command(value) => {
                 let _ = self.other_command(value);
             }
+            obj if recording::is_order(obj) => self.apply_order(obj, value),
             obj if has_effect(obj) => self.apply_motion(obj, value),
             _ => {
                 self.set_param(obj, value);

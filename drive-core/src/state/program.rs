@@ -23,8 +23,8 @@
 use super::DriveState;
 use super::control::SetPoint;
 use super::memory::{ProgramMemory, WORDS};
+use crate::controller::Shared;
 use crate::modes::{Command, WorkMode};
-use crate::motion::cubic::Table;
 use crate::motion::scurve::Limits;
 use crate::od::{Obj, ObjError, refuse};
 use crate::pdu::Words;
@@ -241,7 +241,7 @@ impl Run {
     }
 }
 
-impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
+impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// Sets what the register map's program window holds, at power-up.
     pub(crate) fn set_program_kind(&mut self, kind: ProgramKind) {
         self.program.offered = kind != ProgramKind::None;

@@ -47,11 +47,12 @@
 
 use super::DriveState;
 use super::memory::ProgramMemory;
+use crate::controller::Shared;
 use crate::controller::handoff::RunOrder;
 use crate::controller::run::{Phase, Source};
 use crate::modes::{PvtMode, WorkMode};
 use crate::motion::axis::Axis;
-use crate::motion::cubic::{Cubic, Point, TABLE_SIZE, Table, V_MAX};
+use crate::motion::cubic::{Cubic, Point, TABLE_SIZE, V_MAX};
 use crate::od::{Obj, ObjError, refuse};
 use crate::units::Instant;
 use core::borrow::Borrow;
@@ -84,7 +85,7 @@ enum Effect {
     Stop,
 }
 
-impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
+impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     fn pvt_mode(&self) -> PvtMode {
         PvtMode::from_raw(self.param(Obj::PvtMode)).unwrap_or_default()
     }
@@ -101,7 +102,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
 
     /// The stored point `i` of the table (modes 1, 2) or the ring's `i`-th slot.
     fn stored(&self, i: u16) -> Option<Point> {
-        self.table.borrow().get(usize::from(i))
+        self.shared.borrow().table.get(usize::from(i))
     }
 
     /// The point in the PVT registers 0x6027..0x602C.
@@ -278,7 +279,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         match effect {
             Ok(Effect::Push(p)) => {
                 let slot = (usize::from(pvt.head) + usize::from(pvt.len)) % TABLE_SIZE;
-                self.table.borrow().set(slot, p);
+                self.shared.borrow().table.set(slot, p);
                 pvt.len += 1;
                 pvt.last = Some(p);
                 self.orders.pushed = self.orders.pushed.saturating_add(1);
@@ -304,7 +305,7 @@ impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// stands (built here, not in the tick).
     fn start_run(&mut self) {
         let Ok((source, _, _)) = self.plan_run() else { return };
-        self.ctl.start_run(self.plan_time(), source, &mut self.pvt, self.table.borrow());
+        self.ctl.start_run(self.plan_time(), source, &mut self.pvt, &self.shared.borrow().table);
         if let Some(run) = self.ctl.run {
             self.orders.run = Some(RunOrder::Start(run, self.ctl.status.pvt_pointer));
             self.orders.set_queue(&self.pvt);

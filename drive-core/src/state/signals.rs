@@ -12,8 +12,8 @@
 use super::DriveState;
 use super::inputs::INPUT_FUNCTION_OBJECTS;
 use super::memory::ProgramMemory;
+use crate::controller::Shared;
 use crate::modes::Command;
-use crate::motion::cubic::Table;
 use crate::od::{Obj, ObjError, refuse};
 use crate::units::Instant;
 use core::borrow::Borrow;
@@ -73,7 +73,7 @@ fn push(out: &mut heapless::Vec<Action, MAX_ACTIONS>, obj: Obj, value: u32) -> R
 /// The most writes one signal write makes.
 const MAX_ACTIONS: usize = 8;
 
-impl<P: Borrow<Table>, G: Borrow<ProgramMemory>> DriveState<P, G> {
+impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// Whether an input carries `function`: then the communication IO's signal for it is ignored.
     fn input_has(&self, function: u32) -> bool {
         INPUT_FUNCTION_OBJECTS.iter().any(|&o| self.param(o) == function)

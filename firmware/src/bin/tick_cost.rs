@@ -31,7 +31,11 @@
 //!   limit and home switches, commands; alarm, in position, general, ready), the inputs
 //!   inactive, each through its filter (0x21F9-0x21FF at 1 ms);
 //! - `open_filtered`: open loop through the command filter (0x2210 = 1, 0x2211 at its longest,
-//!   25.6 ms).
+//!   25.6 ms);
+//! - `servo_scope`: the servo loop with the scope recording 8 signals (12 words) a row every
+//!   second tick (10 kHz), armed on a level its following error never reaches (the black box
+//!   records in the other cases, a row every 25 ticks). A row costs about 400 instructions:
+//!   at every tick the mean would be 2 700, over the budget.
 //!
 //! It prints one line a case through semihosting, then ends QEMU.
 #![no_std]
@@ -45,12 +49,12 @@ use cortex_m::peripheral::{Peripherals, SYST};
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
 use drive_core::control::{Outputs, TICK_MICROS};
+use drive_core::controller::Shared;
 use drive_core::controller::handoff::{Handover, TickSide};
 use drive_core::crc::crc16;
 use drive_core::current::{CurrentLoopSettings, recommended_bandwidth};
 use drive_core::faults::Inputs;
 use drive_core::maps::NativeMap;
-use drive_core::motion::cubic::Table;
 use drive_core::od::Obj;
 use drive_core::windings::{DEAD_BAND_A, DEAD_TIME_S, WindingSettings, WindingState};
 use drive_core::{DriveConfig, Instant, Params};
@@ -59,10 +63,10 @@ use {defmt_rtt as _, stm32_metapac as _};
 
 /// The drive as the firmware has it: the PVT table in a static of its own (a case's points are
 /// beyond the queue of the next case's new drive).
-type Drive = drive_core::Drive<NativeMap, &'static Table>;
+type Drive = drive_core::Drive<NativeMap, &'static Shared>;
 
 /// The PVT points of every case's drive.
-static TABLE: Table = Table::new();
+static SHARED: Shared = Shared::new();
 
 /// What every case measures besides its loop's own inputs: all within the thresholds.
 const MEASURED: Inputs = Inputs {
@@ -94,10 +98,11 @@ enum Case {
     Sensorless,
     IoFunctions,
     OpenFiltered,
+    ServoScope,
 }
 
 impl Case {
-    const ALL: [Case; 10] = [
+    const ALL: [Case; 11] = [
         Case::Open,
         Case::OpenRamp,
         Case::OpenPvt,
@@ -108,6 +113,7 @@ impl Case {
         Case::Sensorless,
         Case::IoFunctions,
         Case::OpenFiltered,
+        Case::ServoScope,
     ];
 
     fn name(self) -> &'static str {
@@ -122,6 +128,7 @@ impl Case {
             Case::Sensorless => "sensorless",
             Case::IoFunctions => "io_functions",
             Case::OpenFiltered => "open_filtered",
+            Case::ServoScope => "servo_scope",
         }
     }
 
@@ -130,7 +137,7 @@ impl Case {
         match self {
             Case::Open | Case::OpenRamp | Case::OpenPvt | Case::OpenMeasured => &[],
             Case::PositionLoop => &[(Obj::Feedback, 1), (Obj::TorqueLoop, 0)],
-            Case::ServoLoop | Case::ServoLoopRamp => &[(Obj::Feedback, 1), (Obj::TorqueLoop, 1)],
+            Case::ServoLoop | Case::ServoLoopRamp | Case::ServoScope => &[(Obj::Feedback, 1), (Obj::TorqueLoop, 1)],
             Case::Sensorless => &[(Obj::StallDetect, 1)],
             Case::IoFunctions => &[
                 (Obj::InputFunction1, 9),
@@ -164,7 +171,9 @@ impl Case {
                 Case::Open | Case::OpenRamp | Case::OpenPvt | Case::IoFunctions | Case::OpenFiltered => {
                     Inputs::default()
                 }
-                Case::PositionLoop | Case::ServoLoop | Case::ServoLoopRamp => Inputs { encoder: Some(0), ..MEASURED },
+                Case::PositionLoop | Case::ServoLoop | Case::ServoLoopRamp | Case::ServoScope => {
+                    Inputs { encoder: Some(0), ..MEASURED }
+                }
                 Case::OpenMeasured | Case::Sensorless => MEASURED,
             };
         };
@@ -172,7 +181,7 @@ impl Case {
             Case::Open | Case::OpenRamp | Case::OpenPvt | Case::IoFunctions | Case::OpenFiltered => Inputs::default(),
             Case::OpenMeasured => MEASURED,
             // Closed loop: the setpoint is in encoder counts.
-            Case::PositionLoop | Case::ServoLoop | Case::ServoLoopRamp => {
+            Case::PositionLoop | Case::ServoLoop | Case::ServoLoopRamp | Case::ServoScope => {
                 Inputs { encoder: Some(last.setpoint.whole as u32), ..MEASURED }
             }
             Case::Sensorless => {
@@ -243,7 +252,7 @@ impl<'a> Rig<'a> {
         let drive = boot_into(slot, &mut params);
         drive.state_mut().set_plan_margin(PLAN_MARGIN_US);
         let tick = tick.write(drive.state().tick_side());
-        let last = tick.tick(Instant::from_micros(0), &case.measure(None), &TABLE);
+        let last = tick.tick(Instant::from_micros(0), &case.measure(None), &SHARED);
         let pwm = 1e6 / TICK_MICROS as f32;
         let current = CurrentLoopSettings::new(1.4, 3.0e-3, 24.0, pwm, recommended_bandwidth(pwm))
             .and_then(|s| s.with_dead_time(DEAD_TIME_S, DEAD_BAND_A))
@@ -264,7 +273,7 @@ impl<'a> Rig<'a> {
         let before = SYST::get_current();
         let shares = self.windings.period(&mut self.regulation, phase_ma, 24_000);
         let handover = if self.lent { Some(self.tick.sync(now, &mut self.drive.lend())) } else { None };
-        self.last = self.tick.tick(now, &inputs, &TABLE);
+        self.last = self.tick.tick(now, &inputs, &SHARED);
         self.windings.command(&mut self.regulation, &self.last);
         let after = SYST::get_current();
         core::hint::black_box(shares);
@@ -346,6 +355,19 @@ impl<'a> Rig<'a> {
         (ok, spent)
     }
 
+    /// The scope armed with 8 signals (12 words: positions, following error, velocities, phase
+    /// A's current, the loop's output, the current command), a row every second tick, on a
+    /// level the following error never reaches: it records throughout.
+    fn arm_scope(&mut self) -> bool {
+        let signals = [1, 2, 3, 4, 5, 6, 13, 8];
+        drive_core::state::recording::SIGNALS.iter().zip(signals).all(|(&obj, code)| self.set(obj, code))
+            && self.set(Obj::ScopeTrigger, 2)
+            && self.set(Obj::ScopeTriggerSignal, 3)
+            && self.set(Obj::ScopeTriggerLevel, 32_767)
+            && self.set(Obj::ScopeDivider, 2)
+            && self.set(Obj::ScopeControl, 1)
+    }
+
     /// PVT mode 1 with push on time: four points, 100 ms apart, from rest up to 20000 pps and
     /// back to rest 4000 steps on, then the run started.
     fn start_pvt(&mut self) -> bool {
@@ -368,7 +390,7 @@ impl<'a> Rig<'a> {
 
 /// Builds the drive in `slot`, lending it the table as the firmware does.
 fn boot_into<'a>(slot: &'a mut MaybeUninit<Drive>, params: &mut Params) -> &'a mut Drive {
-    Drive::boot_in(slot, DriveConfig::default(), NativeMap::new(), params, 0, &TABLE)
+    Drive::boot_in(slot, DriveConfig::default(), NativeMap::new(), params, 0, &SHARED)
 }
 
 /// Cost of the measured ticks of `case`: (mean, most) SysTick counts, whether the drive was in
@@ -379,6 +401,9 @@ fn run(case: Case, slot: &mut MaybeUninit<Drive>, tick: &mut MaybeUninit<TickSid
         Case::OpenPvt => (rig.start_pvt(), 50_000),
         Case::OpenRamp | Case::ServoLoopRamp => {
             (rig.set(Obj::MaxSpeed, 32_000) && rig.set(Obj::RelativeMove, 10_000_000), 100_000)
+        }
+        Case::ServoScope => {
+            (rig.arm_scope() && rig.set(Obj::MaxSpeed, 32_000) && rig.set(Obj::RelativeMove, 10_000_000), 1_000_000)
         }
         _ => (rig.set(Obj::MaxSpeed, 32_000) && rig.set(Obj::RelativeMove, 10_000_000), 1_000_000),
     };
@@ -397,6 +422,7 @@ fn run(case: Case, slot: &mut MaybeUninit<Drive>, tick: &mut MaybeUninit<TickSid
             && ctl.status().error == 0
             && ctl.status().controller == 0
             && !ctl.axis().is_still()
+            && (case != Case::ServoScope || ctl.scopes().scope.is_recording())
             && match case {
                 Case::OpenPvt => rig.last.setpoint.velocity > 0.0,
                 Case::OpenRamp | Case::ServoLoopRamp => accelerating,
