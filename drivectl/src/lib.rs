@@ -5,6 +5,7 @@
 
 pub mod dict;
 pub mod link;
+pub mod scope;
 
 use std::collections::BTreeMap;
 use std::time::Duration;
@@ -113,6 +114,21 @@ impl Drive {
                 self.dict.map.name()
             ))
         })
+    }
+
+    /// Writes `v` to the register of `obj`, which `what` needs.
+    pub(crate) async fn set_object(&mut self, obj: Obj, v: i64, what: &str) -> Result<(), Error> {
+        let r = self.needs(obj, what)?;
+        self.set(&r, v).await
+    }
+
+    /// Reads the number in the register of `obj`.
+    pub(crate) async fn get_object(&mut self, obj: Obj) -> Result<i64, Error> {
+        let r = self.needs(obj, "this")?;
+        match self.get(&r).await? {
+            Value::Number(v) => Ok(v),
+            Value::Text(t) => Err(Error::Usage(format!("{} reads {t:?}, not a number", r.name))),
+        }
     }
 
     /// Reads register `r`.

@@ -4,9 +4,10 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use clap::{Parser, Subcommand};
+use drive_core::scope::Phase;
 use drivectl::dict::{Dictionary, Map};
 use drivectl::link::{Error, Framing, Link, Target};
-use drivectl::{Drive, Settings, Value, parse_assignment, scan};
+use drivectl::{Drive, Settings, Value, parse_assignment, scan, scope};
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Commission OpenStep drives over their Modbus link: find them, read and write their settings
@@ -139,6 +140,59 @@ enum Command {
     Save,
     /// Restores the factory settings and saves them.
     FactoryReset,
+    /// Records signals with the drive's scope: configures and arms it, waits for its capture,
+    /// reads it and writes it as CSV and PNG.
+    Scope {
+        /// Up to 8 signals, by name or code (`drivectl scope --signals help` lists them).
+        #[arg(
+            long,
+            value_delimiter = ',',
+            default_value = "commanded-position,actual-position,following-error,commanded-velocity"
+        )]
+        signals: Vec<String>,
+        /// A row every this many control ticks (50 µs each).
+        #[arg(long, default_value_t = 1)]
+        divider: u16,
+        /// What triggers it: now, move, alarm, rising|falling|crossing:SIGNAL:LEVEL,
+        /// set|cleared:SIGNAL:MASK.
+        #[arg(long, default_value = "move")]
+        trigger: String,
+        /// The share of the capture before the trigger, percent.
+        #[arg(long, default_value_t = 10)]
+        pre: u8,
+        /// Once armed, a relative move of this many microsteps (the map's unit): a step response.
+        #[arg(long, allow_hyphen_values = true)]
+        r#move: Option<i64>,
+        /// The move's speed.
+        #[arg(long)]
+        speed: Option<i64>,
+        /// The capture as CSV (`-`: standard output).
+        #[arg(long)]
+        csv: Option<String>,
+        /// The capture drawn as PNG.
+        #[arg(long)]
+        png: Option<std::path::PathBuf>,
+        /// How long to wait for the trigger and the capture, s.
+        #[arg(long, default_value_t = 60)]
+        wait: u64,
+        /// Capture again and again, redrawing the PNG and printing a line a capture, until
+        /// Ctrl-C (or --count captures).
+        #[arg(long)]
+        live: bool,
+        /// With --live: stop after this many captures.
+        #[arg(long)]
+        count: Option<u32>,
+    },
+    /// Reads the black box's capture (the second before the last alarm and a quarter after)
+    /// and writes it as CSV and PNG; the black box then records again.
+    Blackbox {
+        /// The capture as CSV (`-`: standard output).
+        #[arg(long)]
+        csv: Option<String>,
+        /// The capture drawn as PNG.
+        #[arg(long)]
+        png: Option<std::path::PathBuf>,
+    },
     /// The drive's state on one screen, refreshed until Ctrl-C (--once: printed once).
     Status {
         /// Print once and exit.
@@ -305,6 +359,79 @@ async fn run(cli: Cli) -> Result<(), Error> {
         Command::Clear => drive.clear().await?,
         Command::Save => drive.save().await?,
         Command::FactoryReset => drive.factory_reset().await?,
+        Command::Scope { signals, divider, trigger, pre, r#move, speed, csv, png, wait, live, count } => {
+            let setup = scope::Setup {
+                signals: signals.iter().map(|s| scope::signal(s)).collect::<Result<_, _>>()?,
+                divider,
+                trigger: scope::trigger(&trigger)?,
+                pre_percent: pre,
+            };
+            let mut taken = 0u32;
+            let started = std::time::Instant::now();
+            loop {
+                drive.scope_arm(&setup).await?;
+                if let Some(distance) = r#move {
+                    // The share before the trigger filled first, so that the capture holds it.
+                    tokio::time::sleep(Duration::from_secs_f64(setup.pre_trigger_s())).await;
+                    drive.move_to(distance, true, speed).await?;
+                }
+                let bar = ProgressBar::new_spinner();
+                drive
+                    .scope_wait(Duration::from_secs(wait), |p| {
+                        bar.set_message(match p {
+                            Phase::Armed => "armed, waiting for the trigger",
+                            Phase::Triggered => "triggered, recording",
+                            _ => "reading",
+                        });
+                        bar.tick();
+                    })
+                    .await?;
+                bar.finish_and_clear();
+                let read = ProgressBar::new(0);
+                read.set_style(
+                    ProgressStyle::with_template("reading {bar:40} {pos}/{len} registers")
+                        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+                );
+                let t0 = std::time::Instant::now();
+                let capture = drive
+                    .capture(false, |done, of| {
+                        read.set_length(of as u64);
+                        read.set_position(done as u64);
+                    })
+                    .await?;
+                read.finish_and_clear();
+                let took = t0.elapsed().as_secs_f64();
+                taken += 1;
+                write_capture(&capture, csv.as_deref(), png.as_deref(), "scope")?;
+                if !live {
+                    eprintln!(
+                        "capture {}: {} rows of {} signals, {:.3} s from the trigger's {:.3} s before, read in {took:.2} s",
+                        capture.sequence,
+                        capture.rows.len(),
+                        capture.signals.len(),
+                        capture.time(capture.rows.len().saturating_sub(1)),
+                        -capture.time(0),
+                    );
+                    break;
+                }
+                let rate = f64::from(taken) / started.elapsed().as_secs_f64();
+                say!("{}", live_line(&capture, rate));
+                if count.is_some_and(|n| taken >= n) {
+                    break;
+                }
+            }
+        }
+        Command::Blackbox { csv, png } => {
+            let capture = drive.capture(true, |_, _| {}).await?;
+            write_capture(&capture, csv.as_deref(), png.as_deref(), "black box")?;
+            eprintln!(
+                "black box capture {}: {} rows, the alarm at row {} ({:.3} s before it)",
+                capture.sequence,
+                capture.rows.len(),
+                capture.trigger_row,
+                -capture.time(0)
+            );
+        }
         Command::Status { once, every } => loop {
             let rows = drive.status().await?;
             if !once {
@@ -322,6 +449,35 @@ async fn run(cli: Cli) -> Result<(), Error> {
         },
     }
     Ok(())
+}
+
+/// Writes `capture` as CSV (`-`: standard output) and PNG, where asked.
+fn write_capture(
+    capture: &scope::Capture,
+    csv: Option<&str>,
+    png: Option<&std::path::Path>,
+    what: &str,
+) -> Result<(), Error> {
+    match csv {
+        Some("-") => print!("{}", capture.to_csv()),
+        Some(file) => std::fs::write(file, capture.to_csv()).map_err(|e| Error::Usage(format!("{file}: {e}")))?,
+        None => {}
+    }
+    if let Some(png) = png {
+        capture.plot(png, &format!("drive {what}: capture {}", capture.sequence))?;
+    }
+    Ok(())
+}
+
+/// One line of `scope --live`: each signal's range in the capture, and the captures a second.
+fn live_line(capture: &scope::Capture, rate: f64) -> String {
+    let mut line = format!("#{:<5} {rate:5.2}/s", capture.sequence);
+    for (i, s) in capture.signals.iter().enumerate() {
+        let values = capture.rows.iter().map(|r| r[i]);
+        let (lo, hi) = values.fold((i64::MAX, i64::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
+        line.push_str(&format!("  {} {lo}..{hi}", scope::kebab(s.name())));
+    }
+    line
 }
 
 fn main() -> ExitCode {

@@ -8,6 +8,9 @@
 //! Pull-out torque against speed ([`plot_torque_speed`], [`crate::torque_speed`]): a panel a
 //! motor, the chopper's and the bridges' curves at each supply.
 //!
+//! Any panels of lines over time ([`plot_panels`]): what the trace's figure is drawn with, and
+//! `drivectl scope` draws a capture of the drive's own scope with.
+//!
 //! Text is drawn with `plotters`' `ab_glyph` feature and the DejaVu Sans font compiled in (the
 //! `dejavu` crate), so plotting needs no system font, fontconfig or freetype.
 
@@ -20,6 +23,8 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use plotters::style::register_font;
+
+pub use plotters::style::RGBColor;
 
 use crate::bridges::PowerStage;
 use crate::torque_speed::Curve;
@@ -69,14 +74,20 @@ const ROTOR: RGBColor = RGBColor(220, 50, 30);
 const PHASE_A: RGBColor = RGBColor(30, 90, 200);
 const PHASE_B: RGBColor = RGBColor(20, 150, 60);
 
+/// Colours for a panel's lines, in order.
+pub const COLOURS: [RGBColor; 4] = [COMMANDED, ROTOR, PHASE_B, RGBColor(120, 60, 160)];
+
 /// One line of a panel: label, colour, width in pixels, (time, value) points.
-type Series<'a> = (&'a str, RGBColor, u32, Vec<(f64, f64)>);
+pub type Series<'a> = (&'a str, RGBColor, u32, Vec<(f64, f64)>);
 
 /// One panel: a few series against time.
-struct Panel<'a> {
-    title: String,
-    y_desc: &'a str,
-    series: Vec<Series<'a>>,
+pub struct Panel<'a> {
+    /// Its caption.
+    pub title: String,
+    /// The y axis' description.
+    pub y_desc: &'a str,
+    /// Its lines.
+    pub series: Vec<Series<'a>>,
 }
 
 /// Draws the trace to a PNG file (1200 × 1400 pixels), titled `title`.
@@ -123,12 +134,25 @@ pub fn plot_trace(rows: &[TraceRow], png: impl AsRef<Path>, title: &str) -> Resu
         },
     ];
 
-    let root = BitMapBackend::new(png.as_ref(), (1200, 1400)).into_drawing_area();
+    plot_panels(&panels, png, title)
+}
+
+/// Draws `panels` one above the other against time (s) to a PNG file (1200 pixels wide, 350 a
+/// panel), titled `title`. The time axis starts at 0 unless a point is before it.
+pub fn plot_panels(panels: &[Panel<'_>], png: impl AsRef<Path>, title: &str) -> Result<(), PlotError> {
+    let times = || panels.iter().flat_map(|p| p.series.iter().flat_map(|s| s.3.iter().map(|p| p.0)));
+    let first = times().fold(f64::INFINITY, f64::min);
+    if !first.is_finite() {
+        return Err(PlotError("nothing to plot".into()));
+    }
+    register_fonts()?;
+    let height = 350 * u32::try_from(panels.len()).unwrap_or(1).max(1);
+    let root = BitMapBackend::new(png.as_ref(), (1200, height)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
     let root = root.titled(title, (FONT, 28).into_font().style(FontStyle::Bold)).map_err(err)?;
-    let time = padded(rows.iter().map(|r| r.t_s));
-    let time = rows[0].t_s.min(time.start.max(0.0))..time.end;
-    for (area, panel) in root.split_evenly((panels.len(), 1)).iter().zip(&panels) {
+    let time = padded(times());
+    let time = first.min(time.start.max(0.0))..time.end;
+    for (area, panel) in root.split_evenly((panels.len(), 1)).iter().zip(panels) {
         let y = padded(panel.series.iter().flat_map(|s| s.3.iter().map(|p| p.1)));
         let span = y.end - y.start;
         let decimals = if span >= 50.0 {
