@@ -157,3 +157,39 @@ fn an_alarm_freezes_the_black_box_with_the_second_before_it() {
     r.write(0x223A, sequence).unwrap();
     assert_eq!(r.read(0x2238, 1).unwrap(), [1]);
 }
+
+#[test]
+fn every_map_reaches_the_scope_in_its_own_codes() {
+    use drive_core::maps::layout::SCOPE_RANGES;
+    for id in 1..=4 {
+        let map = Maps::by_id(id);
+        let Maps::Layout(layout) = &map else { unreachable!() };
+        let layout = layout.layout();
+        if layout.scope {
+            // Nothing of the map's own lies where the native scope is.
+            let own = layout.entries.iter().map(|e| (e.addr, e.addr + e.words() as u16 - 1));
+            let own = own.chain(layout.reserved.iter().copied());
+            let own = own.chain(layout.program.map(|p| (p.first, p.first + p.words - 1)));
+            for (lo, hi) in own {
+                assert!(SCOPE_RANGES.iter().all(|&(a, b)| hi < a || lo > b), "map {id}: 0x{lo:04X}-0x{hi:04X}");
+            }
+        } else {
+            assert!(layout.sub_index.is_some(), "map {id} reaches the scope through its window");
+            continue;
+        }
+        let mut r = MapRig::new(map);
+        r.write(SIGNAL1, 9).unwrap();
+        r.write(SIGNAL1 + 1, 0).unwrap();
+        r.write(SIGNAL1 + 2, 0).unwrap();
+        r.write(SIGNAL1 + 3, 0).unwrap();
+        r.write(DIVIDER, 2).unwrap();
+        r.write(CONTROL, 1).unwrap();
+        r.run(1_000_000);
+        let (head, words) = capture(&mut r);
+        assert_eq!((head[0], head[3], head[4]), (3, 8192, 1), "map {id}");
+        assert_eq!(words.len(), 8192);
+        // Out of range: the map's own code for it, as for its own registers.
+        let code = layout.exceptions.out_of_range.code();
+        assert_eq!(r.write(SIGNAL1, 99), Err(code), "map {id}");
+    }
+}

@@ -278,6 +278,13 @@ impl Dictionary {
                         registers.push(native(d, Some(0xFF)));
                     }
                 }
+                // The scope and the black box, the native map's registers in these maps.
+                if layout.scope {
+                    let in_scope = |d: &&drive_core::od::ObjectDef| {
+                        drive_core::maps::layout::SCOPE_RANGES.iter().any(|&(lo, hi)| (lo..=hi).contains(&d.addr))
+                    };
+                    registers.extend(OBJECTS.iter().filter(in_scope).map(|d| native(d, None)));
+                }
                 // Seed 004's position data groups, among the registers in address order.
                 if let Some(window) = layout.program.filter(|p| p.kind == ProgramKind::Groups) {
                     let at = registers.iter().position(|r| r.at.register > window.first).unwrap_or(registers.len());

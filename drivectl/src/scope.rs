@@ -30,7 +30,7 @@ pub fn signal(name: &str) -> Result<Signal, Error> {
 
 /// A signal's name on the command line and in CSV headers.
 pub fn kebab(name: &str) -> String {
-    name.replace(' ', "-")
+    name.replace(' ', "-").to_ascii_lowercase()
 }
 
 /// A trigger as the command line says it: `now`, `move`, `alarm`,
@@ -159,10 +159,14 @@ impl Capture {
     }
 }
 
-/// Where a capture's window starts in `map`, if the map reaches it.
-fn window(map: Map, black_box: bool) -> Option<Address> {
+/// Where a capture's window starts in `map` (the native map's registers in every map: seed
+/// 003's through its window, sub-index 0xFF), and the most registers a request reads there.
+fn window(map: Map, black_box: bool) -> (Address, usize) {
     let register = if black_box { 0xA000 } else { 0x4000 };
-    (map == Map::Native).then_some(Address { register, sub: None })
+    match map {
+        Map::Ec57 => (Address { register, sub: Some(drive_core::maps::ec57::WINDOW_SUB) }, 16),
+        _ => (Address { register, sub: None }, 125),
+    }
 }
 
 impl Drive {
@@ -239,12 +243,7 @@ impl Drive {
     /// capture changes under the read, at most three times. `progress` is told the registers
     /// read and their count.
     pub async fn capture(&mut self, black_box: bool, mut progress: impl FnMut(usize, usize)) -> Result<Capture, Error> {
-        let at = window(self.dict.map, black_box).ok_or_else(|| {
-            Error::Usage(format!(
-                "the {} map has no capture window: read it in the native map (register-map = 0)",
-                self.dict.map.name()
-            ))
-        })?;
+        let (at, most) = window(self.dict.map, black_box);
         for _ in 0..3 {
             let (sequence, head) = self.capture_head(black_box).await?;
             let [rows, width, trigger_row] = head;
@@ -252,7 +251,7 @@ impl Drive {
             let mut words = Vec::with_capacity(n);
             while words.len() < n {
                 let k = words.len();
-                let q = (n - k).min(125);
+                let q = (n - k).min(most);
                 let register = at.register + k as u16;
                 words.extend(self.link.read(Address { register, ..at }, q as u16).await?);
                 progress(words.len(), n);

@@ -55,6 +55,7 @@ pub static LAYOUT: Layout = Layout {
     reserved: &[],
     sub_index: None,
     address: None,
+    scope: false,
 };
 
 /// Every code the layout answers, and the request-level ones.

@@ -183,6 +183,7 @@ pub static LAYOUT: Layout = Layout {
     reserved: &[],
     sub_index: None,
     address: None,
+    scope: true,
 };
 
 /// The manual's factory values (§九) where they differ from the drive's: start and stop

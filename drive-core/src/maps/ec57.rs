@@ -242,6 +242,7 @@ pub static LAYOUT: Layout = Layout {
     sub_index: Some(&SUB_INDEX),
     // The serial port's address (§1.3): an EC-57's switches address its fieldbus.
     address: Some(1),
+    scope: false,
 };
 
 /// The requests' index and sub-index (§1.3), and the window from [`WINDOW`] on.

@@ -117,6 +117,7 @@ pub static LAYOUT: Layout = Layout {
     reserved: &[],
     sub_index: None,
     address: None,
+    scope: true,
 };
 
 /// What the reference says beside the table: the decisions where seed 001 is silent or

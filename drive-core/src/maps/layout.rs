@@ -303,7 +303,15 @@ pub struct Layout {
     /// The serial port's own address, which the drive answers to from power-up while the
     /// address source 0x21D1 is 0 (seed 003's, 1); `None`: the node id 0x2028 always.
     pub address: Option<u8>,
+    /// Whether the scope's and the black box's registers are the native map's, at their native
+    /// addresses ([`SCOPE_RANGES`]); a sub-indexed layout reaches them through its window.
+    pub scope: bool,
 }
+
+/// The native map's scope and black box (0x2220-0x223D) and its capture windows (0x4000,
+/// 0xA000), as inclusive ranges: a [`Layout::scope`] layout answers them as the native map does,
+/// a request within one of them, in the layout's codes.
+pub const SCOPE_RANGES: [(u16, u16); 3] = [(0x2220, 0x223D), (0x4000, 0x5FFF), (0xA000, 0xBFFF)];
 
 /// A map's window of raw program words.
 #[derive(Clone, Copy, Debug)]
@@ -370,6 +378,7 @@ impl Layout {
             reserved: &[],
             sub_index: None,
             address: None,
+            scope: false,
         }
     }
 
@@ -494,9 +503,11 @@ impl LayoutMap {
         self.native.set_staged(obj, v);
     }
 
-    /// Whether `addr` is in the window onto the native map (a [`Layout::sub_index`] layout's).
+    /// Whether `addr` is in the window onto the native map (a [`Layout::sub_index`] layout's,
+    /// or a [`Layout::scope`] layout's scope registers).
     fn in_window(&self, addr: u16) -> bool {
         self.layout.sub_index.is_some_and(|s| addr >= s.window)
+            || (self.layout.scope && SCOPE_RANGES.iter().any(|&(lo, hi)| (lo..=hi).contains(&addr)))
     }
 
     /// The native map of the window, if `addr` is in it, and the codes its refusals take.

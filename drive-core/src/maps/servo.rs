@@ -171,6 +171,7 @@ pub static LAYOUT: Layout = Layout {
     reserved: &RESERVED,
     sub_index: None,
     address: None,
+    scope: true,
 };
 
 /// The manual's factory values where they differ from the drive's: P□503 10 r/min.
