@@ -439,6 +439,23 @@ pub fn entry_register(
     }
 }
 
+/// What a [`Layout::scope`](drive_core::maps::layout::Layout::scope) layout answers a read of
+/// `qty` registers from `addr` in its scope ranges: the native map's answer there (`None`
+/// refused); `None` outside them.
+pub fn scope_model(
+    drive: &drive_core::Drive<drive_core::maps::Maps>,
+    addr: u16,
+    qty: usize,
+) -> Option<Option<Vec<u16>>> {
+    use drive_core::maps::RegisterMap;
+    let ranges = drive_core::maps::layout::SCOPE_RANGES;
+    ranges.iter().any(|&(lo, hi)| (lo..=hi).contains(&addr)).then(|| {
+        let mut out = vec![0u8; 2 * qty];
+        let read = drive_core::maps::NativeMap::new().read(drive.state(), addr, &mut out);
+        read.ok().map(|()| out.chunks(2).map(|w| u16::from_be_bytes([w[0], w[1]])).collect())
+    })
+}
+
 /// A compatibility map's run: the records of `data` as [`requests`] reads them, bit 6 of `ctl`
 /// taking the address from `entries` (the data's first byte picks one). Every frame is answered
 /// (a normal reply, or an exception of `codes` that changes nothing `snapshot` sees); a read of

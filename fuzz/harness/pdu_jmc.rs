@@ -31,6 +31,9 @@ fn snapshot(drive: &Drive<Maps>) -> (Vec<u32>, i64, drive_core::power::DeviceSta
 /// The registers a read of `qty` from `addr` gets by the list walk, or `None` if it cannot be
 /// read (no entry starts there, the walk runs out or meets a write-only entry).
 fn model(drive: &Drive<Maps>, addr: u16, qty: usize) -> Option<Vec<u16>> {
+    if let Some(answer) = oracle::scope_model(drive, addr, qty) {
+        return answer;
+    }
     let first = ENTRIES.iter().position(|e| e.addr == addr)?;
     let low_first = drive.state().read(Obj::MapWordOrder) == 1;
     let mut out = Vec::new();
