@@ -21,13 +21,69 @@ use crate::dict::{Address, Map};
 pub enum Target {
     /// The simulator's TCP endpoint (`HOST:PORT`), raw frames (RTU, or ASCII lines).
     Tcp(String),
-    /// A serial port at a baud rate (8N1).
+    /// A serial port at a baud rate and parity.
     Serial {
         /// The port (`/dev/ttyUSB0`).
         port: String,
-        /// Bits a second.
-        baud: u32,
+        /// Its settings.
+        format: LineFormat,
     },
+}
+
+/// The parity bit of each character (the drive's 0x2100).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Parity {
+    /// No parity bit (8N1, the factory's).
+    #[default]
+    None,
+    /// Even parity (8E1).
+    Even,
+    /// Odd parity (8O1).
+    Odd,
+}
+
+impl Parity {
+    /// Every parity: none, even, odd.
+    pub const ALL: [Parity; 3] = [Parity::None, Parity::Even, Parity::Odd];
+
+    /// The parity named `none`, `even` or `odd`.
+    pub fn from_name(name: &str) -> Option<Parity> {
+        match name {
+            "none" => Some(Parity::None),
+            "even" => Some(Parity::Even),
+            "odd" => Some(Parity::Odd),
+            _ => None,
+        }
+    }
+}
+
+/// A serial line's settings: baud rate and parity, with 8 data bits and 1 stop bit (the drive's
+/// formats are 8N1, 8E1 and 8O1).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LineFormat {
+    /// Bits a second.
+    pub baud: u32,
+    /// The parity.
+    pub parity: Parity,
+}
+
+impl Default for LineFormat {
+    /// The drive's factory settings: 9600 baud 8N1.
+    fn default() -> Self {
+        Self { baud: 9600, parity: Parity::None }
+    }
+}
+
+impl fmt::Display for LineFormat {
+    /// `38400 8E1`.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let parity = match self.parity {
+            Parity::None => 'N',
+            Parity::Even => 'E',
+            Parity::Odd => 'O',
+        };
+        write!(f, "{} 8{parity}1", self.baud)
+    }
 }
 
 /// How frames are delimited on the line (the drive's 0x2192 at its power-up).
@@ -145,10 +201,15 @@ async fn open(target: &Target) -> Result<Box<dyn Stream>, Error> {
             s.set_nodelay(true).map_err(|e| Error::Link(e.to_string()))?;
             (Box::new(s), 115_200)
         }
-        Target::Serial { port, baud } => {
-            let s = tokio_serial::SerialStream::open(&tokio_serial::new(port, *baud))
+        Target::Serial { port, format } => {
+            let parity = match format.parity {
+                Parity::None => tokio_serial::Parity::None,
+                Parity::Even => tokio_serial::Parity::Even,
+                Parity::Odd => tokio_serial::Parity::Odd,
+            };
+            let s = tokio_serial::SerialStream::open(&tokio_serial::new(port, format.baud).parity(parity))
                 .map_err(|e| Error::Link(format!("{port}: {e}")))?;
-            (Box::new(s), *baud)
+            (Box::new(s), format.baud)
         }
     };
     Ok(Box::new(framed(stream, t15(baud))))
@@ -366,7 +427,7 @@ impl Link {
     async fn exchange(&mut self, pdu: &[u8]) -> Result<Vec<u8>, Error> {
         let (limit, slave, map) = (self.limit, self.slave, self.map);
         let baud = match &self.target {
-            Target::Serial { baud, .. } => *baud,
+            Target::Serial { format, .. } => format.baud,
             Target::Tcp(_) => 115_200,
         };
         // A link to a sub-indexed map or an ASCII link is opened raw (`Link::connect_with`).

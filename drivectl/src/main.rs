@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use clap::{Parser, Subcommand};
 use drivectl::dict::{Dictionary, Map};
-use drivectl::link::{Error, Framing, Link, Target};
+use drivectl::link::{Error, Framing, LineFormat, Link, Parity, Target};
 use drivectl::{Drive, Settings, Value, parse_assignment, scan};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -16,12 +16,15 @@ use indicatif::{ProgressBar, ProgressStyle};
 #[derive(Parser)]
 #[command(version)]
 struct Cli {
-    /// Serial port of the RS-485 adapter (8N1).
+    /// Serial port of the RS-485 adapter.
     #[arg(long, conflicts_with = "tcp", global = true)]
     port: Option<String>,
     /// Baud rate on the serial port.
     #[arg(long, default_value_t = 9600, global = true)]
     baud: u32,
+    /// Parity on the serial port: none (8N1), even (8E1) or odd (8O1).
+    #[arg(long, default_value = "none", value_parser = parse_parity, global = true)]
+    parity: Parity,
     /// The simulator's TCP endpoint (raw RTU frames, or ASCII lines with --ascii): `hal-sim --tcp
     /// HOST:PORT`.
     #[arg(long, global = true)]
@@ -150,9 +153,19 @@ enum Command {
     },
 }
 
+/// `--parity`'s value.
+fn parse_parity(name: &str) -> Result<Parity, String> {
+    Parity::from_name(name).ok_or_else(|| format!("{name:?}: none, even or odd"))
+}
+
+/// The serial line's settings `--baud` and `--parity` give.
+fn format(cli: &Cli) -> LineFormat {
+    LineFormat { baud: cli.baud, parity: cli.parity }
+}
+
 fn target(cli: &Cli) -> Result<Target, Error> {
     match (&cli.port, &cli.tcp) {
-        (Some(port), _) => Ok(Target::Serial { port: port.clone(), baud: cli.baud }),
+        (Some(port), _) => Ok(Target::Serial { port: port.clone(), format: format(cli) }),
         (None, Some(at)) => Ok(Target::Tcp(at.clone())),
         (None, None) => Err(Error::Usage("say where the bus is: --port DEVICE [--baud B] or --tcp HOST:PORT".into())),
     }
