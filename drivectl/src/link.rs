@@ -6,13 +6,14 @@
 //! frames it as RTU (CRC, a reply ended by t3.5 of silence) or ASCII (`:`, hex, LRC, CR LF, a
 //! reply ended by its LF), then checks the reply's address and function and maps exceptions.
 
+use std::borrow::Cow;
 use std::fmt;
 use std::time::Duration;
 
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::time::{Instant, timeout, timeout_at};
-use tokio_modbus::client::{Context, Reader, Writer, rtu};
-use tokio_modbus::prelude::{ExceptionCode, ReadCode, Slave, SlaveContext};
+use tokio_modbus::client::{Client, Context, Reader, Writer, rtu};
+use tokio_modbus::prelude::{ExceptionCode, ReadCode, Request, Slave, SlaveContext};
 
 use crate::dict::{Address, Map};
 
@@ -65,6 +66,20 @@ pub struct LineFormat {
     pub baud: u32,
     /// The parity.
     pub parity: Parity,
+}
+
+impl LineFormat {
+    /// Bits a character takes on the wire: start, 8 data, parity if any, stop.
+    pub fn bits_per_char(&self) -> u32 {
+        if self.parity == Parity::None { 10 } else { 11 }
+    }
+
+    /// How long `chars` characters take on the wire.
+    pub fn chars_time(&self, chars: u32) -> Duration {
+        Duration::from_micros(
+            u64::from(chars) * u64::from(self.bits_per_char()) * 1_000_000 / u64::from(self.baud.max(1)),
+        )
+    }
 }
 
 impl Default for LineFormat {
@@ -259,7 +274,7 @@ fn framed(stream: Box<dyn Stream>, gap: Duration) -> tokio::io::DuplexStream {
 
 /// The silence inside a frame's gathering: 1.5 characters of 11 bits at `baud`, at least 3 ms
 /// (the host's scheduling and QEMU's pace).
-fn t15(baud: u32) -> Duration {
+pub(crate) fn t15(baud: u32) -> Duration {
     Duration::from_micros(16_500_000 / u64::from(baud.max(1200))).max(Duration::from_millis(3))
 }
 
@@ -311,21 +326,18 @@ impl Link {
         }
         if link.map.sub_indexed() && matches!(link.io, Io::Modbus(_)) {
             // Drop tokio-modbus's stream before opening ours: a serial port opens once.
-            // Its framing tasks close the port once they see the pipe's end: retry a moment.
             link.io = Io::Raw(Box::new(tokio::io::empty()), Framing::Rtu);
-            let mut tries = 0;
-            let stream = loop {
-                tokio::task::yield_now().await;
-                match open(&link.target).await {
-                    Ok(s) => break s,
-                    Err(_) if tries < 25 => tries += 1,
-                    Err(e) => return Err(e),
-                }
-                tokio::time::sleep(Duration::from_millis(20)).await;
-            };
-            link.io = Io::Raw(stream, Framing::Rtu);
+            link.io = Io::Raw(reopen(&link.target).await?, Framing::Rtu);
         }
         Ok(link)
+    }
+
+    /// A link to no drive in particular ([`Link::set_slave`] chooses), answering with the native
+    /// map, that frames every request itself: for a scan, whose requests drain what a late reply
+    /// left and check whose reply came. The port may be one a dropped link still holds.
+    pub async fn connect_raw(target: Target, framing: Framing, limit: Duration) -> Result<Self, Error> {
+        let io = Io::Raw(reopen(&target).await?, framing);
+        Ok(Self { target, slave: 0, io, limit, map: Map::Native })
     }
 
     /// The framing of the link.
@@ -346,6 +358,21 @@ impl Link {
         self.slave = slave;
         if let Io::Modbus(ctx) = &mut self.io {
             ctx.set_slave(Slave(slave));
+        }
+    }
+
+    /// Asks the drive to echo two bytes (diagnostics 0x08, sub-function 0x0000, return query
+    /// data): the shortest request every map serves (the EC-57's parser passes 0x08 through as
+    /// Modbus has it), 8 bytes each way in RTU. A refusal ([`Error::Refused`]) is an answer too.
+    pub async fn probe(&mut self) -> Result<(), Error> {
+        // Sub-function 0, then the two bytes to echo.
+        const DATA: [u8; 4] = [0x00, 0x00, 0x4F, 0x53];
+        let (limit, map) = (self.limit, self.map);
+        match &mut self.io {
+            Io::Modbus(ctx) => {
+                answered(limit, map, ctx.call(Request::Custom(0x08, Cow::Borrowed(&DATA)))).await.map(|_| ())
+            }
+            Io::Raw(..) => self.exchange(&[&[0x08][..], &DATA].concat()).await.map(|_| ()),
         }
     }
 
@@ -450,6 +477,21 @@ impl Link {
             [_, f, ..] if *f == function => Ok(reply.get(1..).unwrap_or_default().to_vec()),
             _ => Err(Error::Link(format!("a malformed reply {reply:02X?} to function {function:02X}"))),
         }
+    }
+}
+
+/// Opens `target`, retrying a moment: a serial port opens once, and a link dropped just before
+/// closes it only once its framing tasks see the pipe's end.
+async fn reopen(target: &Target) -> Result<Box<dyn Stream>, Error> {
+    let mut tries = 0;
+    loop {
+        tokio::task::yield_now().await;
+        match open(target).await {
+            Ok(s) => return Ok(s),
+            Err(_) if tries < 25 => tries += 1,
+            Err(e) => return Err(e),
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
     }
 }
 
