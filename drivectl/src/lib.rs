@@ -14,7 +14,7 @@ use drive_core::od::Obj;
 use serde::{Deserialize, Serialize};
 
 use dict::{Dictionary, Map, Register, parse_int};
-use link::{Error, Framing, LineFormat, Link};
+use link::{Error, Framing, LineFormat, Link, Target};
 
 /// A register's value: a number, or a text.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -453,11 +453,15 @@ pub struct Found {
     pub map: Map,
     /// Its identification (empty for a drive that did not identify itself).
     pub identity: link::Identity,
+    /// The line settings it answered at, for a scan of every setting ([`scan_every_format`]).
+    pub format: Option<LineFormat>,
 }
 
 /// What a scan tells as it goes.
 #[derive(Debug)]
 pub enum ScanEvent<'a> {
+    /// The scan goes on at these settings ([`scan_every_format`]).
+    Format(LineFormat),
     /// `done` of the `total` addresses have been asked at the present settings.
     Asked {
         /// Addresses asked.
@@ -529,6 +533,17 @@ pub async fn scan(
     link: &mut Link,
     addresses: RangeInclusive<u8>,
     timeouts: ScanTimeouts,
+    report: impl FnMut(ScanEvent<'_>),
+) -> Result<Vec<Found>, Error> {
+    scan_at(link, addresses, timeouts, None, report).await
+}
+
+/// [`scan`], each drive found said to have answered at `format`.
+async fn scan_at(
+    link: &mut Link,
+    addresses: RangeInclusive<u8>,
+    timeouts: ScanTimeouts,
+    format: Option<LineFormat>,
     mut report: impl FnMut(ScanEvent<'_>),
 ) -> Result<Vec<Found>, Error> {
     let total = addresses.clone().count();
@@ -556,11 +571,31 @@ pub async fn scan(
                 }
                 Err(e) => return Err(e),
             };
-            let drive = Found { address, map, identity };
+            let drive = Found { address, map, identity, format };
             report(ScanEvent::Found(&drive));
             found.push(drive);
         }
         report(ScanEvent::Asked { done: done + 1, total });
+    }
+    Ok(found)
+}
+
+/// [`scan`] at every setting a drive takes ([`LineFormat::every`]) on the serial port `port`,
+/// waiting at each as `timeouts` has it; each drive found with the settings it answered at.
+pub async fn scan_every_format(
+    port: &str,
+    framing: Framing,
+    addresses: RangeInclusive<u8>,
+    timeouts: impl Fn(LineFormat) -> ScanTimeouts,
+    mut report: impl FnMut(ScanEvent<'_>),
+) -> Result<Vec<Found>, Error> {
+    let mut found = Vec::new();
+    for format in LineFormat::every() {
+        report(ScanEvent::Format(format));
+        let waits = timeouts(format);
+        let target = Target::Serial { port: port.to_string(), format };
+        let mut link = Link::connect_raw(target, framing, waits.probe).await?;
+        found.extend(scan_at(&mut link, addresses.clone(), waits, Some(format), &mut report).await?);
     }
     Ok(found)
 }
@@ -594,5 +629,14 @@ mod tests {
         assert!((ms(ascii.probe) - (2.0 * 17.0 / 0.96 + 33.0)).abs() < 0.01, "{ascii:?}");
         assert_eq!(slow.with_probe(Duration::from_millis(150)).identify, slow.identify);
         assert_eq!(slow.with_probe(Duration::from_millis(500)).identify, Duration::from_millis(500));
+    }
+
+    #[test]
+    fn every_format_is_every_rate_at_every_parity() {
+        let all: Vec<LineFormat> = LineFormat::every().collect();
+        assert_eq!(all.len(), 21);
+        assert_eq!(all.first().map(ToString::to_string).as_deref(), Some("4800 8N1"));
+        assert!(all.contains(&LineFormat { baud: 38_400, parity: Parity::Even }));
+        assert_eq!(all.last().map(ToString::to_string).as_deref(), Some("115200 8O1"));
     }
 }

@@ -80,6 +80,13 @@ impl LineFormat {
             u64::from(chars) * u64::from(self.bits_per_char()) * 1_000_000 / u64::from(self.baud.max(1)),
         )
     }
+
+    /// Every setting a drive takes (0x202A's rates, 0x2100's parities), rate by rate.
+    pub fn every() -> impl Iterator<Item = LineFormat> {
+        drive_core::Baud::SUPPORTED
+            .into_iter()
+            .flat_map(|baud| Parity::ALL.into_iter().map(move |parity| LineFormat { baud, parity }))
+    }
 }
 
 impl Default for LineFormat {

@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use clap::{Parser, Subcommand};
 use drivectl::dict::{Dictionary, Map};
 use drivectl::link::{Error, Framing, LineFormat, Link, Parity, Target};
-use drivectl::{Drive, ScanEvent, ScanTimeouts, Settings, Value, parse_assignment, scan};
+use drivectl::{Drive, ScanEvent, ScanTimeouts, Settings, Value, parse_assignment, scan, scan_every_format};
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Commission OpenStep drives over their Modbus link: find them, read and write their settings
@@ -60,6 +60,10 @@ enum Command {
         /// Last address asked.
         #[arg(long, default_value_t = 247)]
         to: u8,
+        /// Try every baud rate and parity a drive takes (serial port only), each drive printed
+        /// with the settings it answered at.
+        #[arg(long)]
+        all_bauds: bool,
     },
     /// The registers of a map (`--map`, default native): name, address, registers, access, unit;
     /// then its reserved ranges.
@@ -229,8 +233,8 @@ async fn run(cli: Cli) -> Result<(), Error> {
         }
         return Ok(());
     }
-    if let Command::Scan { from, to } = cli.command {
-        return scan_command(&cli, from..=to).await;
+    if let Command::Scan { from, to, all_bauds } = cli.command {
+        return scan_command(&cli, from..=to, all_bauds).await;
     }
     let link = Link::connect_with(target(&cli)?, framing(&cli), cli.address, map_arg(&cli)?, limit).await?;
     let mut drive = Drive::new(link).await?;
@@ -316,7 +320,7 @@ async fn run(cli: Cli) -> Result<(), Error> {
 
 /// `scan`: each drive printed on stdout as it is found, a progress line on stderr while it is a
 /// terminal, and the count and time on stderr at the end.
-async fn scan_command(cli: &Cli, addresses: RangeInclusive<u8>) -> Result<(), Error> {
+async fn scan_command(cli: &Cli, addresses: RangeInclusive<u8>, all_bauds: bool) -> Result<(), Error> {
     let started = Instant::now();
     let framing = framing(cli);
     let probe = cli.timeout.map(Duration::from_millis);
@@ -333,12 +337,17 @@ async fn scan_command(cli: &Cli, addresses: RangeInclusive<u8>) -> Result<(), Er
         ProgressStyle::with_template("scanning{msg} {pos}/{len}").unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let report = |event: ScanEvent<'_>| match event {
+        ScanEvent::Format(format) => {
+            bar.set_message(format!(" at {format}"));
+            bar.set_position(0);
+        }
         ScanEvent::Asked { done, .. } => bar.set_position(done as u64),
         ScanEvent::Found(f) => {
             let id = &f.identity;
+            let at = f.format.map(|format| format!("  at {format}")).unwrap_or_default();
             bar.suspend(|| {
                 say!(
-                    "{:>3}  {:<6}  {} {} {} ({})",
+                    "{:>3}  {:<6}  {} {} {} ({}){at}",
                     f.address,
                     f.map.name(),
                     id.object(0),
@@ -350,12 +359,24 @@ async fn scan_command(cli: &Cli, addresses: RangeInclusive<u8>) -> Result<(), Er
             });
         }
     };
-    let waits = timeouts(format(cli));
-    let mut link = Link::connect_raw(target(cli)?, framing, waits.probe).await?;
-    let found = scan(&mut link, addresses.clone(), waits, report).await?;
+    let found = match (&cli.port, all_bauds) {
+        (Some(port), true) => scan_every_format(port, framing, addresses.clone(), timeouts, report).await?,
+        (None, true) => {
+            return Err(Error::Usage(
+                "--all-bauds needs a serial port (--port): a TCP link carries frames with no baud rate or parity to try"
+                    .into(),
+            ));
+        }
+        (_, false) => {
+            let waits = timeouts(format(cli));
+            let mut link = Link::connect_raw(target(cli)?, framing, waits.probe).await?;
+            scan(&mut link, addresses.clone(), waits, report).await?
+        }
+    };
     bar.finish_and_clear();
     let n = found.len();
-    eprintln!("{n} drive(s); {} address(es) in {:.1} s", addresses.count(), started.elapsed().as_secs_f64());
+    let settings = if all_bauds { format!(" at {} settings", LineFormat::every().count()) } else { String::new() };
+    eprintln!("{n} drive(s); {} address(es){settings} in {:.1} s", addresses.count(), started.elapsed().as_secs_f64());
     if n == 0 { Err(Error::Usage("no drive answered".into())) } else { Ok(()) }
 }
 

@@ -558,3 +558,27 @@ fn a_scan_of_every_address_at_9600_baud_is_quick_and_prints_as_it_goes() {
     }
     assert!(err.starts_with("3 drive(s); 247 address(es) in ") && err.lines().count() == 1, "{err:?}");
 }
+
+/// `--all-bauds` finds a drive at 38400 baud and even parity, at that setting only; over TCP it
+/// is refused.
+#[test]
+fn all_bauds_finds_a_drive_at_38400_baud_even_parity() {
+    let opts = SimOptions {
+        endpoint: Endpoint::Pty { link: None },
+        address: Some(3),
+        baud: Some(38_400),
+        parity: Some(1),
+        ..Default::default()
+    };
+    let sim = Simulator::bind(opts).expect("bind simulator").power_on();
+    let (lines, err, took) = timed(&["--port", sim.endpoint(), "scan", "--all-bauds", "--to", "5"]);
+    eprintln!("--all-bauds of 1-5: {took:?}; found at {:?}", lines.iter().map(|(t, _)| t).collect::<Vec<_>>());
+    assert_eq!(lines.len(), 1, "{lines:?}");
+    assert!(lines.iter().all(|(_, l)| l.starts_with("  3  native") && l.ends_with("at 38400 8E1")), "{lines:?}");
+    assert!(err.contains("5 address(es) at 21 settings"), "{err}");
+    assert!(took <= Duration::from_secs(30), "{took:?}");
+    let (tcp, _) = power_on(Vec::new(), None);
+    let refused = drivectl(&tcp, &["scan", "--all-bauds"]);
+    assert!(!refused.status.success(), "{refused:?}");
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("--all-bauds needs a serial port"), "{refused:?}");
+}
