@@ -8,13 +8,14 @@ pub mod link;
 pub mod scope;
 
 use std::collections::BTreeMap;
+use std::ops::RangeInclusive;
 use std::time::Duration;
 
 use drive_core::od::Obj;
 use serde::{Deserialize, Serialize};
 
 use dict::{Dictionary, Map, Register, parse_int};
-use link::{Error, Link};
+use link::{Error, Framing, LineFormat, Link, Target};
 
 /// A register's value: a number, or a text.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -464,35 +465,194 @@ pub fn parse_assignment(s: &str) -> Result<(String, i64), Error> {
 pub struct Found {
     /// Its slave address.
     pub address: u8,
-    /// The map it answers with.
+    /// The map it answers with (the native map for a drive that did not identify itself).
     pub map: Map,
-    /// Its identification.
+    /// Its identification (empty for a drive that did not identify itself).
     pub identity: link::Identity,
+    /// The line settings it answered at, for a scan of every setting ([`scan_every_format`]).
+    pub format: Option<LineFormat>,
 }
 
-/// Asks every address of `addresses` for its identification; calls `progress` after each.
+/// What a scan tells as it goes.
+#[derive(Debug)]
+pub enum ScanEvent<'a> {
+    /// The scan goes on at these settings ([`scan_every_format`]).
+    Format(LineFormat),
+    /// `done` of the `total` addresses have been asked at the present settings.
+    Asked {
+        /// Addresses asked.
+        done: usize,
+        /// Addresses to ask.
+        total: usize,
+    },
+    /// A drive answered.
+    Found(&'a Found),
+}
+
+/// The margin each of a scan's waits has beyond the time on the wire: the drive's turnaround
+/// (under a millisecond once its t3.5 has passed), a USB adapter's receive latency (an FTDI
+/// chip's timer, 16 ms by default) and the host's scheduling.
+pub const SCAN_MARGIN: Duration = Duration::from_millis(30);
+
+/// How long a scan waits for an answer at each address, worked out from the line's settings.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ScanTimeouts {
+    /// The probe ([`Link::probe`]) every address gets.
+    pub probe: Duration,
+    /// The identification an address that answered the probe gets.
+    pub identify: Duration,
+}
+
+impl ScanTimeouts {
+    /// The waits at `format` in `framing`: the request's time on the wire, the drive's t3.5
+    /// (RTU; an ASCII line ends at its LF), the longest reply's time on the wire, the silence
+    /// after which drivectl takes a reply as whole (1.5 characters, at least 3 ms), and
+    /// [`SCAN_MARGIN`]. The probe is 8 bytes each way (an exception is 5); the identification
+    /// request is 7 and its reply at most 256, an RTU frame's most. An ASCII line carries a
+    /// frame of `n` bytes (CRC included) in `2n + 1` characters (`:`, hex, LRC, CR LF).
+    pub fn of(format: LineFormat, framing: Framing) -> Self {
+        let chars = |rtu_bytes: u32| match framing {
+            Framing::Rtu => rtu_bytes,
+            Framing::Ascii => 2 * rtu_bytes + 1,
+        };
+        // The Modbus serial line fixes t3.5 at 1.75 ms above 19200 baud; below, 3.5 characters
+        // of 11 bits.
+        let t35 = match framing {
+            Framing::Ascii => Duration::ZERO,
+            Framing::Rtu if format.baud > 19_200 => Duration::from_micros(1750),
+            Framing::Rtu => Duration::from_micros(38_500_000 / u64::from(format.baud.max(1))),
+        };
+        let wait = |request: u32, reply: u32| {
+            format.chars_time(chars(request))
+                + t35
+                + format.chars_time(chars(reply))
+                + link::t15(format.baud)
+                + SCAN_MARGIN
+        };
+        Self { probe: wait(8, 8), identify: wait(7, 256) }
+    }
+
+    /// These waits with the probe's set to `probe` (`--timeout`), the identification's no shorter.
+    pub fn with_probe(self, probe: Duration) -> Self {
+        Self { probe, identify: self.identify.max(probe) }
+    }
+}
+
+/// Asks every address of `addresses` on `link` whether a drive is there (a probe, waiting
+/// `timeouts.probe`), and identifies those that answer (waiting `timeouts.identify`): the map
+/// their identification names. `report` hears of each address asked and each drive found as
+/// it is found.
+///
+/// A probe answered by a reply that is not its own (another address', late, or spoilt) is
+/// asked again once the line has been quiet for a probe's wait.
 pub async fn scan(
     link: &mut Link,
-    addresses: impl IntoIterator<Item = u8>,
-    mut progress: impl FnMut(u8),
+    addresses: RangeInclusive<u8>,
+    timeouts: ScanTimeouts,
+    report: impl FnMut(ScanEvent<'_>),
 ) -> Result<Vec<Found>, Error> {
+    scan_at(link, addresses, timeouts, None, report).await
+}
+
+/// [`scan`], each drive found said to have answered at `format`.
+async fn scan_at(
+    link: &mut Link,
+    addresses: RangeInclusive<u8>,
+    timeouts: ScanTimeouts,
+    format: Option<LineFormat>,
+    mut report: impl FnMut(ScanEvent<'_>),
+) -> Result<Vec<Found>, Error> {
+    let total = addresses.clone().count();
     let mut found = Vec::new();
-    for address in addresses {
+    for (done, address) in addresses.enumerate() {
         link.set_slave(address);
-        match link.identify().await {
-            Ok(identity) => {
-                let map = Map::from_application_name(identity.object(6));
-                found.push(Found { address, map, identity });
-            }
-            // Nobody there, or a reply spoilt by a collision: nothing to list.
-            Err(Error::Timeout | Error::Link(_)) => {}
-            // A drive that refuses identification still answers.
-            Err(Error::Refused { .. }) => {
-                found.push(Found { address, map: Map::Native, identity: link::Identity::default() })
-            }
-            Err(e) => return Err(e),
+        link.limit = timeouts.probe;
+        let mut answer = link.probe().await;
+        if matches!(answer, Err(Error::Link(_))) {
+            tokio::time::sleep(timeouts.probe).await;
+            answer = link.probe().await;
         }
-        progress(address);
+        let there = match answer {
+            Ok(()) | Err(Error::Refused { .. }) => true,
+            Err(Error::Timeout | Error::Link(_)) => false,
+            Err(e) => return Err(e),
+        };
+        if there {
+            link.limit = timeouts.identify;
+            let (map, identity) = match link.identify().await {
+                Ok(identity) => (Map::from_application_name(identity.object(6)), identity),
+                // It answered the probe: listed, without an identity.
+                Err(Error::Refused { .. } | Error::Timeout | Error::Link(_)) => {
+                    (Map::Native, link::Identity::default())
+                }
+                Err(e) => return Err(e),
+            };
+            let drive = Found { address, map, identity, format };
+            report(ScanEvent::Found(&drive));
+            found.push(drive);
+        }
+        report(ScanEvent::Asked { done: done + 1, total });
     }
     Ok(found)
+}
+
+/// [`scan`] at every setting a drive takes ([`LineFormat::every`]) on the serial port `port`,
+/// waiting at each as `timeouts` has it; each drive found with the settings it answered at.
+pub async fn scan_every_format(
+    port: &str,
+    framing: Framing,
+    addresses: RangeInclusive<u8>,
+    timeouts: impl Fn(LineFormat) -> ScanTimeouts,
+    mut report: impl FnMut(ScanEvent<'_>),
+) -> Result<Vec<Found>, Error> {
+    let mut found = Vec::new();
+    for format in LineFormat::every() {
+        report(ScanEvent::Format(format));
+        let waits = timeouts(format);
+        let target = Target::Serial { port: port.to_string(), format };
+        let mut link = Link::connect_raw(target, framing, waits.probe).await?;
+        found.extend(scan_at(&mut link, addresses.clone(), waits, Some(format), &mut report).await?);
+    }
+    Ok(found)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use link::Parity;
+
+    fn ms(d: Duration) -> f64 {
+        d.as_secs_f64() * 1000.0
+    }
+
+    #[test]
+    fn scan_waits_follow_the_line() {
+        let at = |baud, parity, framing| ScanTimeouts::of(LineFormat { baud, parity }, framing);
+        // 9600 8N1: 8 + 8 characters of 1.042 ms, t3.5 4.01 ms, 3 ms of gathering, 30 ms.
+        let slow = at(9600, Parity::None, Framing::Rtu);
+        assert!((ms(slow.probe) - 53.68).abs() < 0.01, "{slow:?}");
+        // 7 + 256 characters.
+        assert!((ms(slow.identify) - 310.97).abs() < 0.01, "{slow:?}");
+        // 115200: t3.5 fixed at 1.75 ms.
+        let fast = at(115_200, Parity::None, Framing::Rtu);
+        assert!((ms(fast.probe) - 36.14).abs() < 0.01, "{fast:?}");
+        assert!((ms(fast.identify) - 57.58).abs() < 0.01, "{fast:?}");
+        // A parity bit makes a character 11 bits.
+        let even = at(9600, Parity::Even, Framing::Rtu);
+        assert!((ms(even.probe) - ms(slow.probe) - 16.0 / 9.6 * 1.0).abs() < 0.01, "{even:?}");
+        // ASCII: 17 characters each way for the probe, no t3.5.
+        let ascii = at(9600, Parity::None, Framing::Ascii);
+        assert!((ms(ascii.probe) - (2.0 * 17.0 / 0.96 + 33.0)).abs() < 0.01, "{ascii:?}");
+        assert_eq!(slow.with_probe(Duration::from_millis(150)).identify, slow.identify);
+        assert_eq!(slow.with_probe(Duration::from_millis(500)).identify, Duration::from_millis(500));
+    }
+
+    #[test]
+    fn every_format_is_every_rate_at_every_parity() {
+        let all: Vec<LineFormat> = LineFormat::every().collect();
+        assert_eq!(all.len(), 21);
+        assert_eq!(all.first().map(ToString::to_string).as_deref(), Some("4800 8N1"));
+        assert!(all.contains(&LineFormat { baud: 38_400, parity: Parity::Even }));
+        assert_eq!(all.last().map(ToString::to_string).as_deref(), Some("115200 8O1"));
+    }
 }

@@ -6,13 +6,14 @@
 //! frames it as RTU (CRC, a reply ended by t3.5 of silence) or ASCII (`:`, hex, LRC, CR LF, a
 //! reply ended by its LF), then checks the reply's address and function and maps exceptions.
 
+use std::borrow::Cow;
 use std::fmt;
 use std::time::Duration;
 
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::time::{Instant, timeout, timeout_at};
-use tokio_modbus::client::{Context, Reader, Writer, rtu};
-use tokio_modbus::prelude::{ExceptionCode, ReadCode, Slave, SlaveContext};
+use tokio_modbus::client::{Client, Context, Reader, Writer, rtu};
+use tokio_modbus::prelude::{ExceptionCode, ReadCode, Request, Slave, SlaveContext};
 
 use crate::dict::{Address, Map};
 
@@ -21,13 +22,90 @@ use crate::dict::{Address, Map};
 pub enum Target {
     /// The simulator's TCP endpoint (`HOST:PORT`), raw frames (RTU, or ASCII lines).
     Tcp(String),
-    /// A serial port at a baud rate (8N1).
+    /// A serial port at a baud rate and parity.
     Serial {
         /// The port (`/dev/ttyUSB0`).
         port: String,
-        /// Bits a second.
-        baud: u32,
+        /// Its settings.
+        format: LineFormat,
     },
+}
+
+/// The parity bit of each character (the drive's 0x2100).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Parity {
+    /// No parity bit (8N1, the factory's).
+    #[default]
+    None,
+    /// Even parity (8E1).
+    Even,
+    /// Odd parity (8O1).
+    Odd,
+}
+
+impl Parity {
+    /// Every parity: none, even, odd.
+    pub const ALL: [Parity; 3] = [Parity::None, Parity::Even, Parity::Odd];
+
+    /// The parity named `none`, `even` or `odd`.
+    pub fn from_name(name: &str) -> Option<Parity> {
+        match name {
+            "none" => Some(Parity::None),
+            "even" => Some(Parity::Even),
+            "odd" => Some(Parity::Odd),
+            _ => None,
+        }
+    }
+}
+
+/// A serial line's settings: baud rate and parity, with 8 data bits and 1 stop bit (the drive's
+/// formats are 8N1, 8E1 and 8O1).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LineFormat {
+    /// Bits a second.
+    pub baud: u32,
+    /// The parity.
+    pub parity: Parity,
+}
+
+impl LineFormat {
+    /// Bits a character takes on the wire: start, 8 data, parity if any, stop.
+    pub fn bits_per_char(&self) -> u32 {
+        if self.parity == Parity::None { 10 } else { 11 }
+    }
+
+    /// How long `chars` characters take on the wire.
+    pub fn chars_time(&self, chars: u32) -> Duration {
+        Duration::from_micros(
+            u64::from(chars) * u64::from(self.bits_per_char()) * 1_000_000 / u64::from(self.baud.max(1)),
+        )
+    }
+
+    /// Every setting a drive takes (0x202A's rates, 0x2100's parities), rate by rate.
+    pub fn every() -> impl Iterator<Item = LineFormat> {
+        drive_core::Baud::SUPPORTED
+            .into_iter()
+            .flat_map(|baud| Parity::ALL.into_iter().map(move |parity| LineFormat { baud, parity }))
+    }
+}
+
+impl Default for LineFormat {
+    /// The drive's factory settings: 9600 baud 8N1.
+    fn default() -> Self {
+        Self { baud: 9600, parity: Parity::None }
+    }
+}
+
+impl fmt::Display for LineFormat {
+    /// `38400 8E1`.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let parity = match self.parity {
+            Parity::None => 'N',
+            Parity::Even => 'E',
+            Parity::Odd => 'O',
+        };
+        write!(f, "{} 8{parity}1", self.baud)
+    }
 }
 
 /// How frames are delimited on the line (the drive's 0x2192 at its power-up).
@@ -145,10 +223,15 @@ async fn open(target: &Target) -> Result<Box<dyn Stream>, Error> {
             s.set_nodelay(true).map_err(|e| Error::Link(e.to_string()))?;
             (Box::new(s), 115_200)
         }
-        Target::Serial { port, baud } => {
-            let s = tokio_serial::SerialStream::open(&tokio_serial::new(port, *baud))
+        Target::Serial { port, format } => {
+            let parity = match format.parity {
+                Parity::None => tokio_serial::Parity::None,
+                Parity::Even => tokio_serial::Parity::Even,
+                Parity::Odd => tokio_serial::Parity::Odd,
+            };
+            let s = tokio_serial::SerialStream::open(&tokio_serial::new(port, format.baud).parity(parity))
                 .map_err(|e| Error::Link(format!("{port}: {e}")))?;
-            (Box::new(s), *baud)
+            (Box::new(s), format.baud)
         }
     };
     Ok(Box::new(framed(stream, t15(baud))))
@@ -198,7 +281,7 @@ fn framed(stream: Box<dyn Stream>, gap: Duration) -> tokio::io::DuplexStream {
 
 /// The silence inside a frame's gathering: 1.5 characters of 11 bits at `baud`, at least 3 ms
 /// (the host's scheduling and QEMU's pace).
-fn t15(baud: u32) -> Duration {
+pub(crate) fn t15(baud: u32) -> Duration {
     Duration::from_micros(16_500_000 / u64::from(baud.max(1200))).max(Duration::from_millis(3))
 }
 
@@ -250,21 +333,18 @@ impl Link {
         }
         if link.map.sub_indexed() && matches!(link.io, Io::Modbus(_)) {
             // Drop tokio-modbus's stream before opening ours: a serial port opens once.
-            // Its framing tasks close the port once they see the pipe's end: retry a moment.
             link.io = Io::Raw(Box::new(tokio::io::empty()), Framing::Rtu);
-            let mut tries = 0;
-            let stream = loop {
-                tokio::task::yield_now().await;
-                match open(&link.target).await {
-                    Ok(s) => break s,
-                    Err(_) if tries < 25 => tries += 1,
-                    Err(e) => return Err(e),
-                }
-                tokio::time::sleep(Duration::from_millis(20)).await;
-            };
-            link.io = Io::Raw(stream, Framing::Rtu);
+            link.io = Io::Raw(reopen(&link.target).await?, Framing::Rtu);
         }
         Ok(link)
+    }
+
+    /// A link to no drive in particular ([`Link::set_slave`] chooses), answering with the native
+    /// map, that frames every request itself: for a scan, whose requests drain what a late reply
+    /// left and check whose reply came. The port may be one a dropped link still holds.
+    pub async fn connect_raw(target: Target, framing: Framing, limit: Duration) -> Result<Self, Error> {
+        let io = Io::Raw(reopen(&target).await?, framing);
+        Ok(Self { target, slave: 0, io, limit, map: Map::Native })
     }
 
     /// The framing of the link.
@@ -285,6 +365,21 @@ impl Link {
         self.slave = slave;
         if let Io::Modbus(ctx) = &mut self.io {
             ctx.set_slave(Slave(slave));
+        }
+    }
+
+    /// Asks the drive to echo two bytes (diagnostics 0x08, sub-function 0x0000, return query
+    /// data): the shortest request every map serves (the EC-57's parser passes 0x08 through as
+    /// Modbus has it), 8 bytes each way in RTU. A refusal ([`Error::Refused`]) is an answer too.
+    pub async fn probe(&mut self) -> Result<(), Error> {
+        // Sub-function 0, then the two bytes to echo.
+        const DATA: [u8; 4] = [0x00, 0x00, 0x4F, 0x53];
+        let (limit, map) = (self.limit, self.map);
+        match &mut self.io {
+            Io::Modbus(ctx) => {
+                answered(limit, map, ctx.call(Request::Custom(0x08, Cow::Borrowed(&DATA)))).await.map(|_| ())
+            }
+            Io::Raw(..) => self.exchange(&[&[0x08][..], &DATA].concat()).await.map(|_| ()),
         }
     }
 
@@ -366,7 +461,7 @@ impl Link {
     async fn exchange(&mut self, pdu: &[u8]) -> Result<Vec<u8>, Error> {
         let (limit, slave, map) = (self.limit, self.slave, self.map);
         let baud = match &self.target {
-            Target::Serial { baud, .. } => *baud,
+            Target::Serial { format, .. } => format.baud,
             Target::Tcp(_) => 115_200,
         };
         // A link to a sub-indexed map or an ASCII link is opened raw (`Link::connect_with`).
@@ -389,6 +484,21 @@ impl Link {
             [_, f, ..] if *f == function => Ok(reply.get(1..).unwrap_or_default().to_vec()),
             _ => Err(Error::Link(format!("a malformed reply {reply:02X?} to function {function:02X}"))),
         }
+    }
+}
+
+/// Opens `target`, retrying a moment: a serial port opens once, and a link dropped just before
+/// closes it only once its framing tasks see the pipe's end.
+async fn reopen(target: &Target) -> Result<Box<dyn Stream>, Error> {
+    let mut tries = 0;
+    loop {
+        tokio::task::yield_now().await;
+        match open(target).await {
+            Ok(s) => return Ok(s),
+            Err(_) if tries < 25 => tries += 1,
+            Err(e) => return Err(e),
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
     }
 }
 

@@ -1,13 +1,15 @@
 //! `drivectl`: the commissioning tool for OpenStep drives on a Modbus bus (RTU or ASCII).
 
+use std::io::{IsTerminal, Write};
+use std::ops::RangeInclusive;
 use std::process::ExitCode;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use clap::{Parser, Subcommand};
 use drive_core::scope::Phase;
 use drivectl::dict::{Dictionary, Map};
-use drivectl::link::{Error, Framing, Link, Target};
-use drivectl::{Drive, Settings, Value, parse_assignment, scan, scope};
+use drivectl::link::{Error, Framing, LineFormat, Link, Parity, Target};
+use drivectl::{Drive, ScanEvent, ScanTimeouts, Settings, Value, parse_assignment, scan, scan_every_format, scope};
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Commission OpenStep drives over their Modbus link: find them, read and write their settings
@@ -17,12 +19,15 @@ use indicatif::{ProgressBar, ProgressStyle};
 #[derive(Parser)]
 #[command(version)]
 struct Cli {
-    /// Serial port of the RS-485 adapter (8N1).
+    /// Serial port of the RS-485 adapter.
     #[arg(long, conflicts_with = "tcp", global = true)]
     port: Option<String>,
-    /// Baud rate on the serial port.
+    /// Baud rate on the serial port (over TCP: the bus's, which a scan's waits follow).
     #[arg(long, default_value_t = 9600, global = true)]
     baud: u32,
+    /// Parity on the serial port: none (8N1), even (8E1) or odd (8O1).
+    #[arg(long, default_value = "none", value_parser = parse_parity, global = true)]
+    parity: Parity,
     /// The simulator's TCP endpoint (raw RTU frames, or ASCII lines with --ascii): `hal-sim --tcp
     /// HOST:PORT`.
     #[arg(long, global = true)]
@@ -38,16 +43,17 @@ struct Cli {
     /// ec57, servo).
     #[arg(long, global = true)]
     map: Option<String>,
-    /// How long one request may take, ms.
-    #[arg(long, default_value_t = 1000, global = true)]
-    timeout: u64,
+    /// How long one request may take, ms [default: 1000; a scan works its waits out from the
+    /// baud rate and parity, and this sets the wait at each address].
+    #[arg(long, global = true)]
+    timeout: Option<u64>,
     #[command(subcommand)]
     command: Command,
 }
 
 #[derive(Subcommand)]
 enum Command {
-    /// Every drive on the bus: address, map, identification.
+    /// Every drive on the bus: address, map, identification, each printed as it is found.
     Scan {
         /// First address asked.
         #[arg(long, default_value_t = 1)]
@@ -55,6 +61,10 @@ enum Command {
         /// Last address asked.
         #[arg(long, default_value_t = 247)]
         to: u8,
+        /// Try every baud rate and parity a drive takes (serial port only), each drive printed
+        /// with the settings it answered at.
+        #[arg(long)]
+        all_bauds: bool,
     },
     /// The registers of a map (`--map`, default native): name, address, registers, access, unit;
     /// then its reserved ranges.
@@ -204,9 +214,19 @@ enum Command {
     },
 }
 
+/// `--parity`'s value.
+fn parse_parity(name: &str) -> Result<Parity, String> {
+    Parity::from_name(name).ok_or_else(|| format!("{name:?}: none, even or odd"))
+}
+
+/// The serial line's settings `--baud` and `--parity` give.
+fn format(cli: &Cli) -> LineFormat {
+    LineFormat { baud: cli.baud, parity: cli.parity }
+}
+
 fn target(cli: &Cli) -> Result<Target, Error> {
     match (&cli.port, &cli.tcp) {
-        (Some(port), _) => Ok(Target::Serial { port: port.clone(), baud: cli.baud }),
+        (Some(port), _) => Ok(Target::Serial { port: port.clone(), format: format(cli) }),
         (None, Some(at)) => Ok(Target::Tcp(at.clone())),
         (None, None) => Err(Error::Usage("say where the bus is: --port DEVICE [--baud B] or --tcp HOST:PORT".into())),
     }
@@ -242,7 +262,7 @@ fn show(v: &Value, unit: &str) -> String {
 }
 
 async fn run(cli: Cli) -> Result<(), Error> {
-    let limit = Duration::from_millis(cli.timeout);
+    let limit = Duration::from_millis(cli.timeout.unwrap_or(1000));
     if let Command::List = cli.command {
         let dict = Dictionary::of(map_arg(&cli)?.unwrap_or(Map::Native));
         for r in &dict.registers {
@@ -267,34 +287,8 @@ async fn run(cli: Cli) -> Result<(), Error> {
         }
         return Ok(());
     }
-    if let Command::Scan { from, to } = cli.command {
-        let mut link = Link::connect_with(target(&cli)?, framing(&cli), from, Some(Map::Native), limit).await?;
-        let bar = ProgressBar::new(u64::from(to.saturating_sub(from)) + 1);
-        bar.set_style(
-            ProgressStyle::with_template("scanning {bar:40} {pos}/{len} addresses, {msg}")
-                .unwrap_or_else(|_| ProgressStyle::default_bar()),
-        );
-        let mut n = 0;
-        let found = scan(&mut link, from..=to, |_| {
-            bar.inc(1);
-        })
-        .await?;
-        bar.finish_and_clear();
-        for f in &found {
-            n += 1;
-            let id = &f.identity;
-            say!(
-                "{:>3}  {:<6}  {} {} {} ({})",
-                f.address,
-                f.map.name(),
-                id.object(0),
-                id.object(1),
-                id.object(2),
-                id.object(5)
-            );
-        }
-        say!("{n} drive(s)");
-        return if n == 0 { Err(Error::Usage("no drive answered".into())) } else { Ok(()) };
+    if let Command::Scan { from, to, all_bauds } = cli.command {
+        return scan_command(&cli, from..=to, all_bauds).await;
     }
     let link = Link::connect_with(target(&cli)?, framing(&cli), cli.address, map_arg(&cli)?, limit).await?;
     let mut drive = Drive::new(link).await?;
@@ -478,6 +472,68 @@ fn live_line(capture: &scope::Capture, rate: f64) -> String {
         line.push_str(&format!("  {} {lo}..{hi}", scope::kebab(s.name())));
     }
     line
+}
+
+/// `scan`: each drive printed on stdout as it is found, a progress line on stderr while it is a
+/// terminal, and the count and time on stderr at the end.
+async fn scan_command(cli: &Cli, addresses: RangeInclusive<u8>, all_bauds: bool) -> Result<(), Error> {
+    let started = Instant::now();
+    let framing = framing(cli);
+    let probe = cli.timeout.map(Duration::from_millis);
+    let timeouts = |format| {
+        let computed = ScanTimeouts::of(format, framing);
+        probe.map_or(computed, |p| computed.with_probe(p))
+    };
+    let bar = if std::io::stderr().is_terminal() {
+        ProgressBar::new(addresses.clone().count() as u64)
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template("scanning{msg} {pos}/{len}").unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let report = |event: ScanEvent<'_>| match event {
+        ScanEvent::Format(format) => {
+            bar.set_message(format!(" at {format}"));
+            bar.set_position(0);
+        }
+        ScanEvent::Asked { done, .. } => bar.set_position(done as u64),
+        ScanEvent::Found(f) => {
+            let id = &f.identity;
+            let at = f.format.map(|format| format!("  at {format}")).unwrap_or_default();
+            bar.suspend(|| {
+                say!(
+                    "{:>3}  {:<6}  {} {} {} ({}){at}",
+                    f.address,
+                    f.map.name(),
+                    id.object(0),
+                    id.object(1),
+                    id.object(2),
+                    id.object(5)
+                );
+                let _ = std::io::stdout().flush();
+            });
+        }
+    };
+    let found = match (&cli.port, all_bauds) {
+        (Some(port), true) => scan_every_format(port, framing, addresses.clone(), timeouts, report).await?,
+        (None, true) => {
+            return Err(Error::Usage(
+                "--all-bauds needs a serial port (--port): a TCP link carries frames with no baud rate or parity to try"
+                    .into(),
+            ));
+        }
+        (_, false) => {
+            let waits = timeouts(format(cli));
+            let mut link = Link::connect_raw(target(cli)?, framing, waits.probe).await?;
+            scan(&mut link, addresses.clone(), waits, report).await?
+        }
+    };
+    bar.finish_and_clear();
+    let n = found.len();
+    let settings = if all_bauds { format!(" at {} settings", LineFormat::every().count()) } else { String::new() };
+    eprintln!("{n} drive(s); {} address(es){settings} in {:.1} s", addresses.count(), started.elapsed().as_secs_f64());
+    if n == 0 { Err(Error::Usage("no drive answered".into())) } else { Ok(()) }
 }
 
 fn main() -> ExitCode {

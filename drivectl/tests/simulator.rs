@@ -1,15 +1,15 @@
 //! `drivectl` against the simulated drive over TCP: the binary as a user runs it, and its
 //! library for the bulk checks.
 
-use std::process::{Command, Output};
+use std::process::{Command, Output, Stdio};
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use drive_core::od::{Access, OBJECTS, Obj, Range, Type};
 use drivectl::dict::Address;
 use drivectl::dict::{Dictionary, Map};
-use drivectl::link::{Error, Framing, Link, Target};
-use drivectl::{Drive, Settings, Value};
+use drivectl::link::{Error, Framing, LineFormat, Link, Target};
+use drivectl::{Drive, ScanTimeouts, Settings, Value};
 use hal_sim::{Endpoint, PowerSwitch, SimOptions, Simulator, Snapshot};
 
 /// A simulated drive (or several on one bus) on a free TCP port, with `map` if given.
@@ -50,8 +50,25 @@ fn scan_finds_every_drive_of_the_bus() {
         .filter_map(|l| l.split_whitespace().next()?.parse().ok())
         .collect();
     assert_eq!(addresses, (1..=8).collect::<Vec<_>>(), "{out}");
-    assert!(out.contains("8 drive(s)"), "{out}");
-    assert!(out.lines().take(8).all(|l| l.contains("native") && l.contains("OpenStep Motion")), "{out}");
+    assert_eq!(out.lines().count(), 8, "one line a drive: {out}");
+    assert!(out.lines().all(|l| l.contains("native") && l.contains("OpenStep Motion")), "{out}");
+}
+
+/// Every map answers the scan's probe (diagnostics 0x08), and its identification names it.
+#[tokio::test(flavor = "current_thread")]
+async fn every_map_answers_the_probe_and_is_named() {
+    for (id, map) in
+        [(None, Map::Native), (Some(1), Map::Jmc), (Some(2), Map::Cls9), (Some(3), Map::Ec57), (Some(4), Map::Servo)]
+    {
+        let (sim, _) = power_on(vec![2], id);
+        let timeouts = ScanTimeouts::of(LineFormat::default(), Framing::Rtu);
+        let mut link =
+            Link::connect_raw(Target::Tcp(sim.endpoint().into()), Framing::Rtu, timeouts.probe).await.expect("connect");
+        link.set_slave(2);
+        link.probe().await.unwrap_or_else(|e| panic!("{map:?}: {e}"));
+        let found = drivectl::scan(&mut link, 1..=3, timeouts, |_| {}).await.expect("scan");
+        assert_eq!(found.iter().map(|f| (f.address, f.map)).collect::<Vec<_>>(), [(2, map)]);
+    }
 }
 
 /// A value of `ty` within `range` other than `default`, if there is one.
@@ -259,7 +276,7 @@ fn drivectl_over_a_serial_port() {
     run(&["set", "phase-current=900"]);
     assert_eq!(run(&["get", "phase-current"]), "phase-current = 900 mA\n");
     assert_eq!(run(&["move", "400", "--relative", "--wait"]), "standing at 400\n");
-    assert!(run(&["--timeout", "200", "scan", "--to", "2"]).contains("1 drive(s)"));
+    assert!(run(&["scan", "--to", "2"]).starts_with("  1  native  OpenStep Motion"));
 }
 
 /// Jog, stop, home, enable and clear act on the simulated drive.
@@ -436,8 +453,9 @@ fn ascii_framing_over_tcp() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && err.contains("exception 03") && err.contains("value out of range"), "{err}");
     assert_eq!(stdout(&ascii(&["move", "400", "--relative", "--speed", "4000", "--wait"])), "standing at 400\n");
-    let scan = stdout(&ascii(&["--timeout", "200", "scan", "--to", "3"]));
-    assert!(scan.contains("1 drive(s)") && scan.contains("native"), "{scan}");
+    let scan = ascii(&["scan", "--to", "3"]);
+    assert!(String::from_utf8_lossy(&scan.stderr).contains("1 drive(s)"), "{scan:?}");
+    assert!(stdout(&scan).starts_with("  1  native"), "{scan:?}");
     let settings = Settings::from_toml(&stdout(&ascii(&["dump"]))).expect("a dump");
     assert_eq!(settings.settings.get("phase-current"), Some(&900));
     stdout(&ascii(&["set", "line-framing=0"]));
@@ -467,8 +485,8 @@ fn the_servo_map_in_ascii_on_a_serial_port() {
         on_port(port, &["--ascii", "--map", "servo", "get", "group1.target", "0x0130"]),
         "group1.target = 100000 group unit\njog-speed = 450 r/min\n"
     );
-    let found = on_port(port, &["--ascii", "--timeout", "200", "scan", "--to", "2"]);
-    assert!(found.contains("servo") && found.contains("1 drive(s)"), "{found}");
+    let found = on_port(port, &["--ascii", "scan", "--to", "2"]);
+    assert!(found.starts_with("  1  servo") && found.lines().count() == 1, "{found}");
 }
 
 /// The EC-57 map's sub-indexed requests in ASCII lines: the framing through its window (0x2192
@@ -491,4 +509,76 @@ async fn sub_indexed_requests_in_ascii() {
     assert_eq!(d.get(&idle).await.expect("read"), Value::Number(40));
     let framing = d.register("line-framing").expect("through the window");
     assert_eq!(d.get(&framing).await.expect("read"), Value::Number(1));
+}
+
+/// Runs the binary with `args`, each line of its standard output stamped with when it came: the
+/// lines, what it wrote to standard error, and how long it ran.
+fn timed(args: &[&str]) -> (Vec<(Duration, String)>, String, Duration) {
+    use std::io::{BufRead, BufReader, Read};
+    let start = Instant::now();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_drivectl"))
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run drivectl");
+    let out = child.stdout.take().expect("stdout");
+    let lines = std::thread::spawn(move || {
+        BufReader::new(out).lines().map_while(Result::ok).map(|l| (start.elapsed(), l)).collect::<Vec<_>>()
+    });
+    let mut err = String::new();
+    child.stderr.take().expect("stderr").read_to_string(&mut err).expect("stderr");
+    let status = child.wait().expect("wait");
+    let took = start.elapsed();
+    let lines = lines.join().expect("reader");
+    assert!(status.success(), "drivectl {args:?}: {err}");
+    (lines, err, took)
+}
+
+/// The address at the start of each line.
+fn addresses(lines: &[(Duration, String)]) -> Vec<u8> {
+    lines.iter().filter_map(|(_, l)| l.split_whitespace().next()?.parse().ok()).collect()
+}
+
+/// A scan of addresses 1-247 at 9600 baud over a serial port (the simulator's pseudo-terminal)
+/// with three drives on the bus: all three found within 20 s, each printed as it is found; with
+/// standard error no terminal, no progress, only the count at the end.
+#[test]
+fn a_scan_of_every_address_at_9600_baud_is_quick_and_prints_as_it_goes() {
+    let opts = SimOptions { endpoint: Endpoint::Pty { link: None }, axes: vec![5, 100, 127], ..Default::default() };
+    let sim = Simulator::bind(opts).expect("bind simulator").power_on();
+    let (lines, err, took) = timed(&["--port", sim.endpoint(), "--baud", "9600", "scan"]);
+    eprintln!("scan of 1-247 at 9600 baud: {took:?}; found at {:?}", lines.iter().map(|(t, _)| t).collect::<Vec<_>>());
+    assert_eq!(addresses(&lines), [5, 100, 127], "{lines:?}");
+    assert!(lines.iter().all(|(_, l)| l.contains("native  OpenStep Motion")), "{lines:?}");
+    assert!(took <= Duration::from_secs(20), "{took:?}");
+    // 120 empty addresses after 127 take over 4 s: each line came when its drive was found.
+    for (t, l) in &lines {
+        assert!(took.saturating_sub(*t) > Duration::from_secs(4), "{l:?} at {t:?} of {took:?}");
+    }
+    assert!(err.starts_with("3 drive(s); 247 address(es) in ") && err.lines().count() == 1, "{err:?}");
+}
+
+/// `--all-bauds` finds a drive at 38400 baud and even parity, at that setting only; over TCP it
+/// is refused.
+#[test]
+fn all_bauds_finds_a_drive_at_38400_baud_even_parity() {
+    let opts = SimOptions {
+        endpoint: Endpoint::Pty { link: None },
+        address: Some(3),
+        baud: Some(38_400),
+        parity: Some(1),
+        ..Default::default()
+    };
+    let sim = Simulator::bind(opts).expect("bind simulator").power_on();
+    let (lines, err, took) = timed(&["--port", sim.endpoint(), "scan", "--all-bauds", "--to", "5"]);
+    eprintln!("--all-bauds of 1-5: {took:?}; found at {:?}", lines.iter().map(|(t, _)| t).collect::<Vec<_>>());
+    assert_eq!(lines.len(), 1, "{lines:?}");
+    assert!(lines.iter().all(|(_, l)| l.starts_with("  3  native") && l.ends_with("at 38400 8E1")), "{lines:?}");
+    assert!(err.contains("5 address(es) at 21 settings"), "{err}");
+    assert!(took <= Duration::from_secs(30), "{took:?}");
+    let (tcp, _) = power_on(Vec::new(), None);
+    let refused = drivectl(&tcp, &["scan", "--all-bauds"]);
+    assert!(!refused.status.success(), "{refused:?}");
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("--all-bauds needs a serial port"), "{refused:?}");
 }

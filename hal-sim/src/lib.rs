@@ -14,6 +14,12 @@
 //! by line silence (t3.5) exactly as on a serial line, and a master that leaves more than t1.5
 //! between two bytes of a frame gets no answer.
 //!
+//! On a pseudo-terminal a drive hears a master only at its own baud rate and parity ([`LineFormat`]),
+//! as a UART garbles characters sent at other settings: the loop reads the settings the master set
+//! on the terminal (its termios) with each chunk, and a drive whose settings differ does not see the
+//! chunk. The terminal starts at the (first) drive's settings, so that a master that sets none
+//! talks at them. Over TCP every drive hears every byte (no baud rate travels there).
+//!
 //! Parameters are kept in a [`SimFlash`] (in memory, or in a file with [`SimOptions::flash`])
 //! through drive-core's [`Store`]: loaded before the endpoint opens, saved on the I/O side of the
 //! loop after the reply to 0x200F = 2 or 3 has gone out (see [`serve_request`]), never inside the
@@ -65,8 +71,9 @@ use nix::errno::Errno;
 use nix::fcntl::{FcntlArg, OFlag, fcntl};
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
 use nix::pty::openpty;
-use nix::sys::termios::{FlushArg, SetArg, cfmakeraw, tcflush, tcgetattr, tcsetattr};
+use nix::sys::termios::{FlushArg, tcflush};
 use nix::unistd::ttyname;
+use rustix::termios::{ControlModes, InputModes, OptionalActions};
 
 use crate::flash::{PAGES, SimFlash, block_on};
 use crate::motor::{Motor, MotorCatalog, MotorInputs};
@@ -117,9 +124,11 @@ pub struct SimOptions {
     pub endpoint: Endpoint,
     /// The slave address, instead of the drive's node id (factory 1). The drive takes 1-127.
     pub address: Option<u8>,
-    /// The baud rate the frame timing (t1.5, t3.5) follows, instead of the drive's (factory 9600):
-    /// one of [`Baud::SUPPORTED`].
+    /// The baud rate the frame timing (t1.5, t3.5) follows and a master on the pseudo-terminal
+    /// must set, instead of the drive's (factory 9600): one of [`Baud::SUPPORTED`].
     pub baud: Option<u32>,
+    /// The parity (0x2100: 0 none, 1 even, 2 odd), instead of the drive's (factory none).
+    pub parity: Option<u8>,
     /// The motor and its surroundings.
     pub motor: MotorOptions,
     /// Keep the parameter store's flash in this file (created erased if missing), so that saved
@@ -230,7 +239,10 @@ impl Simulator {
     pub fn bind(opts: SimOptions) -> io::Result<Simulator> {
         let (plants, stores): (Vec<_>, Vec<_>) = powered(&opts)?.into_iter().unzip();
         let (port, endpoint) = match opts.endpoint {
-            Endpoint::Pty { link } => open_pty(link.as_deref())?,
+            Endpoint::Pty { link } => {
+                let format = stores.first().map_or(LineFormat::FACTORY, |p| p.format);
+                open_pty(link.as_deref(), format)?
+            }
             Endpoint::Tcp(addr) => {
                 let listener = TcpListener::bind(&addr).map_err(|e| annotate(e, &addr))?;
                 let at = listener.local_addr()?.to_string();
@@ -366,7 +378,22 @@ pub fn store(flash: SimFlash) -> io::Result<Store<SimFlash>> {
 /// Powers the drive up on `store` ([`Store::power_up`]): the saved parameters, or with
 /// `fset_low` the factory values, saved.
 pub fn boot(store: &mut Store<SimFlash>, config: DriveConfig, fset_low: bool, map: Option<u8>) -> Drive {
-    let loaded = block_on(store.power_up(fset_low));
+    boot_with_parity(store, config, fset_low, map, None)
+}
+
+/// [`boot`], the parity object (0x2100) `parity` for this run if given, as
+/// [`DriveConfig::baud`] does the baud rate's.
+fn boot_with_parity(
+    store: &mut Store<SimFlash>,
+    config: DriveConfig,
+    fset_low: bool,
+    map: Option<u8>,
+    parity: Option<u8>,
+) -> Drive {
+    let mut loaded = block_on(store.power_up(fset_low));
+    if let Some(p) = parity {
+        loaded.params.set(Obj::Parity, u32::from(p));
+    }
     let map = Maps::by_id(map.map_or(loaded.params.get(Obj::RegisterMap), u32::from));
     let drive = Drive::boot_with_map(config, map, &loaded.params, loaded.status);
     if let Some(table) = drive.state().program_memory() {
@@ -395,6 +422,39 @@ struct Powered {
     store: Store<SimFlash>,
     config: DriveConfig,
     map: Option<u8>,
+    parity: Option<u8>,
+    /// The line settings the drive powered up with, in force until it restarts.
+    format: LineFormat,
+}
+
+impl Powered {
+    /// Powers the drive up (again) from its store.
+    fn boot(&mut self, fset_low: bool) -> Drive {
+        let drive = boot_with_parity(&mut self.store, self.config, fset_low, self.map, self.parity);
+        self.format = LineFormat::of(&drive);
+        drive
+    }
+}
+
+/// A serial line's settings as a UART has them: baud rate and parity, 8 data bits and 1 stop bit
+/// (the drive's 8N1, 8E1 or 8O1; a second stop bit from a master is idle line to the receiver).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LineFormat {
+    /// Bits a second.
+    pub baud: u32,
+    /// 0 none, 1 even, 2 odd (0x2100's values).
+    pub parity: u8,
+}
+
+impl LineFormat {
+    /// The drive's factory settings: 9600 baud, no parity.
+    pub const FACTORY: LineFormat = LineFormat { baud: 9600, parity: 0 };
+
+    /// The settings `drive` powered up with: its baud rate and its parity (0x2100), which a write
+    /// changes only from the next power-up, as on the board.
+    pub fn of(drive: &Drive) -> LineFormat {
+        LineFormat { baud: drive.baud().get(), parity: drive.state().read(Obj::Parity).min(2) as u8 }
+    }
 }
 
 /// The drives and motors `opts` ask for, traces open, without parameter stores (a save is
@@ -421,10 +481,11 @@ fn powered(opts: &SimOptions) -> io::Result<Vec<(Plant, Powered)>> {
             }
             None => SimFlash::erased(PAGES),
         };
-        let mut store = store(flash)?;
         let config = DriveConfig { can_save: true, ..config };
-        let drive = boot(&mut store, config, opts.fset_low, opts.map);
-        Ok((drive, Powered { store, config, map: opts.map }))
+        let mut powered =
+            Powered { store: store(flash)?, config, map: opts.map, parity: opts.parity, format: LineFormat::FACTORY };
+        let drive = powered.boot(opts.fset_low);
+        Ok((drive, powered))
     })
 }
 
@@ -485,6 +546,9 @@ fn drive_config(opts: &SimOptions) -> io::Result<DriveConfig> {
             Some(Baud::new(b).ok_or_else(|| invalid(format!("unsupported baud rate {b} (the drive takes {rates})")))?)
         }
     };
+    if let Some(p) = opts.parity.filter(|p| *p > 2) {
+        return Err(invalid(format!("invalid parity {p} (0 none, 1 even, 2 odd)")));
+    }
     Ok(DriveConfig { address, baud, ..Default::default() })
 }
 
@@ -497,12 +561,17 @@ fn annotate(e: io::Error, what: impl std::fmt::Display) -> io::Error {
     io::Error::new(e.kind(), format!("{what}: {e}"))
 }
 
-/// Opens a raw pseudo-terminal and, with `link`, the symlink to it.
-fn open_pty(link: Option<&Path>) -> io::Result<(Port, String)> {
+/// Opens a raw pseudo-terminal at the drive's settings `format` and, with `link`, the symlink to it.
+fn open_pty(link: Option<&Path>, format: LineFormat) -> io::Result<(Port, String)> {
     let pty = openpty(None, None)?;
-    let mut termios = tcgetattr(&pty.slave)?;
-    cfmakeraw(&mut termios);
-    tcsetattr(&pty.slave, SetArg::TCSANOW, &termios)?;
+    let mut termios = rustix::termios::tcgetattr(&pty.slave)?;
+    termios.make_raw();
+    termios.set_speed(format.baud)?;
+    // As a serial library sets a parity (see `PtyLine::format`).
+    termios.control_modes.set(ControlModes::PARENB, format.parity != 0);
+    termios.control_modes.set(ControlModes::PARODD, format.parity == 2);
+    termios.input_modes.set(InputModes::INPCK, format.parity != 0);
+    rustix::termios::tcsetattr(&pty.slave, OptionalActions::Now, &termios)?;
     let flags = OFlag::from_bits_retain(fcntl(&pty.master, FcntlArg::F_GETFL)?);
     fcntl(&pty.master, FcntlArg::F_SETFL(flags | OFlag::O_NONBLOCK))?;
     let path = ttyname(&pty.slave)?;
@@ -605,6 +674,10 @@ trait Line: AsFd {
     fn recv(&mut self, buf: &mut [u8]) -> Recv;
     /// Writes a reply in full; an error means the master went away.
     fn send(&mut self, frame: &[u8]) -> io::Result<()>;
+    /// The settings the master sends at, where the line has any (TCP carries none).
+    fn format(&self) -> Option<LineFormat> {
+        None
+    }
 }
 
 /// The plants on the bus, their stores and what they publish, as the loop sees them.
@@ -645,11 +718,17 @@ impl Sim<'_> {
         self.plants.iter().filter_map(|p| p.drive().deadline()).min()
     }
 
-    /// Bytes on the bus at `now`, after the motors have caught up: every drive receives them.
-    /// Sends what the drives answer; `Err` when the master has gone.
+    /// Bytes on the bus at `now`, after the motors have caught up: every drive at the master's
+    /// settings receives them (at others a UART would make other characters of them, with framing
+    /// and parity errors, where no frame of the master's survives). Sends what the drives answer;
+    /// `Err` when the master has gone.
     fn receive(&mut self, now: Instant, bytes: &[u8], line: &mut impl Line) -> io::Result<()> {
         self.catch_up(now);
-        for plant in self.plants.iter_mut() {
+        let heard = line.format();
+        for (plant, powered) in self.plants.iter_mut().zip(self.stores.iter()) {
+            if heard.is_some_and(|f| f != powered.format) {
+                continue;
+            }
             let drive = plant.drive_mut();
             drive.on_rx(now, bytes);
             // A frame that had ended before these bytes came was answered first.
@@ -665,7 +744,7 @@ impl Sim<'_> {
         for (plant, p) in self.plants.iter_mut().zip(self.stores.iter_mut()) {
             if serve_request(plant.drive_mut(), &mut p.store) {
                 // Seed 004's 0541h: powered up again from the store, as after a power cycle.
-                *plant.drive_mut() = boot(&mut p.store, p.config, false, p.map);
+                *plant.drive_mut() = p.boot(false);
                 plant.restarted();
             }
         }
@@ -804,6 +883,21 @@ impl Line for PtyLine {
         }
         // Whoever has the terminal open may read or not; the line itself never goes away.
         Ok(())
+    }
+
+    /// The baud rate and parity the master set on the terminal. A Linux pseudo-terminal keeps the
+    /// speed and PARODD but clears PARENB on every change, so parity shows as input parity checking
+    /// (INPCK), which serial libraries (serialport, tokio-serial, libmodbus) set with a parity.
+    fn format(&self) -> Option<LineFormat> {
+        let t = rustix::termios::tcgetattr(&self.slave).ok()?;
+        let parity = if t.control_modes.contains(ControlModes::PARODD) {
+            2
+        } else if t.control_modes.contains(ControlModes::PARENB) || t.input_modes.contains(InputModes::INPCK) {
+            1
+        } else {
+            0
+        };
+        Some(LineFormat { baud: t.output_speed(), parity })
     }
 }
 

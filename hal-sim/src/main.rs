@@ -38,9 +38,14 @@ struct Args {
     /// addresses (`2,5,9`). Each has its own motor and its own trace (`FILE-axisA.csv`).
     #[arg(long, value_name = "N|A,B,..", value_parser = parse_axes, conflicts_with_all = ["address", "script"])]
     axes: Option<Axes>,
-    /// Baud rate the frame timing (t1.5, t3.5) follows [default: the drive's, factory 9600].
+    /// Baud rate [default: the drive's, factory 9600]: the frame timing (t1.5, t3.5) follows it,
+    /// and on the pseudo-terminal the drive hears only a master set to it.
     #[arg(long, value_name = "B")]
     baud: Option<u32>,
+    /// Parity, `none`, `even` or `odd` [default: the drive's 0x2100, factory none]; 8 data bits,
+    /// 1 stop bit. On the pseudo-terminal the drive hears only a master set to it.
+    #[arg(long, value_name = "P", value_parser = parse_parity, conflicts_with = "script")]
+    parity: Option<u8>,
     /// Keep the drive's parameter flash (16 KiB, as the STM32G474's parameter store) in FILE,
     /// created erased if missing: parameters saved with 0x200F = 2 are back after a restart.
     /// Without it the flash is in memory and saves last for the run.
@@ -148,6 +153,16 @@ fn parse_map(name: &str) -> Result<u8, String> {
         .ok_or_else(|| format!("{name:?}: one of {}", names.join(", ")))
 }
 
+/// The parity object's value (0x2100) from its name.
+fn parse_parity(name: &str) -> Result<u8, String> {
+    const NAMES: [&str; 3] = ["none", "even", "odd"];
+    NAMES
+        .iter()
+        .position(|n| *n == name)
+        .map(|i| i as u8)
+        .ok_or_else(|| format!("{name:?}: one of {}", NAMES.join(", ")))
+}
+
 /// The addresses of `--axes`.
 #[derive(Clone, Debug)]
 struct Axes(Vec<u8>);
@@ -210,6 +225,7 @@ fn main() -> ExitCode {
         endpoint,
         address: args.address,
         baud: args.baud,
+        parity: args.parity,
         motor,
         flash: args.flash,
         fset_low: args.fset_low,

@@ -239,6 +239,36 @@ fn address_option_and_other_slaves() {
     assert_eq!(baud, frame(&[0x05, 0x03, 0x04, 0x00, 0x01, 0xC2, 0x00]));
 }
 
+/// Sets the master's side of the pseudo-terminal to `baud` and `parity` (0 none, 1 even, 2 odd)
+/// as serialport and libmodbus do: PARENB and PARODD, and input parity checking.
+fn set_line(master: &File, baud: u32, parity: u8) {
+    use rustix::termios::{ControlModes, InputModes, OptionalActions, tcgetattr, tcsetattr};
+    let mut t = tcgetattr(master).expect("tcgetattr");
+    t.set_speed(baud).expect("speed");
+    t.control_modes.set(ControlModes::PARENB, parity != 0);
+    t.control_modes.set(ControlModes::PARODD, parity == 2);
+    t.input_modes.set(InputModes::INPCK, parity != 0);
+    tcsetattr(master, OptionalActions::Now, &t).expect("tcsetattr");
+}
+
+/// On the pseudo-terminal the drive hears a master only at its own baud rate and parity, as a
+/// UART would; the terminal starts at the drive's settings, and 0x2100 shows `--parity`.
+#[test]
+fn a_pty_drive_hears_only_its_baud_rate_and_parity() {
+    let sim = start(&["--baud", "38400", "--parity", "even"]);
+    let mut master = open_pts(&sim.endpoint);
+    assert_eq!(ask(&mut master, &READ, REPLY.len()), REPLY, "the terminal starts at the drive's settings");
+    for (baud, parity) in [(9600, 1), (38400, 0), (38400, 2), (57600, 1)] {
+        set_line(&master, baud, parity);
+        ask_silence(&mut master, &READ);
+    }
+    set_line(&master, 38400, 1);
+    assert_eq!(ask(&mut master, &READ, REPLY.len()), REPLY);
+    assert_eq!(ask(&mut master, &frame(&[0x01, 0x03, 0x21, 0x00, 0x00, 0x01]), 7), frame(&[0x01, 0x03, 0x02, 0, 1]));
+    let err = refused(&["--parity", "mark"]);
+    assert!(err.contains("none, even, odd"), "{err}");
+}
+
 /// Runs the binary with `args`, which it must refuse with exit code 2 before listening.
 fn refused(args: &[&str]) -> String {
     let mut child = Command::new(env!("CARGO_BIN_EXE_hal-sim"))
