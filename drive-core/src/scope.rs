@@ -402,6 +402,11 @@ pub struct Recorder {
     post: u16,
     /// The watched signal at the last row (`None` before the first).
     last: Option<i32>,
+    /// When the trigger's row was recorded, µs.
+    trigger_us: u64,
+    /// The mean time between the capture's rows after the trigger, µs (the platform's ticks',
+    /// not assumed).
+    period_us: u32,
 }
 
 impl Default for Recorder {
@@ -428,6 +433,8 @@ impl Recorder {
             trigger_row: 0,
             post: 0,
             last: None,
+            trigger_us: 0,
+            period_us: 0,
         }
     }
 
@@ -494,7 +501,7 @@ impl Recorder {
     /// from `value`.
     pub fn record(&mut self, memory: &Memory, value: impl Fn(Signal) -> i32) {
         if self.due() {
-            self.row(memory, &frame_of(value));
+            self.row(memory, &frame_of(value), 0);
         }
     }
 
@@ -511,8 +518,9 @@ impl Recorder {
         self.countdown == self.config.divider
     }
 
-    /// Records a row of the signals' values in `frame` and watches the trigger's signal.
-    pub fn row(&mut self, memory: &Memory, frame: &Frame) {
+    /// Records a row of the signals' values in `frame` at `now_us` and watches the trigger's
+    /// signal.
+    pub fn row(&mut self, memory: &Memory, frame: &Frame, now_us: u64) {
         let value = |s: Signal| frame.get(s as usize).copied().unwrap_or(0);
         let row_words = usize::from(self.row_words);
         let mut slots = memory.slots(usize::from(self.head) * row_words, row_words);
@@ -551,22 +559,33 @@ impl Recorder {
                     self.post = self.rows - self.pre_rows - 1;
                     self.len = pre + 1 + self.post;
                     self.phase = Phase::Triggered;
-                    self.finish_if_full();
+                    self.trigger_us = now_us;
+                    self.finish_if_full(now_us);
                 }
             }
             Phase::Triggered => {
                 self.post = self.post.saturating_sub(1);
-                self.finish_if_full();
+                self.finish_if_full(now_us);
             }
             Phase::Idle | Phase::Done => {}
         }
     }
 
-    fn finish_if_full(&mut self) {
+    #[cold]
+    fn finish_if_full(&mut self, now_us: u64) {
         if self.post == 0 {
             self.phase = Phase::Done;
             self.sequence = self.sequence.wrapping_add(1);
+            let rows = u64::from(self.len - self.trigger_row - 1);
+            let took = now_us.saturating_sub(self.trigger_us);
+            self.period_us = if rows == 0 { 0 } else { ((took + rows / 2) / rows).min(u64::from(u32::MAX)) as u32 };
         }
+    }
+
+    /// The mean time between the capture's rows after its trigger, µs (0 when the trigger
+    /// ended it, or none is held).
+    pub const fn period_us(&self) -> u32 {
+        if matches!(self.phase, Phase::Done) { self.period_us } else { 0 }
     }
 
     /// Where it is.
@@ -652,19 +671,19 @@ impl Scopes {
         if self.scope.is_recording() { &self.scope } else { &self.black_box }
     }
 
-    /// The row that is due into `memory` ([`Scopes::due`]) from `frame`.
-    pub fn row(&mut self, memory: &Recordings, frame: &Frame) {
+    /// The row that is due into `memory` ([`Scopes::due`]) from `frame`, at `now_us`.
+    pub fn row(&mut self, memory: &Recordings, frame: &Frame, now_us: u64) {
         if self.scope.is_recording() {
-            self.scope.row(&memory.scope, frame);
+            self.scope.row(&memory.scope, frame, now_us);
         } else {
-            self.black_box.row(&memory.black_box, frame);
+            self.black_box.row(&memory.black_box, frame, now_us);
         }
     }
 
     /// One tick's row, if one is due, into `memory`.
     pub fn record(&mut self, memory: &Recordings, value: impl Fn(Signal) -> i32) {
         if self.due() {
-            self.row(memory, &frame_of(value));
+            self.row(memory, &frame_of(value), 0);
         }
     }
 }

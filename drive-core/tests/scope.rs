@@ -72,6 +72,7 @@ fn a_capture_of_a_move_is_the_ticks_setpoints_from_its_start() {
     let [state, sequence, _, rows, width, trigger] = head[..] else { unreachable!() };
     assert_eq!((state, sequence, width), (3, 1, 4));
     assert_eq!((rows, trigger), (2048, 204), "10 % of 2048 rows before the move's start");
+    assert_eq!(r.read(0x2236, 2).unwrap(), [0, 800], "16 ticks of 50 µs between rows");
     let position = rows32(&words, 4, 0);
     let velocity = rows32(&words, 4, 2);
     // Before the trigger the motor stood; at it the first step; at the end the target.

@@ -278,12 +278,14 @@ impl Dictionary {
                         registers.push(native(d, Some(0xFF)));
                     }
                 }
-                // The scope and the black box, the native map's registers in these maps.
+                // The scope and the black box, the native map's registers in these maps, in
+                // address order among theirs.
                 if layout.scope {
                     let in_scope = |d: &&drive_core::od::ObjectDef| {
                         drive_core::maps::layout::SCOPE_RANGES.iter().any(|&(lo, hi)| (lo..=hi).contains(&d.addr))
                     };
-                    registers.extend(OBJECTS.iter().filter(in_scope).map(|d| native(d, None)));
+                    let at = registers.iter().position(|r| r.at.register > 0x2220).unwrap_or(registers.len());
+                    registers.splice(at..at, OBJECTS.iter().filter(in_scope).map(|d| native(d, None)));
                 }
                 // Seed 004's position data groups, among the registers in address order.
                 if let Some(window) = layout.program.filter(|p| p.kind == ProgramKind::Groups) {

@@ -13,7 +13,7 @@ use crate::Drive;
 use crate::dict::{Address, Map};
 use crate::link::Error;
 
-/// The control tick's period, s: a row every `divider` of them.
+/// The control tick's period on the board, s: a row every `divider` of them.
 pub const TICK_S: f64 = 50e-6;
 
 /// A signal by its name on the command line (`commanded-position`) or its code.
@@ -260,7 +260,13 @@ impl Drive {
                 continue;
             }
             let signals = self.capture_signals(black_box).await?;
-            let period_s = TICK_S * self.capture_divider(black_box).await? as f64;
+            let period = self.get_object(if black_box { Obj::BlackBoxRowPeriod } else { Obj::ScopeRowPeriod }).await?;
+            // The drive's own measure of its rows' spacing; the divider's ticks if it has none
+            // (a capture that ended at its trigger).
+            let period_s = match period {
+                0 => TICK_S * f64::from(self.capture_divider(black_box).await?),
+                us => us as f64 * 1e-6,
+            };
             let rows = words.chunks(width.max(1)).map(|row| decode_row(&signals, row)).collect();
             self.set_object(
                 if black_box { Obj::BlackBoxRead } else { Obj::ScopeRead },

@@ -534,7 +534,7 @@ impl Controller {
         }
         let current_ma = if enabled { current as u16 } else { 0 };
         if self.scopes.due() {
-            let tick = record::Tick { setpoint: &setpoint, current_ma, share, inputs };
+            let tick = record::Tick { now, setpoint: &setpoint, current_ma, share, inputs };
             self.record(&tick, &shared.recordings);
         }
         let (mut commutation, mut steps) = (commutation, steps);

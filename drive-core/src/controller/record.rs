@@ -5,9 +5,11 @@ use crate::faults::Inputs;
 use crate::motion::axis::Setpoint;
 use crate::scope::{Frame, Phase, Recordings};
 use crate::servo::Feedback;
+use crate::units::Instant;
 
 /// What a tick worked out that a row may hold, besides the controller's state.
 pub(super) struct Tick<'a> {
+    pub now: Instant,
     pub setpoint: &'a Setpoint,
     pub current_ma: u16,
     /// The closed loop's share of the phase current.
@@ -61,7 +63,7 @@ impl Controller {
     pub(super) fn record(&mut self, t: &Tick<'_>, recordings: &Recordings) {
         let frame = self.frame(t);
         let waiting = self.scopes.black_box.phase() == Phase::Armed;
-        self.scopes.row(recordings, &frame);
+        self.scopes.row(recordings, &frame, t.now.as_micros());
         if waiting && self.scopes.black_box.phase() != Phase::Armed {
             self.scopes.black_box_fault = self.faults.entry(0);
         }

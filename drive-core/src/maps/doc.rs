@@ -71,7 +71,7 @@ pub fn write_layout(out: &mut impl Write, layout: &Layout, r: &Reference) -> fmt
     if layout.scope {
         writeln!(
             out,
-            "- The scope and the black box: registers 0x2220-0x223D and the capture windows 0x4000-0x5FFF and 0xA000-0xBFFF are the native map's (`registers.md`, \"The scope\"), answered in this map's exception codes."
+            "- The scope and the black box: registers 0x2220-0x2240 and the capture windows 0x4000-0x5FFF and 0xA000-0xBFFF are the native map's (`registers.md`, \"The scope\"), answered in this map's exception codes."
         )?;
     }
     writeln!(out)?;

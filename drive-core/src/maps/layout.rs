@@ -308,10 +308,10 @@ pub struct Layout {
     pub scope: bool,
 }
 
-/// The native map's scope and black box (0x2220-0x223D) and its capture windows (0x4000,
+/// The native map's scope and black box (0x2220-0x2240) and its capture windows (0x4000,
 /// 0xA000), as inclusive ranges: a [`Layout::scope`] layout answers them as the native map does,
 /// a request within one of them, in the layout's codes.
-pub const SCOPE_RANGES: [(u16, u16); 3] = [(0x2220, 0x223D), (0x4000, 0x5FFF), (0xA000, 0xBFFF)];
+pub const SCOPE_RANGES: [(u16, u16); 3] = [(0x2220, 0x2240), (0x4000, 0x5FFF), (0xA000, 0xBFFF)];
 
 /// A map's window of raw program words.
 #[derive(Clone, Copy, Debug)]

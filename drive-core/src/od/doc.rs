@@ -45,7 +45,7 @@ fn write_scope(out: &mut impl Write) -> fmt::Result {
     writeln!(out)?;
     writeln!(
         out,
-        "The scope (0x2220-0x2235) records up to 8 signals a row every 0x2228 control ticks (50 µs) into {WORDS} registers: 0x4000-0x{:04X} hold the capture, its rows in time order, each row its signals' registers in the order of 0x2220-0x2227 (a two-register signal high word first). The black box (0x2238-0x223D) records its signals unless the scope records; an alarm freezes the {} rows before it and the rest after it, at 0x{:04X}-0x{:04X}. A read of the windows may take 1-125 registers anywhere in them. Read 0x2230-0x2231 (0x2238-0x2239) before and after the rows: the same sequence number, state 3 both times, is a whole capture; then write that number to 0x2232 (0x223A).",
+        "The scope (0x2220-0x2237) records up to 8 signals a row every 0x2228 control ticks (50 µs) into {WORDS} registers: 0x4000-0x{:04X} hold the capture, its rows in time order, each row its signals' registers in the order of 0x2220-0x2227 (a two-register signal high word first). The black box (0x2238-0x2240) records its signals unless the scope records; an alarm freezes the {} rows before it and the rest after it, at 0x{:04X}-0x{:04X}. A read of the windows may take 1-125 registers anywhere in them. Read 0x2230-0x2231 (0x2238-0x2239) before and after the rows: the same sequence number, state 3 both times, is a whole capture, its rows 0x2236 (0x223F) µs apart; then write that number to 0x2232 (0x223A).",
         0x4000 + WORDS - 1,
         (WORDS / usize::from(BLACK_BOX.row_words())) * usize::from(BLACK_BOX.pre_percent) / 100,
         0xA000,

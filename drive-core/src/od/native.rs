@@ -784,6 +784,10 @@ objects! {
     ScopeRowWords @ 0x2234: U8, Ro, Live, Any, default 0, None, "scope row words";
     /// Scope trigger row (our object): the row of the capture where it triggered.
     ScopeTriggerRow @ 0x2235: U16, Ro, Live, Any, default 0, None, "scope trigger row";
+    /// Scope row period (our object), µs: the mean time between the capture's rows after its
+    /// trigger, as the drive's clock measured it (0x2228 ticks of 50 µs on the board); 0 while
+    /// none is held.
+    ScopeRowPeriod @ 0x2236: U32, Ro, Live, Any, default 0, Micros, "scope row period";
     /// Black box state (our object): 1 recording (paused while the scope records), 3 a capture
     /// held (rows at 0xA000-0xBFFF) since an alarm: the second before it and a quarter after.
     BlackBoxState @ 0x2238: U8, Ro, Live, Span(0, 3), default 1, None, "black box state";
@@ -799,6 +803,8 @@ objects! {
     /// Black box fault (our object): the fault history entry (as 0x213C-0x214F hold it: code and
     /// time) of the alarm the capture holds; 0 while none is held.
     BlackBoxFault @ 0x223D: U32, Ro, Live, Any, default 0, None, "black box fault";
+    /// Black box row period (our object), µs: as 0x2236, for the black box.
+    BlackBoxRowPeriod @ 0x223F: U32, Ro, Live, Any, default 0, Micros, "black box row period";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake

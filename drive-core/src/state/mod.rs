@@ -671,7 +671,9 @@ impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             | Obj::BlackBoxSequence
             | Obj::BlackBoxRows
             | Obj::BlackBoxTriggerRow
-            | Obj::BlackBoxFault => self.recording_live(obj),
+            | Obj::BlackBoxFault
+            | Obj::ScopeRowPeriod
+            | Obj::BlackBoxRowPeriod => self.recording_live(obj),
             // The ten entries are consecutive objects.
             h if (Obj::FaultHistory0 as usize..=Obj::FaultHistory9 as usize).contains(&(h as usize)) => {
                 self.history(h as usize - Obj::FaultHistory0 as usize)

@@ -1,4 +1,4 @@
-//! The scope's and the black box's objects (0x2220-0x223D): the configuration a master arms
+//! The scope's and the black box's objects (0x2220-0x2240): the configuration a master arms
 //! the scope with, its orders to the tick, what the recorders say, and the captures' rows.
 
 use super::{DriveState, ProgramMemory};
@@ -90,6 +90,8 @@ impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             Obj::BlackBoxRows => black_box.len(),
             Obj::BlackBoxTriggerRow => black_box.trigger_row(),
             Obj::BlackBoxFault if !black_box.is_empty() => return self.ctl.scopes.black_box_fault,
+            Obj::ScopeRowPeriod => return scope.period_us(),
+            Obj::BlackBoxRowPeriod => return black_box.period_us(),
             _ => 0,
         })
     }
