@@ -578,7 +578,7 @@ impl Recorder {
             self.sequence = self.sequence.wrapping_add(1);
             let rows = u64::from(self.len - self.trigger_row - 1);
             let took = now_us.saturating_sub(self.trigger_us);
-            self.period_us = if rows == 0 { 0 } else { ((took + rows / 2) / rows).min(u64::from(u32::MAX)) as u32 };
+            self.period_us = (took + rows / 2).checked_div(rows).map_or(0, |us| us.min(u64::from(u32::MAX)) as u32);
         }
     }
 
