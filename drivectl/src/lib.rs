@@ -108,7 +108,7 @@ impl Drive {
     }
 
     /// The register of object `obj`, which a command needs.
-    fn needs(&self, obj: Obj, what: &str) -> Result<Register, Error> {
+    pub(crate) fn needs(&self, obj: Obj, what: &str) -> Result<Register, Error> {
         self.dict.of_object(obj).cloned().ok_or_else(|| {
             Error::Usage(format!(
                 "the {} map has no register for {what}: switch the drive to the native map (register-map = 0, save, restart)",

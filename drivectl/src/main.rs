@@ -192,6 +192,10 @@ enum Command {
         /// With --live: stop after this many captures.
         #[arg(long)]
         count: Option<u32>,
+        /// Read only this many rows of each capture, the trigger as far into them as into the
+        /// capture: a quicker read-out (with --live, a faster refresh).
+        #[arg(long)]
+        rows: Option<usize>,
     },
     /// Reads the black box's capture (the second before the last alarm and a quarter after)
     /// and writes it as CSV and PNG; the black box then records again.
@@ -353,17 +357,21 @@ async fn run(cli: Cli) -> Result<(), Error> {
         Command::Clear => drive.clear().await?,
         Command::Save => drive.save().await?,
         Command::FactoryReset => drive.factory_reset().await?,
-        Command::Scope { signals, divider, trigger, pre, r#move, speed, csv, png, wait, live, count } => {
+        Command::Scope { signals, divider, trigger, pre, r#move, speed, csv, png, wait, live, count, rows } => {
             let setup = scope::Setup {
                 signals: signals.iter().map(|s| scope::signal(s)).collect::<Result<_, _>>()?,
                 divider,
                 trigger: scope::trigger(&trigger)?,
                 pre_percent: pre,
+                repeat: live,
             };
             let mut taken = 0u32;
             let started = std::time::Instant::now();
             loop {
-                drive.scope_arm(&setup).await?;
+                // Live, the scope is repeated: reading a capture arms it again.
+                if taken == 0 || r#move.is_some() {
+                    drive.scope_arm(&setup).await?;
+                }
                 if let Some(distance) = r#move {
                     // The share before the trigger filled first, so that the capture holds it.
                     tokio::time::sleep(Duration::from_secs_f64(setup.pre_trigger_s())).await;
@@ -388,7 +396,7 @@ async fn run(cli: Cli) -> Result<(), Error> {
                 );
                 let t0 = std::time::Instant::now();
                 let capture = drive
-                    .capture(false, |done, of| {
+                    .capture(false, rows, |done, of| {
                         read.set_length(of as u64);
                         read.set_position(done as u64);
                     })
@@ -416,7 +424,7 @@ async fn run(cli: Cli) -> Result<(), Error> {
             }
         }
         Command::Blackbox { csv, png } => {
-            let capture = drive.capture(true, |_, _| {}).await?;
+            let capture = drive.capture(true, None, |_, _| {}).await?;
             write_capture(&capture, csv.as_deref(), png.as_deref(), "black box")?;
             eprintln!(
                 "black box capture {}: {} rows, the alarm at row {} ({:.3} s before it)",

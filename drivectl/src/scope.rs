@@ -78,6 +78,8 @@ pub struct Setup {
     pub trigger: Trigger,
     /// The share before the trigger, percent.
     pub pre_percent: u8,
+    /// Repeated: armed again by the drive once a capture is read (0x222E = 1).
+    pub repeat: bool,
 }
 
 impl Setup {
@@ -87,6 +89,16 @@ impl Setup {
         let rows = drive_core::scope::WORDS / usize::from(words.max(1));
         (rows * usize::from(self.pre_percent) / 100) as f64 * f64::from(self.divider) * TICK_S
     }
+}
+
+/// What the drive says of the capture it holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Head {
+    sequence: u16,
+    rows: usize,
+    width: usize,
+    trigger_row: usize,
+    period_us: u32,
 }
 
 /// A capture read out whole.
@@ -204,7 +216,7 @@ impl Drive {
         self.set_object(Obj::ScopeTriggerSignal, watched as i64, "the scope").await?;
         self.set_object(Obj::ScopeTriggerLevel, i64::from(level), "the scope").await?;
         self.set_object(Obj::ScopePreTrigger, i64::from(setup.pre_percent), "the scope").await?;
-        self.set_object(Obj::ScopeMode, 0, "the scope").await?;
+        self.set_object(Obj::ScopeMode, i64::from(setup.repeat), "the scope").await?;
         self.set_object(Obj::ScopeControl, 1, "the scope").await
     }
 
@@ -239,70 +251,72 @@ impl Drive {
         })
     }
 
-    /// Reads the capture held (the black box's with `black_box`) whole: read again while a
-    /// capture changes under the read, at most three times. `progress` is told the registers
-    /// read and their count.
-    pub async fn capture(&mut self, black_box: bool, mut progress: impl FnMut(usize, usize)) -> Result<Capture, Error> {
+    /// Reads the capture held (the black box's with `black_box`) whole, or with `rows` that
+    /// many of its rows, the trigger's as far into them as into the capture: read again while
+    /// a capture changes under the read, at most three times. `progress` is told the
+    /// registers read and their count.
+    pub async fn capture(
+        &mut self,
+        black_box: bool,
+        rows: Option<usize>,
+        mut progress: impl FnMut(usize, usize),
+    ) -> Result<Capture, Error> {
         let (at, most) = window(self.dict.map, black_box);
         for _ in 0..3 {
-            let (sequence, head) = self.capture_head(black_box).await?;
-            let [rows, width, trigger_row] = head;
-            let n = rows * width;
+            let head = self.capture_head(black_box).await?;
+            let len = rows.map_or(head.rows, |n| n.clamp(1, head.rows.max(1)));
+            // The first row read: the trigger as far into the rows read as into the capture.
+            let first = head.trigger_row * (head.rows - len) / head.rows.max(1);
+            let (skip, n) = (first * head.width, len * head.width);
             let mut words = Vec::with_capacity(n);
             while words.len() < n {
                 let k = words.len();
                 let q = (n - k).min(most);
-                let register = at.register + k as u16;
+                let register = at.register + (skip + k) as u16;
                 words.extend(self.link.read(Address { register, ..at }, q as u16).await?);
                 progress(words.len(), n);
             }
-            if self.capture_head(black_box).await?.0 != sequence {
+            if self.capture_head(black_box).await? != head {
                 continue;
             }
             let signals = self.capture_signals(black_box).await?;
-            let period = self.get_object(if black_box { Obj::BlackBoxRowPeriod } else { Obj::ScopeRowPeriod }).await?;
             // The drive's own measure of its rows' spacing; the divider's ticks if it has none
             // (a capture that ended at its trigger).
-            let period_s = match period {
+            let period_s = match head.period_us {
                 0 => TICK_S * f64::from(self.capture_divider(black_box).await?),
-                us => us as f64 * 1e-6,
+                us => f64::from(us) * 1e-6,
             };
-            let rows = words.chunks(width.max(1)).map(|row| decode_row(&signals, row)).collect();
-            self.set_object(
-                if black_box { Obj::BlackBoxRead } else { Obj::ScopeRead },
-                i64::from(sequence),
-                "the scope",
-            )
-            .await?;
-            return Ok(Capture { signals, period_s, trigger_row, sequence, rows });
+            let rows = words.chunks(head.width.max(1)).map(|row| decode_row(&signals, row)).collect();
+            let read = if black_box { Obj::BlackBoxRead } else { Obj::ScopeRead };
+            self.set_object(read, i64::from(head.sequence), "the scope").await?;
+            return Ok(Capture {
+                signals,
+                period_s,
+                trigger_row: head.trigger_row - first,
+                sequence: head.sequence,
+                rows,
+            });
         }
         Err(Error::Usage("the capture changed three times while it was read: stop the scope first".into()))
     }
 
-    /// The capture held: its number, and its rows, words a row and trigger row; an error if
-    /// none is held.
-    async fn capture_head(&mut self, black_box: bool) -> Result<(u16, [usize; 3]), Error> {
-        let objs = if black_box {
-            [Obj::BlackBoxState, Obj::BlackBoxSequence, Obj::BlackBoxRows, Obj::BlackBoxTriggerRow]
-        } else {
-            [Obj::ScopeState, Obj::ScopeSequence, Obj::ScopeRows, Obj::ScopeTriggerRow]
-        };
-        let mut v = [0i64; 4];
-        for (slot, obj) in v.iter_mut().zip(objs) {
-            *slot = self.get_object(obj).await?;
+    /// The capture held, its registers read in one request (0x2230-0x2237, 0x2238-0x2240); an
+    /// error if none is held.
+    async fn capture_head(&mut self, black_box: bool) -> Result<Head, Error> {
+        let first = self.needs(if black_box { Obj::BlackBoxState } else { Obj::ScopeState }, "the scope")?;
+        let w = self.link.read(first.at, if black_box { 9 } else { 8 }).await?;
+        let word = |k: usize| usize::from(w.get(k).copied().unwrap_or(0));
+        let pair = |k: usize| ((word(k) as u32) << 16) | word(k + 1) as u32;
+        if word(0) != Phase::Done as usize {
+            let what = if black_box { "black box" } else { "scope" };
+            return Err(Error::Usage(format!("the {what} holds no capture")));
         }
-        if v[0] != Phase::Done as i64 {
-            return Err(Error::Usage(format!(
-                "the {} holds no capture",
-                if black_box { "black box" } else { "scope" }
-            )));
-        }
-        let width = if black_box {
-            drive_core::scope::BLACK_BOX.row_words()
+        Ok(if black_box {
+            let width = usize::from(drive_core::scope::BLACK_BOX.row_words());
+            Head { sequence: word(1) as u16, rows: word(3), width, trigger_row: word(4), period_us: pair(7) }
         } else {
-            self.get_object(Obj::ScopeRowWords).await? as u16
-        };
-        Ok((v[1] as u16, [v[2] as usize, usize::from(width), v[3] as usize]))
+            Head { sequence: word(1) as u16, rows: word(3), width: word(4), trigger_row: word(5), period_us: pair(6) }
+        })
     }
 
     async fn capture_signals(&mut self, black_box: bool) -> Result<Vec<Signal>, Error> {

@@ -153,6 +153,10 @@ pub struct SimOptions {
     pub time_scale: u32,
     /// The ideal chopper or the board's bridges (`--power-stage`).
     pub power_stage: bridges::PowerStage,
+    /// The pseudo-terminal carries bytes at the line's speed (`--wire`): a request is heard
+    /// once its bytes would have arrived, a reply's last byte leaves as long after its start as
+    /// the line takes. Off, bytes pass at once.
+    pub wire: bool,
 }
 
 /// The trace or flash file of the drive at `address` when several share the bus: `-axisN`
@@ -218,6 +222,8 @@ pub struct Simulator {
     snapshots: Vec<Arc<Mutex<Snapshot>>>,
     /// Simulated seconds a wall second.
     time_scale: u32,
+    /// The pseudo-terminal at the line's speed ([`SimOptions::wire`]).
+    wire: bool,
 }
 
 /// The open endpoint.
@@ -250,7 +256,7 @@ impl Simulator {
             }
         };
         let snapshots = plants.iter().map(|_| Arc::default()).collect();
-        Ok(Simulator { plants, stores, port, endpoint, snapshots, time_scale: opts.time_scale })
+        Ok(Simulator { plants, stores, port, endpoint, snapshots, time_scale: opts.time_scale, wire: opts.wire })
     }
 
     /// Where masters reach the drive: `/dev/pts/N`, or the bound `HOST:PORT`.
@@ -313,12 +319,12 @@ impl Simulator {
     /// [`Simulator::run`] until `off` is set (seen within a millisecond while a master is
     /// connected, at the next connection attempt while none is over TCP).
     fn run_until(self, off: &AtomicBool) -> io::Result<()> {
-        let Simulator { mut plants, mut stores, port, snapshots, time_scale, .. } = self;
+        let Simulator { mut plants, mut stores, port, snapshots, time_scale, wire, .. } = self;
         let clock = Clock::start(time_scale);
         let mut sim = Sim { plants: &mut plants, stores: &mut stores, snapshots: &snapshots, off };
         match port {
             Port::Pty { master, slave } => {
-                let mut line = PtyLine { master, slave };
+                let mut line = PtyLine { master, slave, wire };
                 while !off.load(Ordering::Relaxed) {
                     serve(&mut sim, &clock, &mut line)?;
                 }
@@ -833,6 +839,19 @@ fn settle(sim: &mut Sim<'_>, clock: &Clock) {
 struct PtyLine {
     master: File,
     slave: OwnedFd,
+    /// Bytes take the line's time ([`SimOptions::wire`]).
+    wire: bool,
+}
+
+impl PtyLine {
+    /// With [`SimOptions::wire`], waits as long as `bytes` take on the line at the master's
+    /// settings.
+    fn on_the_wire(&self, bytes: usize) {
+        if let Some(f) = self.format().filter(|f| self.wire && f.baud > 0) {
+            let bits = if f.parity == 0 { 10 } else { 11 };
+            thread::sleep(Duration::from_secs_f64(bytes as f64 * f64::from(bits) / f64::from(f.baud)));
+        }
+    }
 }
 
 impl AsFd for PtyLine {
@@ -844,7 +863,10 @@ impl AsFd for PtyLine {
 impl Line for PtyLine {
     fn recv(&mut self, buf: &mut [u8]) -> Recv {
         match self.master.read(buf) {
-            Ok(n) if n > 0 => Recv::Data(n),
+            Ok(n) if n > 0 => {
+                self.on_the_wire(n);
+                Recv::Data(n)
+            }
             Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::Interrupted) => Recv::Nothing,
             other => {
                 // EIO (no slave open: cannot happen while we hold one) or end of file: poll(2)
@@ -864,6 +886,7 @@ impl Line for PtyLine {
         // Replies that no master read are stale, as bytes sent on a line nobody listens to: drop
         // them, so that they neither reach the next master nor fill the buffer and block us.
         let _ = tcflush(&self.slave, FlushArg::TCIFLUSH);
+        self.on_the_wire(frame.len());
         let mut rest = frame;
         let mut waits = 0;
         while !rest.is_empty() {

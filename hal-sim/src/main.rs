@@ -113,6 +113,11 @@ struct Args {
     /// a manual's routine in a test's time.
     #[arg(long, value_name = "N", default_value_t = 1)]
     time_scale: u32,
+    /// The pseudo-terminal carries bytes at the line's speed (the baud rate and parity the
+    /// master set), as an RS-485 line does: for timing a master's traffic. Off, bytes pass at
+    /// once.
+    #[arg(long)]
+    wire: bool,
     /// How the motor's windings are driven: `bridges` (the G474's power stage, as the board:
     /// the current loop on the ADC's view, one period of PWM delay, dead time, the comparators'
     /// trip) or `chopper` (ideal: each current brought to its reference every period).
@@ -237,6 +242,7 @@ fn main() -> ExitCode {
         map: args.map,
         time_scale: args.time_scale,
         power_stage: args.power_stage,
+        wire: args.wire,
     };
     let sim = match Simulator::bind(opts) {
         Ok(sim) => sim,
