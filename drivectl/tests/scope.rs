@@ -61,11 +61,23 @@ fn trigger_row(rows: &[Vec<f64>]) -> usize {
 }
 
 #[test]
-fn a_capture_of_a_move_is_the_simulators_trace_at_every_divider() {
+fn a_capture_of_a_move_is_the_simulators_trace_at_every_divider_over_tcp() {
+    captures_match_the_trace(false);
+}
+
+#[test]
+fn a_capture_of_a_move_is_the_simulators_trace_at_every_divider_over_a_pseudo_terminal() {
+    captures_match_the_trace(true);
+}
+
+/// Three captures of moves at dividers 1, 3 and 10 against the simulator's trace of every tick.
+fn captures_match_the_trace(pty: bool) {
     let dir = tempfile::tempdir().expect("temp dir");
     let trace = dir.path().join("trace.csv");
-    let sim = power_on(Endpoint::Tcp("127.0.0.1:0".into()), Some(&trace), &[]);
-    let link = ["--tcp", sim.endpoint()];
+    let tty = dir.path().join("tty");
+    let endpoint = if pty { Endpoint::Pty { link: Some(tty.clone()) } } else { Endpoint::Tcp("127.0.0.1:0".into()) };
+    let sim = power_on(endpoint, Some(&trace), &[]);
+    let link = if pty { ["--port", tty.to_str().expect("path")] } else { ["--tcp", sim.endpoint()] };
     let dividers = [1usize, 3, 10];
     let mut captures: Vec<PathBuf> = Vec::new();
     for (n, divider) in dividers.iter().enumerate() {
