@@ -474,6 +474,14 @@ impl Recorder {
         Ok(())
     }
 
+    /// Armed and recording again after a pause: the rows before it are dropped, so that the
+    /// rows before a trigger are the ones just before it, evenly spaced.
+    fn resume(&mut self) {
+        if self.phase == Phase::Armed {
+            (self.filled, self.last, self.countdown) = (0, None, 1);
+        }
+    }
+
     /// Stops recording and drops a capture held.
     pub fn stop(&mut self) {
         self.phase = Phase::Idle;
@@ -650,6 +658,8 @@ pub struct Scopes {
     /// The fault history entry of the alarm the black box's capture holds (as the history
     /// holds it: code and time).
     pub black_box_fault: u32,
+    /// The black box paused while the scope recorded.
+    paused: bool,
 }
 
 impl Scopes {
@@ -657,13 +667,22 @@ impl Scopes {
     pub fn new() -> Self {
         let mut black_box = Recorder::new();
         let _ = black_box.arm(&BLACK_BOX);
-        Self { scope: Recorder::new(), black_box, black_box_fault: 0 }
+        Self { scope: Recorder::new(), black_box, black_box_fault: 0, paused: false }
     }
 
-    /// One tick: whether a row is due, the scope's if it records, else the black box's.
+    /// One tick: whether a row is due, the scope's if it records, else the black box's (which
+    /// starts its ring afresh after a pause).
     #[inline]
     pub fn due(&mut self) -> bool {
-        if self.scope.is_recording() { self.scope.due() } else { self.black_box.due() }
+        if self.scope.is_recording() {
+            self.paused = true;
+            return self.scope.due();
+        }
+        if self.paused {
+            self.paused = false;
+            self.black_box.resume();
+        }
+        self.black_box.due()
     }
 
     /// The recorder that records: the scope's if it does, else the black box.
@@ -786,6 +805,47 @@ mod tests {
         c.divider = 0;
         assert_eq!(r.arm(&c), Err(ArmError::Divider));
         assert_eq!(r.phase(), Phase::Idle);
+    }
+
+    #[test]
+    fn after_the_scope_the_black_box_keeps_only_rows_since() {
+        let m = Recordings::new();
+        let mut s = Scopes::new();
+        let value = |t: i32, alarm: bool| {
+            move |sig| match sig {
+                Signal::Alarms => i32::from(alarm),
+                Signal::CommandedVelocity => t,
+                _ => 0,
+            }
+        };
+        for t in 0..50_000 {
+            s.record(&m, value(t, false));
+        }
+        let mut c = config(&[Signal::Status], Trigger::Now, 0);
+        c.divider = 2;
+        assert!(s.scope.arm(&c).is_ok());
+        let mut t = 50_000;
+        while s.scope.is_recording() {
+            s.record(&m, value(t, false));
+            t += 1;
+        }
+        // 100 rows of the black box after the scope, then the alarm: none from before.
+        let resumed = t;
+        for _ in 0..2_500 {
+            s.record(&m, value(t, false));
+            t += 1;
+        }
+        s.record(&m, value(t, true));
+        for _ in 0..10_000 {
+            t += 1;
+            s.record(&m, value(t, true));
+        }
+        let b = s.black_box;
+        assert_eq!(b.phase(), Phase::Done);
+        assert_eq!(b.trigger_row(), 100);
+        let word = |k| i32::from(b.word(&m.black_box, k).unwrap_or_default());
+        let first = (word(0) << 16) | word(1);
+        assert!(first >= resumed, "the first row at {first}, the black box resumed at {resumed}");
     }
 
     #[test]
