@@ -187,17 +187,7 @@ impl Drive {
         if setup.signals.is_empty() || setup.signals.len() > MAX_SIGNALS {
             return Err(Error::Usage(format!("1 to {MAX_SIGNALS} signals")));
         }
-        let slots = [
-            Obj::ScopeSignal1,
-            Obj::ScopeSignal2,
-            Obj::ScopeSignal3,
-            Obj::ScopeSignal4,
-            Obj::ScopeSignal5,
-            Obj::ScopeSignal6,
-            Obj::ScopeSignal7,
-            Obj::ScopeSignal8,
-        ];
-        for (k, obj) in slots.into_iter().enumerate() {
+        for (k, obj) in drive_core::state::recording::SIGNALS.into_iter().enumerate() {
             let code = setup.signals.get(k).map_or(0, |s| *s as i64);
             self.set_object(obj, code, "the scope").await?;
         }
@@ -224,7 +214,7 @@ impl Drive {
     pub async fn scope_wait(&mut self, limit: Duration, mut progress: impl FnMut(Phase)) -> Result<(), Error> {
         let start = Instant::now();
         loop {
-            let phase = self.phase(false).await?;
+            let phase = self.scope_phase().await?;
             progress(phase);
             match phase {
                 Phase::Done => return Ok(()),
@@ -241,8 +231,8 @@ impl Drive {
         }
     }
 
-    async fn phase(&mut self, black_box: bool) -> Result<Phase, Error> {
-        let state = self.get_object(if black_box { Obj::BlackBoxState } else { Obj::ScopeState }).await?;
+    async fn scope_phase(&mut self) -> Result<Phase, Error> {
+        let state = self.get_object(Obj::ScopeState).await?;
         Ok(match state {
             1 => Phase::Armed,
             2 => Phase::Triggered,
