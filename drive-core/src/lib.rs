@@ -41,6 +41,7 @@ pub mod servo;
 pub mod state;
 pub mod store;
 pub mod units;
+pub mod update;
 pub mod windings;
 
 pub use drive::{Drive, DriveConfig};

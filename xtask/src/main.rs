@@ -66,12 +66,14 @@ fn main() -> ExitCode {
         "qemu" => qemu(&std::env::args().skip(2).collect::<Vec<_>>()),
         "hil" => hil(),
         "tick-cost" => tick_cost().and_then(|()| core_tick_cost()),
+        "keygen" => keygen(&std::env::args().skip(2).collect::<Vec<_>>()),
+        "sign" => sign(&std::env::args().skip(2).collect::<Vec<_>>()),
         // The soak in release (the simulator runs ~30x faster than in a debug build).
         "soak" => run(cargo()
             .args(["run", "--release", "-q", "-p", "hal-sim", "--bin", "soak", "--"])
             .args(std::env::args().skip(2))),
         _ => Err(format!(
-            "usage: cargo xtask <ci|docs|masters|firmware|qemu --tcp HOST:PORT|hil|tick-cost|soak [--seed S --hours H --minutes M --axes N --trace]>, not {task:?}"
+            "usage: cargo xtask <ci|docs|masters|firmware|qemu --tcp HOST:PORT|hil|tick-cost|soak [--seed S --hours H --minutes M --axes N --trace]|keygen PREFIX|sign --key FILE --board g474|qemu|sim --version X.Y.Z [--store N] PROGRAM IMAGE>, not {task:?}"
         )),
     };
     match result {
@@ -1034,4 +1036,128 @@ fn masters() -> Result<(), String> {
         run(Command::new(&python).arg(script.join("pymodbus_servo.py")).arg(&sim.1))?;
     }
     Ok(())
+}
+
+/// `cargo xtask keygen PREFIX`: a new Ed25519 key pair from the system's random source,
+/// `PREFIX.key` (the 32-byte secret seed in hex, readable by its owner only) and `PREFIX.pub`
+/// (the public key in hex, which a firmware is built with). An existing file is not replaced.
+fn keygen(args: &[String]) -> Result<(), String> {
+    let [prefix] = args else { return Err("usage: cargo xtask keygen PREFIX".into()) };
+    let mut seed = [0u8; 32];
+    getrandom::fill(&mut seed).map_err(|e| format!("no random source: {e}"))?;
+    let key = ed25519_dalek::SigningKey::from_bytes(&seed);
+    let (secret, public) = (PathBuf::from(format!("{prefix}.key")), PathBuf::from(format!("{prefix}.pub")));
+    for path in [&secret, &public] {
+        if path.exists() {
+            return Err(format!("{} exists: not replaced", path.display()));
+        }
+    }
+    write_private(&secret, &format!("{}\n", hex(&seed)))?;
+    std::fs::write(&public, format!("{}\n", hex(key.verifying_key().as_bytes()))).map_err(|e| e.to_string())?;
+    eprintln!("{} (keep it secret), {}", secret.display(), public.display());
+    Ok(())
+}
+
+/// Writes `text` to a new file at `path` that only its owner may read.
+fn write_private(path: &Path, text: &str) -> Result<(), String> {
+    use std::io::Write as _;
+    use std::os::unix::fs::OpenOptionsExt as _;
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .mode(0o600)
+        .open(path)
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    f.write_all(text.as_bytes()).map_err(|e| e.to_string())
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// The 32 bytes written in hex in the file at `path`.
+fn read_key(path: &str) -> Result<[u8; 32], String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?;
+    let text = text.trim();
+    let bytes: Result<Vec<u8>, _> =
+        (0..text.len()).step_by(2).map(|i| u8::from_str_radix(text.get(i..i + 2).unwrap_or("x"), 16)).collect();
+    bytes.ok().and_then(|b| b.try_into().ok()).ok_or(format!("{path}: not 32 bytes in hex"))
+}
+
+/// `cargo xtask sign --key FILE --board B --version X.Y.Z [--store N] PROGRAM IMAGE`: the image
+/// of PROGRAM (raw bytes, as `objcopy -O binary` gives them): header, program, and the
+/// signature with the secret key in FILE (`drive_core::update`).
+fn sign(args: &[String]) -> Result<(), String> {
+    use drive_core::update::{Board, Header, digest};
+    use ed25519_dalek::Signer as _;
+    let usage = "usage: cargo xtask sign --key FILE --board g474|qemu|sim --version X.Y.Z [--store N] PROGRAM IMAGE";
+    let (mut key, mut board, mut version, mut store, mut files) = (None, None, None, 1u16, Vec::new());
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        let mut value = || it.next().cloned().ok_or(usage.to_string());
+        match a.as_str() {
+            "--key" => key = Some(value()?),
+            "--board" => {
+                board = Some(match value()?.as_str() {
+                    "g474" => Board::G474,
+                    "qemu" => Board::Qemu,
+                    "sim" => Board::Simulator,
+                    other => return Err(format!("no board {other:?}: g474, qemu or sim")),
+                })
+            }
+            "--version" => {
+                let v = value()?;
+                let parts: Vec<u32> = v.split('.').filter_map(|p| p.parse().ok()).collect();
+                version = match parts[..] {
+                    [major, minor, patch] if major < 0x10000 && minor < 0x100 && patch < 0x100 => {
+                        Some(major << 16 | minor << 8 | patch)
+                    }
+                    _ => return Err(format!("{v:?} is not a version X.Y.Z")),
+                };
+            }
+            "--store" => store = value()?.parse().map_err(|_| usage.to_string())?,
+            _ => files.push(a.clone()),
+        }
+    }
+    let (Some(key), Some(board), Some(version), [program, image]) = (key, board, version, &files[..]) else {
+        return Err(usage.into());
+    };
+    let secret = ed25519_dalek::SigningKey::from_bytes(&read_key(&key)?);
+    let code = std::fs::read(program).map_err(|e| format!("{program}: {e}"))?;
+    let length = u32::try_from(code.len()).map_err(|_| format!("{program} is too long"))?;
+    let header = Header { board, version, length, store };
+    let mut bytes = header.to_bytes().to_vec();
+    bytes.extend_from_slice(&code);
+    let signature = secret.sign(&digest(&bytes));
+    bytes.extend_from_slice(&signature.to_bytes());
+    std::fs::write(image, &bytes).map_err(|e| format!("{image}: {e}"))?;
+    eprintln!("{image}: {} bytes, {board:?} version {}.{}.{}", bytes.len(), version >> 16, version >> 8 & 0xFF, version & 0xFF);
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use drive_core::update::{Board, SIGNATURE_LEN, TEST_KEY, Verifier};
+
+    /// `sign` with the repository's test key makes an image the drive takes.
+    #[test]
+    fn a_signed_image_verifies_with_the_test_key() {
+        let dir = std::env::temp_dir().join(format!("xtask-sign-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (program, image) = (dir.join("program.bin"), dir.join("image.bin"));
+        std::fs::write(&program, [0xA5u8; 1000]).unwrap();
+        let key = super::root().join("keys/test.key");
+        let args: Vec<String> =
+            ["--key", key.to_str().unwrap(), "--board", "sim", "--version", "1.2.3", program.to_str().unwrap(), image.to_str().unwrap()]
+                .map(String::from)
+                .to_vec();
+        super::sign(&args).unwrap();
+        let bytes = std::fs::read(&image).unwrap();
+        let (body, signature) = bytes.split_at(bytes.len() - SIGNATURE_LEN);
+        let mut v = Verifier::new();
+        v.absorb(body);
+        let header = v.finish(signature.try_into().unwrap(), &TEST_KEY, Board::Simulator, 1).unwrap();
+        assert_eq!((header.version, header.length), (0x0001_0203, 1000));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }
