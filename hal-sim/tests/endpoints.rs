@@ -437,3 +437,23 @@ fn axes_are_counted_or_listed() {
         assert_eq!(status.code(), Some(2), "--axes {bad}");
     }
 }
+
+/// With `--wire` the pseudo-terminal is as slow as the line: a read of 125 registers at 9600
+/// baud (8 bytes out, 255 back, 10 bits each) is answered no sooner than the line allows, and
+/// the same read without it at once.
+#[test]
+fn pty_on_the_wire_takes_the_lines_time() {
+    let read_125 = frame(&[0x01, 0x03, 0x60, 0x00, 0x00, 0x7D]);
+    let wire = (8.0 + 255.0) * 10.0 / 9600.0;
+    let timed = |args: &[&str]| {
+        let sim = start(args);
+        let mut line = open_pts(&sim.endpoint);
+        let t = Instant::now();
+        ask(&mut line, &read_125, 255);
+        t.elapsed().as_secs_f64()
+    };
+    let paced = timed(&["--wire"]);
+    assert!(paced >= wire, "{paced:.3} s, the line's {wire:.3} s");
+    let instant = timed(&[]);
+    assert!(instant < wire, "{instant:.3} s without --wire");
+}

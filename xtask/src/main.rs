@@ -1131,7 +1131,13 @@ fn sign(args: &[String]) -> Result<(), String> {
     let signature = secret.sign(&digest(&bytes));
     bytes.extend_from_slice(&signature.to_bytes());
     std::fs::write(image, &bytes).map_err(|e| format!("{image}: {e}"))?;
-    eprintln!("{image}: {} bytes, {board:?} version {}.{}.{}", bytes.len(), version >> 16, version >> 8 & 0xFF, version & 0xFF);
+    eprintln!(
+        "{image}: {} bytes, {board:?} version {}.{}.{}",
+        bytes.len(),
+        version >> 16,
+        version >> 8 & 0xFF,
+        version & 0xFF
+    );
     Ok(())
 }
 
@@ -1147,10 +1153,18 @@ mod tests {
         let (program, image) = (dir.join("program.bin"), dir.join("image.bin"));
         std::fs::write(&program, [0xA5u8; 1000]).unwrap();
         let key = super::root().join("keys/test.key");
-        let args: Vec<String> =
-            ["--key", key.to_str().unwrap(), "--board", "sim", "--version", "1.2.3", program.to_str().unwrap(), image.to_str().unwrap()]
-                .map(String::from)
-                .to_vec();
+        let args: Vec<String> = [
+            "--key",
+            key.to_str().unwrap(),
+            "--board",
+            "sim",
+            "--version",
+            "1.2.3",
+            program.to_str().unwrap(),
+            image.to_str().unwrap(),
+        ]
+        .map(String::from)
+        .to_vec();
         super::sign(&args).unwrap();
         let bytes = std::fs::read(&image).unwrap();
         let (body, signature) = bytes.split_at(bytes.len() - SIGNATURE_LEN);
