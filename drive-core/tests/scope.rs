@@ -120,6 +120,7 @@ fn arming_without_a_signal_is_refused_and_changes_nothing() {
     // Out of range.
     assert_eq!(r.write(SIGNAL1, 16), Err(3));
     assert_eq!(r.write(DIVIDER, 0), Err(3));
+    assert_eq!(r.write(DIVIDER, 1), Err(3), "every second tick at the most");
     // The windows are read only, and end where they end.
     assert_eq!(r.write(WINDOW, 1), Err(2));
     assert_eq!(r.read(0x5FFF, 2), Err(2));

@@ -160,8 +160,8 @@ enum Command {
             default_value = "commanded-position,actual-position,following-error,commanded-velocity"
         )]
         signals: Vec<String>,
-        /// A row every this many control ticks (50 µs each).
-        #[arg(long, default_value_t = 1)]
+        /// A row every this many control ticks (50 µs each), 2 at least.
+        #[arg(long, default_value_t = 2)]
         divider: u16,
         /// What triggers it: now, move, alarm, rising|falling|crossing:SIGNAL:LEVEL,
         /// set|cleared:SIGNAL:MASK.
@@ -377,15 +377,27 @@ async fn run(cli: Cli) -> Result<(), Error> {
                     tokio::time::sleep(Duration::from_secs_f64(setup.pre_trigger_s())).await;
                     drive.move_to(distance, true, speed).await?;
                 }
+                // Armed: a spinner; triggered: a bar over the time the rest of the capture takes.
                 let bar = ProgressBar::new_spinner();
+                let after_ms = (setup.capture_s() - setup.pre_trigger_s()) * 1e3;
+                let mut triggered: Option<std::time::Instant> = None;
                 drive
                     .scope_wait(Duration::from_secs(wait), |p| {
-                        bar.set_message(match p {
-                            Phase::Armed => "armed, waiting for the trigger",
-                            Phase::Triggered => "triggered, recording",
-                            _ => "reading",
-                        });
-                        bar.tick();
+                        if p == Phase::Triggered && triggered.is_none() {
+                            triggered = Some(std::time::Instant::now());
+                            bar.set_length(after_ms as u64);
+                            bar.set_style(
+                                ProgressStyle::with_template("triggered, recording {bar:40} {pos}/{len} ms")
+                                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+                            );
+                        }
+                        match triggered {
+                            Some(at) => bar.set_position((at.elapsed().as_secs_f64() * 1e3).min(after_ms) as u64),
+                            None => {
+                                bar.set_message("armed, waiting for the trigger");
+                                bar.tick();
+                            }
+                        }
                     })
                     .await?;
                 bar.finish_and_clear();

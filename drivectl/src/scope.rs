@@ -83,11 +83,20 @@ pub struct Setup {
 }
 
 impl Setup {
-    /// The time the scope takes to record the share before the trigger, s.
-    pub fn pre_trigger_s(&self) -> f64 {
+    /// The rows a capture holds.
+    fn rows(&self) -> usize {
         let words: u16 = self.signals.iter().map(|s| s.words()).sum();
-        let rows = drive_core::scope::WORDS / usize::from(words.max(1));
-        (rows * usize::from(self.pre_percent) / 100) as f64 * f64::from(self.divider) * TICK_S
+        drive_core::scope::WORDS / usize::from(words.max(1))
+    }
+
+    /// The time the scope takes to record the share before the trigger, s (on the board).
+    pub fn pre_trigger_s(&self) -> f64 {
+        (self.rows() * usize::from(self.pre_percent) / 100) as f64 * f64::from(self.divider) * TICK_S
+    }
+
+    /// The time a whole capture takes, s (on the board).
+    pub fn capture_s(&self) -> f64 {
+        self.rows() as f64 * f64::from(self.divider) * TICK_S
     }
 }
 

@@ -746,8 +746,10 @@ objects! {
     /// Scope signal 8 (our object): the code of the 8th signal of a row (`scope::Signal`, listed
     /// with their units and words under "The scope" below); 0 none. Takes effect at the next arm.
     ScopeSignal8 @ 0x2227: U8, Rw, Ram, Span(0, 15), default 0, None, "scope signal 8";
-    /// Scope divider (our object): a row every this many control ticks (50 µs each).
-    ScopeDivider @ 0x2228: U16, Rw, Ram, Span(1, 10_000), default 1, None, "scope divider";
+    /// Scope divider (our object): a row every this many control ticks (50 µs each; every second
+    /// tick at the most, 10 kHz: a row costs the tick about 400 instructions, which at every
+    /// tick would take the servo loop's tick over its 30 % of the period).
+    ScopeDivider @ 0x2228: U16, Rw, Ram, Span(2, 10_000), default 2, None, "scope divider";
     /// Scope trigger (our object): 0 at once, 1 a motion starts (the busy bit rises), 2 the
     /// trigger signal 0x222A rises to the level 0x222B or above, 3 falls to it or below, 4
     /// crosses it either way, 5 a bit of the mask 0x222B turns on in it, 6 turns off, 7 an alarm

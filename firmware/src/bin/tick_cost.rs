@@ -34,8 +34,8 @@
 //!   25.6 ms);
 //! - `servo_scope`: the servo loop with the scope recording 8 signals (12 words) a row every
 //!   second tick (10 kHz), armed on a level its following error never reaches (the black box
-//!   records in the other cases, a row every 25 ticks). A row costs about 400 instructions:
-//!   at every tick the mean would be 2 700, over the budget.
+//!   records in the other cases, a row every 25 ticks): the scope's fastest (a row costs
+//!   about 400 instructions: at every tick the mean would be 2 706, over the budget).
 //!
 //! It prints one line a case through semihosting, then ends QEMU.
 #![no_std]
