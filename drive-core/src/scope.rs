@@ -201,6 +201,20 @@ impl Trigger {
         })
     }
 
+    /// Its code, signal and level (or mask): what [`Trigger::from_code`] takes.
+    pub const fn code(self) -> (u16, Signal, i32) {
+        match self {
+            Trigger::Now => (0, Signal::None, 0),
+            Trigger::MoveStart => (1, Signal::None, 0),
+            Trigger::Rising { signal, level } => (2, signal, level),
+            Trigger::Falling { signal, level } => (3, signal, level),
+            Trigger::Crossing { signal, level } => (4, signal, level),
+            Trigger::BitsSet { signal, mask } => (5, signal, mask as i32),
+            Trigger::BitsCleared { signal, mask } => (6, signal, mask as i32),
+            Trigger::Alarm => (7, Signal::None, 0),
+        }
+    }
+
     /// The signal it watches.
     const fn watched(self) -> Signal {
         match self {
@@ -793,6 +807,24 @@ mod tests {
         r.acknowledge(1);
         assert_eq!(r.phase(), Phase::Armed);
         assert_eq!(r.len(), 0);
+    }
+
+    #[test]
+    fn a_trigger_is_its_code() {
+        let s = Signal::Status;
+        for t in [
+            Trigger::Now,
+            Trigger::MoveStart,
+            Trigger::Rising { signal: s, level: -5 },
+            Trigger::Falling { signal: s, level: 7 },
+            Trigger::Crossing { signal: s, level: 0 },
+            Trigger::BitsSet { signal: s, mask: 0x8000_0001 },
+            Trigger::BitsCleared { signal: s, mask: 8 },
+            Trigger::Alarm,
+        ] {
+            let (kind, signal, level) = t.code();
+            assert_eq!(Trigger::from_code(kind, signal, level), Some(t));
+        }
     }
 
     #[test]

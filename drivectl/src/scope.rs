@@ -85,8 +85,11 @@ pub struct Setup {
 impl Setup {
     /// The rows a capture holds.
     fn rows(&self) -> usize {
-        let words: u16 = self.signals.iter().map(|s| s.words()).sum();
-        drive_core::scope::WORDS / usize::from(words.max(1))
+        let mut config = drive_core::scope::Config::OFF;
+        for (slot, s) in config.signals.iter_mut().zip(&self.signals) {
+            *slot = *s;
+        }
+        drive_core::scope::WORDS / usize::from(config.row_words().max(1))
     }
 
     /// The time the scope takes to record the share before the trigger, s (on the board).
@@ -183,7 +186,8 @@ impl Capture {
 /// Where a capture's window starts in `map` (the native map's registers in every map: seed
 /// 003's through its window, sub-index 0xFF), and the most registers a request reads there.
 fn window(map: Map, black_box: bool) -> (Address, usize) {
-    let register = if black_box { 0xA000 } else { 0x4000 };
+    use drive_core::state::recording::{BLACK_BOX_WINDOW, SCOPE_WINDOW};
+    let register = if black_box { BLACK_BOX_WINDOW } else { SCOPE_WINDOW };
     match map {
         Map::Ec57 => (Address { register, sub: Some(drive_core::maps::ec57::WINDOW_SUB) }, 16),
         _ => (Address { register, sub: None }, 125),
@@ -200,18 +204,9 @@ impl Drive {
             let code = setup.signals.get(k).map_or(0, |s| *s as i64);
             self.set_object(obj, code, "the scope").await?;
         }
-        let (kind, watched, level) = match setup.trigger {
-            Trigger::Now => (0, Signal::None, 0),
-            Trigger::MoveStart => (1, Signal::None, 0),
-            Trigger::Rising { signal, level } => (2, signal, level),
-            Trigger::Falling { signal, level } => (3, signal, level),
-            Trigger::Crossing { signal, level } => (4, signal, level),
-            Trigger::BitsSet { signal, mask } => (5, signal, mask as i32),
-            Trigger::BitsCleared { signal, mask } => (6, signal, mask as i32),
-            Trigger::Alarm => (7, Signal::None, 0),
-        };
+        let (kind, watched, level) = setup.trigger.code();
         self.set_object(Obj::ScopeDivider, i64::from(setup.divider), "the scope").await?;
-        self.set_object(Obj::ScopeTrigger, kind, "the scope").await?;
+        self.set_object(Obj::ScopeTrigger, i64::from(kind), "the scope").await?;
         self.set_object(Obj::ScopeTriggerSignal, watched as i64, "the scope").await?;
         self.set_object(Obj::ScopeTriggerLevel, i64::from(level), "the scope").await?;
         self.set_object(Obj::ScopePreTrigger, i64::from(setup.pre_percent), "the scope").await?;
@@ -302,20 +297,33 @@ impl Drive {
     /// The capture held, its registers read in one request (0x2230-0x2237, 0x2238-0x2240); an
     /// error if none is held.
     async fn capture_head(&mut self, black_box: bool) -> Result<Head, Error> {
-        let first = self.needs(if black_box { Obj::BlackBoxState } else { Obj::ScopeState }, "the scope")?;
-        let w = self.link.read(first.at, if black_box { 9 } else { 8 }).await?;
-        let word = |k: usize| usize::from(w.get(k).copied().unwrap_or(0));
-        let pair = |k: usize| ((word(k) as u32) << 16) | word(k + 1) as u32;
-        if word(0) != Phase::Done as usize {
+        let [state, sequence, rows, trigger, period] = if black_box {
+            [
+                Obj::BlackBoxState,
+                Obj::BlackBoxSequence,
+                Obj::BlackBoxRows,
+                Obj::BlackBoxTriggerRow,
+                Obj::BlackBoxRowPeriod,
+            ]
+        } else {
+            [Obj::ScopeState, Obj::ScopeSequence, Obj::ScopeRows, Obj::ScopeTriggerRow, Obj::ScopeRowPeriod]
+        };
+        // From the state to the row period's last register, as the objects lie.
+        let first = self.needs(state, "the scope")?;
+        let w = self.link.read(first.at, (period.def().end() - u32::from(state.def().addr)) as u16).await?;
+        let at = |obj: Obj, k: u16| {
+            usize::from(w.get(usize::from(obj.def().addr - state.def().addr + k)).copied().unwrap_or(0))
+        };
+        let word = |obj: Obj| at(obj, 0);
+        if word(state) != Phase::Done as usize {
             let what = if black_box { "black box" } else { "scope" };
             return Err(Error::Usage(format!("the {what} holds no capture")));
         }
-        Ok(if black_box {
-            let width = usize::from(drive_core::scope::BLACK_BOX.row_words());
-            Head { sequence: word(1) as u16, rows: word(3), width, trigger_row: word(4), period_us: pair(7) }
-        } else {
-            Head { sequence: word(1) as u16, rows: word(3), width: word(4), trigger_row: word(5), period_us: pair(6) }
-        })
+        // High word first, as the native map has it in every map.
+        let period_us = ((at(period, 0) as u32) << 16) | at(period, 1) as u32;
+        let width =
+            if black_box { usize::from(drive_core::scope::BLACK_BOX.row_words()) } else { word(Obj::ScopeRowWords) };
+        Ok(Head { sequence: word(sequence) as u16, rows: word(rows), width, trigger_row: word(trigger), period_us })
     }
 
     async fn capture_signals(&mut self, black_box: bool) -> Result<Vec<Signal>, Error> {

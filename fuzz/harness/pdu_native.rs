@@ -62,11 +62,13 @@ fn read_model(drive: &Drive, addr: usize, qty: usize) -> Result<Vec<u16>, u8> {
         return Err(3);
     }
     let end = addr + qty;
-    // The capture windows: the scope's at 0x4000, the black box's at 0xA000 (8192 each).
-    for (window, black_box) in [(0x4000, false), (0xA000, true)] {
-        if (window..window + 8192).contains(&addr) {
+    // The capture windows: the scope's and the black box's, 8192 registers each.
+    use drive_core::state::recording::{BLACK_BOX_WINDOW, SCOPE_WINDOW};
+    const WORDS: usize = drive_core::scope::WORDS;
+    for (window, black_box) in [(usize::from(SCOPE_WINDOW), false), (usize::from(BLACK_BOX_WINDOW), true)] {
+        if (window..window + WORDS).contains(&addr) {
             let words = (addr..end).map(|r| drive.state().capture_word(black_box, r - window));
-            return if end <= window + 8192 { Ok(words.map(|w| w.unwrap_or(0)).collect()) } else { Err(2) };
+            return if end <= window + WORDS { Ok(words.map(|w| w.unwrap_or(0)).collect()) } else { Err(2) };
         }
     }
     let page: Vec<_> = OBJECTS.iter().filter(|d| usize::from(d.addr) >> 8 == addr >> 8).collect();

@@ -27,7 +27,9 @@
 use super::native::{NativeMap, Op, RegisterMap, Spoilt};
 use crate::od::{Access, Obj, ObjError, ObjectDef, Type};
 use crate::pdu::{Exception, Parser, Words};
+use crate::scope::WORDS;
 use crate::state::Shared;
+use crate::state::recording::{BLACK_BOX_WINDOW, SCOPE_WINDOW};
 use crate::state::{DriveState, ProgramMemory};
 use core::borrow::Borrow;
 
@@ -311,7 +313,11 @@ pub struct Layout {
 /// The native map's scope and black box (0x2220-0x2240) and its capture windows (0x4000,
 /// 0xA000), as inclusive ranges: a [`Layout::scope`] layout answers them as the native map does,
 /// a request within one of them, in the layout's codes.
-pub const SCOPE_RANGES: [(u16, u16); 3] = [(0x2220, 0x2240), (0x4000, 0x5FFF), (0xA000, 0xBFFF)];
+pub const SCOPE_RANGES: [(u16, u16); 3] = [
+    (0x2220, 0x2240),
+    (SCOPE_WINDOW, SCOPE_WINDOW + (WORDS - 1) as u16),
+    (BLACK_BOX_WINDOW, BLACK_BOX_WINDOW + (WORDS - 1) as u16),
+];
 
 /// A map's window of raw program words.
 #[derive(Clone, Copy, Debug)]
