@@ -35,6 +35,20 @@ pub const MAGIC: [u8; 4] = *b"OSFW";
 /// The header format this drive reads.
 pub const FORMAT: u16 = 1;
 
+/// Bytes of an image slot (embassy-boot's ACTIVE; DFU is one page more): the G474's bank 1
+/// after its 32 KiB boot loader, and the same in the simulator and under QEMU.
+pub const SLOT_LEN: u32 = 224 * 1024;
+/// A flash page, the unit of erase.
+pub const PAGE: u32 = 2048;
+/// Where in a slot an image's trailer lies, its last page: the header and the signature, which
+/// the drive writes there once the image has checked, so that the program starts the slot (its
+/// vector table where the boot loader jumps) and a slot says which image it holds.
+pub const TRAILER: u32 = SLOT_LEN - PAGE;
+/// The trailer's length: header and signature.
+pub const TRAILER_LEN: usize = HEADER_LEN + SIGNATURE_LEN;
+/// The longest program a slot takes: the slot up to its trailer.
+pub const MAX_PROGRAM: u32 = TRAILER;
+
 /// The public key of the repository's test key pair (`keys/test.key`, `keys/test.pub`): what
 /// the simulator and the tests check images against. A firmware built with it says so in its
 /// identification; a user's drives carry the user's own.
