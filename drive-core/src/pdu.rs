@@ -120,6 +120,11 @@ pub enum Request<'a> {
         /// Its data.
         data: &'a [u8],
     },
+    /// 0x15 write file record: an image's records ([`crate::update`]).
+    WriteFileRecord {
+        /// Its sub-requests, checked whole.
+        records: FileRecords<'a>,
+    },
     /// 0x2B / 0x0E read device identification.
     ReadDeviceId {
         /// 1 basic, 2 regular, 3 extended (stream), 4 one object.
@@ -182,6 +187,7 @@ impl<'a> Request<'a> {
                 let rest = data.get(2..).unwrap_or_default();
                 Ok(Request::Diagnostics { sub, data: rest })
             }
+            0x15 => Ok(Request::WriteFileRecord { records: FileRecords::parse(data)? }),
             0x2B => match data {
                 [0x0E, code, object] => Ok(Request::ReadDeviceId { code: *code, object: *object }),
                 [0x0E, ..] => Err(Bad),
@@ -221,6 +227,83 @@ impl<'a> Request<'a> {
             }
             _ => None,
         }
+    }
+}
+
+/// The sub-requests of a write file record (0x15), as they stand in the request after its byte
+/// count: each a reference type 6, a file number (from 1), a record number (0-9999), a record
+/// length in registers and that many registers; checked whole before any is taken.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FileRecords<'a>(&'a [u8]);
+
+/// One sub-request of a write file record.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FileRecord<'a> {
+    /// The file number, 1 or more.
+    pub file: u16,
+    /// The first record (register) number, 0-9999.
+    pub record: u16,
+    /// The registers' bytes, high byte first.
+    pub data: &'a [u8],
+}
+
+/// The last record number a file has (Modbus: 0x270F).
+pub const MAX_RECORD: u16 = 9999;
+
+/// A sub-request's head: reference type, file, record, length.
+const RECORD_HEAD: usize = 7;
+
+impl<'a> FileRecords<'a> {
+    /// The sub-requests of the request data `data` (its byte count first), if well-formed: a byte
+    /// count of 7-245 that is the rest's length, each sub-request of reference type 6, its file
+    /// number not 0, its records within the file's 10 000 and its length not 0.
+    ///
+    /// ```
+    /// use drive_core::pdu::{FileRecord, FileRecords};
+    /// let data = [9, 6, 0, 1, 0, 2, 0, 1, 0xAB, 0xCD];
+    /// let records = FileRecords::parse(&data).unwrap();
+    /// assert_eq!(records.iter().collect::<Vec<_>>(), [FileRecord { file: 1, record: 2, data: &[0xAB, 0xCD] }]);
+    /// assert!(FileRecords::parse(&[9, 5, 0, 1, 0, 2, 0, 1, 0xAB, 0xCD]).is_err(), "reference type 5");
+    /// assert!(FileRecords::parse(&[9, 6, 0, 0, 0, 2, 0, 1, 0xAB, 0xCD]).is_err(), "file 0");
+    /// assert!(FileRecords::parse(&[9, 6, 0, 1, 0x27, 0x10, 0, 1, 0xAB, 0xCD]).is_err(), "record 10000");
+    /// assert!(FileRecords::parse(&[10, 6, 0, 1, 0, 2, 0, 1, 0xAB, 0xCD]).is_err(), "byte count");
+    /// ```
+    pub fn parse(data: &'a [u8]) -> Result<Self, Exception> {
+        let (&count, rest) = data.split_first().ok_or(Exception::IllegalDataValue)?;
+        if !(9..=0xFB).contains(&count) || usize::from(count) != rest.len() {
+            return Err(Exception::IllegalDataValue);
+        }
+        let mut left = rest;
+        while !left.is_empty() {
+            let (head, tail) = left.split_first_chunk::<RECORD_HEAD>().ok_or(Exception::IllegalDataValue)?;
+            let [kind, fh, fl, rh, rl, lh, ll] = *head;
+            let (file, record, len) =
+                (u16::from_be_bytes([fh, fl]), u16::from_be_bytes([rh, rl]), u16::from_be_bytes([lh, ll]));
+            let end = u32::from(record) + u32::from(len);
+            if kind != 6 || file == 0 || len == 0 || end > u32::from(MAX_RECORD) + 1 {
+                return Err(Exception::IllegalDataAddress);
+            }
+            left = tail.get(2 * usize::from(len)..).ok_or(Exception::IllegalDataValue)?;
+        }
+        Ok(Self(rest))
+    }
+
+    /// The sub-requests in order.
+    pub fn iter(&self) -> impl Iterator<Item = FileRecord<'a>> + 'a {
+        let mut left = self.0;
+        core::iter::from_fn(move || {
+            let (head, tail) = left.split_first_chunk::<RECORD_HEAD>()?;
+            let [_, fh, fl, rh, rl, lh, ll] = *head;
+            let n = 2 * usize::from(u16::from_be_bytes([lh, ll]));
+            let data = tail.get(..n)?;
+            left = tail.get(n..)?;
+            Some(FileRecord { file: u16::from_be_bytes([fh, fl]), record: u16::from_be_bytes([rh, rl]), data })
+        })
+    }
+
+    /// The request's data after its byte count, as received: what the reply echoes.
+    pub fn bytes(&self) -> &'a [u8] {
+        self.0
     }
 }
 

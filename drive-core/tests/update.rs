@@ -1,33 +1,12 @@
 //! Signed firmware images: an image signed with the test key is taken, and an unsigned,
 //! foreign-key, wrong-board, truncated, lengthened or corrupted one is refused with its reason.
 
-use drive_core::update::{Board, HEADER_LEN, Header, KEY_LEN, Refusal, SIGNATURE_LEN, TEST_KEY, Verifier, digest};
-use ed25519_dalek::{Signer, SigningKey};
+mod common;
+
+use common::images::{image, key_file, test_key};
+use drive_core::update::{Board, HEADER_LEN, Header, KEY_LEN, Refusal, SIGNATURE_LEN, TEST_KEY, Verifier};
+use ed25519_dalek::SigningKey;
 use proptest::prelude::*;
-
-/// The 32 bytes in hex in the repository's file `name`.
-fn key_file(name: &str) -> [u8; 32] {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../keys/").to_owned() + name;
-    let text = std::fs::read_to_string(&path).expect("key file");
-    let text = text.trim();
-    let bytes: Vec<u8> =
-        (0..text.len()).step_by(2).map(|i| u8::from_str_radix(&text[i..i + 2], 16).expect("hex")).collect();
-    bytes.try_into().expect("32 bytes")
-}
-
-fn test_key() -> SigningKey {
-    SigningKey::from_bytes(&key_file("test.key"))
-}
-
-/// An image of `program` for `board`, signed with `key`.
-fn image(key: &SigningKey, board: Board, program: &[u8], store: u16) -> Vec<u8> {
-    let header = Header { board, version: 0x0002_0100, length: program.len() as u32, store };
-    let mut bytes = header.to_bytes().to_vec();
-    bytes.extend_from_slice(program);
-    let signature = key.sign(&digest(&bytes));
-    bytes.extend_from_slice(&signature.to_bytes());
-    bytes
-}
 
 /// The verdict on `image` as a drive on `board` with store version 1 and key `key` gives it,
 /// its bytes taken in pieces of `piece`.

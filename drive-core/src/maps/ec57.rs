@@ -62,8 +62,8 @@ fn register(index: u16, sub: u8) -> Result<u16, Exception> {
 
 /// Decodes an EC-57 request PDU: 03, 06 and 16 with the sub-index byte after the index (their
 /// register number a table's key, or in the window the native register at the index), the
-/// Modbus diagnostics 0x08 and identification 0x2B as Modbus has them ([`Request::parse`]); any
-/// other function is refused.
+/// Modbus diagnostics 0x08, the firmware update's write file record 0x15 and identification 0x2B
+/// as Modbus has them ([`Request::parse`]); any other function is refused.
 ///
 /// ```
 /// use drive_core::maps::ec57::parse;
@@ -81,7 +81,7 @@ pub fn parse(pdu: &[u8]) -> Result<Request<'_>, Exception> {
     let (&function, data) = pdu.split_first().ok_or(FUNCTION)?;
     match function {
         0x03 | 0x06 | 0x10 => {}
-        0x08 | 0x2B => return Request::parse(pdu),
+        0x08 | 0x15 | 0x2B => return Request::parse(pdu),
         _ => return Err(FUNCTION),
     }
     let (&[ih, il, sub, wh, wl], rest) = data.split_first_chunk::<5>().ok_or(VALUE)?;

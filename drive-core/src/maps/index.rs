@@ -4,7 +4,7 @@
 //! object to the end of its last; every register of that span knows the index of the object at or
 //! after it. Reserved registers between objects thus lead to the next object.
 
-use crate::od::{OBJECTS, Storage, Type};
+use crate::od::{OBJECTS, Obj, Storage, Type};
 
 /// One page's span of registers.
 #[derive(Clone, Copy)]
@@ -97,7 +97,8 @@ static INDEX: [u32; SPAN] = {
             let d = &OBJECTS[i];
             let stored = matches!(d.storage(), Storage::Ram | Storage::Rom);
             let entry = match d.ty() {
-                _ if d.addr as u32 > reg => ((i as u32) << 16) | 32,
+                // Reserved registers, and the password, which is not told: its value shifted out.
+                _ if d.addr as u32 > reg || matches!(d.obj, Obj::Password) => ((i as u32) << 16) | 32,
                 Type::U8 | Type::U16 if stored => (i as u32) << 16,
                 // High word first.
                 Type::U32 | Type::S32 if stored => ((i as u32) << 16) | ((d.addr as u32 + 1 - reg) * 16),

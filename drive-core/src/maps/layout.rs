@@ -310,11 +310,11 @@ pub struct Layout {
     pub scope: bool,
 }
 
-/// The native map's scope and black box (0x2220-0x2240) and its capture windows (0x4000,
-/// 0xA000), as inclusive ranges: a [`Layout::scope`] layout answers them as the native map does,
+/// The native map's scope and black box (0x2220-0x2240), firmware update and write lock
+/// (0x2250-0x2260), and its capture windows (0x4000, 0xA000), as inclusive ranges: a [`Layout::scope`] layout answers them as the native map does,
 /// a request within one of them, in the layout's codes.
 pub const SCOPE_RANGES: [(u16, u16); 3] = [
-    (0x2220, 0x2240),
+    (0x2220, 0x2260),
     (SCOPE_WINDOW, SCOPE_WINDOW + (WORDS - 1) as u16),
     (BLACK_BOX_WINDOW, BLACK_BOX_WINDOW + (WORDS - 1) as u16),
 ];

@@ -193,6 +193,13 @@ impl RegisterMap for Maps {
         }
     }
 
+    fn is_native(&self, addr: u16) -> bool {
+        match self {
+            Self::Native(_) => true,
+            Self::Layout(m) => m.window(addr).is_some(),
+        }
+    }
+
     fn fixed_address(&self) -> Option<u8> {
         match self {
             Self::Native(m) => m.fixed_address(),

@@ -77,6 +77,11 @@ pub trait RegisterMap {
     fn fixed_address(&self) -> Option<u8> {
         None
     }
+    /// Whether register `addr` of this map is the native map's register `addr` (the native
+    /// map's own, or a layout's window onto it): where a locked drive takes 0x225F.
+    fn is_native(&self, _addr: u16) -> bool {
+        false
+    }
 }
 
 /// What spoilt a frame the framing dropped.
@@ -430,6 +435,10 @@ const PLAN_CAPACITY: usize = {
 type Plan = Vec<Step, PLAN_CAPACITY>;
 
 impl RegisterMap for NativeMap {
+    fn is_native(&self, _addr: u16) -> bool {
+        true
+    }
+
     #[inline(always)]
     fn read<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &self,
@@ -589,6 +598,8 @@ mod tests {
         let Some(d) = OBJECTS.iter().find(|d| d.addr <= reg && u32::from(reg) < d.end()) else { return 0 };
         let k = reg - d.addr;
         match d.ty() {
+            // Not told.
+            _ if d.obj == Obj::Password => 0,
             Type::Str(_) => drive.text_word(d.obj, usize::from(k)),
             Type::U32 | Type::S32 if k == 0 => (drive.read_def(d) >> 16) as u16,
             _ => drive.read_def(d) as u16,

@@ -208,6 +208,8 @@ pub enum Unit {
     Rpm,
     /// Microseconds.
     Micros,
+    /// Bytes.
+    Bytes,
 }
 
 impl Unit {
@@ -234,6 +236,7 @@ impl Unit {
             Unit::PerMille => "‰",
             Unit::Rpm => "r/min",
             Unit::Micros => "µs",
+            Unit::Bytes => "bytes",
         }
     }
 }

@@ -807,6 +807,46 @@ objects! {
     BlackBoxFault @ 0x223D: U32, Ro, Live, Any, default 0, None, "black box fault";
     /// Black box row period (our object), µs: as 0x2236, for the black box.
     BlackBoxRowPeriod @ 0x223F: U32, Ro, Live, Any, default 0, Micros, "black box row period";
+    /// Update state (our object): where the image transfer (function 0x15, `updates.md`) stands:
+    /// 0 idle, 1 receiving, 2 verifying (the image whole, its signature good, its trailer being
+    /// written), 3 ready to install, 4 failed (0x2251 says why; the running image stays), 5
+    /// installing.
+    UpdateState @ 0x2250: U8, Ro, Live, Span(0, 5), default 0, None, "update state";
+    /// Update failure (our object): why 0x2250 reads 4: 1 not an image, 2 for another board, 3
+    /// installed with fewer bytes than its header says, 4 its signature (unsigned, another key,
+    /// changed since signed), 5 it needs a newer parameter store, 6 longer than a slot takes,
+    /// 7 the flash did not take it or hold it. 0 otherwise.
+    UpdateReason @ 0x2251: U8, Ro, Live, Span(0, 7), default 0, None, "update failure";
+    /// Update received (our object): the image's bytes taken, in order from its first.
+    UpdateReceived @ 0x2252: U32, Ro, Live, Any, default 0, Bytes, "update received";
+    /// Update length (our object): the image's whole length (header, program, signature) once its
+    /// header has come; 0 before.
+    UpdateLength @ 0x2254: U32, Ro, Live, Any, default 0, Bytes, "update length";
+    /// Update control (our object): 1 abandons the transfer; 2 installs the image ready (0x2250
+    /// = 3): checked once more as the slot holds it, marked for the boot loader, and the drive
+    /// restarts into it once the reply has gone. 2 is refused (04) while the axis moves or a save
+    /// is under way, or with no image ready; an image that stopped short fails for 3.
+    UpdateControl @ 0x2256: U8, Cmd, Ram, Span(0, 2), default 0, None, "update control";
+    /// Update version (our object): the received image's version, as its header says:
+    /// major << 16 | minor << 8 | patch; 0 until its header has come.
+    UpdateVersion @ 0x2257: U32, Ro, Live, Any, default 0, None, "update version";
+    /// Firmware version (our object): the running image's, major << 16 | minor << 8 | patch.
+    FirmwareVersion @ 0x2259: U32, Ro, Live, Any, default 0, None, "firmware version";
+    /// Firmware key (our object): 0 the drive takes images signed with its maker's key; 1 with
+    /// the repository's test key, which anyone can sign with (not for a machine in service);
+    /// 2 it takes no images (a platform without the slots).
+    FirmwareKey @ 0x225B: U8, Ro, Live, Span(0, 2), default 2, None, "firmware key";
+    /// Write lock (our object): 0 no password is set; 1 locked: every write and update but
+    /// 0x225F is refused with exception 01 (FSET still restores the factory settings, which have
+    /// no password); 2 unlocked by 0x225F until the next power-up.
+    WriteLock @ 0x225C: U8, Ro, Live, Span(0, 2), default 0, None, "write lock";
+    /// Password (our object): a number other than 0 locks the drive's writes at every power-up
+    /// (0x225C) once saved (0x200F = 2); 0 no lock. Setting it leaves the drive unlocked until
+    /// the next power-up. Reads 0: the password is not told.
+    Password @ 0x225D: U32, Rw, Rom, Any, default 0, None, "password";
+    /// Unlock (our object): the password unlocks the drive's writes until the next power-up; 0
+    /// locks them again. Any other number is refused (03) and changes nothing.
+    Unlock @ 0x225F: U32, Cmd, Ram, Any, default 0, None, "unlock";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake

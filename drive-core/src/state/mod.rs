@@ -15,6 +15,7 @@ pub mod program;
 pub mod pvt;
 pub mod recording;
 pub mod signals;
+pub(crate) mod update;
 
 use crate::controller::handoff::{Base, Clears, Orders};
 use crate::controller::{Controller, Pvt, Settings};
@@ -249,6 +250,13 @@ pub struct DriveState<P = Shared, G = ProgramMemory> {
     jog: command::Jog,
     /// What the signal objects left to do (`signals`).
     pub(crate) signals: signals::Signals,
+    /// The firmware update: the transfer (kept out of [`Checkpoint`]: only 0x15 and the
+    /// platform change it, and 0x2256's orders are carried out once a request is taken whole).
+    pub(crate) updates: update::Updates,
+    /// The transfer's order (0x2256) of the request being served, carried out at its end.
+    update_order: u8,
+    /// The password was given since power-up (0x225F) or set (0x225D).
+    unlocked: bool,
 }
 
 /// `ma` in percent of `of` mA (0 for none).
@@ -269,6 +277,7 @@ fn plans_motion(obj: Obj) -> bool {
         && !crate::od::is_pvt_command(obj)
         && !matches!(obj, Obj::Position | Obj::HomingControl)
         && !recording::is_order(obj)
+        && !update::is_order(obj)
 }
 
 /// Everything of a [`DriveState`] but the PVT point table and the programs' memory: what a
@@ -291,6 +300,8 @@ pub struct Checkpoint {
     program: program::Program,
     history_unsaved: bool,
     command_base: u32,
+    update_order: u8,
+    unlocked: bool,
 }
 
 impl DriveState {
@@ -359,6 +370,9 @@ impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             current_loop: false,
             jog: if get(Obj::PowerUpJog) == 1 { command::Jog::Start } else { command::Jog::Done },
             signals: signals::Signals::default(),
+            updates: update::Updates::default(),
+            update_order: 0,
+            unlocked: false,
         }
     }
 
@@ -400,6 +414,9 @@ impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             jog: _,
             // Set only after the write that sets it succeeded.
             signals: _,
+            updates: _,
+            update_order,
+            unlocked,
         } = self;
         Checkpoint {
             params: *params,
@@ -415,6 +432,8 @@ impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             program: *program,
             history_unsaved: *history_unsaved,
             command_base: *command_base,
+            update_order: *update_order,
+            unlocked: *unlocked,
         }
     }
 
@@ -456,7 +475,10 @@ impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             program,
             history_unsaved,
             command_base,
+            update_order,
+            unlocked,
         } = c;
+        (self.update_order, self.unlocked) = (update_order, unlocked);
         (self.params, self.storage, self.request, self.now, self.orders) = (params, storage, request, now, orders);
         (self.ctl, self.pp, self.pvt, self.homing, self.device) = (ctl, pp, pvt, homing, device);
         (self.program, self.history_unsaved, self.command_base) = (program, history_unsaved, command_base);
@@ -674,6 +696,14 @@ impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             | Obj::BlackBoxFault
             | Obj::ScopeRowPeriod
             | Obj::BlackBoxRowPeriod => self.recording_live(obj),
+            Obj::UpdateState
+            | Obj::UpdateReason
+            | Obj::UpdateReceived
+            | Obj::UpdateLength
+            | Obj::UpdateVersion
+            | Obj::FirmwareVersion
+            | Obj::FirmwareKey
+            | Obj::WriteLock => self.update_live(obj),
             // The ten entries are consecutive objects.
             h if (Obj::FaultHistory0 as usize..=Obj::FaultHistory9 as usize).contains(&(h as usize)) => {
                 self.history(h as usize - Obj::FaultHistory0 as usize)
@@ -753,6 +783,7 @@ impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
                 Obj::SystemControl | Obj::RegisterMap | Obj::CurrentAutoTune | Obj::CurrentKp | Obj::CurrentKi
             )
             && !signals::is_signal(d.obj)
+            && !update::is_order(d.obj)
     }
 
     /// Whether the object `d` declares takes writes, and `value` is within its range.
@@ -793,6 +824,7 @@ impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             // Their writes (`signals`) are checked as they are made.
             (obj, v) if signals::is_signal(obj) => self.check_signal(obj, v),
             (obj, v) if recording::is_order(obj) => self.check_order(obj, v),
+            (obj, v) if update::is_order(obj) => self.check_update_order(obj, v),
             (obj, _) if is_command(obj) => self.check_motion(obj, value),
             _ => Ok(()),
         }
@@ -879,7 +911,7 @@ impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     /// Writes `value` to the object `d` declares, which [`DriveState::check`] accepted.
     #[inline(always)]
     pub fn apply_def(&mut self, d: &ObjectDef, value: u32) {
-        if d.access() == Access::Rw && d.storage() != Storage::Live && !is_command(d.obj) {
+        if d.access() == Access::Rw && d.storage() != Storage::Live && !is_command(d.obj) && d.obj != Obj::Password {
             // A setting: stored, and handed to the controller if it runs it.
             if let Some(p) = self.params.get_mut(d.obj as usize) {
                 *p = value;
@@ -956,6 +988,7 @@ impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
                 let _ = self.other_command(value);
             }
             obj if recording::is_order(obj) => self.apply_order(obj, value),
+            obj if update::is_order(obj) => self.apply_update_order(obj, value),
             obj if has_effect(obj) => self.apply_motion(obj, value),
             _ => {
                 self.set_param(obj, value);

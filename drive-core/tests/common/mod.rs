@@ -1,6 +1,8 @@
 //! Helpers shared by the drive-core tests: frames with CRC, a clocked exchange, state snapshots.
 #![allow(dead_code, missing_docs)]
 
+pub mod images;
+
 use drive_core::maps::{NativeMap, RegisterMap};
 use drive_core::od::OBJECTS;
 use drive_core::{Drive, Instant, crc};
@@ -125,6 +127,12 @@ impl MapRig {
             [f, code] if f & 0x80 != 0 => Err(*code),
             _ => Ok(pdu),
         }
+    }
+
+    /// Every object's value but the diagnostics'.
+    pub fn snapshot_params(&self) -> Vec<u32> {
+        let st = self.drive.state();
+        OBJECTS.iter().filter(|d| !d.obj.is_diagnostic()).map(|d| st.read(d.obj)).collect()
     }
 
     /// Writes one register (0x06).
