@@ -3,7 +3,8 @@
 //!
 //! Pages of 2 KiB, 8-byte (double-word) programming, erased bytes 0xFF. As on the STM32G4, a
 //! double word is programmed once between erases: programming one that is not fully erased is an
-//! error ([`FlashError::NotErased`]) and changes nothing. With a file (`hal-sim --flash FILE`)
+//! error ([`FlashError::NotErased`]) and changes nothing, unless the new double word is all zeros
+//! (RM0440, 3.3.7), which embassy-boot's state log relies on. With a file (`hal-sim --flash FILE`)
 //! every operation writes the bytes it changed through to the file at once, so the flash survives
 //! the process being killed at any moment.
 //!
@@ -243,7 +244,8 @@ impl NorFlash for SimFlash {
     async fn write(&mut self, offset: u32, data: &[u8]) -> Result<(), FlashError> {
         let start = self.check(offset, data.len(), WORD)?;
         let target = self.bytes.get(start..start + data.len()).ok_or(FlashError::OutOfBounds)?;
-        if target.iter().any(|&b| b != 0xFF) {
+        let programmed_over = |(t, d): (&[u8], &[u8])| t.iter().any(|&b| b != 0xFF) && d.iter().any(|&b| b != 0);
+        if target.chunks(WORD).zip(data.chunks(WORD)).any(programmed_over) {
             return Err(FlashError::NotErased);
         }
         let tear = self.begin()?;
@@ -257,8 +259,9 @@ impl NorFlash for SimFlash {
         let programmed = full * WORD + if partial { WORD } else { 0 };
         let target = self.bytes.get_mut(start..start + programmed).ok_or(FlashError::OutOfBounds)?;
         for (i, (t, &d)) in target.iter_mut().zip(data).enumerate() {
-            // A torn last word: only some of the bits that were to go to 0 did.
-            *t = if i >= full * WORD { d | 0xA5 } else { d };
+            // Programming only clears bits. A torn last word: only some of those that were to go to
+            // 0 did.
+            *t &= if i >= full * WORD { d | 0xA5 } else { d };
         }
         self.busy += PROGRAM_TIME * (full + usize::from(partial)) as u32;
         self.persist(start, start + programmed)?;
@@ -287,12 +290,17 @@ mod tests {
     fn programs_once_and_erases_to_ff() {
         let mut f = SimFlash::erased(2);
         block_on(f.write(8, &[0; 8])).unwrap();
-        assert!(matches!(block_on(f.write(8, &[0; 8])), Err(FlashError::NotErased)));
+        assert!(matches!(block_on(f.write(8, &[1; 8])), Err(FlashError::NotErased)));
+        // Zeros over a programmed double word, as the G474 allows.
+        block_on(f.write(8, &[0; 8])).unwrap();
+        block_on(f.write(0, &[0x0F; 8])).unwrap();
+        block_on(f.write(0, &[0; 8])).unwrap();
+        assert_eq!(&f.bytes()[..16], &[0; 16]);
         assert!(matches!(block_on(f.write(4, &[0; 8])), Err(FlashError::NotAligned)));
         assert!(matches!(block_on(f.write(4096, &[0; 8])), Err(FlashError::OutOfBounds)));
         block_on(f.erase(0, 2048)).unwrap();
         assert!(f.bytes().iter().all(|&b| b == 0xFF));
-        assert_eq!((f.ops(), f.erase_counts()), (2, &[1, 0][..]));
+        assert_eq!((f.ops(), f.erase_counts()), (5, &[1, 0][..]));
     }
 
     #[test]

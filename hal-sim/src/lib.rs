@@ -89,6 +89,7 @@ pub mod plant;
 pub mod plot;
 pub mod pulses;
 pub mod script;
+pub mod slots;
 pub mod soak;
 pub mod thermal;
 pub mod torque_speed;
