@@ -6,6 +6,7 @@
 pub mod dict;
 pub mod link;
 pub mod scope;
+pub mod update;
 
 use std::collections::BTreeMap;
 use std::ops::RangeInclusive;

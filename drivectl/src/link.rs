@@ -355,6 +355,14 @@ impl Link {
         }
     }
 
+    /// The line's settings: the serial port's, or over TCP the simulator's nominal 115 200 8N1.
+    pub fn line_format(&self) -> LineFormat {
+        match &self.target {
+            Target::Serial { format, .. } => *format,
+            Target::Tcp(_) => LineFormat { baud: 115_200, parity: Parity::None },
+        }
+    }
+
     /// The slave address.
     pub fn slave(&self) -> u8 {
         self.slave
@@ -457,8 +465,10 @@ impl Link {
     }
 
     /// Sends `pdu` in a frame of our own, RTU or ASCII as the link is framed, and returns the
-    /// reply's PDU (an exception as an error).
-    async fn exchange(&mut self, pdu: &[u8]) -> Result<Vec<u8>, Error> {
+    /// reply's PDU (an exception as an error): on a link that frames its requests itself
+    /// ([`Link::connect_raw`], a sub-indexed map's, an ASCII link), for a function tokio-modbus
+    /// does not decode (0x15).
+    pub async fn exchange(&mut self, pdu: &[u8]) -> Result<Vec<u8>, Error> {
         let (limit, slave, map) = (self.limit, self.slave, self.map);
         let baud = match &self.target {
             Target::Serial { format, .. } => format.baud,

@@ -7,9 +7,12 @@ use std::time::{Duration, Instant};
 
 use clap::{Parser, Subcommand};
 use drive_core::scope::Phase;
+use drivectl::dict::Map as DriveMap;
 use drivectl::dict::{Dictionary, Map};
 use drivectl::link::{Error, Framing, LineFormat, Link, Parity, Target};
-use drivectl::{Drive, ScanEvent, ScanTimeouts, Settings, Value, parse_assignment, scan, scan_every_format, scope};
+use drivectl::{
+    Drive, ScanEvent, ScanTimeouts, Settings, Value, parse_assignment, scan, scan_every_format, scope, update,
+};
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Commission OpenStep drives over their Modbus link: find them, read and write their settings
@@ -207,6 +210,23 @@ enum Command {
         #[arg(long)]
         png: Option<std::path::PathBuf>,
     },
+    /// Updates the firmware with a signed image (`cargo xtask sign`): sends it in file records
+    /// (0x15), which the drive checks as they come, has the drive install it and restart, and
+    /// reads the new version back.
+    Update {
+        /// The image.
+        file: std::path::PathBuf,
+        /// Every drive a scan of addresses 1-247 finds, one after the other (else --address).
+        #[arg(long)]
+        all: bool,
+        /// Send and check only: the drive keeps the image ready until `--install-only` (or
+        /// another transfer), and runs on.
+        #[arg(long, conflicts_with = "install_only")]
+        no_install: bool,
+        /// Install the image the drive holds ready, sending nothing.
+        #[arg(long)]
+        install_only: bool,
+    },
     /// The drive's state on one screen, refreshed until Ctrl-C (--once: printed once).
     Status {
         /// Print once and exit.
@@ -294,10 +314,15 @@ async fn run(cli: Cli) -> Result<(), Error> {
     if let Command::Scan { from, to, all_bauds } = cli.command {
         return scan_command(&cli, from..=to, all_bauds).await;
     }
+    if let Command::Update { file, all, no_install, install_only } = &cli.command {
+        let bytes = std::fs::read(file).map_err(|e| Error::Usage(format!("{}: {e}", file.display())))?;
+        let steps = Steps { send: !install_only, install: !no_install };
+        return update_command(&cli, &update::Image::new(bytes)?, *all, steps).await;
+    }
     let link = Link::connect_with(target(&cli)?, framing(&cli), cli.address, map_arg(&cli)?, limit).await?;
     let mut drive = Drive::new(link).await?;
     match cli.command {
-        Command::Scan { .. } | Command::List => {}
+        Command::Scan { .. } | Command::List | Command::Update { .. } => {}
         Command::Get { keys } => {
             for key in keys {
                 let r = drive.register(&key)?;
@@ -554,6 +579,107 @@ async fn scan_command(cli: &Cli, addresses: RangeInclusive<u8>, all_bauds: bool)
     let settings = if all_bauds { format!(" at {} settings", LineFormat::every().count()) } else { String::new() };
     eprintln!("{n} drive(s); {} address(es){settings} in {:.1} s", addresses.count(), started.elapsed().as_secs_f64());
     if n == 0 { Err(Error::Usage("no drive answered".into())) } else { Ok(()) }
+}
+
+/// What `update` does to each drive.
+#[derive(Clone, Copy)]
+struct Steps {
+    send: bool,
+    install: bool,
+}
+
+/// `update`: the image to the drive at `--address`, or to every drive a scan finds, one after
+/// the other; a line for each on stdout, a progress bar on stderr while it is a terminal. A
+/// drive that fails is named with its reason, and the others still go.
+async fn update_command(cli: &Cli, image: &update::Image, all: bool, steps: Steps) -> Result<(), Error> {
+    let limit = Duration::from_millis(cli.timeout.unwrap_or(1000));
+    let framing = framing(cli);
+    eprintln!(
+        "image {} for board {:?}, {} bytes",
+        update::version(image.header.version),
+        image.header.board,
+        image.bytes.len()
+    );
+    let drives: Vec<(u8, Option<DriveMap>)> = if all {
+        let waits = ScanTimeouts::of(format(cli), framing);
+        let mut link = Link::connect_raw(target(cli)?, framing, waits.probe).await?;
+        let found = scan(&mut link, 1..=247, waits, |_| {}).await?;
+        found.iter().map(|f| (f.address, Some(f.map))).collect()
+    } else {
+        vec![(cli.address, map_arg(cli)?)]
+    };
+    if drives.is_empty() {
+        return Err(Error::Usage("no drive answered the scan".into()));
+    }
+    let mut link = Link::connect_raw(target(cli)?, framing, limit).await?;
+    let mut failed = 0;
+    for (address, map) in drives {
+        link.set_slave(address);
+        match update_one(&mut link, map, image, steps).await {
+            Ok(line) => say!("drive {address}: {line}"),
+            Err(e) => {
+                failed += 1;
+                say!("drive {address}: failed: {e}");
+            }
+        }
+    }
+    if failed > 0 { Err(Error::Usage(format!("{failed} drive(s) not updated"))) } else { Ok(()) }
+}
+
+/// One drive's update: what it ran, the transfer (time, speed, against the wire's limit), the
+/// install, and the version it runs after its restart.
+async fn update_one(
+    link: &mut Link,
+    map: Option<DriveMap>,
+    image: &update::Image,
+    steps: Steps,
+) -> Result<String, Error> {
+    link.map = match map {
+        Some(m) => m,
+        None => DriveMap::from_application_name(link.identify().await?.object(6)),
+    };
+    let format = link.line_format();
+    let mut u = update::Updater { link };
+    u.check().await?;
+    let was = u.running().await?;
+    let mut line = update::version(was);
+    if steps.send {
+        let bar = if std::io::stderr().is_terminal() {
+            ProgressBar::new(image.bytes.len() as u64)
+        } else {
+            ProgressBar::hidden()
+        };
+        bar.set_style(
+            ProgressStyle::with_template("sending {bar:40} {bytes}/{total_bytes} {bytes_per_sec} {eta}")
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        let t0 = Instant::now();
+        u.send(image, |n| bar.set_position(u64::from(n))).await?;
+        bar.finish_and_clear();
+        let took = t0.elapsed().as_secs_f64();
+        let wire = update::wire_limit(image, format).as_secs_f64();
+        line += &format!(
+            ", sent {} bytes in {took:.1} s ({:.0} B/s; {:.2}x the wire's {wire:.1} s at {format}), checked",
+            image.bytes.len(),
+            image.bytes.len() as f64 / took,
+            took / wire
+        );
+    }
+    if !steps.install {
+        u.ready().await?;
+    }
+    if steps.install {
+        u.install().await?;
+        let now = u.restarted(image.header.version, Duration::from_secs(60)).await?;
+        if now != image.header.version {
+            return Err(Error::Usage(format!(
+                "restarted still running {} (the boot loader kept the old image)",
+                update::version(now)
+            )));
+        }
+        line += &format!(", installed, restarted: {}", update::version(now));
+    }
+    Ok(line)
 }
 
 fn main() -> ExitCode {

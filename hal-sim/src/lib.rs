@@ -95,6 +95,7 @@ pub mod thermal;
 pub mod torque_speed;
 pub mod trace;
 pub mod tracking;
+pub mod updates;
 
 /// Where masters reach the simulated drive.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -423,10 +424,11 @@ pub fn serve_request(drive: &mut Drive, store: &mut Store<SimFlash>) -> bool {
     restart
 }
 
-/// A drive's parameter store and how it powers up again after a restart.
+/// A drive's parameter store, its image slots, and how it powers up again after a restart.
 #[derive(Debug)]
 struct Powered {
     store: Store<SimFlash>,
+    firmware: updates::Firmware,
     config: DriveConfig,
     map: Option<u8>,
     parity: Option<u8>,
@@ -435,9 +437,14 @@ struct Powered {
 }
 
 impl Powered {
-    /// Powers the drive up (again) from its store.
+    /// Powers the drive up (again): the boot loader on its slots, then the image from its store.
     fn boot(&mut self, fset_low: bool) -> Drive {
-        let drive = boot_with_parity(&mut self.store, self.config, fset_low, self.map, self.parity);
+        if let Err(e) = self.firmware.boot() {
+            eprintln!("hal-sim: {e}");
+        }
+        let config = DriveConfig { identity: self.firmware.identity(self.config.identity), ..self.config };
+        let mut drive = boot_with_parity(&mut self.store, config, fset_low, self.map, self.parity);
+        self.firmware.configure(&mut drive);
         self.format = LineFormat::of(&drive);
         drive
     }
@@ -489,8 +496,14 @@ fn powered(opts: &SimOptions) -> io::Result<Vec<(Plant, Powered)>> {
             None => SimFlash::erased(PAGES),
         };
         let config = DriveConfig { can_save: true, ..config };
-        let mut powered =
-            Powered { store: store(flash)?, config, map: opts.map, parity: opts.parity, format: LineFormat::FACTORY };
+        let mut powered = Powered {
+            store: store(flash)?,
+            firmware: updates::Firmware::new(),
+            config,
+            map: opts.map,
+            parity: opts.parity,
+            format: LineFormat::FACTORY,
+        };
         let drive = powered.boot(opts.fset_low);
         Ok((drive, powered))
     })
@@ -749,8 +762,9 @@ impl Sim<'_> {
     /// Does what the drives ask of their platform (saves, a restart), each with its own store.
     fn serve_requests(&mut self) {
         for (plant, p) in self.plants.iter_mut().zip(self.stores.iter_mut()) {
-            if serve_request(plant.drive_mut(), &mut p.store) {
-                // Seed 004's 0541h: powered up again from the store, as after a power cycle.
+            let restart = serve_request(plant.drive_mut(), &mut p.store);
+            if p.firmware.serve(plant.drive_mut()) || restart {
+                // Seed 004's 0541h, or an image installed: powered up again, as after a power cycle.
                 *plant.drive_mut() = p.boot(false);
                 plant.restarted();
             }

@@ -183,6 +183,10 @@ impl Slots {
     /// aligned, whole double words.
     pub fn write_dfu(&mut self, offset: u32, bytes: &[u8]) -> Result<(), SlotError> {
         let Some(last) = bytes.len().checked_sub(1) else { return Ok(()) };
+        if offset == 0 {
+            // A transfer starts again: its first page is erased again.
+            self.erased = None;
+        }
         // An updater lives for one call here and would erase the page it starts in again: bytes
         // continuing the page this transfer erased are programmed as the updater would (a
         // write), the rest goes through it.
