@@ -120,15 +120,12 @@ async fn set_and_get_round_trip_by_name_for_every_writable_native_object() {
     // Seed 004's signal inputs (P□512/P□513) are views of the inputs' functions whose digits
     // must name distinct inputs: every bit of their mask set is refused.
     let views = ["signal-inputs1", "signal-inputs2"];
-    for def in OBJECTS
-        .iter()
-        .filter(|d| {
-            d.access() == Access::Rw
-                && !signals.contains(&d.obj)
-                && !current_loop.contains(&d.obj)
-                && !secret.contains(&d.obj)
-        })
-    {
+    for def in OBJECTS.iter().filter(|d| {
+        d.access() == Access::Rw
+            && !signals.contains(&d.obj)
+            && !current_loop.contains(&d.obj)
+            && !secret.contains(&d.obj)
+    }) {
         let r = d.dict.of_object(def.obj).expect("named").clone();
         if views.contains(&r.name.as_str()) {
             continue;

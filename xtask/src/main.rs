@@ -973,6 +973,11 @@ fn hil() -> Result<(), String> {
     run(cargo().args(firmware_args("build", &["--test", "hil"])))
 }
 
+/// `path` as text, for a command's argument.
+fn path_str(path: &Path) -> Result<&str, String> {
+    path.to_str().ok_or_else(|| format!("{} is not UTF-8", path.display()))
+}
+
 /// A simulator process, killed when dropped.
 struct Sim(Child, String);
 
@@ -1008,6 +1013,20 @@ fn masters() -> Result<(), String> {
     drop(sim);
     let sim = start_sim(&["--tcp", "127.0.0.1:0"])?;
     run(Command::new(&python).arg(script.join("pymodbus_check.py")).arg(&sim.1))?;
+    drop(sim);
+    // A firmware update: an image of 40 KB signed with the test key, sent over the
+    // pseudo-terminal, installed, the new version read back.
+    let dir = root().join("target/masters");
+    std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+    let program: Vec<u8> = (0..40_000u32).map(|i| (i * 31 + i / 997) as u8).collect();
+    std::fs::write(dir.join("program.bin"), program).map_err(|e| e.to_string())?;
+    let key = root().join("keys/test.key");
+    let (program, image) = (dir.join("program.bin"), dir.join("sim.img"));
+    let args =
+        ["--key", path_str(&key)?, "--board", "sim", "--version", "3.2.1", path_str(&program)?, path_str(&image)?];
+    sign(&args.map(String::from))?;
+    let sim = start_sim(&[])?;
+    run(Command::new(&python).arg(script.join("pymodbus_update.py")).arg(&sim.1).arg(&image))?;
     drop(sim);
     let sim = start_sim(&[])?;
     run(Command::new("bash").arg(script.join("mbpoll_check.sh")).arg(&sim.1))?;
