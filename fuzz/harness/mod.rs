@@ -15,12 +15,13 @@ pub mod pdu_native;
 pub mod pdu_servo;
 pub mod rtu_frame;
 pub mod rtu_stream;
+pub mod update;
 
 /// A target's entry point.
 pub type Run = fn(&[u8]);
 
 /// The targets and their entry points, for the replay.
-pub const TARGETS: [(&str, Run); 10] = [
+pub const TARGETS: [(&str, Run); 11] = [
     ("rtu_stream", rtu_stream::run),
     ("rtu_frame", rtu_frame::run),
     ("pdu_native", pdu_native::run),
@@ -31,4 +32,5 @@ pub const TARGETS: [(&str, Run); 10] = [
     ("pdu_servo", pdu_servo::run),
     ("ascii_stream", ascii_stream::run),
     ("ascii_slave", ascii_slave::run),
+    ("update", update::run),
 ];

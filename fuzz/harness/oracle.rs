@@ -303,6 +303,7 @@ pub fn check_reply(req: &[u8], reply: &[u8]) -> bool {
             }
         }
         0x2B => assert_eq!(reply[2], 0x0E, "{reply:02X?} answering {req:02X?}"),
+        0x15 => assert_eq!(reply, req, "0x15 is echoed"),
         _ => panic!("normal reply {reply:02X?} to unsupported function {f:02X}"),
     }
     false

@@ -45,7 +45,10 @@ fn snapshot(drive: &Drive) -> (Vec<u32>, i64) {
 /// The word register `reg` shows by the object declarations: 0 where no object is.
 fn declared(drive: &Drive, reg: usize) -> u16 {
     let i = OBJECTS.partition_point(|d| d.end() as usize <= reg);
-    let Some(d) = OBJECTS.get(i).filter(|d| usize::from(d.addr) <= reg) else { return 0 };
+    let Some(d) = OBJECTS.get(i).filter(|d| usize::from(d.addr) <= reg && d.obj != Obj::Password) else {
+        // A reserved register, or the password, which is not told.
+        return 0;
+    };
     let k = reg - usize::from(d.addr);
     let v = drive.state().read_def(d);
     match d.ty() {
