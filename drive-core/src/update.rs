@@ -249,6 +249,24 @@ impl Target {
     }
 }
 
+/// What the boot loader's state says of the running image (0x2261).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[repr(u8)]
+pub enum BootState {
+    /// It runs for good (confirmed, or never updated).
+    #[default]
+    Confirmed = 0,
+    /// Swapped in at the last reset, on trial: it confirms itself once it has served the bus,
+    /// else the next reset swaps the one before back.
+    Trial = 1,
+    /// An update that did not confirm was swapped back at the last reset: this is the image
+    /// before it.
+    RolledBack = 2,
+    /// An update is marked for the boot loader and swapped in at the next reset (a board without
+    /// a boot loader, QEMU's, keeps it marked).
+    Marked = 3,
+}
+
 /// Where a transfer stands (0x2250).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[repr(u8)]

@@ -677,7 +677,8 @@ async fn update_one(
                 update::version(now)
             )));
         }
-        line += &format!(", installed, restarted: {}", update::version(now));
+        let state = update::boot_state(u.boot_state().await?);
+        line += &format!(", installed, restarted: {}, {state}", update::version(now));
     }
     Ok(line)
 }

@@ -92,6 +92,17 @@ pub fn reason(code: u16) -> &'static str {
     }
 }
 
+/// What 0x2261 says, in words.
+pub fn boot_state(code: u16) -> &'static str {
+    match code {
+        0 => "confirmed",
+        1 => "on trial: it has not confirmed itself, and the next reset goes back",
+        2 => "rolled back",
+        3 => "an update is marked for the next reset",
+        _ => "in an unknown state",
+    }
+}
+
 /// A drive's transfer as 0x2250-0x2255 say.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Status {
@@ -130,6 +141,11 @@ impl Updater<'_> {
     /// The running image's version (0x2259).
     pub async fn running(&mut self) -> Result<u32, Error> {
         self.read32(Obj::FirmwareVersion).await
+    }
+
+    /// What the drive's boot loader state says of the image it runs (0x2261, `update::BootState`).
+    pub async fn boot_state(&mut self) -> Result<u16, Error> {
+        self.read16(Obj::FirmwareState).await
     }
 
     /// The transfer's state.

@@ -74,7 +74,7 @@ fn every_drive_of_a_bus_restarts_into_the_new_version_with_its_parameters() {
     assert!(out.status.success(), "{said}");
     for a in 1..=3 {
         let line = said.lines().find(|l| l.starts_with(&format!("drive {a}: "))).expect("a line a drive");
-        assert!(line.contains("installed, restarted: 2.1.0"), "{line}");
+        assert!(line.contains("installed, restarted: 2.1.0, confirmed"), "{line}");
         assert!(line.contains("sent 30097 bytes"), "{line}");
         let address = a.to_string();
         let link = [&tcp[..], &["-a", &address]].concat();
@@ -94,17 +94,21 @@ fn an_image_that_does_not_confirm_itself_is_rolled_back_at_the_next_reset() {
     let file = write(dir.path(), "bad.img", &image(Board::Simulator, &program(NO_CONFIRM, 5000)));
     let out = drivectl(&tcp, &["update", &file]);
     assert!(out.status.success(), "{}", text(&out));
+    assert!(text(&out).contains("restarted: 2.1.0, on trial"), "{}", text(&out));
     // It runs, on trial, and never confirms; the next reset goes back.
     assert_eq!(get(&tcp, "firmware-version"), i64::from(VERSION));
+    assert_eq!(get(&tcp, "firmware-state"), 1, "on trial");
     assert!(drivectl(&tcp, &["set", "restart=1"]).status.success());
     std::thread::sleep(std::time::Duration::from_millis(300));
     assert_eq!(get(&tcp, "firmware-version"), BUILD, "rolled back");
+    assert_eq!(get(&tcp, "firmware-state"), 2, "rolled back");
     // A good image after it goes in and stays.
     let file = write(dir.path(), "good.img", &image(Board::Simulator, &program(b"", 5000)));
     assert!(drivectl(&tcp, &["update", &file]).status.success());
     assert!(drivectl(&tcp, &["set", "restart=1"]).status.success());
     std::thread::sleep(std::time::Duration::from_millis(300));
     assert_eq!(get(&tcp, "firmware-version"), i64::from(VERSION), "confirmed: kept");
+    assert_eq!(get(&tcp, "firmware-state"), 0);
 }
 
 #[test]

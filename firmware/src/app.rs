@@ -22,6 +22,8 @@ use core::sync::atomic::{AtomicPtr, AtomicU32, Ordering};
 use core::task::Poll;
 
 use defmt::warn;
+
+use crate::update::Updates;
 use drive_core::controller::Shared;
 use drive_core::controller::handoff::{Handover, Lent, TickSide};
 use drive_core::ident::Identity;
@@ -66,11 +68,17 @@ pub static TICKS: AtomicU32 = AtomicU32::new(0);
 /// (the tick had stopped on its own since they were planned).
 pub static HANDOVERS: [AtomicU32; 3] = [const { AtomicU32::new(0) }; 3];
 
-/// Who this firmware says it is (0x1022 hardware version from the board).
+/// Who this firmware says it is (0x1022 hardware version from the board; the revision says
+/// when the build takes images signed with the repository's test key).
 static IDENTITY: Identity = Identity {
     model_name: "OSD-42",
     user_application_name: "firmware",
     hardware_version: crate::board::HARDWARE,
+    revision: if crate::update::TEST {
+        concat!(env!("CARGO_PKG_VERSION"), " test-key")
+    } else {
+        env!("CARGO_PKG_VERSION")
+    },
     ..Identity::SIMULATOR
 };
 
@@ -189,7 +197,12 @@ async fn lend(lent: &mut Lent<'_>) {
 
 /// After the drive had its say: the reply out while the tick takes in what the request changed
 /// (a motion from the tick it was planned for), then the flash operations the request asked for.
-async fn after_request(drive: &mut Drive, serial: &mut Serial, store: &mut crate::board::ParamStore) {
+async fn after_request(
+    drive: &mut Drive,
+    serial: &mut Serial,
+    store: &mut crate::board::ParamStore,
+    updates: &mut Updates,
+) {
     let changed = drive.has_changes();
     let (reply, mut lent) = drive.reply_and_lend();
     let send = async {
@@ -216,6 +229,13 @@ async fn after_request(drive: &mut Drive, serial: &mut Serial, store: &mut crate
             warn!("uart: flush failed");
         }
         serve_store(drive, store);
+    }
+    // The DFU slot and the update state lie in bank 2 (QEMU: RAM), beside the running code.
+    if updates.serve(drive, store.flash()) {
+        if serial.flush().await.is_err() {
+            warn!("uart: flush failed");
+        }
+        cortex_m::peripheral::SCB::sys_reset();
     }
 }
 
@@ -262,6 +282,7 @@ pub async fn modbus(drive: &'static mut Drive, mut serial: Serial, store: &'stat
     use embedded_io_async::Read;
     // Bytes come one or a few at a time: the task reads them as they arrive.
     let mut buf = [0u8; 16];
+    let mut updates = Updates::power_up(store.flash(), drive);
     loop {
         // The end of a frame, or the bus side's own work in time (a homing's checks, the analog
         // input), whichever comes first.
@@ -296,7 +317,7 @@ pub async fn modbus(drive: &'static mut Drive, mut serial: Serial, store: &'stat
             }
             Either3::Third(()) => {}
         }
-        after_request(drive, &mut serial, store).await;
+        after_request(drive, &mut serial, store, &mut updates).await;
     }
 }
 
@@ -322,18 +343,21 @@ pub async fn modbus(drive: &'static mut Drive, mut serial: Serial, store: &'stat
     let mut buf = [0u8; 16];
     // The map's bytes after a register address (seed 003's sub-index) lengthen its requests.
     let mut frame = crate::frames::Assembler::new(drive_core::maps::RegisterMap::address_extra(drive.map()));
+    let mut updates = Updates::power_up(store.flash(), drive);
     loop {
         let silence = if frame.expects_more() { SILENCE_PARTIAL } else { SILENCE };
         match select3(serial.read(&mut buf), Timer::after(silence), ATTENTION.wait()).await {
             Either3::First(Ok(n)) => {
                 for &b in buf.get(..n).unwrap_or_default() {
                     if frame.push(b) {
-                        deliver(drive, &mut frame, &mut serial, store).await;
+                        deliver(drive, &mut frame, &mut serial, store, &mut updates).await;
                     }
                 }
             }
             Either3::First(Err(_)) => {}
-            Either3::Second(()) if !frame.is_empty() => deliver(drive, &mut frame, &mut serial, store).await,
+            Either3::Second(()) if !frame.is_empty() => {
+                deliver(drive, &mut frame, &mut serial, store, &mut updates).await
+            }
             // The bus side's own work in time (a homing's checks, the analog input), at the
             // silence's pace.
             Either3::Second(()) => {
@@ -341,12 +365,12 @@ pub async fn modbus(drive: &'static mut Drive, mut serial: Serial, store: &'stat
                 if drive.state().service_is_due(now) {
                     sync(drive).await;
                     drive.state_mut().service(now);
-                    after_request(drive, &mut serial, store).await;
+                    after_request(drive, &mut serial, store, &mut updates).await;
                 }
             }
             Either3::Third(()) => {
                 sync(drive).await;
-                after_request(drive, &mut serial, store).await;
+                after_request(drive, &mut serial, store, &mut updates).await;
             }
         }
     }
@@ -360,6 +384,7 @@ async fn deliver(
     frame: &mut crate::frames::Assembler,
     serial: &mut Serial,
     store: &mut crate::board::ParamStore,
+    updates: &mut Updates,
 ) {
     // The model synced before the request is served.
     sync(drive).await;
@@ -368,5 +393,5 @@ async fn deliver(
     drive.on_rx(Instant::from_micros(t.saturating_sub(t35)), frame.bytes());
     drive.on_timer(Instant::from_micros(t.max(t35)));
     frame.clear();
-    after_request(drive, serial, store).await;
+    after_request(drive, serial, store, updates).await;
 }

@@ -28,6 +28,8 @@ pub fn request_len(head: &[u8], sub_index: usize) -> Option<usize> {
         0x0F => counted(6, 9),
         // Read/write multiple: two start/quantity pairs, byte count, data, CRC.
         0x17 => counted(10, 13),
+        // Read and write file record: byte count, sub-requests, CRC.
+        0x14 | 0x15 => counted(2, 5),
         // Read device identification (MEI 0x0E): MEI type, code, object id, CRC.
         0x2B => Some(7),
         // Mask write: reference, AND mask, OR mask, CRC.

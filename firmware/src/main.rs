@@ -26,6 +26,8 @@ mod app;
 mod power;
 #[cfg(target_os = "none")]
 mod stack;
+#[cfg(target_os = "none")]
+mod update;
 
 #[cfg(all(target_os = "none", feature = "g474", feature = "qemu"))]
 compile_error!("features `g474` and `qemu` select different chips: build with `--no-default-features --features qemu`");

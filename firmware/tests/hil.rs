@@ -34,6 +34,10 @@ mod frames;
 #[cfg(target_os = "none")]
 #[path = "../src/power.rs"]
 mod power;
+#[cfg(target_os = "none")]
+#[path = "../src/update.rs"]
+#[allow(dead_code, reason = "the suite uses part of the application")]
+mod update;
 
 #[cfg(target_os = "none")]
 #[defmt::panic_handler]

@@ -6,7 +6,7 @@
 use std::io;
 
 use drive_core::ident::{self, Identity};
-use drive_core::update::{self, Board, Header, Job, TEST_KEY, Target};
+use drive_core::update::{self, Board, BootState, Header, Job, TEST_KEY, Target};
 use embassy_boot::State;
 
 use crate::Drive;
@@ -29,6 +29,8 @@ pub struct Firmware {
     confirms: bool,
     /// Its version: its header's, or the build's where ACTIVE has no image of the simulator's.
     version: u32,
+    /// What the boot loader's state says of it.
+    boot: BootState,
 }
 
 impl std::fmt::Debug for Firmware {
@@ -46,7 +48,7 @@ impl Default for Firmware {
 impl Firmware {
     /// Erased slots: the drive runs the build's own image, as flashed by a probe.
     pub fn new() -> Self {
-        Self { slots: Slots::new(), trial: false, confirms: true, version: ident::VERSION }
+        Self { slots: Slots::new(), trial: false, confirms: true, version: ident::VERSION, boot: BootState::Confirmed }
     }
 
     /// A reset: the boot loader swaps, resumes or rolls back as the update state says, then the
@@ -55,6 +57,11 @@ impl Firmware {
         let boot = self.slots.boot().map_err(slot_error)?;
         self.version = boot.header.filter(|h| h.board == Board::Simulator).map_or(ident::VERSION, |h| h.version);
         self.trial = boot.state == UPDATE_START;
+        self.boot = match boot.state {
+            UPDATE_START => BootState::Trial,
+            State::Revert if boot.loader == State::Swap => BootState::RolledBack,
+            _ => BootState::Confirmed,
+        };
         self.confirms = !self.slots.active().starts_with(NO_CONFIRM);
         Ok(self.version)
     }
@@ -81,6 +88,7 @@ impl Firmware {
     /// Tells `drive` what it runs and what images it takes.
     pub fn configure(&self, drive: &mut Drive) {
         drive.state_mut().set_updates(Some(TARGET), self.version);
+        drive.state_mut().set_boot_state(self.boot);
     }
 
     /// Does what `drive`'s transfer asks of the flash; true once an image is installed, when
@@ -89,7 +97,11 @@ impl Firmware {
         if self.trial && self.confirms && drive.counters().slave_messages > 0 {
             // The self-test: the new image has powered up and answered the bus.
             match self.slots.mark_booted() {
-                Ok(()) => self.trial = false,
+                Ok(()) => {
+                    self.trial = false;
+                    self.boot = BootState::Confirmed;
+                    drive.state_mut().set_boot_state(self.boot);
+                }
                 Err(e) => eprintln!("hal-sim: confirming the image failed: {e:?}"),
             }
         }

@@ -311,10 +311,11 @@ pub struct Layout {
 }
 
 /// The native map's scope and black box (0x2220-0x2240), firmware update and write lock
-/// (0x2250-0x2260), and its capture windows (0x4000, 0xA000), as inclusive ranges: a [`Layout::scope`] layout answers them as the native map does,
+/// (0x2250-0x2261), and its capture windows (0x4000, 0xA000), as inclusive ranges: a
+/// [`Layout::scope`] layout answers them as the native map does,
 /// a request within one of them, in the layout's codes.
 pub const SCOPE_RANGES: [(u16, u16); 3] = [
-    (0x2220, 0x2260),
+    (0x2220, 0x2261),
     (SCOPE_WINDOW, SCOPE_WINDOW + (WORDS - 1) as u16),
     (BLACK_BOX_WINDOW, BLACK_BOX_WINDOW + (WORDS - 1) as u16),
 ];

@@ -847,6 +847,12 @@ objects! {
     /// Unlock (our object): the password unlocks the drive's writes until the next power-up; 0
     /// locks them again. Any other number is refused (03) and changes nothing.
     Unlock @ 0x225F: U32, Cmd, Ram, Any, default 0, None, "unlock";
+    /// Firmware state (our object): what the boot loader's state says of the running image: 0
+    /// confirmed (or never updated); 1 on trial, swapped in at the last reset: it confirms itself
+    /// once it has answered a request, else the next reset swaps the image before back; 2 rolled
+    /// back: an update that did not confirm was swapped out at the last reset; 3 an update is
+    /// marked for the next reset (on a board without a boot loader, QEMU's, it stays marked).
+    FirmwareState @ 0x2261: U8, Ro, Live, Span(0, 3), default 0, None, "firmware state";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B
     /// open (the power stage's open-load flags), 3 A over-current, 4 B over-current (0x2133),
     /// 5 under-voltage (0x2130). A set bit latches the safe state: power stage off, brake

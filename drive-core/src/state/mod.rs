@@ -703,6 +703,7 @@ impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             | Obj::UpdateVersion
             | Obj::FirmwareVersion
             | Obj::FirmwareKey
+            | Obj::FirmwareState
             | Obj::WriteLock => self.update_live(obj),
             // The ten entries are consecutive objects.
             h if (Obj::FaultHistory0 as usize..=Obj::FaultHistory9 as usize).contains(&(h as usize)) => {

@@ -1,10 +1,10 @@
-//! The firmware update's and the write lock's objects (0x2250-0x2260): what a transfer says, the
+//! The firmware update's and the write lock's objects (0x2250-0x2261): what a transfer says, the
 //! orders a master gives it, and the password that locks a commissioned drive's writes.
 
 use super::{DriveState, ProgramMemory, STORAGE_SAVING};
 use crate::controller::Shared;
 use crate::od::{Obj, ObjError};
-use crate::update::{RecordError, Target, Transfer};
+use crate::update::{BootState, RecordError, Target, Transfer};
 use core::borrow::Borrow;
 
 /// 0x2256: abandon the transfer.
@@ -34,6 +34,8 @@ pub(crate) struct Updates {
     pub(crate) target: Option<Target>,
     /// The running image's version.
     pub(crate) version: u32,
+    /// What the boot loader's state says of it.
+    pub(crate) boot: BootState,
 }
 
 impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
@@ -48,6 +50,12 @@ impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
     pub fn set_updates(&mut self, target: Option<Target>, version: u32) {
         self.updates.target = target;
         self.updates.version = version;
+    }
+
+    /// Says what the boot loader's state says of the running image (0x2261): on trial until the
+    /// platform confirms it.
+    pub fn set_boot_state(&mut self, boot: BootState) {
+        self.updates.boot = boot;
     }
 
     /// The image transfer, for the slave's 0x15 and the platform's flash jobs.
@@ -118,6 +126,7 @@ impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             Obj::UpdateVersion => s.version,
             Obj::FirmwareVersion => self.updates.version,
             Obj::FirmwareKey => self.updates.target.map_or(2, |t| u32::from(t.test_key())),
+            Obj::FirmwareState => self.updates.boot as u32,
             Obj::WriteLock if self.param(Obj::Password) == 0 => 0,
             Obj::WriteLock => 1 + u32::from(self.unlocked),
             _ => 0,

@@ -107,6 +107,36 @@ pub type Serial = BufferedUart<'static>;
 pub const STORE: Range<u32> =
     flash_map::PARAMS.start - flash_map::FLASH_START..flash_map::PARAMS.end() - flash_map::FLASH_START;
 
+/// The board images are built for (an image's header).
+pub const IMAGE_BOARD: drive_core::update::Board = drive_core::update::Board::G474;
+/// embassy-boot's boot loader starts the image and swaps an update in.
+pub const BOOT_LOADER: bool = true;
+/// Bytes of the boot loader's state ([`flash_map::STATE`]).
+pub const STATE_LEN: u32 = flash_map::STATE.len;
+
+/// Where an access of `len` bytes at `offset` of the DFU slot lies in the flash driver's
+/// addressing ([`flash_map::DFU`], in bank 2).
+pub fn dfu_at(offset: u32, len: u32) -> Option<u32> {
+    within(flash_map::DFU, offset, len)
+}
+
+/// Where an access of `len` bytes at `offset` of the boot loader's state lies.
+pub fn state_at(offset: u32, len: u32) -> Option<u32> {
+    within(flash_map::STATE, offset, len)
+}
+
+fn within(region: flash_map::Region, offset: u32, len: u32) -> Option<u32> {
+    (offset.checked_add(len)? <= region.len).then_some(region.start - flash_map::FLASH_START + offset)
+}
+
+/// The header in the running image's trailer (ACTIVE's last page): what an update installed.
+pub fn active_trailer() -> [u8; drive_core::update::HEADER_LEN] {
+    let at = flash_map::ACTIVE.start + drive_core::update::TRAILER;
+    // SAFETY: ACTIVE is this chip's flash, mapped and readable; nothing writes it while the image
+    // that lies in it runs.
+    unsafe { core::ptr::read_volatile(at as *const [u8; drive_core::update::HEADER_LEN]) }
+}
+
 /// The parameter store on the flash. The blocking driver's `NorFlash` programs and erases
 /// without a critical section, so interrupts (the control tick) stay enabled during a save.
 pub type ParamStore = Store<BlockingAsync<Flash<'static, Blocking>>>;

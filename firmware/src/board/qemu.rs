@@ -115,8 +115,52 @@ pub fn power_off() {}
 
 /// The parameter store's range in [`RamFlash`]: the size of the board's ([`crate::flash_map::PARAMS`]).
 pub const STORE: core::ops::Range<u32> = 0..STORE_BYTES;
-/// Bytes of [`RamFlash`].
+/// Bytes of the store.
 const STORE_BYTES: u32 = crate::flash_map::PARAMS.len;
+/// Bytes of [`RamFlash`]: SRAM2 but its last page, which keeps the marker.
+const RAM_FLASH_BYTES: u32 = 32 * 1024 - PAGE;
+/// A page of [`RamFlash`].
+const PAGE: u32 = drive_core::update::PAGE;
+
+/// The board images are built for (an image's header).
+pub const IMAGE_BOARD: drive_core::update::Board = drive_core::update::Board::Qemu;
+/// No boot loader: QEMU starts the image in ACTIVE; an update is received, checked and marked,
+/// but nothing swaps it in.
+pub const BOOT_LOADER: bool = false;
+/// Bytes of the boot loader's state: two pages, as on the board.
+pub const STATE_LEN: u32 = 2 * PAGE;
+/// The DFU slot's program pages that [`RamFlash`] holds (after the store): an image's program of
+/// up to 8 KiB; its trailer page follows them, then the state.
+const DFU_PAGES: u32 = 4;
+
+/// Where an access of `len` bytes at `offset` of the DFU slot lies in [`RamFlash`]: its first
+/// [`DFU_PAGES`] pages and its trailer page, each a page of the 14 KiB after the store (the
+/// L475's SRAM2 holds no 226 KiB slot).
+pub fn dfu_at(offset: u32, len: u32) -> Option<u32> {
+    let end = offset.checked_add(len)?;
+    let trailer = drive_core::update::TRAILER;
+    if end <= DFU_PAGES * PAGE {
+        Some(STORE_BYTES + offset)
+    } else if offset >= trailer && end <= trailer + PAGE {
+        Some(STORE_BYTES + DFU_PAGES * PAGE + offset - trailer)
+    } else {
+        None
+    }
+}
+
+/// Where an access of `len` bytes at `offset` of the boot loader's state lies in [`RamFlash`]:
+/// its last two pages.
+pub fn state_at(offset: u32, len: u32) -> Option<u32> {
+    (offset.checked_add(len)? <= STATE_LEN).then_some(STORE_BYTES + (DFU_PAGES + 1) * PAGE + offset)
+}
+
+/// The header in the running image's trailer: none under QEMU (nothing installs one), read as
+/// the board reads it.
+pub fn active_trailer() -> [u8; drive_core::update::HEADER_LEN] {
+    let at = crate::flash_map::ACTIVE.start + drive_core::update::TRAILER;
+    // SAFETY: ACTIVE lies in the L475's flash, which QEMU maps readable (zero where no program is).
+    unsafe { core::ptr::read_volatile(at as *const [u8; drive_core::update::HEADER_LEN]) }
+}
 /// Where [`RamFlash`] lives: the L475's SRAM2 (32 KiB at 0x10000000), outside the RAM that
 /// `memory.x` gives the program (its SRAM1), where the G474 has its CCM SRAM.
 const STORE_RAM: usize = 0x1000_0000;
@@ -133,20 +177,20 @@ pub struct RamFlash(&'static mut [u8]);
 /// The parameter store on [`RamFlash`], behind the adapter the board's flash uses.
 pub type ParamStore = drive_core::store::Store<embassy_embedded_hal::adapter::BlockingAsync<RamFlash>>;
 
-/// The store's RAM (the first call only; `None` after): as the last run left it, or erased if
-/// this is QEMU's first boot.
+/// The store's RAM, and the update's after it (the first call only; `None` after): as the last
+/// run left it, or erased if this is QEMU's first boot.
 pub fn param_flash() -> Option<RamFlash> {
     static TAKEN: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
     if TAKEN.swap(true, Ordering::AcqRel) {
         return None;
     }
-    let marker = (STORE_RAM + STORE_BYTES as usize) as *mut u32;
-    // SAFETY: STORE_RAM..+STORE_BYTES and the marker word after it are SRAM2 of the STM32L475,
-    // outside the linker's RAM region (memory.x), so nothing else uses them; the flag above
-    // hands them out once.
+    let marker = (STORE_RAM + RAM_FLASH_BYTES as usize) as *mut u32;
+    // SAFETY: STORE_RAM..+RAM_FLASH_BYTES and the marker word after it are SRAM2 of the
+    // STM32L475, outside the linker's RAM region (memory.x), so nothing else uses them; the flag
+    // above hands them out once.
     let (bytes, formatted) = unsafe {
         (
-            core::slice::from_raw_parts_mut(STORE_RAM as *mut u8, STORE_BYTES as usize),
+            core::slice::from_raw_parts_mut(STORE_RAM as *mut u8, RAM_FLASH_BYTES as usize),
             core::ptr::read_volatile(marker) == FORMATTED,
         )
     };
