@@ -19,7 +19,7 @@ use core::borrow::Borrow;
 
 pub use crate::state::{
     Checkpoint, DriveState, Params, STATUS_BUSY, STATUS_STALL, STORAGE_CORRUPT, STORAGE_EMPTY, STORAGE_FSET,
-    STORAGE_SAVE_FAILED, STORAGE_SAVING, Status, SystemRequest,
+    STORAGE_NEWER, STORAGE_SAVE_FAILED, STORAGE_SAVING, Status, SystemRequest,
 };
 
 /// What a platform gives a drive at power-up.

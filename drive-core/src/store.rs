@@ -8,7 +8,10 @@
 //!   The record is a header `[format, 0, count (u16)]` and `count` entries `(register address
 //!   (u16), value (u32))`, little endian. Loading ignores addresses this firmware does not save
 //!   (an object dropped by an update) and values its ranges refuse; objects the record lacks (added
-//!   by an update) keep their factory values. A record of another [`FORMAT`] is not read at all.
+//!   by an update) keep their factory values: how a newer image reads an older store's record. A
+//!   record of another [`FORMAT`] is not read at all; one of a newer format (a newer firmware's,
+//!   found after a rollback) is kept, and this firmware refuses to save over it
+//!   ([`STORAGE_NEWER`]). The formats together are the store's [`VERSION`].
 //! - [`POSITION_KEY`]: the position saved at power loss (0x6055), an `i32`, small and quick so it
 //!   fits in the power supply's hold-up time.
 //! - [`FAULTS_KEY`]: the fault history 0x213C..0x214F and the alarm count 0x2136
@@ -38,7 +41,9 @@ use embedded_storage_async::nor_flash::NorFlash;
 use sequential_storage::cache::{Cache, Uncached};
 use sequential_storage::map::{MapConfig, MapConfigError, MapStorage};
 
-use crate::drive::{Drive, Params, STORAGE_CORRUPT, STORAGE_EMPTY, STORAGE_FSET, STORAGE_SAVE_FAILED, SystemRequest};
+use crate::drive::{
+    Drive, Params, STORAGE_CORRUPT, STORAGE_EMPTY, STORAGE_FSET, STORAGE_NEWER, STORAGE_SAVE_FAILED, SystemRequest,
+};
 pub use crate::faults::FaultHistory;
 use crate::faults::HISTORY_LEN;
 use crate::maps::RegisterMap;
@@ -63,8 +68,13 @@ const PROGRAM_CHUNK: usize = 256;
 pub const PROGRAM_CHUNKS: usize = (2 * PROGRAM_WORDS).div_ceil(PROGRAM_CHUNK);
 /// Format of the program records.
 pub const PROGRAM_FORMAT: u8 = 1;
+/// The store's version: the formats of its records that this firmware writes and reads (the
+/// parameter record's [`FORMAT`], [`FAULTS_FORMAT`], [`PROGRAM_FORMAT`]). An image's header
+/// names the lowest store version it reads (`update::Header::store`), and a drive refuses an
+/// image that needs a newer store than its own.
+pub const VERSION: u16 = 1;
 /// Format of the parameter record; bumped only if the entry layout changes (new objects do not).
-pub const FORMAT: u8 = 1;
+pub const FORMAT: u8 = VERSION as u8;
 /// Format of the fault history record.
 pub const FAULTS_FORMAT: u8 = 1;
 /// Bytes of the fault history record.
@@ -212,7 +222,15 @@ impl<S: NorFlash> Store<S> {
         let mut found_other = false;
         let mut unreadable = self
             .read(PARAMS_KEY..FAULTS_KEY + 1, &mut |key, record| match key {
-                PARAMS_KEY => status = if decode(record, &mut params).is_err() { STORAGE_CORRUPT } else { 0 },
+                PARAMS_KEY => {
+                    status = match decode(record, &mut params) {
+                        Ok(()) => 0,
+                        // A newer firmware's store (a rollback after an update that changed
+                        // it): kept for that firmware, not saved over (0x2120 bit 5).
+                        Err(DecodeError::Format(f)) if f > FORMAT => STORAGE_CORRUPT | STORAGE_NEWER,
+                        Err(_) => STORAGE_CORRUPT,
+                    }
+                }
                 POSITION_KEY => {
                     // An `i32`, little endian, as the crate stores one.
                     if let Some(&bytes) = record.first_chunk::<4>() {

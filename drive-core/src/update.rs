@@ -259,7 +259,7 @@ pub enum BootState {
     /// Swapped in at the last reset, on trial: it confirms itself once it has served the bus,
     /// else the next reset swaps the one before back.
     Trial = 1,
-    /// An update that did not confirm was swapped back at the last reset: this is the image
+    /// The last update did not confirm itself and was swapped back out: this is the image
     /// before it.
     RolledBack = 2,
     /// An update is marked for the boot loader and swapped in at the next reset (a board without

@@ -18,7 +18,7 @@ pub const KEY: [u8; 32] = hex_key(include_str!(env!("OSD_UPDATE_KEY")));
 /// The build takes images signed with the repository's test key, which anyone can sign with.
 pub const TEST: bool = same(&KEY, &TEST_KEY);
 /// What this build takes images for.
-pub const TARGET: Target = Target { board: board::IMAGE_BOARD, key: KEY, store: drive_core::store::FORMAT as u16 };
+pub const TARGET: Target = Target { board: board::IMAGE_BOARD, key: KEY, store: drive_core::store::VERSION };
 
 /// The 32 bytes of a key file's 64 hex digits; a build error if it holds anything else.
 #[allow(clippy::indexing_slicing, reason = "const evaluation: out of bounds is a compile error")]

@@ -14,7 +14,7 @@ use crate::slots::{SlotError, Slots, UPDATE_START};
 
 /// What the simulator takes images for: its board, the repository's test key, its store's
 /// format.
-pub const TARGET: Target = Target { board: Board::Simulator, key: TEST_KEY, store: drive_core::store::FORMAT as u16 };
+pub const TARGET: Target = Target { board: Board::Simulator, key: TEST_KEY, store: drive_core::store::VERSION };
 
 /// A program that starts with these bytes stands for an image that fails its self-test: it
 /// never confirms itself, so the boot loader rolls it back at the next reset.
@@ -59,7 +59,7 @@ impl Firmware {
         self.trial = boot.state == UPDATE_START;
         self.boot = match boot.state {
             UPDATE_START => BootState::Trial,
-            State::Revert if boot.loader == State::Swap => BootState::RolledBack,
+            State::Revert => BootState::RolledBack,
             _ => BootState::Confirmed,
         };
         self.confirms = !self.slots.active().starts_with(NO_CONFIRM);

@@ -217,8 +217,11 @@ objects! {
     /// Storage status (our object), write 1 to clear (bit 3 excepted): bit 0 no saved parameters
     /// at power-up, 1 saved parameters unreadable at power-up (both: factory values in use), 2 FSET
     /// held low at power-up (factory values restored and saved), 3 save in progress, 4 last save
-    /// failed (the flash keeps the set saved before it).
-    StorageStatus @ 0x2120: U8, W1c, Live, Bits(0x1F), default 0, None, "storage status";
+    /// failed (the flash keeps the set saved before it), 5 the saved parameters are of a newer
+    /// store version than this firmware reads (a rollback after an update that changed it): with
+    /// bit 1, factory values in use, and saves refused (04) so that the store stays for the
+    /// firmware that wrote it; FSET, or an update back, ends it.
+    StorageStatus @ 0x2120: U8, W1c, Live, Bits(0x3F), default 0, None, "storage status";
     /// Under-voltage threshold (our object): a supply below it latches 0x6000 bit 5, alarm 13.
     /// 10 V by default: seed 000 rates the drive for 12-48 V DC, and a 12 V supply sags under
     /// load; raise it for a higher supply.
@@ -850,7 +853,7 @@ objects! {
     /// Firmware state (our object): what the boot loader's state says of the running image: 0
     /// confirmed (or never updated); 1 on trial, swapped in at the last reset: it confirms itself
     /// once it has answered a request, else the next reset swaps the image before back; 2 rolled
-    /// back: an update that did not confirm was swapped out at the last reset; 3 an update is
+    /// back: the last update did not confirm itself and was swapped back out; 3 an update is
     /// marked for the next reset (on a board without a boot loader, QEMU's, it stays marked).
     FirmwareState @ 0x2261: U8, Ro, Live, Span(0, 3), default 0, None, "firmware state";
     /// Error status, write 1 to clear: bit 0 over-temperature (0x2132), 1 coil A open, 2 coil B

@@ -46,6 +46,10 @@ pub const STORAGE_FSET: u8 = 1 << 2;
 pub const STORAGE_SAVING: u8 = 1 << 3;
 /// Storage status bit 4: the last save failed; the flash holds the set saved before it.
 pub const STORAGE_SAVE_FAILED: u8 = 1 << 4;
+/// Storage status bit 5: the saved parameters are of a newer store version than this firmware
+/// reads (with [`STORAGE_CORRUPT`]: factory values); saves are refused, so that the store stays
+/// for the firmware that wrote it.
+pub const STORAGE_NEWER: u8 = 1 << 5;
 /// The storage status bits that say the store has failed: the store's alarm (0x2135 bit 5).
 const STORE_FAILED: u8 = STORAGE_CORRUPT | STORAGE_SAVE_FAILED;
 
@@ -814,6 +818,8 @@ impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             (Obj::SystemControl, 2 | 3) if !self.ctl.axis.is_still() || self.storage & STORAGE_SAVING != 0 => {
                 Err(ObjError::Busy)
             }
+            // The store holds a newer firmware's parameters: not overwritten by this one's.
+            (Obj::SystemControl, 2 | 3) if self.storage & STORAGE_NEWER != 0 => Err(ObjError::NotNow),
             // The value it holds changes nothing: taken whatever the state (a dump loaded back).
             (Obj::CurrentAutoTune | Obj::CurrentKp | Obj::CurrentKi, v) if v == self.read(d.obj) => Ok(()),
             // No current loop runs them: an external driver regulates the current.
