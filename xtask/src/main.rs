@@ -50,6 +50,9 @@ const QEMU_STORE_WORDS: usize = 16 * 1024 / 4;
 const RAM_END: u64 = 0x2000_0000 + RAM_CAPACITY;
 /// Where the program's slot starts (ACTIVE, behind the boot loader): QEMU starts the core there.
 const ACTIVE_START: u64 = 0x0800_8000;
+/// The start of flash: the boot loader's region (BOOTLOADER, `firmware/src/flash_map.rs`), up to
+/// ACTIVE, where the core starts.
+const BOOTLOADER_START: u64 = 0x0800_0000;
 
 fn main() -> ExitCode {
     let task = std::env::args().nth(1).unwrap_or_default();
@@ -153,26 +156,37 @@ fn elf_dir() -> PathBuf {
     root().join("target").join(TARGET).join("firmware")
 }
 
+/// The sections of `elf`: name, size and address, as `arm-none-eabi-size -A` lists them.
+fn section_table(elf: &Path) -> Result<Vec<(String, u64, u64)>, String> {
+    let out = Command::new("arm-none-eabi-size")
+        .arg("-A")
+        .arg(elf)
+        .output()
+        .map_err(|e| format!("arm-none-eabi-size (install binutils-arm-none-eabi, .ci/install does): {e}"))?;
+    Ok(String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| {
+            let mut f = l.split_whitespace();
+            let name = f.next()?.to_string();
+            let size = f.next()?.parse().ok()?;
+            let addr = f.next()?.parse().ok()?;
+            Some((name, size, addr))
+        })
+        .collect())
+}
+
+/// The total size of the sections of `table` called `name`.
+fn section_size(table: &[(String, u64, u64)], name: &str) -> u64 {
+    table.iter().filter(|(n, _, _)| n == name).map(|(_, size, _)| size).sum()
+}
+
 /// Builds the G474 firmware, reports it by part against the flash and RAM budgets, and fails
 /// over either or if it does not fit the chip.
 fn firmware() -> Result<(), String> {
     run(cargo().args(firmware_args("build", &[])))?;
     let elf = elf_dir().join("firmware");
-    let out = Command::new("arm-none-eabi-size")
-        .arg("-A")
-        .arg(&elf)
-        .output()
-        .map_err(|e| format!("arm-none-eabi-size (install binutils-arm-none-eabi, .ci/install does): {e}"))?;
-    let sections = String::from_utf8_lossy(&out.stdout);
-    let size = |name: &str| -> u64 {
-        sections
-            .lines()
-            .filter_map(|l| {
-                let mut f = l.split_whitespace();
-                (f.next() == Some(name)).then(|| f.next().and_then(|n| n.parse::<u64>().ok())).flatten()
-            })
-            .sum()
-    };
+    let sections = section_table(&elf)?;
+    let size = |name: &str| section_size(&sections, name);
     let flash = size(".boot_stub") + size(".vector_table") + size(".text") + size(".rodata") + size(".data");
     let statics = size(".data") + size(".bss") + size(".uninit");
     println!(
@@ -187,7 +201,7 @@ fn firmware() -> Result<(), String> {
     if flash == 0 {
         return Err(format!("no sections read from {}", elf.display()));
     }
-    check_boot(&elf)?;
+    check_boot(&elf, false)?;
     flash_by_part(&elf, flash)?;
     call_graph_checks(&elf, statics)?;
     if flash > FLASH_CAPACITY || statics > RAM_CAPACITY {
@@ -464,7 +478,7 @@ fn build_qemu() -> Result<PathBuf, String> {
     // processes at once, and a rename never shows another one a half-written file.
     let part = elf_dir().join(format!("firmware-qemu.{}", std::process::id()));
     std::fs::copy(elf_dir().join("firmware"), &part).map_err(|e| format!("{}: {e}", part.display()))?;
-    check_boot(&part)?;
+    check_boot(&part, true)?;
     std::fs::rename(&part, &elf).map_err(|e| format!("{}: {e}", elf.display()))?;
     Ok(elf)
 }
@@ -538,19 +552,29 @@ fn section_bytes(elf: &Path, name: &str, n: usize) -> Result<Vec<u8>, String> {
     }
 }
 
-/// Fails unless `elf` starts where the core starts: its vector table at ACTIVE, and the boot
-/// loader's stand-in at the start of flash holding the same stack pointer and reset vector
-/// (`memory.x`), so that a board flashed with the image alone, and QEMU, boot it.
-fn check_boot(elf: &Path) -> Result<(), String> {
+/// Fails unless `elf` starts where it is started: its vector table at ACTIVE, and with `stub`
+/// (the QEMU build, which has no boot loader) the boot loader's stand-in at the start of flash
+/// holding the same stack pointer and reset vector (`firmware/boot_stub.x`), where QEMU starts
+/// the core. Without it (the G474 build) nothing of the image may lie in the boot loader's
+/// region: flashing the image must leave the boot loader whole.
+fn check_boot(elf: &Path, stub: bool) -> Result<(), String> {
     let vectors = symbol(&nm_symbols(elf, &[])?, "__vector_table")?;
     if vectors != ACTIVE_START {
         return Err(format!("the vector table is at {vectors:#x}, not at ACTIVE ({ACTIVE_START:#x})"));
     }
-    let (stub, table) = (section_bytes(elf, ".boot_stub", 8)?, section_bytes(elf, ".vector_table", 8)?);
-    if stub != table {
-        return Err(format!("the boot stand-in {stub:02x?} is not the vector table's {table:02x?}"));
+    if stub {
+        let (stub, table) = (section_bytes(elf, ".boot_stub", 8)?, section_bytes(elf, ".vector_table", 8)?);
+        if stub != table {
+            return Err(format!("the boot stand-in {stub:02x?} is not the vector table's {table:02x?}"));
+        }
+        return Ok(());
     }
-    Ok(())
+    let below: Vec<String> = section_table(elf)?
+        .into_iter()
+        .filter(|&(_, size, addr)| size > 0 && (BOOTLOADER_START..ACTIVE_START).contains(&addr))
+        .map(|(name, _, addr)| format!("{name} at {addr:#x}"))
+        .collect();
+    if below.is_empty() { Ok(()) } else { Err(format!("the image writes into the boot loader's region: {below:?}")) }
 }
 
 /// Boots `elf` on QEMU's b-l475e-iot01a with USART1 a TCP server on `host:port`.
