@@ -7,7 +7,7 @@
 //! - `masters`: run pymodbus and mbpoll against the simulator (native and DS-CLS9 maps).
 //! - `firmware`: cross-build the firmware, print its size and its stack by the call graph against
 //!   the budgets, fail if it does not fit the chip or if the tick reaches software floating
-//!   point.
+//!   point; then the boot loader (`bootloader/`), its size against its region.
 //! - `qemu --tcp HOST:PORT [--map NAME]`: build the QEMU variant and run it with its USART on that
 //!   port (switched to map NAME as a master would: 0x2190, a save, a reset), and QEMU's monitor on
 //!   the port it prints second (`system_reset` restarts the chip, its store kept).
@@ -53,6 +53,8 @@ const ACTIVE_START: u64 = 0x0800_8000;
 /// The start of flash: the boot loader's region (BOOTLOADER, `firmware/src/flash_map.rs`), up to
 /// ACTIVE, where the core starts.
 const BOOTLOADER_START: u64 = 0x0800_0000;
+/// The boot loader's region, 32 KiB: `firmware` fails if the boot loader does not fit it.
+const BOOTLOADER_CAPACITY: u64 = ACTIVE_START - BOOTLOADER_START;
 
 fn main() -> ExitCode {
     let task = std::env::args().nth(1).unwrap_or_default();
@@ -111,6 +113,8 @@ fn step(name: &str) {
 fn ci() -> Result<(), String> {
     step("rustfmt");
     run(cargo().args(["fmt", "--all", "--check"]))?;
+    // The boot loader is a workspace of its own.
+    run(cargo().current_dir(root().join("bootloader")).args(["fmt", "--check"]))?;
     step("clippy (host)");
     run(cargo().args(["clippy", "--workspace", "--all-targets", "--", "-D", "warnings"]))?;
     step("rustdoc (host): every doc link resolves and names a public item");
@@ -118,6 +122,12 @@ fn ci() -> Result<(), String> {
     step("clippy (firmware)");
     // The G474 binary and its HIL suite.
     run(cargo().args(firmware_args("clippy", &["--bin", "firmware", "--test", "hil"])).args(["--", "-D", "warnings"]))?;
+    // The boot loader, a workspace of its own, in the target directory its build uses.
+    run(cargo()
+        .current_dir(root().join("bootloader"))
+        .args(["clippy", "--release", "--target", TARGET, "--target-dir"])
+        .arg(bootloader_target())
+        .args(["--", "-D", "warnings"]))?;
     // drive-tests' `qemu` test boots the firmware under QEMU (`cargo xtask qemu`) for tokio-modbus.
     step("tests (host, including the register reference, tokio-modbus and the firmware under QEMU)");
     // The default members: the firmware is cross-built below; on the host only its framing by
@@ -215,6 +225,53 @@ fn firmware() -> Result<(), String> {
     }
     // The QEMU build shares the output path: keep the board's ELF for `tick-cost`.
     std::fs::copy(&elf, elf_dir().join("firmware-g474")).map_err(|e| e.to_string())?;
+    bootloader()
+}
+
+/// The boot loader's target directory: its own, it is a workspace of its own.
+fn bootloader_target() -> PathBuf {
+    root().join("target").join("bootloader")
+}
+
+/// Builds the boot loader (`bootloader/`, a workspace of its own, size-optimised) into
+/// `target/bootloader`, reports its flash against its region and its RAM, and fails unless it
+/// fits the region and starts at the start of flash.
+fn bootloader() -> Result<(), String> {
+    let dir = bootloader_target();
+    let started = Instant::now();
+    run(cargo()
+        .current_dir(root().join("bootloader"))
+        .args(["build", "--release", "--target", TARGET, "--target-dir"])
+        .arg(&dir))?;
+    let elf = dir.join(TARGET).join("release").join("bootloader");
+    let sections = section_table(&elf)?;
+    let size = |name: &str| section_size(&sections, name);
+    let flash = size(".vector_table") + size(".text") + size(".rodata") + size(".data");
+    let statics = size(".data") + size(".bss") + size(".uninit");
+    println!(
+        "boot loader (STM32G474CE): flash {flash} B of its {BOOTLOADER_CAPACITY} B region ({:.1} %), built in {:.1} s",
+        percent(flash, BOOTLOADER_CAPACITY),
+        started.elapsed().as_secs_f64()
+    );
+    let g = CallGraph::read(&elf)?;
+    let stack = g.roots("Reset", true).first().map(|&r| g.depth(r, &mut vec![], &mut Default::default()));
+    println!(
+        "boot loader (STM32G474CE): RAM {statics} B of statics, {} B of stack by the call graph (its page buffer \
+         included), of the {RAM_CAPACITY} B the image has after it",
+        stack.map_or_else(|| "?".into(), |s| s.to_string())
+    );
+    let vectors = symbol(&nm_symbols(&elf, &[])?, "__vector_table")?;
+    if flash == 0 || vectors != BOOTLOADER_START {
+        return Err(format!(
+            "the boot loader's vector table is at {vectors:#x}, not at the start of flash ({BOOTLOADER_START:#x})"
+        ));
+    }
+    if flash > BOOTLOADER_CAPACITY {
+        return Err(format!("the boot loader, {flash} B, does NOT FIT its {BOOTLOADER_CAPACITY} B region"));
+    }
+    if statics + stack.unwrap_or(0) > RAM_CAPACITY {
+        return Err("the boot loader's RAM does not fit the chip".into());
+    }
     Ok(())
 }
 
