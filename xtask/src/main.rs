@@ -7,7 +7,7 @@
 //! - `masters`: run pymodbus and mbpoll against the simulator (native and DS-CLS9 maps).
 //! - `firmware`: cross-build the firmware, print its size and its stack by the call graph against
 //!   the budgets, fail if it does not fit the chip or if the tick reaches software floating
-//!   point.
+//!   point; then the boot loader (`bootloader/`), its size against its region.
 //! - `qemu --tcp HOST:PORT [--map NAME]`: build the QEMU variant and run it with its USART on that
 //!   port (switched to map NAME as a master would: 0x2190, a save, a reset), and QEMU's monitor on
 //!   the port it prints second (`system_reset` restarts the chip, its store kept).
@@ -50,6 +50,11 @@ const QEMU_STORE_WORDS: usize = 16 * 1024 / 4;
 const RAM_END: u64 = 0x2000_0000 + RAM_CAPACITY;
 /// Where the program's slot starts (ACTIVE, behind the boot loader): QEMU starts the core there.
 const ACTIVE_START: u64 = 0x0800_8000;
+/// The start of flash: the boot loader's region (BOOTLOADER, `firmware/src/flash_map.rs`), up to
+/// ACTIVE, where the core starts.
+const BOOTLOADER_START: u64 = 0x0800_0000;
+/// The boot loader's region, 32 KiB: `firmware` fails if the boot loader does not fit it.
+const BOOTLOADER_CAPACITY: u64 = ACTIVE_START - BOOTLOADER_START;
 
 fn main() -> ExitCode {
     let task = std::env::args().nth(1).unwrap_or_default();
@@ -108,6 +113,8 @@ fn step(name: &str) {
 fn ci() -> Result<(), String> {
     step("rustfmt");
     run(cargo().args(["fmt", "--all", "--check"]))?;
+    // The boot loader is a workspace of its own.
+    run(cargo().current_dir(root().join("bootloader")).args(["fmt", "--check"]))?;
     step("clippy (host)");
     run(cargo().args(["clippy", "--workspace", "--all-targets", "--", "-D", "warnings"]))?;
     step("rustdoc (host): every doc link resolves and names a public item");
@@ -115,6 +122,12 @@ fn ci() -> Result<(), String> {
     step("clippy (firmware)");
     // The G474 binary and its HIL suite.
     run(cargo().args(firmware_args("clippy", &["--bin", "firmware", "--test", "hil"])).args(["--", "-D", "warnings"]))?;
+    // The boot loader, a workspace of its own, in the target directory its build uses.
+    run(cargo()
+        .current_dir(root().join("bootloader"))
+        .args(["clippy", "--release", "--target", TARGET, "--target-dir"])
+        .arg(bootloader_target())
+        .args(["--", "-D", "warnings"]))?;
     // drive-tests' `qemu` test boots the firmware under QEMU (`cargo xtask qemu`) for tokio-modbus.
     step("tests (host, including the register reference, tokio-modbus and the firmware under QEMU)");
     // The default members: the firmware is cross-built below; on the host only its framing by
@@ -153,26 +166,37 @@ fn elf_dir() -> PathBuf {
     root().join("target").join(TARGET).join("firmware")
 }
 
+/// The sections of `elf`: name, size and address, as `arm-none-eabi-size -A` lists them.
+fn section_table(elf: &Path) -> Result<Vec<(String, u64, u64)>, String> {
+    let out = Command::new("arm-none-eabi-size")
+        .arg("-A")
+        .arg(elf)
+        .output()
+        .map_err(|e| format!("arm-none-eabi-size (install binutils-arm-none-eabi, .ci/install does): {e}"))?;
+    Ok(String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| {
+            let mut f = l.split_whitespace();
+            let name = f.next()?.to_string();
+            let size = f.next()?.parse().ok()?;
+            let addr = f.next()?.parse().ok()?;
+            Some((name, size, addr))
+        })
+        .collect())
+}
+
+/// The total size of the sections of `table` called `name`.
+fn section_size(table: &[(String, u64, u64)], name: &str) -> u64 {
+    table.iter().filter(|(n, _, _)| n == name).map(|(_, size, _)| size).sum()
+}
+
 /// Builds the G474 firmware, reports it by part against the flash and RAM budgets, and fails
 /// over either or if it does not fit the chip.
 fn firmware() -> Result<(), String> {
     run(cargo().args(firmware_args("build", &[])))?;
     let elf = elf_dir().join("firmware");
-    let out = Command::new("arm-none-eabi-size")
-        .arg("-A")
-        .arg(&elf)
-        .output()
-        .map_err(|e| format!("arm-none-eabi-size (install binutils-arm-none-eabi, .ci/install does): {e}"))?;
-    let sections = String::from_utf8_lossy(&out.stdout);
-    let size = |name: &str| -> u64 {
-        sections
-            .lines()
-            .filter_map(|l| {
-                let mut f = l.split_whitespace();
-                (f.next() == Some(name)).then(|| f.next().and_then(|n| n.parse::<u64>().ok())).flatten()
-            })
-            .sum()
-    };
+    let sections = section_table(&elf)?;
+    let size = |name: &str| section_size(&sections, name);
     let flash = size(".boot_stub") + size(".vector_table") + size(".text") + size(".rodata") + size(".data");
     let statics = size(".data") + size(".bss") + size(".uninit");
     println!(
@@ -187,7 +211,7 @@ fn firmware() -> Result<(), String> {
     if flash == 0 {
         return Err(format!("no sections read from {}", elf.display()));
     }
-    check_boot(&elf)?;
+    check_boot(&elf, false)?;
     flash_by_part(&elf, flash)?;
     call_graph_checks(&elf, statics)?;
     if flash > FLASH_CAPACITY || statics > RAM_CAPACITY {
@@ -201,6 +225,53 @@ fn firmware() -> Result<(), String> {
     }
     // The QEMU build shares the output path: keep the board's ELF for `tick-cost`.
     std::fs::copy(&elf, elf_dir().join("firmware-g474")).map_err(|e| e.to_string())?;
+    bootloader()
+}
+
+/// The boot loader's target directory: its own, it is a workspace of its own.
+fn bootloader_target() -> PathBuf {
+    root().join("target").join("bootloader")
+}
+
+/// Builds the boot loader (`bootloader/`, a workspace of its own, size-optimised) into
+/// `target/bootloader`, reports its flash against its region and its RAM, and fails unless it
+/// fits the region and starts at the start of flash.
+fn bootloader() -> Result<(), String> {
+    let dir = bootloader_target();
+    let started = Instant::now();
+    run(cargo()
+        .current_dir(root().join("bootloader"))
+        .args(["build", "--release", "--target", TARGET, "--target-dir"])
+        .arg(&dir))?;
+    let elf = dir.join(TARGET).join("release").join("bootloader");
+    let sections = section_table(&elf)?;
+    let size = |name: &str| section_size(&sections, name);
+    let flash = size(".vector_table") + size(".text") + size(".rodata") + size(".data");
+    let statics = size(".data") + size(".bss") + size(".uninit");
+    println!(
+        "boot loader (STM32G474CE): flash {flash} B of its {BOOTLOADER_CAPACITY} B region ({:.1} %), built in {:.1} s",
+        percent(flash, BOOTLOADER_CAPACITY),
+        started.elapsed().as_secs_f64()
+    );
+    let g = CallGraph::read(&elf)?;
+    let stack = g.roots("Reset", true).first().map(|&r| g.depth(r, &mut vec![], &mut Default::default()));
+    println!(
+        "boot loader (STM32G474CE): RAM {statics} B of statics, {} B of stack by the call graph (its page buffer \
+         included), of the {RAM_CAPACITY} B the image has after it",
+        stack.map_or_else(|| "?".into(), |s| s.to_string())
+    );
+    let vectors = symbol(&nm_symbols(&elf, &[])?, "__vector_table")?;
+    if flash == 0 || vectors != BOOTLOADER_START {
+        return Err(format!(
+            "the boot loader's vector table is at {vectors:#x}, not at the start of flash ({BOOTLOADER_START:#x})"
+        ));
+    }
+    if flash > BOOTLOADER_CAPACITY {
+        return Err(format!("the boot loader, {flash} B, does NOT FIT its {BOOTLOADER_CAPACITY} B region"));
+    }
+    if statics + stack.unwrap_or(0) > RAM_CAPACITY {
+        return Err("the boot loader's RAM does not fit the chip".into());
+    }
     Ok(())
 }
 
@@ -464,7 +535,7 @@ fn build_qemu() -> Result<PathBuf, String> {
     // processes at once, and a rename never shows another one a half-written file.
     let part = elf_dir().join(format!("firmware-qemu.{}", std::process::id()));
     std::fs::copy(elf_dir().join("firmware"), &part).map_err(|e| format!("{}: {e}", part.display()))?;
-    check_boot(&part)?;
+    check_boot(&part, true)?;
     std::fs::rename(&part, &elf).map_err(|e| format!("{}: {e}", elf.display()))?;
     Ok(elf)
 }
@@ -538,19 +609,29 @@ fn section_bytes(elf: &Path, name: &str, n: usize) -> Result<Vec<u8>, String> {
     }
 }
 
-/// Fails unless `elf` starts where the core starts: its vector table at ACTIVE, and the boot
-/// loader's stand-in at the start of flash holding the same stack pointer and reset vector
-/// (`memory.x`), so that a board flashed with the image alone, and QEMU, boot it.
-fn check_boot(elf: &Path) -> Result<(), String> {
+/// Fails unless `elf` starts where it is started: its vector table at ACTIVE, and with `stub`
+/// (the QEMU build, which has no boot loader) the boot loader's stand-in at the start of flash
+/// holding the same stack pointer and reset vector (`firmware/boot_stub.x`), where QEMU starts
+/// the core. Without it (the G474 build) nothing of the image may lie in the boot loader's
+/// region: flashing the image must leave the boot loader whole.
+fn check_boot(elf: &Path, stub: bool) -> Result<(), String> {
     let vectors = symbol(&nm_symbols(elf, &[])?, "__vector_table")?;
     if vectors != ACTIVE_START {
         return Err(format!("the vector table is at {vectors:#x}, not at ACTIVE ({ACTIVE_START:#x})"));
     }
-    let (stub, table) = (section_bytes(elf, ".boot_stub", 8)?, section_bytes(elf, ".vector_table", 8)?);
-    if stub != table {
-        return Err(format!("the boot stand-in {stub:02x?} is not the vector table's {table:02x?}"));
+    if stub {
+        let (stub, table) = (section_bytes(elf, ".boot_stub", 8)?, section_bytes(elf, ".vector_table", 8)?);
+        if stub != table {
+            return Err(format!("the boot stand-in {stub:02x?} is not the vector table's {table:02x?}"));
+        }
+        return Ok(());
     }
-    Ok(())
+    let below: Vec<String> = section_table(elf)?
+        .into_iter()
+        .filter(|&(_, size, addr)| size > 0 && (BOOTLOADER_START..ACTIVE_START).contains(&addr))
+        .map(|(name, _, addr)| format!("{name} at {addr:#x}"))
+        .collect();
+    if below.is_empty() { Ok(()) } else { Err(format!("the image writes into the boot loader's region: {below:?}")) }
 }
 
 /// Boots `elf` on QEMU's b-l475e-iot01a with USART1 a TCP server on `host:port`.
