@@ -53,7 +53,7 @@ pub const BOOTLOADER: Region = Region {
     name: "BOOTLOADER",
     start: FLASH_START,
     len: 32 * 1024,
-    why: "the boot loader (embassy-boot with its flash driver and logs, about 16 KiB); twice that for room. Until it exists, its first two words start the image (memory.x)",
+    why: "embassy-boot's boot loader (`bootloader/`: its flash driver, no logs, about 5 KiB); the region leaves room for logs or a recovery over the bus. The QEMU build, which has none, puts the image's first two words here (firmware/boot_stub.x)",
 };
 
 /// The image that runs.
