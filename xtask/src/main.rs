@@ -73,12 +73,13 @@ fn main() -> ExitCode {
         "tick-cost" => tick_cost().and_then(|()| core_tick_cost()),
         "keygen" => keygen(&std::env::args().skip(2).collect::<Vec<_>>()),
         "sign" => sign(&std::env::args().skip(2).collect::<Vec<_>>()),
+        "image" => image(&std::env::args().skip(2).collect::<Vec<_>>()),
         // The soak in release (the simulator runs ~30x faster than in a debug build).
         "soak" => run(cargo()
             .args(["run", "--release", "-q", "-p", "hal-sim", "--bin", "soak", "--"])
             .args(std::env::args().skip(2))),
         _ => Err(format!(
-            "usage: cargo xtask <ci|docs|masters|firmware|qemu --tcp HOST:PORT|hil|tick-cost|soak [--seed S --hours H --minutes M --axes N --trace]|keygen PREFIX|sign --key FILE --board g474|qemu|sim --version X.Y.Z [--store N] PROGRAM IMAGE>, not {task:?}"
+            "usage: cargo xtask <ci|docs|masters|firmware|qemu --tcp HOST:PORT|hil|tick-cost|soak [--seed S --hours H --minutes M --axes N --trace]|keygen PREFIX|sign --key FILE --board g474|qemu|sim --version X.Y.Z [--store N] PROGRAM IMAGE|image --key FILE --version X.Y.Z [IMAGE]>, not {task:?}"
         )),
     };
     match result {
@@ -1182,6 +1183,46 @@ fn read_key(path: &str) -> Result<[u8; 32], String> {
     let bytes: Result<Vec<u8>, _> =
         (0..text.len()).step_by(2).map(|i| u8::from_str_radix(text.get(i..i + 2).unwrap_or("x"), 16)).collect();
     bytes.ok().and_then(|b| b.try_into().ok()).ok_or(format!("{path}: not 32 bytes in hex"))
+}
+
+/// `cargo xtask image --key FILE --version X.Y.Z [IMAGE]`: the G474 firmware built to take images
+/// signed with the key pair of FILE (its `.pub` beside it, as `keygen` writes them), its program
+/// as `objcopy -O binary` gives it, and that program signed with FILE: an image to send to drives
+/// that run a firmware built with the same key (`target/firmware-g474.img` unless IMAGE says).
+fn image(args: &[String]) -> Result<(), String> {
+    let usage = "usage: cargo xtask image --key FILE --version X.Y.Z [IMAGE]";
+    let (mut key, mut version, mut out) = (None, None, None);
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        match a.as_str() {
+            "--key" => key = it.next().cloned(),
+            "--version" => version = it.next().cloned(),
+            other if out.is_none() => out = Some(PathBuf::from(other)),
+            _ => return Err(usage.into()),
+        }
+    }
+    let (Some(key), Some(version)) = (key, version) else { return Err(usage.into()) };
+    let secret = ed25519_dalek::SigningKey::from_bytes(&read_key(&key)?);
+    let public = Path::new(&key).with_extension("pub");
+    let public = std::fs::canonicalize(&public).map_err(|e| format!("{}: {e}", public.display()))?;
+    if read_key(path_str(&public)?)? != secret.verifying_key().to_bytes() {
+        return Err(format!("{} is not the public key of {key}", public.display()));
+    }
+    run(cargo().args(firmware_args("build", &[])).env("OSD_UPDATE_KEY", &public))?;
+    let elf = elf_dir().join("firmware");
+    let program = elf_dir().join("firmware-g474.bin");
+    let status = Command::new("arm-none-eabi-objcopy")
+        .args(["-O", "binary"])
+        .arg(&elf)
+        .arg(&program)
+        .status()
+        .map_err(|e| format!("arm-none-eabi-objcopy (binutils-arm-none-eabi, .ci/install): {e}"))?;
+    if !status.success() {
+        return Err(format!("objcopy: {status}"));
+    }
+    let out = out.unwrap_or_else(|| root().join("target/firmware-g474.img"));
+    let args = ["--key", &key, "--board", "g474", "--version", &version, path_str(&program)?, path_str(&out)?];
+    sign(&args.map(String::from))
 }
 
 /// `cargo xtask sign --key FILE --board B --version X.Y.Z [--store N] PROGRAM IMAGE`: the image
