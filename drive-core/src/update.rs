@@ -353,9 +353,10 @@ pub enum RecordError {
     Refused(Reason),
 }
 
-/// Bytes of program a transfer holds until the flash takes them: a record's (at most 244) and
-/// what a double word left of the one before.
-const STAGE: usize = 256;
+/// Bytes of program a transfer holds until the flash takes them: a request's records (at most
+/// 244 bytes), what a double word left of the request before (at most 6: records are whole
+/// registers) and the last double word's padding.
+const STAGE: usize = 264;
 /// The flash's unit of programming: bytes written are whole double words.
 pub const WRITE_UNIT: usize = 8;
 
@@ -544,7 +545,7 @@ impl Transfer {
     /// Abandons the transfer (0x2256 = 1): nothing is marked, the slot is written again by the
     /// next one. Refused while the image is being installed.
     pub fn abort(&mut self) -> Result<(), RecordError> {
-        if self.installing {
+        if self.installing || self.status.phase == Phase::Installing {
             return Err(RecordError::Busy);
         }
         *self = Self::default();

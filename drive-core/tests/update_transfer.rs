@@ -224,6 +224,27 @@ fn bad_records_change_nothing() {
 }
 
 #[test]
+fn records_of_any_whole_registers_are_taken() {
+    // Records that leave 2, 4 or 6 bytes short of a double word before a full one.
+    let img = image(&test_key(), Board::Simulator, &program(5000), 1);
+    for first in [2usize, 100, 242, 244] {
+        let mut r = Rig::new(Maps::by_id(0));
+        r.send(0, &img[..first]).expect("first");
+        let mut at = first;
+        while at < img.len() {
+            let n = (img.len() - at).min(244);
+            let mut data = img[at..at + n].to_vec();
+            if data.len() % 2 == 1 {
+                data.push(0);
+            }
+            r.send(at as u32, &data).unwrap_or_else(|e| panic!("a first record of {first}: at {at}: {e}"));
+            at += n;
+        }
+        assert_eq!(r.status().0, 3, "a first record of {first}");
+    }
+}
+
+#[test]
 fn no_install_while_moving_and_records_while_moving() {
     let img = image(&test_key(), Board::Simulator, &program(1000), 1);
     let mut r = Rig::new(Maps::by_id(0));

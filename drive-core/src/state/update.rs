@@ -4,7 +4,7 @@
 use super::{DriveState, ProgramMemory, STORAGE_SAVING};
 use crate::controller::Shared;
 use crate::od::{Obj, ObjError};
-use crate::update::{BootState, RecordError, Target, Transfer};
+use crate::update::{BootState, Phase, RecordError, Target, Transfer};
 use core::borrow::Borrow;
 
 /// 0x2256: abandon the transfer.
@@ -83,7 +83,7 @@ impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
                 Ok(()) | Err(RecordError::Refused(_)) => Ok(()),
                 Err(e) => Err(refusal(e)),
             },
-            (Obj::UpdateControl, ABORT) => t.clone().abort().map_err(refusal),
+            (Obj::UpdateControl, ABORT) if t.status().phase == Phase::Installing => Err(ObjError::Busy),
             (Obj::Unlock, 0) => Ok(()),
             (Obj::Unlock, v) if v == self.param(Obj::Password) => Ok(()),
             (Obj::Unlock, _) => Err(ObjError::OutOfRange),
