@@ -627,6 +627,54 @@ impl Transfer {
     }
 }
 
+/// The check of the image a slot holds, a piece at a time ([`check_slot`] runs it whole): its
+/// trailer first, then the program in the pieces [`SlotCheck::next`] names, then the verdict. A
+/// platform whose watchdog is fed by another task lets that task run between pieces.
+#[derive(Clone, Debug)]
+pub struct SlotCheck {
+    header: Header,
+    signature: [u8; SIGNATURE_LEN],
+    verifier: Verifier,
+    at: u32,
+}
+
+impl SlotCheck {
+    /// Bytes of program a piece holds at most.
+    pub const PIECE: u32 = 2048;
+
+    /// The check of the slot whose trailer (its bytes at [`TRAILER`]) is `trailer`.
+    pub fn start(trailer: &[u8; TRAILER_LEN]) -> Result<Self, Refusal> {
+        let (head, sig) = trailer.split_at(HEADER_LEN);
+        let header = Header::parse(head)?;
+        if header.length > MAX_PROGRAM {
+            return Err(Refusal::Length);
+        }
+        let mut verifier = Verifier::new();
+        verifier.absorb(head);
+        let signature = sig.try_into().map_err(|_| Refusal::Signature)?;
+        Ok(Self { header, signature, verifier, at: 0 })
+    }
+
+    /// The next piece of program to read, where and how long; `None` once all are taken.
+    pub fn next(&self) -> Option<(u32, usize)> {
+        (self.at < self.header.length).then(|| (self.at, (self.header.length - self.at).min(Self::PIECE) as usize))
+    }
+
+    /// Takes the piece [`SlotCheck::next`] named, as the slot holds it.
+    pub fn absorb(&mut self, piece: &[u8]) {
+        self.verifier.absorb(piece);
+        self.at += piece.len() as u32;
+    }
+
+    /// The verdict, once every piece is taken, for a drive that is `target`.
+    pub fn finish(self, target: &Target) -> Result<Header, Refusal> {
+        if self.next().is_some() {
+            return Err(Refusal::Length);
+        }
+        self.verifier.finish(&self.signature, &target.key, target.board, target.store)
+    }
+}
+
 /// Checks the image a slot holds ([`TRAILER`]: its header and signature after its program),
 /// reading the slot through `read(offset, buf)` (false: the flash failed): what an install does
 /// before it marks the slot for the boot loader, so that what boots is what was signed, as the
@@ -636,24 +684,14 @@ pub fn check_slot(mut read: impl FnMut(u32, &mut [u8]) -> bool, target: &Target)
     if !read(TRAILER, &mut trailer) {
         return Err(Refusal::NotAnImage);
     }
-    let (head, sig) = trailer.split_at(HEADER_LEN);
-    let header = Header::parse(head)?;
-    if header.length > MAX_PROGRAM {
-        return Err(Refusal::Length);
-    }
-    let mut verifier = Verifier::new();
-    verifier.absorb(head);
+    let mut check = SlotCheck::start(&trailer)?;
     let mut buf = [0u8; 256];
-    let mut at = 0;
-    while at < header.length {
-        let n = (header.length - at).min(buf.len() as u32) as usize;
-        let chunk = buf.get_mut(..n).unwrap_or_default();
-        if !read(at, chunk) {
+    while let Some((at, n)) = check.next() {
+        let piece = buf.get_mut(..n.min(256)).unwrap_or_default();
+        if !read(at, piece) {
             return Err(Refusal::Length);
         }
-        verifier.absorb(chunk);
-        at += n as u32;
+        check.absorb(piece);
     }
-    let signature: [u8; SIGNATURE_LEN] = sig.try_into().map_err(|_| Refusal::Signature)?;
-    verifier.finish(&signature, &target.key, target.board, target.store)
+    check.finish(target)
 }

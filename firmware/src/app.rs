@@ -231,7 +231,7 @@ async fn after_request(
         serve_store(drive, store);
     }
     // The DFU slot and the update state lie in bank 2 (QEMU: RAM), beside the running code.
-    if updates.serve(drive, store.flash()) {
+    if updates.serve(drive, store.flash()).await {
         if serial.flush().await.is_err() {
             warn!("uart: flush failed");
         }

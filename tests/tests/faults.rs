@@ -352,8 +352,17 @@ async fn a_stall_in_open_loop_sets_bit_2_and_stops_the_motor() {
     assert_eq!(r.reg(0x6001).await, 1 << 3, "running freely: busy, no stall");
     r.injector.inject(Change::Blocked(true));
     r.wait_for(0x6001, 1 << 2).await;
-    // Stopped (0x6043 = 1), not faulted: the power stage stays on, moves are refused.
-    let s = r.snapshot();
+    // Stopped (0x6043 = 1), not faulted: the power stage stays on, moves are refused. The
+    // simulator publishes its snapshot as its loop catches up, which may be a step behind the
+    // reply that showed the stall: a few milliseconds to show the stop.
+    let mut s = r.snapshot();
+    for _ in 0..50 {
+        if s.velocity == 0.0 {
+            break;
+        }
+        sleep(Duration::from_millis(2)).await;
+        s = r.snapshot();
+    }
     assert_eq!(s.velocity, 0.0, "{s:?}");
     assert!(s.enabled);
     assert_eq!(r.relative(100).await, Err(ExceptionCode::ServerDeviceFailure));

@@ -905,6 +905,7 @@ fn core_tick_cost() -> Result<(), String> {
     println!("control tick of drive-core on the Cortex-M4 (QEMU -icount), the cases of firmware/src/bin/tick_cost.rs:");
     let mut over_budget = false;
     let mut longest_request = 0.0f64;
+    let mut image: Vec<(String, f64)> = Vec::new();
     for line in text.lines() {
         // `tick_cost NAME mean M most N counts`
         let words: Vec<&str> = line.split_whitespace().collect();
@@ -929,6 +930,12 @@ fn core_tick_cost() -> Result<(), String> {
                     "  request {name:14} {spent:7.0} instructions to serve ({:.2} ms of the bus task; the tick runs on meanwhile)",
                     spent / 170e3,
                 );
+            }
+            // `image NAME N counts`: the image check's parts.
+            ["image", name, spent, "counts"] => {
+                let spent = spent.parse::<f64>().map_err(|e| format!("{line}: {e}"))? * per_count;
+                image.push((name.to_string(), spent));
+                println!("  image check: {name:14} {spent:8.0} instructions ({:.1} ms at 170 MHz)", spent / 170e3);
             }
             // `tick_cost handover synced N planned M counts`
             ["tick_cost", "handover", "synced", synced, "planned", planned, "counts"] => {
@@ -960,6 +967,23 @@ fn core_tick_cost() -> Result<(), String> {
             "a request keeps the Modbus task long enough for {arriving:.0} bytes to overrun the {RX_RING} B ring"
         ));
     }
+    // The install's check of the largest image (the slot's 192 KiB budget): the digest of its
+    // bytes, a piece of 2 KiB at a time with the other tasks run between pieces (the sense task
+    // feeds the watchdog), and the signature's check in one go, the longest stretch without them.
+    let part = |name: &str| image.iter().find(|(n, _)| n == name).map(|&(_, v)| v);
+    let (Some(digest), Some(signature)) = (part("digest_8k"), part("signature")) else {
+        return Err("tick_cost printed no image check".into());
+    };
+    let share = 170e6 * (1.0 - TICK_MEAN_BUDGET / TICK_CYCLES);
+    let (install_s, stretch_s) = ((digest * 24.0 + signature) / share, signature.max(digest / 4.0) / share);
+    println!(
+        "  install check of a 192 KiB image: {:.0} ms of the bus task at 170 MHz, the tick preempting it; at most {:.1} ms without the other tasks (the watchdog allows {WATCHDOG_MS} ms)",
+        install_s * 1e3,
+        stretch_s * 1e3
+    );
+    if stretch_s * 1e3 > f64::from(WATCHDOG_MS) / 5.0 {
+        return Err(format!("the install's check keeps the other tasks waiting {:.0} ms", stretch_s * 1e3));
+    }
     if over_budget {
         return Err(format!(
             "OVER the control work's budget: a mean of {TICK_MEAN_BUDGET:.0} instructions (30 % of a period), at most {TICK_MOST_BUDGET:.0} in one"
@@ -967,6 +991,10 @@ fn core_tick_cost() -> Result<(), String> {
     }
     Ok(())
 }
+
+/// The G474's independent watchdog: it resets the chip after this many ms without a feed, which
+/// the sense task gives; the install's check may keep that task waiting a fifth of it at most.
+const WATCHDOG_MS: u32 = 500;
 
 /// How long `probe` tries to reach the drive under QEMU.
 const PROBE_FOR: Duration = Duration::from_secs(60);

@@ -28,7 +28,7 @@ const WINDOW: u16 = 0x1000;
 /// The answer to a frame whose CRC is wrong, while 0x21D2 asks for one (§1.3.4's example).
 const CRC_ERROR: u8 = 0x01;
 
-/// Exception 02: a function other than 03, 06 and 16 (and 0x08 and 0x2B).
+/// Exception 02: a function other than 03, 06 and 16 (and 0x08, 0x15 and 0x2B).
 const FUNCTION: Exception = Exception::Vendor(2);
 /// Exception 03: an index and sub-index outside the table.
 const ADDRESS: Exception = Exception::Vendor(3);
@@ -284,8 +284,8 @@ pub static REFERENCE: super::doc::Reference = super::doc::Reference {
     title: "EC-57 map (seed 003)",
     notes: &[
         "Chosen with 0x2190 = 3 (in this map: index 0x2190, sub-index 0xFF), saved, from the next power-up; `hal-sim --map ec57` for one run. Writing 3 to the native map's 0x2190 and saving switches to it; 0x2190 sub-index 0xFF = 0 and a save (0x2030 = 1) switch back.",
-        "Requests carry a sub-index byte after the two-byte index (§1.3): `01 03 20 00 00 00 01` reads 0x2000 sub-index 0. Functions 03, 06 and 16; a multi-register request walks the table below in its (index, sub-index) order from the entry it names (0x2003 has sub-indices 1 and 2, no 0), 16 registers at most. Replies are the manual's: 03 returns the byte count and values, 06 echoes the request, 16 echoes index, sub-index and count. The Modbus diagnostics 0x08 and identification 0x2B are answered too.",
-        "Exception codes (§1.3.4, table 1.3): 02 a function other than 03, 06, 16 (and 0x08, 0x2B); 03 an index and sub-index outside the table; 04 more than 16 registers, or none; 05 a read of the write-only 0x2030 or a write of a read-only register; 06 a value out of range, a wrong length or byte count, and a value the drive cannot take in its state (writing 0x2005 while the motor moves, say), which the manual has no code for.",
+        "Requests carry a sub-index byte after the two-byte index (§1.3): `01 03 20 00 00 00 01` reads 0x2000 sub-index 0. Functions 03, 06 and 16; a multi-register request walks the table below in its (index, sub-index) order from the entry it names (0x2003 has sub-indices 1 and 2, no 0), 16 registers at most. Replies are the manual's: 03 returns the byte count and values, 06 echoes the request, 16 echoes index, sub-index and count. The Modbus diagnostics 0x08, identification 0x2B and the firmware update's write file record 0x15 (`updates.md`) are answered too.",
+        "Exception codes (§1.3.4, table 1.3): 02 a function other than 03, 06, 16 (and 0x08, 0x15, 0x2B); 03 an index and sub-index outside the table; 04 more than 16 registers, or none; 05 a read of the write-only 0x2030 or a write of a read-only register; 06 a value out of range, a wrong length or byte count, and a value the drive cannot take in its state (writing 0x2005 while the motor moves, say), which the manual has no code for.",
         "A frame whose CRC is wrong is dropped, as §1.3.4's text and the Modbus serial line say; 0x21D2 = 1 (in the window) answers it with exception 01 as the manual's example does (`01 83 01 80 F0`), if it began with this drive's address.",
         "The window: sub-index 0xFF addresses the drive's native register at the index (seed 000's map, `registers.md`): `01 03 60 0C FF 00 01` reads the native 0x600C. The EC-57's motion comes over its fieldbus, which this drive does not have; the window is how a master moves it (0x21A0 motion commands, 0x6005 relative moves, ...), saves (0x200F), and switches maps (0x2190). Its refusals take this map's codes: 02 → 03, 03 and 04 → 06.",
         "0x2000 is the node id and 0x2001 its source, from the next power-up once saved (0x2030 = 1): 0 (the factory value) the serial port's fixed address 1, as the manual says of the EC-57's serial port; 1 the address 0x2000 holds (1-127). A platform that sets the address (the simulator's `--address`, its `--axes`) overrides both.",
