@@ -55,38 +55,25 @@ impl Identity {
     }
 }
 
-/// The crate's version as a firmware image's header has it: major << 16 | minor << 8 | patch.
-pub const VERSION: u32 = {
-    #[allow(clippy::indexing_slicing)] // const evaluation: out of bounds is a compile error
-    const fn number(s: &str) -> u32 {
-        let b = s.as_bytes();
-        let (mut n, mut i) = (0u32, 0);
-        while i < b.len() {
-            if let Some(d) = (b[i] as char).to_digit(10) {
-                n = n * 10 + d;
-            }
-            i += 1;
+/// The number a version part's digits make (a cargo version part is digits only).
+#[allow(clippy::indexing_slicing)] // const evaluation: out of bounds is a compile error
+const fn number(s: &str) -> u32 {
+    let b = s.as_bytes();
+    let (mut n, mut i) = (0u32, 0);
+    while i < b.len() {
+        if let Some(d) = (b[i] as char).to_digit(10) {
+            n = n * 10 + d;
         }
-        n
+        i += 1;
     }
-    number(env!("CARGO_PKG_VERSION_MAJOR")) << 16
-        | number(env!("CARGO_PKG_VERSION_MINOR")) << 8
-        | number(env!("CARGO_PKG_VERSION_PATCH"))
-};
+    n
+}
+
+/// The crate's version as a firmware image's header has it: major << 16 | minor << 8 | patch.
+pub const VERSION: u32 = number(env!("CARGO_PKG_VERSION_MAJOR")) << 16
+    | number(env!("CARGO_PKG_VERSION_MINOR")) << 8
+    | number(env!("CARGO_PKG_VERSION_PATCH"));
 
 /// The crate's version as major × 100 + minor (`0.1.x` is 1).
-pub const SOFTWARE_REVISION: u16 = {
-    #[allow(clippy::indexing_slicing)] // const evaluation: out of bounds is a compile error
-    const fn number(s: &str) -> u16 {
-        let b = s.as_bytes();
-        let (mut n, mut i) = (0u16, 0);
-        while i < b.len() {
-            if let Some(d) = (b[i] as char).to_digit(10) {
-                n = n * 10 + d as u16;
-            }
-            i += 1;
-        }
-        n
-    }
-    number(env!("CARGO_PKG_VERSION_MAJOR")) * 100 + number(env!("CARGO_PKG_VERSION_MINOR"))
-};
+pub const SOFTWARE_REVISION: u16 =
+    (number(env!("CARGO_PKG_VERSION_MAJOR")) * 100 + number(env!("CARGO_PKG_VERSION_MINOR"))) as u16;

@@ -49,6 +49,52 @@ pub const TRAILER_LEN: usize = HEADER_LEN + SIGNATURE_LEN;
 /// The longest program a slot takes: the slot up to its trailer.
 pub const MAX_PROGRAM: u32 = TRAILER;
 
+/// The key a key file's text holds (`cargo xtask keygen`'s `.key` and `.pub`): 64 hex digits,
+/// whitespace around them; `None` for anything else. A `const fn`, so that a firmware builds its
+/// key in.
+///
+/// ```
+/// use drive_core::update::{key_from_hex, TEST_KEY};
+/// let text = "3622c52d7d4bb9133ed708391372418beb7b6e050db4c50b1d63a9e18a2d2607\n";
+/// assert_eq!(key_from_hex(text), Some(TEST_KEY));
+/// assert_eq!(key_from_hex("36 22"), None);
+/// ```
+pub const fn key_from_hex(text: &str) -> Option<[u8; KEY_LEN]> {
+    const fn digit(c: u8) -> Option<u8> {
+        match c {
+            b'0'..=b'9' => Some(c - b'0'),
+            b'a'..=b'f' => Some(c - b'a' + 10),
+            b'A'..=b'F' => Some(c - b'A' + 10),
+            _ => None,
+        }
+    }
+    let mut rest = text.as_bytes();
+    while let [c, tail @ ..] = rest
+        && c.is_ascii_whitespace()
+    {
+        rest = tail;
+    }
+    let mut key = [0u8; KEY_LEN];
+    let mut i = 0;
+    while i < KEY_LEN {
+        let [h, l, tail @ ..] = rest else { return None };
+        let (Some(h), Some(l)) = (digit(*h), digit(*l)) else { return None };
+        #[allow(clippy::indexing_slicing, reason = "i < KEY_LEN, the array's length")]
+        {
+            key[i] = h << 4 | l;
+        }
+        rest = tail;
+        i += 1;
+    }
+    while let [c, tail @ ..] = rest {
+        if !c.is_ascii_whitespace() {
+            return None;
+        }
+        rest = tail;
+    }
+    Some(key)
+}
+
 /// The public key of the repository's test key pair (`keys/test.key`, `keys/test.pub`): what
 /// the simulator and the tests check images against. A firmware built with it says so in its
 /// identification; a user's drives carry the user's own.
@@ -244,8 +290,15 @@ pub struct Target {
 
 impl Target {
     /// Whether its key is the repository's test key, which anyone can sign with.
-    pub fn test_key(&self) -> bool {
-        self.key == TEST_KEY
+    pub const fn test_key(&self) -> bool {
+        let (mut a, mut b) = (self.key.as_slice(), TEST_KEY.as_slice());
+        while let ([x, rest_a @ ..], [y, rest_b @ ..]) = (a, b) {
+            if *x != *y {
+                return false;
+            }
+            (a, b) = (rest_a, rest_b);
+        }
+        true
     }
 }
 

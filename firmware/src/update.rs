@@ -5,7 +5,7 @@
 //! its parameter store uses (`board::dfu_at`, `board::state_at`).
 
 use defmt::{info, warn};
-use drive_core::update::{self, BootState, Header, Job, SlotCheck, TEST_KEY, Target};
+use drive_core::update::{self, BootState, Header, Job, SlotCheck, Target};
 use embassy_boot::{FirmwareState, State};
 use embedded_storage_async::nor_flash::{ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash};
 
@@ -14,44 +14,14 @@ use crate::board;
 
 /// The public key images must be signed with: the `.pub` file `OSD_UPDATE_KEY` names (64 hex
 /// digits), the repository's test key unless a build sets it (`.cargo/config.toml`).
-pub const KEY: [u8; 32] = hex_key(include_str!(env!("OSD_UPDATE_KEY")));
+pub const KEY: [u8; 32] = match update::key_from_hex(include_str!(env!("OSD_UPDATE_KEY"))) {
+    Some(key) => key,
+    None => panic!("OSD_UPDATE_KEY: not a key file (64 hex digits)"),
+};
 /// The build takes images signed with the repository's test key, which anyone can sign with.
-pub const TEST: bool = same(&KEY, &TEST_KEY);
+pub const TEST: bool = TARGET.test_key();
 /// What this build takes images for.
 pub const TARGET: Target = Target { board: board::IMAGE_BOARD, key: KEY, store: drive_core::store::VERSION };
-
-/// The 32 bytes of a key file's 64 hex digits; a build error if it holds anything else.
-#[allow(clippy::indexing_slicing, reason = "const evaluation: out of bounds is a compile error")]
-const fn hex_key(text: &str) -> [u8; 32] {
-    const fn digit(c: u8) -> u8 {
-        match c {
-            b'0'..=b'9' => c - b'0',
-            b'a'..=b'f' => c - b'a' + 10,
-            b'A'..=b'F' => c - b'A' + 10,
-            _ => panic!("OSD_UPDATE_KEY: not a hex digit"),
-        }
-    }
-    let b = text.as_bytes();
-    let mut key = [0u8; 32];
-    let mut i = 0;
-    while i < 32 {
-        key[i] = digit(b[2 * i]) << 4 | digit(b[2 * i + 1]);
-        i += 1;
-    }
-    key
-}
-
-#[allow(clippy::indexing_slicing, reason = "const evaluation over two arrays of 32")]
-const fn same(a: &[u8; 32], b: &[u8; 32]) -> bool {
-    let mut i = 0;
-    while i < 32 {
-        if a[i] != b[i] {
-            return false;
-        }
-        i += 1;
-    }
-    true
-}
 
 /// A part of the board's flash addressed from 0, `len` bytes: `at` gives an access's offset in
 /// the flash (`None` outside the part).

@@ -36,9 +36,8 @@ fn image() -> &'static [u8] {
     static IMAGE: OnceLock<Vec<u8>> = OnceLock::new();
     IMAGE.get_or_init(|| {
         use ed25519_dalek::Signer as _;
-        let hex = include_str!("../../keys/test.key").trim();
-        let secret: Vec<u8> = (0..32).map(|k| u8::from_str_radix(&hex[2 * k..2 * k + 2], 16).unwrap_or(0)).collect();
-        let key = ed25519_dalek::SigningKey::from_bytes(&secret.try_into().unwrap_or([0; 32]));
+        let secret = update::key_from_hex(include_str!("../../keys/test.key")).unwrap_or([0; 32]);
+        let key = ed25519_dalek::SigningKey::from_bytes(&secret);
         let program: Vec<u8> = (0..700u32).map(|i| (i * 13 + 5) as u8).collect();
         let header = Header { board: Board::Simulator, version: 0x0002_0000, length: 700, store: 1 };
         let mut bytes = header.to_bytes().to_vec();

@@ -143,12 +143,11 @@ impl Firmware {
 /// The secret half of the repository's test key pair (`keys/test.key`), which the simulator's
 /// images are signed with in the tests: public, as the pair is.
 pub fn test_secret() -> [u8; 32] {
-    let hex = include_str!("../../keys/test.key").trim();
-    let mut key = [0u8; 32];
-    for (k, b) in key.iter_mut().enumerate() {
-        *b = hex.get(2 * k..2 * k + 2).and_then(|h| u8::from_str_radix(h, 16).ok()).unwrap_or(0);
-    }
-    key
+    const SECRET: [u8; 32] = match update::key_from_hex(include_str!("../../keys/test.key")) {
+        Some(key) => key,
+        None => panic!("keys/test.key: not 32 bytes in hex"),
+    };
+    SECRET
 }
 
 /// The image of `program` that `header` describes (its length set to the program's), signed

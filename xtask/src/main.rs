@@ -1207,10 +1207,7 @@ fn hex(bytes: &[u8]) -> String {
 /// The 32 bytes written in hex in the file at `path`.
 fn read_key(path: &str) -> Result<[u8; 32], String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?;
-    let text = text.trim();
-    let bytes: Result<Vec<u8>, _> =
-        (0..text.len()).step_by(2).map(|i| u8::from_str_radix(text.get(i..i + 2).unwrap_or("x"), 16)).collect();
-    bytes.ok().and_then(|b| b.try_into().ok()).ok_or(format!("{path}: not 32 bytes in hex"))
+    drive_core::update::key_from_hex(&text).ok_or(format!("{path}: not 32 bytes in hex"))
 }
 
 /// `cargo xtask image --key FILE --version X.Y.Z [IMAGE]`: the G474 firmware built to take images

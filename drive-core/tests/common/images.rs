@@ -8,10 +8,7 @@ use ed25519_dalek::{Signer, SigningKey};
 pub fn key_file(name: &str) -> [u8; 32] {
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../keys/").to_owned() + name;
     let text = std::fs::read_to_string(&path).expect("key file");
-    let text = text.trim();
-    let bytes: Vec<u8> =
-        (0..text.len()).step_by(2).map(|i| u8::from_str_radix(&text[i..i + 2], 16).expect("hex")).collect();
-    bytes.try_into().expect("32 bytes")
+    drive_core::update::key_from_hex(&text).expect("32 bytes in hex")
 }
 
 /// The repository's test key.
