@@ -557,16 +557,20 @@ const PLAN_LIMITS: Limits = Limits { v_max: 32_000.0, a_max: 77_440.0, d_max: 77
 
 /// `rest`: 200 000 microsteps from rest. `moving`: a re-target 4096 behind while cruising at
 /// full speed (the reversal of `after_retarget_reverse`). `accelerating`: a re-target while
-/// half-way up the acceleration, with acceleration in hand.
+/// half-way up the acceleration, with acceleration in hand. `stop`: to rest from the worst
+/// state, full speed with the full acceleration pushing on (a speed of 0, the stop a velocity
+/// mode plans; the target position is unused).
 fn setup_plan(which: &str) -> PlanCase {
     let start = match which {
         "rest" => State { p: 0.0, v: 0.0, a: 0.0 },
         "moving" => State { p: 0.0, v: 32_000.0, a: 0.0 },
+        "stop" => State { p: 0.0, v: 32_000.0, a: 77_440.0 },
         _ => State { p: 0.0, v: 12_000.0, a: 60_000.0 },
     };
     let target = match which {
         "rest" => 200_000.0,
         "moving" => -4096.0,
+        "stop" => 0.0,
         _ => 50_000.0,
     };
     PlanCase { start, target, limits: PLAN_LIMITS }
@@ -582,12 +586,21 @@ fn plan(case: PlanCase) -> f32 {
     Profile::to_position(c.start, c.target, 0.0, &c.limits).map_or(0.0, |p| p.duration())
 }
 
+// Ours: `Profile::to_velocity` to a speed of 0, the stop a velocity mode plans.
+#[library_benchmark]
+#[bench::stop(args = ("stop"), setup = setup_plan)]
+fn plan_stop(case: PlanCase) -> f32 {
+    let c = black_box(case);
+    Profile::to_velocity(c.start, 0.0, &c.limits).map_or(0.0, |p| p.duration())
+}
+
 // The peer: Ruckig (`rsruckig` 3, the Rust port) on the same case, in revolutions (÷ 6400) as
 // it wants moderate magnitudes; the durations agree with ours (checked in the test suite).
 #[library_benchmark]
 #[bench::rest(args = ("rest"), setup = setup_ruckig)]
 #[bench::moving(args = ("moving"), setup = setup_ruckig)]
 #[bench::accelerating(args = ("accelerating"), setup = setup_ruckig)]
+#[bench::stop(args = ("stop"), setup = setup_ruckig)]
 fn ruckig(mut case: RuckigCase) -> f64 {
     let mut traj = Trajectory::new(None);
     match case.otg.calculate(black_box(&case.input), &mut traj) {
@@ -613,6 +626,10 @@ fn setup_ruckig(which: &str) -> RuckigCase {
     input.max_velocity[0] = f64::from(c.limits.v_max) / SCALE;
     input.max_acceleration[0] = f64::from(c.limits.a_max) / SCALE;
     input.max_jerk[0] = f64::from(c.limits.jerk.unwrap_or(f32::INFINITY)) / SCALE;
+    if which == "stop" {
+        input.control_interface = ControlInterface::Velocity;
+        input.target_velocity[0] = 0.0;
+    }
     RuckigCase { otg: Ruckig::new(None, 0.001), input }
 }
 
@@ -623,7 +640,7 @@ library_benchmark_group!(
 
 library_benchmark_group!(
     name = planning;
-    benchmarks = plan, ruckig
+    benchmarks = plan, plan_stop, ruckig
 );
 
 main!(library_benchmark_groups = control, planning);
