@@ -845,19 +845,47 @@ fn turn_closed(v0: f32, a0: f32, w: Vel, vf: f32, lim: &Lim) -> Option<(f32, f32
     Some((t_lead + t1 + t2, d, slope))
 }
 
-/// The fastest position profile in closed form, when it is a turn: from `(v0, a0)` within
-/// the limits, with the start acceleration not already towards the final velocity (that is
-/// the search's dip family) and pulses of one acceleration limit each ([`turn_closed`]).
+/// Duration, distance and the distance's slope in `a` of the dip family in closed form: from
+/// `(v0, a0)` with the acceleration towards the final velocity (the sign `s`), its magnitude
+/// `s·a0` first ramped at full jerk to `a` (between 0 and `s·a0`), then the pulse to `(vf, 0)`
+/// from there (the tail of a pulse between zero accelerations, as in [`turn_closed`]). `None`
+/// unless the pulse keeps one acceleration limit, the start's within it.
+fn dip_closed(v0: f32, a0: f32, a: f32, vf: f32, s: f32, lim: &Lim) -> Option<(f32, f32, f32)> {
+    let j = lim.j;
+    let tau = (s * a0 - a) / j;
+    let ramp = tau * (v0 + tau * (0.5 * a0 - s * j * tau / 6.0));
+    let apex = v0 + tau * (a0 - 0.5 * s * j * tau);
+    let lead = a / j;
+    let u = apex - s * 0.5 * a * lead;
+    let l = one_limit(u, vf, lim)?;
+    if s * a0 > l {
+        return None;
+    }
+    let (t, dt) = pulse_time((s * (vf - u)).max(0.0), l, j);
+    let m = 0.5 * (u + vf);
+    let d = ramp + m * t - lead * (u + s * j * lead * lead / 6.0);
+    // d(ramp)/da = −apex/j; the pulse's mean speed falls by s·a/j and its speed change grows
+    // by 2a/j as the dip deepens; the lead's distance changes by u/j − 3s·a²/2j².
+    let slope = -apex / j + (2.0 * m * dt - s * t) * a / j - (u / j - 1.5 * s * a * lead / j);
+    Some((tau + t - lead, d, slope))
+}
+
+/// The fastest position profile in closed form: from `(v0, a0)` within the limits, with
+/// pulses of one acceleration limit each ([`turn_closed`], [`dip_closed`]).
 ///
-/// The distance of "pulse to `w`, pulse to `vf`" grows with the turning speed `w` from `−v_max`
-/// to `v_max` (flat between the natural and the final velocity, where both are the direct
-/// profile), so one family holds the answer: a cruise at `±v_max` when the distance is beyond
-/// what the turns there cover, else the one turn that covers it. Its speed solves the closed
-/// form: `w = vi ± z²` from the direct profile's end `vi`, where the distance is smooth in `z`
-/// (a pulse between nearly equal speeds lasts as √Δv), by safeguarded Newton steps (the
-/// distance is a quadratic in `w` while both pulses reach the limit, and a quartic in `z`
-/// otherwise). The pulses are then built (`p1`, `p2`) and checked to land within rounding;
-/// `None` if the move is not of this kind or the check fails (the search then plans it).
+/// The distance of "pulse to `w`, pulse to `vf`" grows with the turning speed `w` on each side
+/// of the direct profile: above the larger of the natural and the final velocity (`hi`) up to
+/// `v_max`, and below the smaller (`lo`) down to `−v_max`. A family is a candidate when its
+/// range of distances holds the move's: a cruise at `±v_max` beyond the turns there, a turn on
+/// either side, and, when the start acceleration is already towards the final velocity, a dip
+/// of it towards zero (from the direct pulse, no dip, to a dip to zero, the turn at the
+/// natural velocity). Each solves its closed form: a turn's speed is `w = vi ± z²` from the
+/// side's inner end `vi`, where the distance is smooth in `z` (a pulse between nearly equal
+/// speeds lasts as √Δv); a dip's depth is its acceleration. Safeguarded Newton steps find
+/// them (the distance is a quadratic in `w` while both pulses reach the limit, and a quartic in
+/// `z` otherwise). The fastest candidate's pulses are then built (`p1`, `p2`) and checked to
+/// land within rounding; `None` if the move is not of this kind or the check fails (the search
+/// then plans it).
 fn closed_pulses(
     v0: f32,
     a0: f32,
@@ -869,84 +897,154 @@ fn closed_pulses(
 ) -> Result<Option<(Cand, Eval)>, PlanError> {
     let vmax = lim.v;
     let vn = lim.v_nat(v0, a0);
-    let direct = if vf >= vn { 1.0 } else { -1.0 };
-    if fabs(v0) > vmax || fabs(vn) > vmax || fabs(vf) > vmax || (lim.smooth() && direct * a0 > 0.0) {
+    if fabs(v0) > vmax || fabs(vn) > vmax || fabs(vf) > vmax {
         return Ok(None);
     }
     let turn = |w: Vel| turn_closed(v0, a0, w, vf, lim);
-    let (Some(top), Some(bottom)) = (turn(Vel::of(vmax)), turn(Vel::of(-vmax))) else {
-        return Ok(None);
+    let mut best: Option<(f32, Cand)> = None;
+    let mut consider = |t: f32, c: Cand| {
+        if t.is_finite() && best.is_none_or(|(bt, _)| t < bt) {
+            best = Some((t, c));
+        }
     };
-    let (vp, cruise) = if d >= top.1 {
-        (Vel::of(vmax), (d - top.1) / vmax)
-    } else if d <= bottom.1 {
-        (Vel::of(-vmax), (bottom.1 - d) / vmax)
+    // Beyond the turns at ±v_max, the cruise there: nothing covers the distance sooner than
+    // reaching the top speed at once and braking at the last moment.
+    let Some(top) = turn(Vel::of(vmax)) else { return Ok(None) };
+    let bottom = if d >= top.1 {
+        let cruise = (d - top.1) / vmax;
+        consider(top.0 + cruise, Cand::Turn { vp: Vel::of(vmax), cruise });
+        None
     } else {
-        let (hi, lo) = (vn.max(vf), vn.min(vf));
-        let Some(inner_hi) = turn(Vel::of(hi)) else { return Ok(None) };
-        let (vi, sg, inner, far) = if d >= inner_hi.1 {
-            (hi, 1.0, inner_hi.1, top.1)
+        let Some(bottom) = turn(Vel::of(-vmax)) else { return Ok(None) };
+        if d <= bottom.1 {
+            let cruise = (bottom.1 - d) / vmax;
+            consider(bottom.0 + cruise, Cand::Turn { vp: Vel::of(-vmax), cruise });
+            None
         } else {
-            let Some(inner_lo) = turn(Vel::of(lo)) else { return Ok(None) };
-            if d > inner_lo.1 {
-                return Ok(None);
-            }
-            (lo, -1.0, inner_lo.1, bottom.1)
-        };
-        let at = |z: f32| Vel { base: vi, off: sg * z * z };
-        let ftol = 2.0 * f32::EPSILON * fabs(d).max(1.0);
-        let f = |z: f32| turn(at(z)).map(|(_, dist, slope)| (dist - d, slope * 2.0 * sg * z));
-        let Some(z) = newton(&f, sqrt(vmax - sg * vi), inner - d, far - d, ftol) else { return Ok(None) };
-        (at(z), 0.0)
+            Some(bottom)
+        }
     };
-    pulse(Vel::of(v0), a0, vp, lim, None, p1)?;
-    pulse(vp, 0.0, Vel::of(vf), lim, None, p2)?;
-    let (e1, e2) = (p1.time_dist(v0), p2.time_dist(vp.val()));
-    let v = vp.val();
-    let e = Eval { t: e1.t + e2.t + cruise, d: e1.d + e2.d + cruise * v, mag: e1.mag + e2.mag + fabs(cruise * v) };
-    Ok((cruise >= 0.0 && fabs(e.d - d) <= e.tol()).then_some((Cand::Turn { vp, cruise }, e)))
+    if let Some(bottom) = bottom
+        && closed_turns(v0, a0, vf, d, lim, (top, bottom), &mut consider).is_none()
+    {
+        return Ok(None);
+    }
+    let Some((_, cand)) = best else { return Ok(None) };
+    let e = match cand {
+        Cand::Turn { vp, cruise } => {
+            pulse(Vel::of(v0), a0, vp, lim, None, p1)?;
+            pulse(vp, 0.0, Vel::of(vf), lim, None, p2)?;
+            let (e1, e2) = (p1.time_dist(v0), p2.time_dist(vp.val()));
+            let v = vp.val();
+            Eval { t: e1.t + e2.t + cruise, d: e1.d + e2.d + cruise * v, mag: e1.mag + e2.mag + fabs(cruise * v) }
+        }
+        Cand::Dip { v, a } => {
+            // The ramp to the dip, then the pulse from its apex.
+            let s = if vf >= vn { 1.0 } else { -1.0 };
+            pulse(v, s * a, Vel::of(vf), lim, None, p2)?;
+            *p1 = Pulse::EMPTY;
+            p1.push((s * a0 - a) / lim.j, a0, -s * lim.j)?;
+            for seg in p2.iter() {
+                p1.push(seg.t, seg.a, seg.j)?;
+            }
+            *p2 = Pulse::EMPTY;
+            p1.time_dist(v0)
+        }
+    };
+    Ok((fabs(e.d - d) <= e.tol()).then_some((cand, e)))
+}
+
+/// The candidates of [`closed_pulses`] strictly between the cruises at `±v_max` (`ends`: the
+/// turns there), given to `consider` (duration, candidate); `None` if one cannot be solved in
+/// closed form.
+fn closed_turns(
+    v0: f32,
+    a0: f32,
+    vf: f32,
+    d: f32,
+    lim: &Lim,
+    ends: ((f32, f32, f32), (f32, f32, f32)),
+    consider: &mut dyn FnMut(f32, Cand),
+) -> Option<()> {
+    let (vmax, vn, (top, bottom)) = (lim.v, lim.v_nat(v0, a0), ends);
+    let ftol = 2.0 * f32::EPSILON * fabs(d).max(1.0);
+    let turn = |w: Vel| turn_closed(v0, a0, w, vf, lim);
+    let (hi, lo) = (vn.max(vf), vn.min(vf));
+    let (inner_hi, inner_lo) = (turn(Vel::of(hi))?, turn(Vel::of(lo))?);
+    for (vi, sg, inner, far) in [(hi, 1.0, inner_hi, top), (lo, -1.0, inner_lo, bottom)] {
+        if sg * (d - inner.1) > 0.0 && sg * (far.1 - d) > 0.0 {
+            let at = |z: f32| Vel { base: vi, off: sg * z * z };
+            let f = |z: f32| turn(at(z)).map(|(_, dist, slope)| (dist - d, slope * 2.0 * sg * z));
+            let z_max = sqrt(vmax - sg * vi);
+            let (f0, f_max) = (inner.1 - d, far.1 - d);
+            let z = newton(&f, z_max * sqrt(f0 / (f0 - f_max)), z_max, f0, f_max, ftol)?;
+            let (t, _, _) = turn(at(z))?;
+            consider(t, Cand::Turn { vp: at(z), cruise: 0.0 });
+        }
+    }
+    let s = if vf >= vn { 1.0 } else { -1.0 };
+    let an = s * a0;
+    if lim.smooth() && an > 0.0 {
+        // The direct pulse (no dip) and the turn at the natural velocity (a dip to zero).
+        let (direct, none) = (if s > 0.0 { inner_hi } else { inner_lo }, if s > 0.0 { inner_lo } else { inner_hi });
+        let (f_deep, f_none) = (none.1 - d, direct.1 - d);
+        if (f_deep > 0.0) != (f_none > 0.0) {
+            let f = |a: f32| dip_closed(v0, a0, a, vf, s, lim).map(|(_, dist, slope)| (dist - d, slope));
+            let a = newton(&f, an * f_deep / (f_deep - f_none), an, f_deep, f_none, ftol)?;
+            let (t, _, _) = dip_closed(v0, a0, a, vf, s, lim)?;
+            let apex = Vel { base: v0, off: s * ((an - a) * (an + a)) / (2.0 * lim.j) };
+            consider(t, Cand::Dip { v: apex, a });
+        }
+    }
+    Some(())
 }
 
 /// The most Newton steps [`newton`] takes (each halves the bracket at least every other step).
 const NEWTON_ITERS: usize = 40;
 
-/// The root in `[0, z_max]` of `f` (value and slope), given its values `f0` at 0 and `f_max`
-/// at `z_max` of opposite signs: Newton steps from the secant's guess in `z²`, a bisection
-/// whenever a step leaves the bracket; stops at `|f| ≤ ftol` or when the bracket cannot shrink.
-fn newton(f: &dyn Fn(f32) -> Option<(f32, f32)>, z_max: f32, f0: f32, f_max: f32, ftol: f32) -> Option<f32> {
+/// The root in `[0, x_max]` of `f` (value and slope), given its values `f0` at 0 and `f_max`
+/// at `x_max` of opposite signs: Newton steps from the guess `x`, a bisection whenever a step
+/// leaves the bracket; stops at `|f| ≤ ftol` or when the bracket cannot shrink.
+fn newton(
+    f: &dyn Fn(f32) -> Option<(f32, f32)>,
+    mut x: f32,
+    x_max: f32,
+    f0: f32,
+    f_max: f32,
+    ftol: f32,
+) -> Option<f32> {
     if fabs(f0) <= ftol {
         return Some(0.0);
     }
     if fabs(f_max) <= ftol {
-        return Some(z_max);
+        return Some(x_max);
     }
-    if (f0 > 0.0) == (f_max > 0.0) || !z_max.is_finite() {
+    if (f0 > 0.0) == (f_max > 0.0) || !x_max.is_finite() {
         return None;
     }
     // The side of the bracket where `f` has `f0`'s sign, and the other.
-    let (mut near, mut far) = (0.0, z_max);
-    let mut z = z_max * sqrt(f0 / (f0 - f_max));
+    let (mut near, mut far) = (0.0, x_max);
     for _ in 0..NEWTON_ITERS {
         let (lo, hi) = if near < far { (near, far) } else { (far, near) };
-        if !(z > lo && z < hi) {
-            z = 0.5 * (near + far);
-            if !(z > lo && z < hi) {
-                return Some(z);
+        if !(x > lo && x < hi) {
+            x = 0.5 * (near + far);
+            if !(x > lo && x < hi) {
+                return Some(x);
             }
         }
-        let (fz, slope) = f(z)?;
-        if fabs(fz) <= ftol {
-            return Some(z);
+        let (fx, slope) = f(x)?;
+        if fabs(fx) <= ftol {
+            return Some(x);
         }
-        if (fz > 0.0) == (f0 > 0.0) {
-            near = z;
+        if (fx > 0.0) == (f0 > 0.0) {
+            near = x;
         } else {
-            far = z;
+            far = x;
         }
-        let step = fz / slope;
-        z = if step.is_finite() { z - step } else { 0.5 * (near + far) };
+        let step = fx / slope;
+        x = if step.is_finite() { x - step } else { 0.5 * (near + far) };
     }
-    Some(z)
+    Some(x)
 }
 
 /// [`closed_pulses`] without keeping the pulses (for the tests).
@@ -968,8 +1066,12 @@ fn closed_position(
     end: State,
 ) -> Result<bool, PlanError> {
     let (mut p1, mut p2) = (Pulse::EMPTY, Pulse::EMPTY);
-    let Some((Cand::Turn { vp, cruise }, eval)) = closed_pulses(start.v, a0, end.v, d, lim, &mut p1, &mut p2)? else {
+    let Some((cand, eval)) = closed_pulses(start.v, a0, end.v, d, lim, &mut p1, &mut p2)? else {
         return Ok(false);
+    };
+    let (vp, cruise) = match cand {
+        Cand::Turn { vp, cruise } => (vp, cruise),
+        Cand::Dip { .. } => (Vel::of(0.0), 0.0),
     };
     let mut segs = [Seg::default(); MAX_PHASES];
     let mut ns = 0usize;
@@ -1481,10 +1583,9 @@ mod tests {
             };
             let vf = if d == 0.0 { 0.0 } else { vf * v_max * d.signum() };
             let found = closed_form(v0, a0, vf, d, &lim);
-            let a_towards = lim.smooth() && a0 * (vf - lim.v_nat(v0, a0)) > 0.0;
             // With two limits, a move that passes through zero speed is the search's.
             let one_limit = lim.acc == lim.dec || (v0 == 0.0 && a0 == 0.0 && vf == 0.0 && d != 0.0);
-            if !a_towards && one_limit {
+            if one_limit {
                 proptest::prop_assert!(matches!(found, Ok(Some(_))), "{found:?}");
             }
             if let Ok(Some((_, fast))) = found {
