@@ -806,49 +806,85 @@ fn pulse_time(dv: f32, l: f32, j: f32) -> (f32, f32) {
     }
 }
 
-/// Duration, distance and the distance's slope in `w` of "pulse from `(v0, a0)` to `(w, 0)`,
-/// pulse to `(vf, 0)`" in closed form, when each pulse keeps one acceleration limit (see
-/// [`one_limit`]) and the start acceleration is within it; `None` otherwise.
+/// A pulse in closed form: its duration, distance, and the distance's slopes in the end speed
+/// and (from no acceleration) in the start speed.
+#[derive(Clone, Copy, Debug)]
+struct Closed {
+    t: f32,
+    d: f32,
+    d_end: f32,
+    d_start: f32,
+}
+
+/// The fastest pulse from `(vs, a_s)` to `(ve, 0)` in closed form ([`Closed`]) when it needs
+/// no brake line and no dip: one acceleration limit, or through zero speed from `d_max` to
+/// `a_max`, the start acceleration within what they allow. `None` otherwise.
 ///
-/// A pulse between zero accelerations is symmetric in time, so it covers its mean speed times
-/// its duration. The first pulse is the tail of one: with the acceleration towards `w`, of the
-/// pulse from the speed `u = v0 − a0·|a0|/2j` at which a ramp at full jerk would have started
-/// (its first `|a0|/j` taken off); against it, the ramp of the acceleration to zero first, then
-/// the pulse from there.
-fn turn_closed(v0: f32, a0: f32, w: Vel, vf: f32, lim: &Lim) -> Option<(f32, f32, f32)> {
+/// A pulse between zero accelerations is symmetric in time: it covers its mean speed times its
+/// duration. This one is cut from such pulses. A start acceleration towards `ve` makes it the
+/// tail of the pulse from the speed a ramp at full jerk would have started at; one against it
+/// is first ramped to zero. Through zero speed with two limits, the acceleration there, `a_z`,
+/// is at most the lower limit and what the ramps from the start and to the end allow: the pulse
+/// is the head of one at `d_max` ending `a_z/j` after zero speed, then the tail of one at
+/// `a_max` that began `a_z/j` before it.
+fn pulse_closed(vs: Vel, a_s: f32, ve: Vel, lim: &Lim) -> Option<Closed> {
     let j = lim.j;
-    let vn = lim.v_nat(v0, a0);
-    let s1 = if (w.base - vn) + w.off >= 0.0 { 1.0 } else { -1.0 };
-    let an = s1 * a0;
-    let (u, t_lead, d_lead) = if an > 0.0 {
-        let tau = an / j;
-        let u = v0 - s1 * 0.5 * an * tau;
-        (u, -tau, -tau * (u + s1 * j * tau * tau / 6.0))
-    } else if an < 0.0 {
+    let vn = lim.v_nat(vs.base, a_s);
+    let s = if (ve.base - vn) + (ve.off - vs.off) >= 0.0 { 1.0 } else { -1.0 };
+    let an = s * a_s;
+    // Normalised: the speed `u = s·v` rises by `w ≥ 0` from `u0` with an acceleration `a0 ≥ 0`
+    // (a ramp at full jerk of `a` over `a/j` changes the speed by `a·τ/2`: no `j·τ³`, which is
+    // 0·∞ for a trapezoid).
+    let (t_lead, d_lead, u0, a0, w) = if an < 0.0 {
         let tau = -an / j;
-        (vn, tau, tau * (v0 + tau * (0.5 * a0 + s1 * j * tau / 6.0)))
+        (tau, tau * (vs.val() + tau * a_s / 3.0), s * (vn + vs.off), 0.0, s * ((ve.base - vn) + (ve.off - vs.off)))
     } else {
-        (v0, 0.0, 0.0)
+        (0.0, 0.0, s * vs.val(), an, s * ((ve.base - vs.base) + (ve.off - vs.off)))
     };
-    let wv = w.val();
-    let l1 = one_limit(u, wv, lim)?;
-    if an > l1 {
-        return None;
-    }
-    let l2 = one_limit(wv, vf, lim)?;
-    let (t1, dt1) = pulse_time((s1 * ((w.base - u) + w.off)).max(0.0), l1, j);
-    let s2 = if (vf - w.base) - w.off >= 0.0 { 1.0 } else { -1.0 };
-    let (t2, dt2) = pulse_time((s2 * ((vf - w.base) - w.off)).max(0.0), l2, j);
-    let (m1, m2) = (0.5 * (u + wv), 0.5 * (wv + vf));
-    let d = d_lead + m1 * t1 + m2 * t2;
-    let slope = 0.5 * (t1 + t2) + s1 * m1 * dt1 - s2 * m2 * dt2;
-    Some((t_lead + t1 + t2, d, slope))
+    let w = w.max(0.0);
+    let ue = u0 + w;
+    let tau0 = a0 / j;
+    let lead0 = 0.5 * a0 * tau0;
+    let uv = u0 - lead0;
+    let c = if u0 >= 0.0 || ue <= 0.0 || lim.acc == lim.dec {
+        let level = if u0 >= 0.0 { lim.acc } else { lim.dec };
+        if a0 > level {
+            return None;
+        }
+        let (t, dt) = pulse_time(w + lead0, level, j);
+        let m = 0.5 * (uv + ue);
+        Closed { t: t - tau0, d: m * t - tau0 * (uv + a0 * tau0 / 6.0), d_end: 0.5 * t + m * dt, d_start: 0.5 * t - m * dt }
+    } else {
+        let a_lo = lim.acc.min(lim.dec);
+        let a_z = a_lo.min(sqrt(a0 * a0 - 2.0 * j * u0)).min(sqrt(2.0 * j * ue));
+        if a0 > lim.dec || a0 * a0 > a_z * a_z - 2.0 * j * u0 {
+            return None;
+        }
+        let tau1 = a_z / j;
+        let ez = 0.5 * a_z * tau1;
+        let (t1, dt1) = pulse_time(ez - uv, lim.dec, j);
+        let (t2, dt2) = pulse_time(ue + ez, lim.acc, j);
+        let (m1, m2) = (0.5 * (uv + ez), 0.5 * (ue - ez));
+        let d1 = m1 * t1 - tau0 * (uv + a0 * tau0 / 6.0) - tau1 * (ez - a_z * tau1 / 6.0);
+        let d2 = m2 * t2 - tau1 * (a_z * tau1 / 6.0 - ez);
+        Closed { t: t1 - tau0 - 2.0 * tau1 + t2, d: d1 + d2, d_end: 0.5 * t2 + m2 * dt2, d_start: 0.5 * t1 - m1 * dt1 }
+    };
+    Some(Closed { t: t_lead + c.t, d: d_lead + s * c.d, ..c })
+}
+
+/// Duration, distance and the distance's slope in `w` of "pulse from `(v0, a0)` to `(w, 0)`,
+/// pulse to `(vf, 0)`" in closed form ([`pulse_closed`]); `None` if a pulse is not of that
+/// kind.
+fn turn_closed(v0: f32, a0: f32, w: Vel, vf: f32, lim: &Lim) -> Option<(f32, f32, f32)> {
+    let p1 = pulse_closed(Vel::of(v0), a0, w, lim)?;
+    let p2 = pulse_closed(w, 0.0, Vel::of(vf), lim)?;
+    Some((p1.t + p2.t, p1.d + p2.d, p1.d_end + p2.d_start))
 }
 
 /// Duration, distance and the distance's slope in `a` of the dip family in closed form: from
 /// `(v0, a0)` with the acceleration towards the final velocity (the sign `s`), its magnitude
 /// `s·a0` first ramped at full jerk to `a` (between 0 and `s·a0`), then the pulse to `(vf, 0)`
-/// from there (the tail of a pulse between zero accelerations, as in [`turn_closed`]). `None`
+/// from there (the tail of a pulse between zero accelerations, as in [`pulse_closed`]). `None`
 /// unless the pulse keeps one acceleration limit, the start's within it.
 fn dip_closed(v0: f32, a0: f32, a: f32, vf: f32, s: f32, lim: &Lim) -> Option<(f32, f32, f32)> {
     let j = lim.j;
@@ -1583,9 +1619,9 @@ mod tests {
             };
             let vf = if d == 0.0 { 0.0 } else { vf * v_max * d.signum() };
             let found = closed_form(v0, a0, vf, d, &lim);
-            // With two limits, a move that passes through zero speed is the search's.
-            let one_limit = lim.acc == lim.dec || (v0 == 0.0 && a0 == 0.0 && vf == 0.0 && d != 0.0);
-            if one_limit {
+            // With two limits, a dip whose pulse passes through zero speed is the search's.
+            let dip = lim.smooth() && a0 * (vf - lim.v_nat(v0, a0)) > 0.0;
+            if lim.acc == lim.dec || !dip {
                 proptest::prop_assert!(matches!(found, Ok(Some(_))), "{found:?}");
             }
             if let Ok(Some((_, fast))) = found {
