@@ -816,9 +816,10 @@ struct Closed {
     d_start: f32,
 }
 
-/// The fastest pulse from `(vs, a_s)` to `(ve, 0)` in closed form ([`Closed`]) when it needs
-/// no brake line and no dip: one acceleration limit, or through zero speed from `d_max` to
-/// `a_max`, the start acceleration within what they allow. `None` otherwise.
+/// The fastest pulse from `(vs, a_s)` to `(ve, 0)` in closed form ([`Closed`]) when it needs no
+/// dip: one acceleration limit (a start acceleration beyond it first returns to it at full
+/// jerk), or through zero speed from `d_max` to `a_max` with the start acceleration within what
+/// they allow. `None` otherwise.
 ///
 /// A pulse between zero accelerations is symmetric in time: it covers its mean speed times its
 /// duration. This one is cut from such pulses. A start acceleration towards `ve` makes it the
@@ -841,26 +842,31 @@ fn pulse_closed(vs: Vel, a_s: f32, ve: Vel, lim: &Lim) -> Option<Closed> {
     } else {
         (0.0, 0.0, s * vs.val(), an, s * ((ve.base - vs.base) + (ve.off - vs.off)))
     };
-    let w = w.max(0.0);
-    let ue = u0 + w;
-    let tau0 = a0 / j;
-    let lead0 = 0.5 * a0 * tau0;
-    let uv = u0 - lead0;
+    let ue = u0 + w.max(0.0);
     let c = if u0 >= 0.0 || ue <= 0.0 || lim.acc == lim.dec {
         let level = if u0 >= 0.0 { lim.acc } else { lim.dec };
-        if a0 > level {
-            return None;
-        }
-        let (t, dt) = pulse_time(w + lead0, level, j);
+        // Beyond the limit, the acceleration first returns to it at full jerk.
+        let (t_brake, d_brake, u0, a0) = if a0 > level {
+            let tb = (a0 - level) / j;
+            (tb, tb * (u0 + tb * (0.5 * a0 - (a0 - level) / 6.0)), u0 + 0.5 * tb * (a0 + level), level)
+        } else {
+            (0.0, 0.0, u0, a0)
+        };
+        let tau0 = a0 / j;
+        let lead0 = 0.5 * a0 * tau0;
+        let uv = u0 - lead0;
+        let (t, dt) = pulse_time((ue - u0) + lead0, level, j);
         let m = 0.5 * (uv + ue);
-        Closed { t: t - tau0, d: m * t - tau0 * (uv + a0 * tau0 / 6.0), d_end: 0.5 * t + m * dt, d_start: 0.5 * t - m * dt }
+        let d = d_brake + m * t - tau0 * (uv + a0 * tau0 / 6.0);
+        Closed { t: t_brake + t - tau0, d, d_end: 0.5 * t + m * dt, d_start: 0.5 * t - m * dt }
     } else {
         let a_lo = lim.acc.min(lim.dec);
         let a_z = a_lo.min(sqrt(a0 * a0 - 2.0 * j * u0)).min(sqrt(2.0 * j * ue));
         if a0 > lim.dec || a0 * a0 > a_z * a_z - 2.0 * j * u0 {
             return None;
         }
-        let tau1 = a_z / j;
+        let (tau0, tau1) = (a0 / j, a_z / j);
+        let uv = u0 - 0.5 * a0 * tau0;
         let ez = 0.5 * a_z * tau1;
         let (t1, dt1) = pulse_time(ez - uv, lim.dec, j);
         let (t2, dt2) = pulse_time(ue + ez, lim.acc, j);
@@ -933,7 +939,7 @@ fn closed_pulses(
 ) -> Result<Option<(Cand, Eval)>, PlanError> {
     let vmax = lim.v;
     let vn = lim.v_nat(v0, a0);
-    if fabs(v0) > vmax || fabs(vn) > vmax || fabs(vf) > vmax {
+    if fabs(vf) > vmax {
         return Ok(None);
     }
     let turn = |w: Vel| turn_closed(v0, a0, w, vf, lim);
@@ -943,27 +949,27 @@ fn closed_pulses(
             best = Some((t, c));
         }
     };
-    // Beyond the turns at ±v_max, the cruise there: nothing covers the distance sooner than
-    // reaching the top speed at once and braking at the last moment.
+    // From within the limits, beyond the turns at ±v_max is the cruise there: nothing covers
+    // the distance sooner than reaching the top speed at once and braking at the last moment.
+    // From beyond them, a braking that eases off at v_max may be sooner.
+    let within = fabs(v0) <= vmax && fabs(vn) <= vmax;
     let Some(top) = turn(Vel::of(vmax)) else { return Ok(None) };
-    let bottom = if d >= top.1 {
+    if d >= top.1 {
         let cruise = (d - top.1) / vmax;
         consider(top.0 + cruise, Cand::Turn { vp: Vel::of(vmax), cruise });
-        None
-    } else {
+    }
+    if !within || d < top.1 {
         let Some(bottom) = turn(Vel::of(-vmax)) else { return Ok(None) };
         if d <= bottom.1 {
             let cruise = (bottom.1 - d) / vmax;
             consider(bottom.0 + cruise, Cand::Turn { vp: Vel::of(-vmax), cruise });
-            None
-        } else {
-            Some(bottom)
         }
-    };
-    if let Some(bottom) = bottom
-        && closed_turns(v0, a0, vf, d, lim, (top, bottom), &mut consider).is_none()
-    {
-        return Ok(None);
+        if (!within || d > bottom.1) && closed_turns(v0, a0, vf, d, lim, (top, bottom), &mut consider).is_none() {
+            return Ok(None);
+        }
+        if !within && lim.smooth() && brake_dip(v0, a0, vf, d, lim, &mut consider).is_none() {
+            return Ok(None);
+        }
     }
     let Some((_, cand)) = best else { return Ok(None) };
     let e = match cand {
@@ -975,19 +981,42 @@ fn closed_pulses(
             Eval { t: e1.t + e2.t + cruise, d: e1.d + e2.d + cruise * v, mag: e1.mag + e2.mag + fabs(cruise * v) }
         }
         Cand::Dip { v, a } => {
-            // The ramp to the dip, then the pulse from its apex.
-            let s = if vf >= vn { 1.0 } else { -1.0 };
-            pulse(v, s * a, Vel::of(vf), lim, None, p2)?;
-            *p1 = Pulse::EMPTY;
-            p1.push((s * a0 - a) / lim.j, a0, -s * lim.j)?;
-            for seg in p2.iter() {
-                p1.push(seg.t, seg.a, seg.j)?;
-            }
+            pulse(Vel::of(v0), a0, Vel::of(vf), lim, Some(Dip { v, a }), p1)?;
             *p2 = Pulse::EMPTY;
             p1.time_dist(v0)
         }
     };
     Ok((fabs(e.d - d) <= e.tol()).then_some((cand, e)))
+}
+
+/// The braking family of [`closed_pulses`] from beyond `v_max`, given to `consider`: one
+/// braking pulse whose deceleration eases off to `a` as it passes `±v_max` (the head of a pulse
+/// that would end `a/j` later, then the tail of one from there, [`pulse_closed`]), between the
+/// deepest dip the jerk allows and none. Its depth is found by the bracketed search on this
+/// closed form: its slope has no simple form. `None` if a pulse is not of that kind.
+fn brake_dip(v0: f32, a0: f32, vf: f32, d: f32, lim: &Lim, consider: &mut dyn FnMut(f32, Cand)) -> Option<()> {
+    let (vmax, vn) = (lim.v, lim.v_nat(v0, a0));
+    let vd = if (if fabs(vn) > vmax { vn } else { v0 }) > 0.0 { vmax } else { -vmax };
+    let s = if vf >= vn { 1.0 } else { -1.0 };
+    let Some((a_lo, a_hi)) = dip_bounds(v0, a0, vf, lim, vd).ok()? else { return Some(()) };
+    let dist = |a: f32| -> Option<(f32, f32)> {
+        let tau = a / lim.j;
+        let end = Vel { base: vd, off: s * 0.5 * a * tau };
+        let head = pulse_closed(Vel::of(v0), a0, end, lim)?;
+        let tail = pulse_closed(Vel::of(vd), s * a, Vel::of(vf), lim)?;
+        let cut = tau * (end.val() - s * a * tau / 6.0);
+        Some((head.t - tau + tail.t, head.d - cut + tail.d))
+    };
+    let (e_lo, e_hi) = (dist(a_lo)?, dist(a_hi)?);
+    let (f_lo, f_hi) = (e_lo.1 - d, e_hi.1 - d);
+    if (f_lo > 0.0) == (f_hi > 0.0) {
+        return Some(());
+    }
+    let ftol = 2.0 * f32::EPSILON * fabs(d).max(1.0);
+    let mut f = |a: f32| dist(a).map(|e| e.1 - d).ok_or(PlanError::NoSolution);
+    let a = solve(&mut f, a_lo, f_lo, a_hi, f_hi, ftol).ok()?;
+    consider(dist(a)?.0, Cand::Dip { v: Vel::of(vd), a });
+    Some(())
 }
 
 /// The candidates of [`closed_pulses`] strictly between the cruises at `±v_max` (`ends`: the
@@ -1008,7 +1037,7 @@ fn closed_turns(
     let (hi, lo) = (vn.max(vf), vn.min(vf));
     let (inner_hi, inner_lo) = (turn(Vel::of(hi))?, turn(Vel::of(lo))?);
     for (vi, sg, inner, far) in [(hi, 1.0, inner_hi, top), (lo, -1.0, inner_lo, bottom)] {
-        if sg * (d - inner.1) > 0.0 && sg * (far.1 - d) > 0.0 {
+        if fabs(vi) <= vmax && sg * (d - inner.1) > 0.0 && sg * (far.1 - d) > 0.0 {
             let at = |z: f32| Vel { base: vi, off: sg * z * z };
             let f = |z: f32| turn(at(z)).map(|(_, dist, slope)| (dist - d, slope * 2.0 * sg * z));
             let z_max = sqrt(vmax - sg * vi);
@@ -1020,7 +1049,7 @@ fn closed_turns(
     }
     let s = if vf >= vn { 1.0 } else { -1.0 };
     let an = s * a0;
-    if lim.smooth() && an > 0.0 {
+    if lim.smooth() && an > 0.0 && fabs(vn) <= vmax {
         // The direct pulse (no dip) and the turn at the natural velocity (a dip to zero).
         let (direct, none) = (if s > 0.0 { inner_hi } else { inner_lo }, if s > 0.0 { inner_lo } else { inner_hi });
         let (f_deep, f_none) = (none.1 - d, direct.1 - d);
@@ -1591,15 +1620,17 @@ mod tests {
     use crate::motion::scurve::Limits;
 
     proptest::proptest! {
-        /// Where the closed form answers (a cruise at ±v_max, or a turn), the full search finds
-        /// a profile of the same duration: the closed form never gives a slower move, and
-        /// answers the moves it should (from rest, while cruising, on a ramp away from the
-        /// final speed).
+        /// Where the closed form answers, the full search finds a profile of the same
+        /// duration: the closed form never gives a slower move. It answers every move from
+        /// within the limits (from rest, cruising, accelerating, braking) but a dip through
+        /// zero speed between two limits; from beyond them (up to twice the speed and the
+        /// acceleration), it answers or leaves the move to the search.
         #[test]
         fn the_closed_form_is_the_fastest_profile(
             d in proptest::prop_oneof![-1e6f32..1e6, -2e3f32..2e3, -10f32..10.0],
             v0 in proptest::prop_oneof![-1.0f32..1.0, proptest::prelude::Just(0.0)],
             a0 in proptest::prop_oneof![-1.0f32..1.0, proptest::prelude::Just(0.0)],
+            beyond in proptest::prop_oneof![3 => proptest::prelude::Just(1.0f32), 1 => 1.0f32..2.0],
             vf in proptest::prop_oneof![0.0f32..1.0, proptest::prelude::Just(0.0)],
             v_max in 100.0f32..200_000.0,
             a_max in 1_000.0f32..200_000.0,
@@ -1608,20 +1639,22 @@ mod tests {
         ) {
             let d_max = d_max.unwrap_or(a_max);
             let Ok(lim) = Lim::new(&Limits { v_max, a_max, d_max, jerk }) else { return Ok(()) };
-            // Any start within the limits: a speed, an acceleration whose ramp to zero stays
-            // within the speed limit; an end speed of the move's direction.
-            let v0 = v0 * v_max;
-            let a0 = if lim.smooth() {
-                let room = (lim.v - libm::fabsf(v0)) * 2.0 * lim.j;
-                a0 * lim.acc.min(lim.dec).min(libm::sqrtf(room))
-            } else {
-                0.0
+            // A start within the limits (a speed, an acceleration whose ramp to zero stays within
+            // the speed limit), or beyond them by `beyond`; an end speed of the move's direction.
+            let v0 = v0 * v_max * beyond;
+            let a0 = match (lim.smooth(), beyond > 1.0) {
+                (false, _) => 0.0,
+                (true, true) => a0 * beyond * lim.acc.max(lim.dec),
+                (true, false) => {
+                    let room = (lim.v - libm::fabsf(v0)) * 2.0 * lim.j;
+                    a0 * lim.acc.min(lim.dec).min(libm::sqrtf(room))
+                }
             };
             let vf = if d == 0.0 { 0.0 } else { vf * v_max * d.signum() };
             let found = closed_form(v0, a0, vf, d, &lim);
             // With two limits, a dip whose pulse passes through zero speed is the search's.
             let dip = lim.smooth() && a0 * (vf - lim.v_nat(v0, a0)) > 0.0;
-            if lim.acc == lim.dec || !dip {
+            if beyond == 1.0 && (lim.acc == lim.dec || !dip) {
                 proptest::prop_assert!(matches!(found, Ok(Some(_))), "{found:?}");
             }
             if let Ok(Some((_, fast))) = found {
