@@ -846,16 +846,18 @@ fn pulse_closed(vs: Vel, a_s: f32, ve: Vel, lim: &Lim) -> Option<Closed> {
     let c = if u0 >= 0.0 || ue <= 0.0 || lim.acc == lim.dec {
         let level = if u0 >= 0.0 { lim.acc } else { lim.dec };
         // Beyond the limit, the acceleration first returns to it at full jerk.
-        let (t_brake, d_brake, u0, a0) = if a0 > level {
+        // (The speed change is kept apart from the speeds, as `w` is: see `Vel`.)
+        let (t_brake, d_brake, u0, a0, w) = if a0 > level {
             let tb = (a0 - level) / j;
-            (tb, tb * (u0 + tb * (0.5 * a0 - (a0 - level) / 6.0)), u0 + 0.5 * tb * (a0 + level), level)
+            let dv = 0.5 * tb * (a0 + level);
+            (tb, tb * (u0 + tb * (0.5 * a0 - (a0 - level) / 6.0)), u0 + dv, level, w - dv)
         } else {
-            (0.0, 0.0, u0, a0)
+            (0.0, 0.0, u0, a0, w)
         };
         let tau0 = a0 / j;
         let lead0 = 0.5 * a0 * tau0;
         let uv = u0 - lead0;
-        let (t, dt) = pulse_time((ue - u0) + lead0, level, j);
+        let (t, dt) = pulse_time(w.max(0.0) + lead0, level, j);
         let m = 0.5 * (uv + ue);
         let d = d_brake + m * t - tau0 * (uv + a0 * tau0 / 6.0);
         Closed { t: t_brake + t - tau0, d, d_end: 0.5 * t + m * dt, d_start: 0.5 * t - m * dt }
@@ -891,7 +893,7 @@ fn turn_closed(v0: f32, a0: f32, w: Vel, vf: f32, lim: &Lim) -> Option<(f32, f32
 /// `(v0, a0)` with the acceleration towards the final velocity (the sign `s`), its magnitude
 /// `s·a0` first ramped at full jerk to `a` (between 0 and `s·a0`), then the pulse to `(vf, 0)`
 /// from there (the tail of a pulse between zero accelerations, as in [`pulse_closed`]). `None`
-/// unless the pulse keeps one acceleration limit, the start's within it.
+/// unless the pulse keeps one acceleration limit and `a` is within it.
 fn dip_closed(v0: f32, a0: f32, a: f32, vf: f32, s: f32, lim: &Lim) -> Option<(f32, f32, f32)> {
     let j = lim.j;
     let tau = (s * a0 - a) / j;
@@ -900,7 +902,7 @@ fn dip_closed(v0: f32, a0: f32, a: f32, vf: f32, s: f32, lim: &Lim) -> Option<(f
     let lead = a / j;
     let u = apex - s * 0.5 * a * lead;
     let l = one_limit(u, vf, lim)?;
-    if s * a0 > l {
+    if a > l {
         return None;
     }
     let (t, dt) = pulse_time((s * (vf - u)).max(0.0), l, j);
@@ -1051,11 +1053,13 @@ fn closed_turns(
     let an = s * a0;
     if lim.smooth() && an > 0.0 && fabs(vn) <= vmax {
         // The direct pulse (no dip) and the turn at the natural velocity (a dip to zero).
+        // From beyond the limit, the direct pulse first returns to it: a dip to the limit.
         let (direct, none) = (if s > 0.0 { inner_hi } else { inner_lo }, if s > 0.0 { inner_lo } else { inner_hi });
         let (f_deep, f_none) = (none.1 - d, direct.1 - d);
         if (f_deep > 0.0) != (f_none > 0.0) {
+            let a_top = an.min(one_limit(v0, vf, lim)?);
             let f = |a: f32| dip_closed(v0, a0, a, vf, s, lim).map(|(_, dist, slope)| (dist - d, slope));
-            let a = newton(&f, an * f_deep / (f_deep - f_none), an, f_deep, f_none, ftol)?;
+            let a = newton(&f, a_top * f_deep / (f_deep - f_none), a_top, f_deep, f_none, ftol)?;
             let (t, _, _) = dip_closed(v0, a0, a, vf, s, lim)?;
             let apex = Vel { base: v0, off: s * ((an - a) * (an + a)) / (2.0 * lim.j) };
             consider(t, Cand::Dip { v: apex, a });
