@@ -34,7 +34,9 @@
 //!
 //! `plan` and `ruckig`: one time-optimal jerk-limited plan by our planner and by Ruckig (the
 //! peer, `rsruckig`) on the same start, target and limits: from rest, a reversal while
-//! cruising, a re-target while accelerating.
+//! cruising, a re-target while accelerating; `plan_stop` and `ruckig stop`: a stop from full
+//! speed with the full acceleration still pushing on (our `to_velocity`, Ruckig's velocity
+//! interface).
 //!
 //! Setup checks that the situation is the one named: the velocity constant or rising, the
 //! acceleration zero or not, and for a re-target that the drive runs to the new target.

@@ -27,19 +27,32 @@
 //! `v_max`), reversals, overshoot-and-return and the asymmetric limits.
 //!
 //! The turning velocity `vp` is the only unknown: on each side of the direct profile the distance
-//! covered by "pulse 1 + pulse 2" is monotonic in `vp`, so `vp` is found by a bracketed Illinois /
-//! bisection search with a bounded iteration count (in `√|vp − v_direct|`, kept apart from
-//! `v_direct`: a pulse between nearly equal speeds lasts as the square root of their difference);
-//! the cruise variants at `±v_max` are closed form.
-//! Two one-parameter families fill the distances in between, solved the same way on the depth of
-//! a "dip" of the acceleration towards zero:
+//! covered by "pulse 1 + pulse 2" is monotonic in `vp`; the cruise variants at `±v_max` are
+//! direct. Two one-parameter families fill the distances in between, with the depth of a "dip"
+//! of the acceleration towards zero as their unknown:
 //!
 //! * already accelerating towards the final velocity: the acceleration first falls at full jerk
 //!   and rises again (Ruckig's UDUD without a turn),
 //! * faster than `v_max`: the braking eases off as the speed reaches `v_max` (a full dip is "brake
 //!   to `v_max`, cruise").
 //!
-//! The fastest candidate wins. Above `v_max` the speed only ever decreases (or is still being pushed
+//! Each family is solved in closed form (`pulse_closed`): a pulse between zero accelerations
+//! at one limit is symmetric in time, so it covers its mean speed times its duration (`Δv/l +
+//! l/j`, or `2√(Δv/j)` short of the limit), and every pulse above is cut from one or two such
+//! pulses (the tail of one when it starts accelerating, the head of one when it ends so, two
+//! when the speed passes zero between `d_max` and `a_max`). A turn's speed is `vp = vi ± z²`
+//! from the direct profile's end `vi`, where the distance is smooth in `z`, and is found by
+//! safeguarded Newton steps on that closed form (a quadratic in `vp` while both pulses reach the
+//! limit, a quartic in `z` short of it), as is an accelerating dip's depth; the braking dip at
+//! `v_max` by a bracketed Illinois / bisection search on its closed form (its slope has no
+//! simple form). The candidates whose distance range holds the move's are compared by their
+//! closed-form durations and only the fastest is built. Where no closed form applies (a start
+//! beyond the limits whose pulse passes through zero speed between two limits, a dip through
+//! zero speed between two limits) or its result does not land within rounding, a bracketed
+//! search over the same families builds and measures the pulses themselves: none of the 180 000
+//! plans of the comparison with Ruckig, 0.5 % of the property suite's (which seeks the edges).
+//!
+//! Above `v_max` the speed only ever decreases (or is still being pushed
 //! up by a start acceleration that is ramped down at full jerk); it is eased into `v_max` rather
 //! than braked at full deceleration down to `v_max` and then undershot, as Ruckig's brake does, so
 //! from such starts it is often faster than Ruckig.
@@ -66,13 +79,12 @@
 //! The control tick does not evaluate a profile: it walks a track sampled from it
 //! ([`super::track`]).
 //!
-//! Planning builds a pulse a few dozen times (median about 35, at most about 110 in the tests;
-//! each a few dozen `f32` operations, a sort of at most 48 numbers and a few square roots). Two common cases skip the
-//! search: from no acceleration towards a target with room to cruise, the cruise at `v_max`
-//! (its two pulses built once); without room, the turn below it, whose speed solves the
-//! closed-form distance of two time-symmetric pulses. `cargo xtask tick-cost` measures a whole
-//! move request on the M4 (docs/performance.md). Planning belongs outside the 20 kHz tick. A
-//! [`Profile`] is 340 bytes on the Cortex-M4.
+//! Planning evaluates a few closed forms (each a few dozen `f32` operations and a square root
+//! or two) a few times each, then builds the winner's pulses directly; a pulse needs the
+//! envelope's walk (a sort of at most 48 numbers) only with a dip or a brake line.
+//! `cargo bench -p drive-core --bench tick` measures it next to Ruckig, and `cargo xtask
+//! tick-cost` a whole move request on the M4 (docs/performance.md). Planning belongs outside
+//! the 20 kHz tick. A [`Profile`] is 340 bytes on the Cortex-M4.
 //!
 //! ```
 //! use drive_core::motion::scurve::{Limits, Profile, State};
