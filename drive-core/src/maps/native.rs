@@ -396,7 +396,7 @@ const fn interval(ty: Type, range: Range) -> Option<(u16, u16)> {
 /// The register of an [`index::OTHER`] entry `e`: a live value or a text.
 #[inline(never)]
 fn other_word<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(drive: &DriveState<P, G>, e: u32) -> u16 {
-    let Some(&obj) = Obj::ALL.get((e & index::OTHER_OBJ) as usize) else { return 0 };
+    let Some(obj) = OBJECTS.get((e & index::OTHER_OBJ) as usize).map(|d| d.obj) else { return 0 };
     if e & index::OTHER_TEXT != 0 {
         return drive.text_word(obj, ((e >> index::OTHER_WORD) & 15) as usize);
     }
