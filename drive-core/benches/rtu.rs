@@ -8,7 +8,9 @@
 //!   is `on_rx` of the last byte, `on_timer` at t3.5 after it, and `take_reply`.
 //! - `drive_whole`: the same drive fed the whole frame at once: its total cost per request.
 //! - `crc_floor`: CRC-16/MODBUS over the request and over the reply (both without their CRC),
-//!   with `drive_core::crc::crc16`: what any slave must pay to check one and seal the other.
+//!   with `drive_core::crc::crc16`: what any slave must pay to check one and seal the other;
+//!   also for EC-57's read 2 and plain write 1 (`ec57_read_2`, `ec57_write_1`), whose frames a
+//!   sub-index makes a byte longer.
 //! - `rmodbus`: rmodbus 0.13's server (no_std, heapless response buffer) parsing the same RTU frame
 //!   and building the reply from a context that holds the same register values.
 //!
@@ -194,11 +196,26 @@ fn setup_frames(req: Req) -> Frames {
     Frames { request: Frame::new(&request(req)), reply: Frame::new(&drive_reply(req)) }
 }
 
+/// An EC-57 request (without its CRC) and the drive's reply to it, checked to be normal.
+fn setup_ec57_frames(frame: &'static [u8]) -> Frames {
+    let mut request = frame.to_vec();
+    let crc = crc16(&request);
+    request.extend_from_slice(&crc.to_le_bytes());
+    let mut probe = Drive::with_map(drive_core::DriveConfig::default(), drive_core::maps::Maps::ec57());
+    probe.on_rx(T0, &request);
+    probe.on_timer(T0.plus_micros(T35_US));
+    let reply = probe.take_reply().expect("the drive answers").to_vec();
+    assert_eq!(reply.get(..2), Some(&[SLAVE, frame[1]][..]), "not a normal reply: {reply:02X?}");
+    Frames { request: Frame::new(&request), reply: Frame::new(&reply) }
+}
+
 #[library_benchmark]
 #[bench::read_2(args = (Req::Read2), setup = setup_frames)]
 #[bench::read_125(args = (Req::Read125), setup = setup_frames)]
 #[bench::write_1(args = (Req::Write1), setup = setup_frames)]
 #[bench::write_10(args = (Req::Write10), setup = setup_frames)]
+#[bench::ec57_read_2(args = (EC57_READ_2), setup = setup_ec57_frames)]
+#[bench::ec57_write_1(args = (EC57_WRITE_1), setup = setup_ec57_frames)]
 fn crc_floor(frames: Frames) -> (u16, u16) {
     let req = black_box(frames.request.bytes());
     let rep = black_box(frames.reply.bytes());
@@ -342,9 +359,19 @@ fn cls9(case: MapCase) -> usize {
     map_reply(case)
 }
 
-// ec57: the EC-57 map (seed 003), its sub-indexed requests: §1.3.1's read of 4 registers from
-// 0x2000 and §1.3.2's write of 0x2005 (pulses a revolution: the resolution).
+/// EC-57's read of 2 registers from 0x2003.1 (standstill delay, standstill current: plain
+/// settings, in the drive's units).
+const EC57_READ_2: &[u8] = &[SLAVE, 0x03, 0x20, 0x03, 0x01, 0x00, 0x02];
+/// EC-57's write of 0x2013 (power-up jog, a plain setting: stored, nothing else) = 1.
+const EC57_WRITE_1: &[u8] = &[SLAVE, 0x06, 0x20, 0x13, 0x00, 0x00, 0x01];
+
+// ec57: the EC-57 map (seed 003), its sub-indexed requests: a read 2 and a write 1 of plain
+// settings (with a CRC floor of their own: the sub-index makes the frames a byte longer), and
+// §1.3.1's read of 4 registers from 0x2000 and §1.3.2's write of 0x2005 (pulses a revolution:
+// the resolution, which rebuilds the controller's settings).
 #[library_benchmark]
+#[bench::read_2(args = (EC57_READ_2), setup = setup_ec57)]
+#[bench::write_1_plain(args = (EC57_WRITE_1), setup = setup_ec57)]
 #[bench::read_4(args = (&[SLAVE, 0x03, 0x20, 0x00, 0x00, 0x00, 0x04]), setup = setup_ec57)]
 #[bench::write_1(args = (&[SLAVE, 0x06, 0x20, 0x05, 0x00, 0x27, 0x10]), setup = setup_ec57)]
 fn ec57(case: MapCase) -> usize {

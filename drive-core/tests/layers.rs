@@ -50,7 +50,7 @@ const ALLOWED: [(&str, &[&str]); 23] = [
             "update",
         ],
     ),
-    ("maps", &["ident", "od", "pdu", "scope", "state", "units"]),
+    ("maps", &["crc", "ident", "od", "pdu", "scope", "state", "units"]),
     (
         "drive",
         &[

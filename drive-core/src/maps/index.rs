@@ -73,8 +73,20 @@ const SPAN: usize = {
 };
 
 /// The high half of an [`INDEX`] entry whose register a read takes from the drive state (a
-/// live object, a text), not from a stored value; the low half is then the object's index.
+/// live object, a text), not from a stored value; the low half is then the object's index
+/// ([`OTHER_OBJ`]), the register's place in the object from bit [`OTHER_WORD`], [`OTHER_TEXT`]
+/// for a text, [`OTHER_HIGH`] for a 32-bit object's high word: what the read needs, without
+/// the object's declaration.
 pub(crate) const OTHER: u16 = u16::MAX;
+/// The object's index in an [`OTHER`] entry.
+pub(crate) const OTHER_OBJ: u32 = 0x1FF;
+/// The shift of the register's place in the object in an [`OTHER`] entry (4 bits: a text has
+/// at most 8 registers).
+pub(crate) const OTHER_WORD: u32 = 9;
+/// An [`OTHER`] entry's flag: a text.
+pub(crate) const OTHER_TEXT: u32 = 1 << 13;
+/// An [`OTHER`] entry's flag: a 32-bit object's high word.
+pub(crate) const OTHER_HIGH: u32 = 1 << 14;
 
 /// Every register of every page's span. A read takes a register from the stored value of object
 /// `e >> 16` shifted right by `e as u16` (0 or 16 for the low or high word; 32, giving 0, for a
@@ -83,7 +95,7 @@ pub(crate) const OTHER: u16 = u16::MAX;
 /// (The shift in the low byte is where x86's shift instruction takes its count.)
 #[allow(clippy::indexing_slicing)]
 static INDEX: [u32; SPAN] = {
-    assert!(OBJECTS.len() < OTHER as usize);
+    assert!(OBJECTS.len() <= OTHER_OBJ as usize);
     let mut index = [0u32; SPAN];
     let mut p = 0;
     let mut i = 0;
@@ -102,7 +114,16 @@ static INDEX: [u32; SPAN] = {
                 Type::U8 | Type::U16 if stored => (i as u32) << 16,
                 // High word first.
                 Type::U32 | Type::S32 if stored => ((i as u32) << 16) | ((d.addr as u32 + 1 - reg) * 16),
-                _ => ((OTHER as u32) << 16) | i as u32,
+                _ => {
+                    let k = reg - d.addr as u32;
+                    assert!(k < 16);
+                    let flags = match d.ty() {
+                        Type::Str(_) => OTHER_TEXT,
+                        Type::U32 | Type::S32 if k == 0 => OTHER_HIGH,
+                        _ => 0,
+                    };
+                    ((OTHER as u32) << 16) | flags | (k << OTHER_WORD) | i as u32
+                }
             };
             index[page.offset + (reg - page.first) as usize] = entry;
             reg += 1;
@@ -139,5 +160,5 @@ pub(crate) fn registers(addr: u16, qty: u16) -> Option<&'static [u32]> {
 #[inline(always)]
 pub fn locate(addr: u16, qty: u16) -> Option<usize> {
     let e = *registers(addr, qty)?.first()?;
-    Some((if (e >> 16) as u16 == OTHER { e & 0xFFFF } else { e >> 16 }) as usize)
+    Some((if (e >> 16) as u16 == OTHER { e & OTHER_OBJ } else { e >> 16 }) as usize)
 }

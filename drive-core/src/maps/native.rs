@@ -2,6 +2,7 @@
 
 use super::exceptions::Exceptions;
 use super::index;
+use crate::crc;
 use crate::od::{Access, OBJECTS, Obj, ObjError, ObjectDef, Range, Storage, Type, is_command};
 use crate::pdu::{Exception, MAX_WRITE, Parser, Words};
 use crate::scope::WORDS;
@@ -20,6 +21,20 @@ pub trait RegisterMap {
         addr: u16,
         out: &mut [u8],
     ) -> Result<(), Exception>;
+    /// [`RegisterMap::read`], and the CRC register `crc` run on over the bytes read. A map that
+    /// makes its bytes one register at a time runs it as it goes, so that the reply is not read
+    /// a second time to seal it.
+    #[inline(always)]
+    fn read_sealing<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
+        &self,
+        drive: &DriveState<P, G>,
+        addr: u16,
+        out: &mut [u8],
+        crc: u16,
+    ) -> Result<u16, Exception> {
+        self.read(drive, addr, out)?;
+        Ok(crate::crc::update_bytes(crc, out))
+    }
     /// Whether `qty` registers from `addr` could be read (checked before 0x17 writes anything).
     fn check_read(&self, addr: u16, qty: u16) -> Result<(), Exception>;
     /// Writes `values` from `addr`: all of them, or none and an exception.
@@ -378,17 +393,16 @@ const fn interval(ty: Type, range: Range) -> Option<(u16, u16)> {
     }
 }
 
-/// Register `reg` of the `i`th object, a live value or a text.
+/// The register of an [`index::OTHER`] entry `e`: a live value or a text.
 #[inline(never)]
-fn other_word<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(drive: &DriveState<P, G>, i: usize, reg: u32) -> u16 {
-    let Some(d) = OBJECTS.get(i) else { return 0 };
-    let Some(k) = reg.checked_sub(u32::from(d.addr)) else { return 0 };
-    match d.ty() {
-        Type::U8 | Type::U16 => drive.read_def(d) as u16,
-        // High word first.
-        Type::U32 | Type::S32 => drive.read_def(d).wrapping_shr(16 * (1 - k.min(1))) as u16,
-        Type::Str(_) => drive.text_word(d.obj, k as usize),
+fn other_word<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(drive: &DriveState<P, G>, e: u32) -> u16 {
+    let Some(obj) = OBJECTS.get((e & index::OTHER_OBJ) as usize).map(|d| d.obj) else { return 0 };
+    if e & index::OTHER_TEXT != 0 {
+        return drive.text_word(obj, ((e >> index::OTHER_WORD) & 15) as usize);
     }
+    // High word first.
+    let shift = if e & index::OTHER_HIGH != 0 { 16 } else { 0 };
+    (drive.live(obj) >> shift) as u16
 }
 
 /// One object of a plan and what to do with it: 8 bytes (a declaration's reference beside an
@@ -446,19 +460,35 @@ impl RegisterMap for NativeMap {
         addr: u16,
         out: &mut [u8],
     ) -> Result<(), Exception> {
+        // The same loop; the CRC it runs, unused, is left out by the compiler.
+        self.read_sealing(drive, addr, out, crc::INIT).map(|_| ())
+    }
+
+    #[inline(always)]
+    fn read_sealing<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
+        &self,
+        drive: &DriveState<P, G>,
+        addr: u16,
+        out: &mut [u8],
+        crc: u16,
+    ) -> Result<u16, Exception> {
         let Some(regs) = index::registers(addr, (out.len() / 2) as u16) else {
-            return read_window(drive, addr, out);
+            read_window(drive, addr, out)?;
+            return Ok(crc::update_bytes(crc, out));
         };
-        for ((slot, &e), reg) in out.chunks_exact_mut(2).zip(regs).zip(u32::from(addr)..) {
+        let mut crc = crc;
+        for (slot, &e) in out.as_chunks_mut::<2>().0.iter_mut().zip(regs) {
             // A stored value, or a reserved register (shifted out), as the index entry says;
             // OTHER is past the end of `params`.
             let w = match drive.params.get((e >> 16) as usize) {
                 Some(&p) => (u64::from(p) >> (e & 63)) as u16,
-                None => other_word(drive, (e & 0xFFFF) as usize, reg),
+                None => other_word(drive, e),
             };
-            slot.copy_from_slice(&w.to_be_bytes());
+            let [hi, lo] = w.to_be_bytes();
+            *slot = [hi, lo];
+            crc = crc::update(crc::update(crc, hi), lo);
         }
-        Ok(())
+        Ok(crc)
     }
 
     /// A read must lie within one page (256 registers sharing the high byte), from the page's
@@ -490,9 +520,17 @@ impl RegisterMap for NativeMap {
         // the exception to give.
         let mut plain = true;
         for (&e, &v) in regs.iter().zip(values.pairs()) {
-            let (lo, hi) = PLAIN.get((e >> 16) as usize).copied().unwrap_or(NOT_PLAIN);
+            // The entry turned half over: the object's index if its shift is 0, else past the
+            // table's end, so that one bounds check tests both.
+            let Some(&(lo, hi)) = PLAIN.get(e.rotate_right(16) as usize) else {
+                plain = false;
+                break;
+            };
             let v = u16::from_be_bytes(v);
-            plain &= (e & 0xFFFF == 0) & (lo <= v) & (v <= hi);
+            if v < lo || v > hi {
+                plain = false;
+                break;
+            }
         }
         if !plain {
             return self.write_planned(drive, addr, values);

@@ -634,7 +634,8 @@ impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         if d.is_live() { self.live(d.obj) } else { self.params.get(d.obj as usize).copied().unwrap_or(0) }
     }
 
-    fn live(&self, obj: Obj) -> u32 {
+    /// The value of the live object `obj` (of any other, its stored value).
+    pub(crate) fn live(&self, obj: Obj) -> u32 {
         let s = &self.ctl.status;
         match obj {
             // The axis's own state, not a copy: the register shows the low 32 bits of the setpoint.
