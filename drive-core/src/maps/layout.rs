@@ -25,7 +25,7 @@
 //! ```
 
 use super::native::{NativeMap, Op, RegisterMap, Spoilt};
-use crate::od::{Access, Obj, ObjError, ObjectDef, Type};
+use crate::od::{Access, OBJECTS, Obj, ObjError, ObjectDef, Type};
 use crate::pdu::{Exception, Parser, Words};
 use crate::scope::WORDS;
 use crate::state::Shared;
@@ -399,7 +399,7 @@ impl Layout {
                 let i = entries.partition_point(|e| e.addr <= addr).checked_sub(1)?;
                 (i, u32::from(addr) - u32::from(entries.get(i)?.addr))
             }
-            Walk::List => (entries.iter().position(|e| e.addr == addr)?, 0),
+            Walk::List => (self.find(addr)?, 0),
         };
         let mut left = qty;
         let mut reg = u32::from(addr);
@@ -417,6 +417,18 @@ impl Layout {
             (left, reg, i, k) = (left - n, reg + n, i + 1, 0);
         }
         Some(())
+    }
+
+    /// The entry whose first register is `addr`: a binary search over a layout in address
+    /// order, a scan of a list (a few dozen entries: cheaper than a search through an index).
+    fn find(&self, addr: u16) -> Option<usize> {
+        let entries = self.entries;
+        let addr_of = |i: usize| entries.get(i).map_or(u16::MAX, |e| e.addr);
+        let i = match self.walk {
+            Walk::Address => entries.partition_point(|e| e.addr < addr),
+            Walk::List => entries.iter().position(|e| e.addr == addr)?,
+        };
+        (addr_of(i) == addr).then_some(i)
     }
 
     /// The place in the program of `qty` registers from `addr`, if they are in its window;
@@ -632,7 +644,142 @@ impl LayoutMap {
     }
 }
 
+impl LayoutMap {
+    /// The commonest read, sealed as it is made: whole entries of numbers in the scales `One`,
+    /// `Ratio`, `PerRev` or `Gear`, from the entry at `addr` ([`Layout::find`]). `None` for
+    /// anything else (a text, a field, a table, a narrow or wide entry, part of an entry, a
+    /// refusal), which the general walk answers.
+    #[inline(always)]
+    fn read_plain<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
+        &self,
+        drive: &DriveState<P, G>,
+        addr: u16,
+        out: &mut [u8],
+        mut crc: u16,
+    ) -> Option<u16> {
+        let layout = self.layout;
+        let qty = out.len() / 2;
+        if layout.in_program(addr, qty).is_some() || layout.in_reserved(addr, qty).is_some() {
+            return None;
+        }
+        let mut i = layout.find(addr)?;
+        let mut slots = out.as_chunks_mut::<2>().0.iter_mut();
+        let mut reg = u32::from(addr);
+        let mut put = |w: u16, crc: &mut u16| -> Option<()> {
+            let [hi, lo] = w.to_be_bytes();
+            *slots.next()? = [hi, lo];
+            *crc = crate::crc::update(crate::crc::update(*crc, hi), lo);
+            Some(())
+        };
+        let end = u32::from(addr) + qty as u32;
+        while reg < end {
+            let e = layout.entries.get(i)?;
+            if (layout.walk == Walk::Address && u32::from(e.addr) != reg) || e.flags & (NARROW | WIDE | CLEAR) != 0 {
+                return None;
+            }
+            let d = e.obj.def();
+            let raw = drive.read_def(d);
+            let v = match *e.scale {
+                Scale::One => raw,
+                Scale::Ratio(..) | Scale::PerRev(..) => {
+                    let v = signed(d, raw);
+                    e.scale.to_map(v, i64::from(drive.per_rev())).unwrap_or(v) as u32
+                }
+                Scale::Gear => {
+                    let (v, (num, den)) = (signed(d, raw), gear(drive));
+                    div_round(v.saturating_mul(den), num).unwrap_or(v) as u32
+                }
+                _ => return None,
+            };
+            match d.ty() {
+                Type::Str(_) => return None,
+                Type::S32 | Type::U32 => {
+                    if reg + 2 > end || e.view() == View::WriteOnly {
+                        return None;
+                    }
+                    let (first, second) = if is_high(layout.order, drive, 0) { (v >> 16, v) } else { (v, v >> 16) };
+                    put(first as u16, &mut crc)?;
+                    put(second as u16, &mut crc)?;
+                    reg += 2;
+                }
+                _ => {
+                    if e.view() == View::WriteOnly {
+                        return None;
+                    }
+                    put(v as u16, &mut crc)?;
+                    reg += 1;
+                }
+            }
+            i += 1;
+        }
+        Some(crc)
+    }
+
+    /// The commonest write: one whole entry of a plain setting ([`DriveState::plain`]: any
+    /// value in its range is taken and stored, whatever the drive does), its value converted
+    /// and checked, then stored. `None` (nothing changed) for anything else or a value refused,
+    /// which the general path answers.
+    #[inline(always)]
+    fn write_plain<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
+        &mut self,
+        drive: &mut DriveState<P, G>,
+        addr: u16,
+        values: &Words<'_>,
+    ) -> Option<()> {
+        let layout = self.layout;
+        let e = layout.entries.get(layout.find(addr)?)?;
+        let d = e.obj.def();
+        if !PLAIN.get(e.obj as usize).copied().unwrap_or(false) || e.view() == View::ReadOnly {
+            return None;
+        }
+        let bits = match (e.words(), values.len()) {
+            (1, 1) => u32::from(values.get(0)?),
+            (2, 2) => {
+                let (first, second) = (u32::from(values.get(0)?), u32::from(values.get(1)?));
+                if is_high(layout.order, drive, 0) { first << 16 | second } else { second << 16 | first }
+            }
+            _ => return None,
+        };
+        let v = self.drive_value(drive, e, bits).ok()?;
+        if !d.accepts(v) {
+            return None;
+        }
+        *drive.params.get_mut(e.obj as usize)? = v;
+        self.set_staged(e.obj, None);
+        Some(())
+    }
+}
+
+/// Which objects are plain settings ([`DriveState::plain`]), by object index.
+static PLAIN: [bool; Obj::COUNT] = {
+    let mut table = [false; Obj::COUNT];
+    let mut i = 0;
+    while i < Obj::COUNT {
+        #[allow(clippy::indexing_slicing)] // const evaluation: out of bounds is a compile error
+        {
+            table[i] = DriveState::<Shared>::plain(&OBJECTS[i]) && !matches!(OBJECTS[i].ty(), Type::Str(_));
+        }
+        i += 1;
+    }
+    table
+};
+
 impl RegisterMap for LayoutMap {
+    #[inline(always)]
+    fn read_sealing<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
+        &self,
+        drive: &DriveState<P, G>,
+        addr: u16,
+        out: &mut [u8],
+        crc: u16,
+    ) -> Result<u16, Exception> {
+        if let Some(crc) = self.read_plain(drive, addr, out, crc) {
+            return Ok(crc);
+        }
+        self.read(drive, addr, out)?;
+        Ok(crate::crc::update_bytes(crc, out))
+    }
+
     fn read<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &self,
         drive: &DriveState<P, G>,
@@ -726,6 +873,9 @@ impl RegisterMap for LayoutMap {
         if let Some(reserved) = self.layout.in_reserved(addr, values.len()) {
             reserved.map_err(|()| ex.unknown)?;
             return Err(ex.unsupported);
+        }
+        if self.write_plain(drive, addr, &values).is_some() {
+            return Ok(());
         }
         let mut plan = heapless::Vec::new();
         self.plan(drive, addr, &values, &mut plan)?;

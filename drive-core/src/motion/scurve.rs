@@ -1138,14 +1138,7 @@ fn closed_form(v0: f32, a0: f32, vf: f32, d: f32, lim: &Lim) -> Result<Option<(C
 /// Plans the closed form ([`closed_pulses`]) into `out` from the pulses it measured, not
 /// built twice; whether it applies.
 #[inline(never)]
-fn closed_position(
-    out: &mut Profile,
-    start: State,
-    a0: f32,
-    d: f32,
-    lim: &Lim,
-    end: State,
-) -> Result<bool, PlanError> {
+fn closed_position(out: &mut Profile, start: State, a0: f32, d: f32, lim: &Lim, end: State) -> Result<bool, PlanError> {
     let (mut p1, mut p2) = (Pulse::EMPTY, Pulse::EMPTY);
     let Some((cand, eval)) = closed_pulses(start.v, a0, end.v, d, lim, &mut p1, &mut p2)? else {
         return Ok(false);
