@@ -649,7 +649,7 @@ impl LayoutMap {
     /// `Ratio`, `PerRev` or `Gear`, from the entry at `addr` ([`Layout::find`]). `None` for
     /// anything else (a text, a field, a table, a narrow or wide entry, part of an entry, a
     /// refusal), which the general walk answers.
-    #[inline(always)]
+    #[inline(never)]
     fn read_plain<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &self,
         drive: &DriveState<P, G>,
@@ -719,7 +719,7 @@ impl LayoutMap {
     /// value in its range is taken and stored, whatever the drive does), its value converted
     /// and checked, then stored. `None` (nothing changed) for anything else or a value refused,
     /// which the general path answers.
-    #[inline(always)]
+    #[inline(never)]
     fn write_plain<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &mut self,
         drive: &mut DriveState<P, G>,
