@@ -1056,7 +1056,15 @@ fn closed_turns(
             let f = |z: f32| turn(at(z)).map(|(_, dist, slope)| (dist - d, slope * 2.0 * sg * z));
             let z_max = sqrt(vmax - sg * vi);
             let (f0, f_max) = (inner.1 - d, far.1 - d);
-            let z = newton(&f, z_max * sqrt(f0 / (f0 - f_max)), z_max, f0, f_max, ftol)?;
+            // The first guess: the root of the distance's quadratic from `±v_max`, exact while
+            // both pulses reach the limit (its curvature in `w` is ±(1/l1 + 1/l2)); else the
+            // secant's in `z²`.
+            let curve = sg * (1.0 / lim.acc + 1.0 / lim.dec);
+            let root = (far.2 * far.2 - 2.0 * curve * f_max).max(0.0);
+            let step = -2.0 * f_max / (far.2 + sqrt(root));
+            let guess = sqrt(vmax + sg * step - sg * vi);
+            let guess = if guess > 0.0 && guess < z_max { guess } else { z_max * sqrt(f0 / (f0 - f_max)) };
+            let z = newton(&f, guess, z_max, f0, f_max, ftol)?;
             let (t, _, _) = turn(at(z))?;
             consider(t, Cand::Turn { vp: at(z), cruise: 0.0 });
         }
