@@ -460,7 +460,7 @@ fn requests(slot: &mut MaybeUninit<Drive>, tick: &mut MaybeUninit<TickSide>) -> 
     rig.run(100_000);
     measure(&mut rig, "stop", &[SLAVE, 0x06, 0x60, 0x53, 0x00, 0x00]);
     rig.run(100_000);
-    // Too short to reach the speed limit: the planner searches the turning speed.
+    // Too short to reach the speed limit: the planner solves for the turning speed.
     measure(&mut rig, "short_move", &write32(0x6005, 2_000));
     ok
 }
