@@ -467,6 +467,16 @@ fn is_high<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(order: WordOrder, drive:
     (k == 0) == high_first
 }
 
+/// The 32-bit value of a two-register write whose registers came as `first`, `second`.
+fn joined<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
+    order: WordOrder,
+    drive: &DriveState<P, G>,
+    first: u32,
+    second: u32,
+) -> u32 {
+    if is_high(order, drive, 0) { first << 16 | second } else { second << 16 | first }
+}
+
 /// The position data groups' electronic gear (0x219B / 0x219C), both at least 1.
 fn gear<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(drive: &DriveState<P, G>) -> (i64, i64) {
     (i64::from(drive.read(Obj::GearNumerator).max(1)), i64::from(drive.read(Obj::GearDenominator).max(1)))
@@ -540,18 +550,22 @@ impl LayoutMap {
     }
 
     /// The map's value of `e` now, as register bits (32 at most).
+    #[inline(always)]
     fn map_value<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(&self, drive: &DriveState<P, G>, e: &Entry) -> u32 {
         let d = e.obj.def();
-        if let Scale::Field(shift, width) = *e.scale {
-            return drive.read_def(d).checked_shr(u32::from(shift)).unwrap_or(0) & mask(width);
+        let raw = drive.read_def(d);
+        let v = signed(d, raw);
+        match *e.scale {
+            // The same unit: the raw bits (what the conversion below gives, without it).
+            Scale::One => raw,
+            Scale::Field(shift, width) => raw.checked_shr(u32::from(shift)).unwrap_or(0) & mask(width),
+            Scale::Gear => {
+                let (num, den) = gear(drive);
+                div_round(v.saturating_mul(den), num).unwrap_or(v) as u32
+            }
+            // A drive value beyond the map's range reads as its low bits.
+            scale => scale.to_map(v, i64::from(drive.per_rev())).unwrap_or(v) as u32,
         }
-        let v = signed(d, drive.read_def(d));
-        if *e.scale == Scale::Gear {
-            let (num, den) = gear(drive);
-            return div_round(v.saturating_mul(den), num).unwrap_or(v) as u32;
-        }
-        // A drive value beyond the map's range reads as its low bits.
-        e.scale.to_map(v, i64::from(drive.per_rev())).unwrap_or(v) as u32
     }
 
     /// The drive's raw value of the map's register bits `bits` for `e`.
@@ -614,7 +628,7 @@ impl LayoutMap {
                 Ok(Op::Commit(word()))
             } else if n == 2 {
                 let (first, second) = (word(), word());
-                Ok(Op::Commit(if is_high(order, drive, 0) { first << 16 | second } else { second << 16 | first }))
+                Ok(Op::Commit(joined(order, drive, first, second)))
             } else if !self.layout.halves {
                 Err(ex.split)
             } else if is_high(order, drive, k) {
@@ -677,20 +691,11 @@ impl LayoutMap {
             if (layout.walk == Walk::Address && u32::from(e.addr) != reg) || e.flags & (NARROW | WIDE | CLEAR) != 0 {
                 return None;
             }
+            if !matches!(*e.scale, Scale::One | Scale::Ratio(..) | Scale::PerRev(..) | Scale::Gear) {
+                return None;
+            }
             let d = e.obj.def();
-            let raw = drive.read_def(d);
-            let v = match *e.scale {
-                Scale::One => raw,
-                Scale::Ratio(..) | Scale::PerRev(..) => {
-                    let v = signed(d, raw);
-                    e.scale.to_map(v, i64::from(drive.per_rev())).unwrap_or(v) as u32
-                }
-                Scale::Gear => {
-                    let (v, (num, den)) = (signed(d, raw), gear(drive));
-                    div_round(v.saturating_mul(den), num).unwrap_or(v) as u32
-                }
-                _ => return None,
-            };
+            let v = self.map_value(drive, e);
             match d.ty() {
                 Type::Str(_) => return None,
                 Type::S32 | Type::U32 => {
@@ -736,7 +741,7 @@ impl LayoutMap {
             (1, 1) => u32::from(values.get(0)?),
             (2, 2) => {
                 let (first, second) = (u32::from(values.get(0)?), u32::from(values.get(1)?));
-                if is_high(layout.order, drive, 0) { first << 16 | second } else { second << 16 | first }
+                joined(layout.order, drive, first, second)
             }
             _ => return None,
         };
