@@ -14,6 +14,7 @@
 //! assert_eq!(drive.state().read(Obj::CommandSpeed), 1_000);
 //! ```
 
+use super::compiled::Compiled;
 use super::layout::{Choice, Entry, Exceptions, Layout, ProgramWindow, Scale, SpoiltCodes, Walk, WordOrder, ZERO_ONE};
 use crate::od::Obj;
 
@@ -184,7 +185,11 @@ pub static LAYOUT: Layout = Layout {
     sub_index: None,
     address: None,
     scope: true,
+    index: Some(&INDEX),
 };
+
+/// The table's compiled lookup.
+static INDEX: Compiled = compiled!(ENTRIES);
 
 /// The manual's factory values (§九) where they differ from the drive's: start and stop
 /// speeds 1 rev/s, ramps 100 rev/s², runs, jogs and homing at 10 rev/s, the homing clockwise,

@@ -15,6 +15,7 @@
 //! assert_eq!(drive.state().read(Obj::Microsteps), 50);
 //! ```
 
+use super::compiled::Compiled;
 use super::layout::{Choice, Entry, Exceptions, Layout, Scale, SpoiltCodes, SubIndex, Walk, WordOrder, ZERO_ONE};
 use crate::od::Obj;
 use crate::pdu::{Exception, Request, Words};
@@ -243,7 +244,11 @@ pub static LAYOUT: Layout = Layout {
     // The serial port's address (§1.3): an EC-57's switches address its fieldbus.
     address: Some(1),
     scope: false,
+    index: Some(&INDEX),
 };
+
+/// The table's compiled lookup.
+static INDEX: Compiled = compiled!(ENTRIES);
 
 /// The requests' index and sub-index (§1.3), and the window from [`WINDOW`] on.
 static SUB_INDEX: SubIndex = SubIndex { parse, index_of, window: WINDOW };

@@ -13,6 +13,7 @@
 //! assert_eq!(drive.take_reply(), Some(&[0x01, 0x86, 0x0B, 0x03, 0xA7][..]));
 //! ```
 
+use super::compiled::Compiled;
 use super::layout::{Choice, Entry, Exceptions, Layout, Scale, SpoiltCodes, Walk, WordOrder};
 use crate::od::Obj;
 use crate::pdu::Exception;
@@ -118,7 +119,11 @@ pub static LAYOUT: Layout = Layout {
     sub_index: None,
     address: None,
     scope: true,
+    index: Some(&INDEX),
 };
+
+/// The table's compiled lookup.
+static INDEX: Compiled = compiled!(ENTRIES);
 
 /// What the reference says beside the table: the decisions where seed 001 is silent or
 /// contradicts itself.

@@ -24,8 +24,9 @@
 //! assert_eq!(drive.state().read(Obj::PhaseCurrent), 1200);
 //! ```
 
+use super::compiled::{self, Compiled};
 use super::native::{NativeMap, Op, RegisterMap, Spoilt};
-use crate::od::{Access, OBJECTS, Obj, ObjError, ObjectDef, Type};
+use crate::od::{Access, OBJECTS, Obj, ObjError, ObjectDef, Range, Type};
 use crate::pdu::{Exception, Parser, Words};
 use crate::scope::WORDS;
 use crate::state::Shared;
@@ -113,6 +114,7 @@ pub enum Scale {
 
 /// `n / d` rounded to the nearest (halves away from zero); `None` for `d == 0` or overflow.
 /// (64 bits hold every product: a 32-bit value times a factor below 2^31.)
+#[inline(always)]
 fn div_round(n: i64, d: i64) -> Option<i64> {
     if d == 0 {
         return None;
@@ -270,6 +272,87 @@ impl Entry {
     }
 }
 
+/// The first register of each of `entries`, in their order: what [`compiled::table`] hashes.
+#[allow(clippy::indexing_slicing)] // const evaluation: out of bounds is a compile error
+pub const fn addresses<const N: usize>(entries: &[Entry; N]) -> [u16; N] {
+    let mut addrs = [0u16; N];
+    let mut i = 0;
+    while i < N {
+        addrs[i] = entries[i].addr;
+        i += 1;
+    }
+    addrs
+}
+
+/// The compiled lookup's flags of each entry ([`Compiled::fast`]).
+#[allow(clippy::indexing_slicing)]
+pub const fn fast_flags<const N: usize>(entries: &[Entry; N]) -> [u8; N] {
+    let mut fast = [0u8; N];
+    let mut i = 0;
+    while i < N {
+        let e = &entries[i];
+        let d = &OBJECTS[e.obj as usize];
+        let number = !matches!(d.ty(), Type::Str(_));
+        let (linear, scale) = match *e.scale {
+            Scale::One => (true, compiled::ONE),
+            Scale::Ratio(..) => (true, compiled::RATIO),
+            Scale::PerRev(..) => (true, compiled::PER_REV),
+            Scale::Gear => (true, compiled::GEAR),
+            _ => (false, compiled::ONE),
+        };
+        let words = if e.is_narrow() {
+            1
+        } else if e.is_wide() {
+            2
+        } else {
+            d.words()
+        };
+        let mut f = scale;
+        if words == 2 {
+            f |= compiled::TWO;
+        }
+        if matches!(d.ty(), Type::S32) {
+            f |= compiled::SIGNED;
+        }
+        if d.is_live() {
+            f |= compiled::LIVE;
+        }
+        if e.is_narrow() {
+            f |= compiled::NARROW;
+        }
+        let whole = !e.is_narrow() && !e.is_wide() && !e.is_clear();
+        if number && linear && whole && !matches!(e.view(), View::WriteOnly) {
+            f |= compiled::READ;
+        }
+        let interval = matches!(*d.range, Range::Any | Range::Span(..));
+        if number
+            && linear
+            && interval
+            && !e.is_clear()
+            && !e.is_wide()
+            && !matches!(e.view(), View::ReadOnly)
+            && DriveState::<Shared>::plain(d)
+        {
+            f |= compiled::WRITE;
+        }
+        fast[i] = f;
+        i += 1;
+    }
+    fast
+}
+
+/// A layout's [`Compiled`] lookup from its entries (a static array), built when compiling.
+#[macro_export]
+macro_rules! compiled {
+    ($entries:path) => {{
+        const ADDRS: [u16; $entries.len()] = $crate::maps::layout::addresses(&$entries);
+        const TABLE: (usize, u32) = $crate::maps::compiled::table(&ADDRS);
+        static SLOTS: [u8; TABLE.0] = $crate::maps::compiled::slots::<{ TABLE.0 }>(&ADDRS, TABLE.1);
+        static FAST: [u8; $entries.len()] = $crate::maps::layout::fast_flags(&$entries);
+        $crate::maps::compiled::Compiled { mul: TABLE.1, slots: &SLOTS, fast: &FAST }
+    }};
+}
+
 /// A register layout: its entries, how requests walk them, and the codes of its refusals.
 #[derive(Clone, Copy, Debug)]
 pub struct Layout {
@@ -308,6 +391,9 @@ pub struct Layout {
     /// Whether the scope's and the black box's registers are the native map's, at their native
     /// addresses ([`SCOPE_RANGES`]); a sub-indexed layout reaches them through its window.
     pub scope: bool,
+    /// The lookup compiled from the entries ([`compiled!`](crate::compiled)), which the
+    /// commonest requests take; `None`: every request walks the table.
+    pub index: Option<&'static Compiled>,
 }
 
 /// The native map's scope and black box (0x2220-0x2240), firmware update and write lock
@@ -386,6 +472,7 @@ impl Layout {
             sub_index: None,
             address: None,
             scope: false,
+            index: None,
         }
     }
 
@@ -419,9 +506,12 @@ impl Layout {
         Some(())
     }
 
-    /// The entry whose first register is `addr`: a binary search over a layout in address
-    /// order, a scan of a list (a few dozen entries: cheaper than a search through an index).
-    fn find(&self, addr: u16) -> Option<usize> {
+    /// The entry whose first register is `addr`: by the compiled lookup, or else a binary
+    /// search over a layout in address order, a scan of a list.
+    pub(super) fn find(&self, addr: u16) -> Option<usize> {
+        if let Some(index) = self.index {
+            return self.find_compiled(index, addr);
+        }
         let entries = self.entries;
         let addr_of = |i: usize| entries.get(i).map_or(u16::MAX, |e| e.addr);
         let i = match self.walk {
@@ -431,9 +521,16 @@ impl Layout {
         (addr_of(i) == addr).then_some(i)
     }
 
+    /// [`Layout::find`] by the compiled lookup `index`, the layout's.
+    #[inline(always)]
+    fn find_compiled(&self, index: &Compiled, addr: u16) -> Option<usize> {
+        let i = index.candidate(addr)?;
+        (self.entries.get(i)?.addr == addr).then_some(i)
+    }
+
     /// The place in the program of `qty` registers from `addr`, if they are in its window;
     /// `Err` if they begin in it but run past its end.
-    fn in_program(&self, addr: u16, qty: usize) -> Option<Result<usize, ()>> {
+    pub(super) fn in_program(&self, addr: u16, qty: usize) -> Option<Result<usize, ()>> {
         let window = self.program?;
         let k = usize::from(addr.checked_sub(window.first)?);
         let words = usize::from(window.words).min(crate::state::memory::WORDS);
@@ -443,7 +540,7 @@ impl Layout {
 
     /// Whether `qty` registers from `addr` are all reserved ([`Layout::reserved`]); `Err` if
     /// they begin in a reserved range and run past it.
-    fn in_reserved(&self, addr: u16, qty: usize) -> Option<Result<(), ()>> {
+    pub(super) fn in_reserved(&self, addr: u16, qty: usize) -> Option<Result<(), ()>> {
         let &(_, last) = self.reserved.iter().find(|(first, last)| (*first..=*last).contains(&addr))?;
         Some(if usize::from(addr) + qty <= usize::from(last) + 1 { Ok(()) } else { Err(()) })
     }
@@ -465,6 +562,78 @@ fn is_high<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(order: WordOrder, drive:
         WordOrder::Setting => drive.read(Obj::MapWordOrder) == 0,
     };
     (k == 0) == high_first
+}
+
+/// The drive's raw value of the register bits `bits` of a [`compiled::WRITE`] entry `e` whose
+/// compiled flags are `fast`, if the object takes it: what [`LayoutMap::drive_value`] and the
+/// object's range check give these entries, by their flags, inlined into the plain write.
+#[inline(always)]
+fn plain_value<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
+    drive: &DriveState<P, G>,
+    e: &Entry,
+    fast: u8,
+    bits: u32,
+) -> Option<u32> {
+    // The map's register is signed as the object is.
+    let v = if fast & compiled::SIGNED == 0 {
+        i64::from(bits)
+    } else if fast & compiled::NARROW != 0 {
+        i64::from(bits as u16 as i16)
+    } else {
+        i64::from(bits as i32)
+    };
+    let v = match (fast & compiled::SCALE, *e.scale) {
+        (compiled::ONE, _) => v,
+        (compiled::GEAR, _) => {
+            let (num, den) = gear(drive);
+            div_round(v.saturating_mul(num), den)?
+        }
+        (_, Scale::Ratio(n, den)) => div_round(v.checked_mul(i64::from(n))?, i64::from(den))?,
+        (_, Scale::PerRev(n, den)) => {
+            div_round(v.checked_mul(i64::from(n) * i64::from(drive.per_rev()))?, i64::from(den))?
+        }
+        _ => return None,
+    };
+    // A [`compiled::WRITE`] entry's object takes one interval of values, within its type.
+    let d = e.obj.def();
+    let (lo, hi) = match *d.range {
+        Range::Span(lo, hi) => (i64::from(lo), i64::from(hi)),
+        _ => (i64::MIN, i64::MAX),
+    };
+    let (type_lo, type_hi) = match d.ty() {
+        Type::U8 => (0, i64::from(u8::MAX)),
+        Type::U16 => (0, i64::from(u16::MAX)),
+        Type::U32 => (0, i64::from(u32::MAX)),
+        Type::S32 => (i64::from(i32::MIN), i64::from(i32::MAX)),
+        Type::Str(_) => return None,
+    };
+    (v >= lo.max(type_lo) && v <= hi.min(type_hi)).then_some(v as u32)
+}
+
+/// The map's value now of a [`compiled::READ`] entry `e` whose compiled flags are `fast`, as
+/// register bits: what [`LayoutMap::map_value`] gives these entries, by their flags.
+#[inline(always)]
+fn plain_map_value<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(drive: &DriveState<P, G>, e: &Entry, fast: u8) -> u32 {
+    let raw = if fast & compiled::LIVE != 0 {
+        drive.live(e.obj)
+    } else {
+        drive.params.get(e.obj as usize).copied().unwrap_or(0)
+    };
+    let v = if fast & compiled::SIGNED != 0 { i64::from(raw as i32) } else { i64::from(raw) };
+    // A drive value beyond the map's range reads as its low bits.
+    let map = match (fast & compiled::SCALE, *e.scale) {
+        (compiled::ONE, _) => return raw,
+        (compiled::GEAR, _) => {
+            let (num, den) = gear(drive);
+            div_round(v.saturating_mul(den), num)
+        }
+        (_, Scale::Ratio(n, den)) => v.checked_mul(i64::from(den)).and_then(|x| div_round(x, i64::from(n))),
+        (_, Scale::PerRev(n, den)) => {
+            v.checked_mul(i64::from(den)).and_then(|x| div_round(x, i64::from(n) * i64::from(drive.per_rev())))
+        }
+        _ => None,
+    };
+    map.unwrap_or(v) as u32
 }
 
 /// The 32-bit value of a two-register write whose registers came as `first`, `second`.
@@ -592,11 +761,18 @@ impl LayoutMap {
             Type::S32 if e.is_narrow() => i64::from(bits as u16 as i16),
             _ => signed(d, bits),
         };
-        let v = if *e.scale == Scale::Gear {
-            let (num, den) = gear(drive);
-            div_round(v.saturating_mul(num), den)
-        } else {
-            e.scale.to_drive(v, i64::from(drive.per_rev()))
+        // The linear scales spelt out: what `to_drive` gives them, without its other arms.
+        let v = match *e.scale {
+            Scale::One => Some(v),
+            Scale::Ratio(n, den) => v.checked_mul(i64::from(n)).and_then(|x| div_round(x, i64::from(den))),
+            Scale::PerRev(n, den) => {
+                v.checked_mul(i64::from(n) * i64::from(drive.per_rev())).and_then(|x| div_round(x, i64::from(den)))
+            }
+            Scale::Gear => {
+                let (num, den) = gear(drive);
+                div_round(v.saturating_mul(num), den)
+            }
+            scale => scale.to_drive(v, i64::from(drive.per_rev())),
         };
         raw_of(d, v.ok_or(ObjError::OutOfRange)?).ok_or(ObjError::OutOfRange)
     }
@@ -659,12 +835,13 @@ impl LayoutMap {
 }
 
 impl LayoutMap {
-    /// The commonest read, sealed as it is made: whole entries of numbers in the scales `One`,
-    /// `Ratio`, `PerRev` or `Gear`, from the entry at `addr` ([`Layout::find`]). `None` for
-    /// anything else (a text, a field, a table, a narrow or wide entry, part of an entry, a
-    /// refusal), which the general walk answers.
+    /// The commonest read, sealed as it is made: whole entries that the compiled lookup marks
+    /// [`compiled::READ`], from the entry at `addr`. `None` for anything else (a text, a field,
+    /// a table, a narrow or wide entry, part of an entry, a refusal, a layout without a compiled
+    /// lookup), which the general walk answers. (No entry lies in a window, the program or a
+    /// reserved range: a test checks each layout.)
     #[inline(never)]
-    fn read_plain<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
+    pub(super) fn read_plain<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &self,
         drive: &DriveState<P, G>,
         addr: u16,
@@ -672,102 +849,117 @@ impl LayoutMap {
         mut crc: u16,
     ) -> Option<u16> {
         let layout = self.layout;
-        let qty = out.len() / 2;
-        if layout.in_program(addr, qty).is_some() || layout.in_reserved(addr, qty).is_some() {
-            return None;
-        }
-        let mut i = layout.find(addr)?;
-        let mut slots = out.as_chunks_mut::<2>().0.iter_mut();
-        let mut reg = u32::from(addr);
-        let mut put = |w: u16, crc: &mut u16| -> Option<()> {
-            let [hi, lo] = w.to_be_bytes();
-            *slots.next()? = [hi, lo];
+        let index = layout.index?;
+        let mut i = layout.find_compiled(index, addr)?;
+        let high_first = is_high(layout.order, drive, 0);
+        let mut reg = addr;
+        let put = |w: u32, slot: &mut [u8; 2], crc: &mut u16| {
+            let [hi, lo] = (w as u16).to_be_bytes();
+            *slot = [hi, lo];
             *crc = crate::crc::update(crate::crc::update(*crc, hi), lo);
-            Some(())
         };
-        let end = u32::from(addr) + qty as u32;
-        while reg < end {
-            let e = layout.entries.get(i)?;
-            if (layout.walk == Walk::Address && u32::from(e.addr) != reg) || e.flags & (NARROW | WIDE | CLEAR) != 0 {
+        let mut slots = out.as_chunks_mut::<2>().0;
+        while let Some((slot, rest)) = slots.split_first_mut() {
+            let (e, fast) = (layout.entries.get(i)?, *index.fast.get(i)?);
+            if fast & compiled::READ == 0 || (layout.walk == Walk::Address && e.addr != reg) {
                 return None;
             }
-            if !matches!(*e.scale, Scale::One | Scale::Ratio(..) | Scale::PerRev(..) | Scale::Gear) {
-                return None;
+            let v = plain_map_value(drive, e, fast);
+            if fast & compiled::TWO == 0 {
+                put(v, slot, &mut crc);
+                slots = rest;
+            } else {
+                let (next, rest) = rest.split_first_mut()?;
+                let (first, second) = if high_first { (v >> 16, v) } else { (v, v >> 16) };
+                put(first, slot, &mut crc);
+                put(second, next, &mut crc);
+                slots = rest;
             }
-            let d = e.obj.def();
-            let v = self.map_value(drive, e);
-            match d.ty() {
-                Type::Str(_) => return None,
-                Type::S32 | Type::U32 => {
-                    if reg + 2 > end || e.view() == View::WriteOnly {
-                        return None;
-                    }
-                    let (first, second) = if is_high(layout.order, drive, 0) { (v >> 16, v) } else { (v, v >> 16) };
-                    put(first as u16, &mut crc)?;
-                    put(second as u16, &mut crc)?;
-                    reg += 2;
-                }
-                _ => {
-                    if e.view() == View::WriteOnly {
-                        return None;
-                    }
-                    put(v as u16, &mut crc)?;
-                    reg += 1;
-                }
-            }
+            reg = reg.wrapping_add(1 + u16::from(fast & compiled::TWO != 0));
             i += 1;
         }
         Some(crc)
     }
 
-    /// The commonest write: one whole entry of a plain setting ([`DriveState::plain`]: any
-    /// value in its range is taken and stored, whatever the drive does), its value converted
-    /// and checked, then stored. `None` (nothing changed) for anything else or a value refused,
-    /// which the general path answers.
-    #[inline(never)]
-    fn write_plain<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
+    /// The commonest write: one whole entry that the compiled lookup marks [`compiled::WRITE`]
+    /// (a plain setting, [`DriveState::plain`]: any value in its range is taken and stored,
+    /// whatever the drive does), its value converted and checked, then stored. `None` (nothing
+    /// changed) for anything else or a value refused, which the general path answers.
+    #[inline(always)]
+    pub(super) fn write_plain<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &mut self,
         drive: &mut DriveState<P, G>,
         addr: u16,
         values: &Words<'_>,
     ) -> Option<()> {
         let layout = self.layout;
-        let e = layout.entries.get(layout.find(addr)?)?;
-        let d = e.obj.def();
-        if !PLAIN.get(e.obj as usize).copied().unwrap_or(false) || e.view() == View::ReadOnly {
+        let index = layout.index?;
+        let i = layout.find_compiled(index, addr)?;
+        let (e, fast) = (layout.entries.get(i)?, *index.fast.get(i)?);
+        if fast & compiled::WRITE == 0 {
             return None;
         }
-        let bits = match (e.words(), values.len()) {
-            (1, 1) => u32::from(values.get(0)?),
-            (2, 2) => {
-                let (first, second) = (u32::from(values.get(0)?), u32::from(values.get(1)?));
-                joined(layout.order, drive, first, second)
-            }
+        let bits = match (fast & compiled::TWO != 0, values.len()) {
+            (false, 1) => u32::from(values.get(0)?),
+            (true, 2) => joined(layout.order, drive, u32::from(values.get(0)?), u32::from(values.get(1)?)),
             _ => return None,
         };
-        let v = self.drive_value(drive, e, bits).ok()?;
-        if !d.accepts(v) {
-            return None;
-        }
+        let v = plain_value(drive, e, fast, bits)?;
         *drive.params.get_mut(e.obj as usize)? = v;
         self.set_staged(e.obj, None);
         Some(())
     }
 }
 
-/// Which objects are plain settings ([`DriveState::plain`]), by object index.
-static PLAIN: [bool; Obj::COUNT] = {
-    let mut table = [false; Obj::COUNT];
-    let mut i = 0;
-    while i < Obj::COUNT {
-        #[allow(clippy::indexing_slicing)] // const evaluation: out of bounds is a compile error
-        {
-            table[i] = DriveState::<Shared>::plain(&OBJECTS[i]) && !matches!(OBJECTS[i].ty(), Type::Str(_));
+impl LayoutMap {
+    /// A write that [`LayoutMap::write_plain`] did not take: the program window, the reserved
+    /// registers, and the table walked. Out of line: its plan (123 objects at most) is on the
+    /// stack for a layout's writes only, not under every write of the maps it is a variant of.
+    #[inline(never)]
+    pub(super) fn write_walked<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
+        &mut self,
+        drive: &mut DriveState<P, G>,
+        addr: u16,
+        values: Words<'_>,
+    ) -> Result<(), Exception> {
+        let ex = self.layout.exceptions;
+        if let Some(window) = self.layout.in_program(addr, values.len()) {
+            let k = window.map_err(|()| ex.unknown)?;
+            if let Some(check) = self.layout.program.and_then(|p| p.check) {
+                let bad = values.iter().enumerate().any(|(j, v)| !check(k + j, v));
+                if bad {
+                    return Err(ex.out_of_range);
+                }
+            }
+            return drive.write_program(k, &values).map_err(|x| ex.of(x));
         }
-        i += 1;
+        if let Some(reserved) = self.layout.in_reserved(addr, values.len()) {
+            reserved.map_err(|()| ex.unknown)?;
+            return Err(ex.unsupported);
+        }
+        let mut plan = heapless::Vec::new();
+        self.plan(drive, addr, &values, &mut plan)?;
+        if let [(e, Op::Commit(bits))] = plan.as_slice() {
+            // One object: its own write is all or nothing, no checkpoint needed.
+            let v = self.drive_value(drive, e, *bits).map_err(|x| ex.of(x))?;
+            drive.write_def(e.obj.def(), v).map_err(|x| ex.of(x))?;
+            self.set_staged(e.obj, None);
+            return Ok(());
+        }
+        // Each value in the drive's unit as the writes before it left the drive (a scale may
+        // depend on an object written earlier in the request).
+        drive
+            .write_in_order(&plan, |drive, &(e, op)| match op {
+                Op::Commit(bits) => self.drive_value(drive, e, bits).map(|v| Some((e.obj.def(), v))),
+                Op::Stage(_) => Ok(None),
+            })
+            .map_err(|e| ex.of(e))?;
+        for &(e, op) in &plan {
+            self.set_staged(e.obj, if let Op::Stage(hi) = op { Some(hi) } else { None });
+        }
+        Ok(())
     }
-    table
-};
+}
 
 impl RegisterMap for LayoutMap {
     #[inline(always)]
@@ -855,54 +1047,16 @@ impl RegisterMap for LayoutMap {
         }
     }
 
-    // Out of line: its plan (123 objects at most) is on the stack for a layout's writes only,
-    // not under every write of the maps it is a variant of.
-    #[inline(never)]
     fn write<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
         &mut self,
         drive: &mut DriveState<P, G>,
         addr: u16,
         values: Words<'_>,
     ) -> Result<(), Exception> {
-        let ex = self.layout.exceptions;
-        if let Some(window) = self.layout.in_program(addr, values.len()) {
-            let k = window.map_err(|()| ex.unknown)?;
-            if let Some(check) = self.layout.program.and_then(|p| p.check) {
-                let bad = values.iter().enumerate().any(|(j, v)| !check(k + j, v));
-                if bad {
-                    return Err(ex.out_of_range);
-                }
-            }
-            return drive.write_program(k, &values).map_err(|x| ex.of(x));
-        }
-        if let Some(reserved) = self.layout.in_reserved(addr, values.len()) {
-            reserved.map_err(|()| ex.unknown)?;
-            return Err(ex.unsupported);
-        }
         if self.write_plain(drive, addr, &values).is_some() {
             return Ok(());
         }
-        let mut plan = heapless::Vec::new();
-        self.plan(drive, addr, &values, &mut plan)?;
-        if let [(e, Op::Commit(bits))] = plan.as_slice() {
-            // One object: its own write is all or nothing, no checkpoint needed.
-            let v = self.drive_value(drive, e, *bits).map_err(|x| ex.of(x))?;
-            drive.write_def(e.obj.def(), v).map_err(|x| ex.of(x))?;
-            self.set_staged(e.obj, None);
-            return Ok(());
-        }
-        // Each value in the drive's unit as the writes before it left the drive (a scale may
-        // depend on an object written earlier in the request).
-        drive
-            .write_in_order(&plan, |drive, &(e, op)| match op {
-                Op::Commit(bits) => self.drive_value(drive, e, bits).map(|v| Some((e.obj.def(), v))),
-                Op::Stage(_) => Ok(None),
-            })
-            .map_err(|e| ex.of(e))?;
-        for &(e, op) in &plan {
-            self.set_staged(e.obj, if let Op::Stage(hi) = op { Some(hi) } else { None });
-        }
-        Ok(())
+        self.write_walked(drive, addr, values)
     }
 
     fn request_exception(&self, e: Exception) -> Exception {

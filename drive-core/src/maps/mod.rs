@@ -2,14 +2,16 @@
 //! own map (seed 000), indexed at compile time; [`layout`] serves any other map from a table of
 //! addresses, word orders, scales and exception codes over the same objects.
 
+#[macro_use]
+pub mod layout;
 pub mod cls9;
+pub mod compiled;
 #[cfg(feature = "docs")]
 pub mod doc;
 pub mod ec57;
 pub mod exceptions;
 pub mod index;
 pub mod jmc;
-pub mod layout;
 pub mod native;
 pub mod servo;
 
@@ -103,10 +105,19 @@ impl RegisterMap for Maps {
     ) -> Result<u16, Exception> {
         let (native, codes) = match self {
             Self::Native(m) => (m, None),
-            Self::Layout(m) => match m.window(addr) {
-                Some((w, codes)) => (w, Some(codes)),
-                None => return m.read_sealing(drive, addr, out, crc),
-            },
+            Self::Layout(m) => {
+                // The commonest reads first: their entries lie outside the window.
+                if let Some(crc) = m.read_plain(drive, addr, out, crc) {
+                    return Ok(crc);
+                }
+                match m.window(addr) {
+                    Some((w, codes)) => (w, Some(codes)),
+                    None => {
+                        m.read(drive, addr, out)?;
+                        return Ok(crate::crc::update_bytes(crc, out));
+                    }
+                }
+            }
         };
         native.read_sealing(drive, addr, out, crc).map_err(|e| codes.map_or(e, |c| c.native(e)))
     }
@@ -131,8 +142,12 @@ impl RegisterMap for Maps {
         let (native, codes) = match self {
             Self::Native(m) => (m, None),
             Self::Layout(m) => {
+                // The commonest writes first: their entries lie outside the window.
+                if m.write_plain(drive, addr, &values).is_some() {
+                    return Ok(());
+                }
                 if m.window(addr).is_none() {
-                    return m.write(drive, addr, values);
+                    return m.write_walked(drive, addr, values);
                 }
                 match m.window_mut(addr) {
                     Some((w, codes)) => (w, Some(codes)),
@@ -216,6 +231,122 @@ impl RegisterMap for Maps {
         match self {
             Self::Native(m) => m.fixed_address(),
             Self::Layout(m) => m.fixed_address(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
+    use super::layout::{Layout, LayoutMap, SCOPE_RANGES};
+    use super::{RegisterMap, cls9, compiled, ec57, jmc, servo};
+    use crate::od::Obj;
+    use crate::pdu::Words;
+    use crate::state::DriveState;
+
+    const LAYOUTS: [&Layout; 4] = [&jmc::LAYOUT, &cls9::LAYOUT, &ec57::LAYOUT, &servo::LAYOUT];
+
+    /// A drive whose settings hold arbitrary bits (the plain paths and the walk must agree on
+    /// any), with a sane resolution and gear.
+    fn scrambled() -> DriveState {
+        let mut drive = DriveState::new(&crate::ident::Identity::SIMULATOR, false);
+        for (i, p) in drive.params.iter_mut().enumerate() {
+            *p = (i as u32 + 1).wrapping_mul(2_654_435_761) >> (i % 17);
+        }
+        drive.params[Obj::Microsteps as usize] = 16;
+        drive.params[Obj::GearNumerator as usize] = 3;
+        drive.params[Obj::GearDenominator as usize] = 7;
+        drive.params[Obj::MapWordOrder as usize] = 1;
+        drive
+    }
+
+    /// Each map's table is the smallest, and every entry has a slot of its own in it.
+    #[test]
+    fn every_entry_has_a_slot_of_its_own() {
+        for layout in LAYOUTS {
+            let index = layout.index.unwrap();
+            assert_eq!(index.slots.len(), (2 * layout.entries.len()).next_power_of_two());
+            assert_eq!(index.slots.iter().filter(|&&s| s != 0).count(), layout.entries.len());
+        }
+    }
+
+    #[test]
+    fn the_lookup_finds_every_entry_and_nothing_else() {
+        for layout in LAYOUTS {
+            assert!(layout.index.is_some());
+            for addr in 0..=u16::MAX {
+                assert_eq!(layout.find(addr), layout.entries.iter().position(|e| e.addr == addr), "{addr:#06x}");
+            }
+        }
+    }
+
+    /// What lets the plain paths go first: no entry begins in a window onto the native map, the
+    /// program or a reserved range.
+    #[test]
+    fn no_entry_lies_in_a_window_the_program_or_a_reserved_range() {
+        for layout in LAYOUTS {
+            let map = LayoutMap::new(layout);
+            for e in layout.entries {
+                assert!(map.window(e.addr).is_none(), "{:#06x}", e.addr);
+                assert!(layout.in_program(e.addr, 1).is_none(), "{:#06x}", e.addr);
+                assert!(layout.in_reserved(e.addr, 1).is_none(), "{:#06x}", e.addr);
+                let in_scope = SCOPE_RANGES.iter().any(|&(lo, hi)| (lo..=hi).contains(&e.addr));
+                assert!(!(layout.scope && in_scope), "{:#06x}", e.addr);
+            }
+        }
+    }
+
+    /// The plain read gives the walk's registers and their CRC, wherever it answers; it answers
+    /// every read of whole entries it marks.
+    #[test]
+    fn the_plain_read_reads_as_the_walk() {
+        let drive = scrambled();
+        for layout in LAYOUTS {
+            let map = LayoutMap::new(layout);
+            let mut answered = 0;
+            for e in layout.entries {
+                for qty in 1..=6 {
+                    let (mut plain, mut walked) = ([0u8; 12], [0u8; 12]);
+                    let (plain, walked) = (&mut plain[..2 * qty], &mut walked[..2 * qty]);
+                    let Some(crc) = map.read_plain(&drive, e.addr, plain, 0x1234) else { continue };
+                    answered += 1;
+                    assert_eq!(map.read(&drive, e.addr, walked), Ok(()), "{:#06x} {qty}", e.addr);
+                    assert_eq!(plain, walked, "{:#06x} {qty}", e.addr);
+                    assert_eq!(crc, crate::crc::update_bytes(0x1234, walked));
+                }
+            }
+            assert!(answered > layout.entries.len() / 3, "{answered}");
+        }
+    }
+
+    /// The plain write changes what the walk's write changes, and nothing where it does not
+    /// answer; it answers values the walk takes for the entries it marks.
+    #[test]
+    fn the_plain_write_writes_as_the_walk() {
+        let drive = scrambled();
+        let values: [u16; 8] = [0, 1, 2, 100, 0x7FFF, 0x8000, 0xFFFF, 12_345];
+        for layout in LAYOUTS {
+            let mut answered = 0;
+            for (i, e) in layout.entries.iter().enumerate() {
+                let two = layout.index.unwrap().fast[i] & compiled::TWO != 0;
+                for &a in &values {
+                    for &b in &values[..if two { values.len() } else { 1 }] {
+                        let bytes = [(a >> 8) as u8, a as u8, (b >> 8) as u8, b as u8];
+                        let words = Words::new(&bytes[..if two { 4 } else { 2 }]);
+                        let (mut plain, mut walked) = (drive.clone(), drive.clone());
+                        let mut map = LayoutMap::new(layout);
+                        if map.write_plain(&mut plain, e.addr, &words).is_none() {
+                            assert_eq!(plain.params, drive.params, "{:#06x}", e.addr);
+                            continue;
+                        }
+                        answered += 1;
+                        let taken = LayoutMap::new(layout).write_walked(&mut walked, e.addr, words);
+                        assert_eq!(taken, Ok(()), "{:#06x} {a} {b}", e.addr);
+                        assert_eq!(plain.params, walked.params, "{:#06x} {a} {b}", e.addr);
+                    }
+                }
+            }
+            assert!(answered > 0);
         }
     }
 }

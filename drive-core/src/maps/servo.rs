@@ -15,6 +15,7 @@
 //! assert_eq!(drive.state().read(Obj::CommTimeout), 50);
 //! ```
 
+use super::compiled::Compiled;
 use super::layout::{Choice, Entry, Exceptions, Layout, ProgramWindow, Scale, SpoiltCodes, Walk, WordOrder};
 use crate::od::Obj;
 use crate::state::ProgramKind;
@@ -172,7 +173,11 @@ pub static LAYOUT: Layout = Layout {
     sub_index: None,
     address: None,
     scope: true,
+    index: Some(&INDEX),
 };
+
+/// The table's compiled lookup.
+static INDEX: Compiled = compiled!(ENTRIES);
 
 /// The manual's factory values where they differ from the drive's: P□503 10 r/min.
 static DEFAULTS: [(u16, i32); 1] = [(0x01F7, 10)];

@@ -105,7 +105,15 @@ impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
 
     /// Carries out the transfer's order of the request just taken, if any: an install of an
     /// image that stopped short fails it (0x2251 = 3) and is refused.
+    #[inline(always)]
     pub fn settle_update(&mut self) -> Result<(), ObjError> {
+        // Every write comes here; an order is rare, and out of line.
+        if self.update_order == 0 { Ok(()) } else { self.carry_out_update_order() }
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn carry_out_update_order(&mut self) -> Result<(), ObjError> {
         let order = core::mem::take(&mut self.update_order);
         let t = &mut self.updates.transfer;
         match u32::from(order) {
