@@ -22,6 +22,10 @@ pub enum RxError {
     Overrun,
 }
 
+/// The bytes of a Modbus write's reply before its CRC: address, function, register, value or
+/// count.
+pub const HEAD: usize = 6;
+
 /// Assembles frames from time-stamped bytes.
 #[derive(Clone, Debug)]
 pub struct Framer {
@@ -33,6 +37,10 @@ pub struct Framer {
     /// CRC register over the bytes received so far: computed as they arrive, so that the check
     /// at the end of the frame costs nothing (as a receive interrupt would do it).
     crc: u16,
+    /// The CRC register after the frame's first [`HEAD`] bytes: a Modbus write's reply echoes
+    /// them, so its CRC is known when the request has come (the receive path pays a comparison
+    /// a byte).
+    head_crc: u16,
     t15: u64,
     t35: u64,
 }
@@ -46,9 +54,16 @@ impl Framer {
             last: Instant::from_micros(0),
             error: None,
             crc: crate::crc::INIT,
+            head_crc: crate::crc::INIT,
             t15: baud.t15_micros(),
             t35: baud.t35_micros(),
         }
+    }
+
+    /// The CRC register over the frame's first [`HEAD`] bytes; while fewer have come, a stale
+    /// value.
+    pub fn head_crc(&self) -> u16 {
+        self.head_crc
     }
 
     /// t3.5 in microseconds.
@@ -94,6 +109,9 @@ impl Framer {
             *slot = b;
             len += 1;
             crc = crate::crc::update(crc, b);
+            if len == HEAD {
+                self.head_crc = crc;
+            }
         }
         (self.len, self.crc) = (len, crc);
     }
@@ -149,6 +167,15 @@ mod tests {
         assert_eq!(f.frame().1, None);
         f.push(at(1718 + 1719), 3);
         assert_eq!(f.frame().1, Some(RxError::Gap { after_frame: false }));
+    }
+
+    #[test]
+    fn the_head_crc_is_the_crc_of_the_first_bytes() {
+        let mut f = Framer::new(Baud::FACTORY);
+        let frame = [1u8, 0x10, 0x20, 0x03, 0x00, 0x01, 0x02, 0x00, 0x32, 0xAA, 0xBB];
+        f.extend(at(0), &frame[..3]);
+        f.extend(at(10), &frame[3..]);
+        assert_eq!(f.head_crc(), crate::crc::update_bytes(crate::crc::INIT, &frame[..HEAD]));
     }
 
     #[test]
