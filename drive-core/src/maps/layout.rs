@@ -761,18 +761,11 @@ impl LayoutMap {
             Type::S32 if e.is_narrow() => i64::from(bits as u16 as i16),
             _ => signed(d, bits),
         };
-        // The linear scales spelt out: what `to_drive` gives them, without its other arms.
-        let v = match *e.scale {
-            Scale::One => Some(v),
-            Scale::Ratio(n, den) => v.checked_mul(i64::from(n)).and_then(|x| div_round(x, i64::from(den))),
-            Scale::PerRev(n, den) => {
-                v.checked_mul(i64::from(n) * i64::from(drive.per_rev())).and_then(|x| div_round(x, i64::from(den)))
-            }
-            Scale::Gear => {
-                let (num, den) = gear(drive);
-                div_round(v.saturating_mul(num), den)
-            }
-            scale => scale.to_drive(v, i64::from(drive.per_rev())),
+        let v = if *e.scale == Scale::Gear {
+            let (num, den) = gear(drive);
+            div_round(v.saturating_mul(num), den)
+        } else {
+            e.scale.to_drive(v, i64::from(drive.per_rev()))
         };
         raw_of(d, v.ok_or(ObjError::OutOfRange)?).ok_or(ObjError::OutOfRange)
     }
