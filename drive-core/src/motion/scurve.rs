@@ -47,11 +47,12 @@
 //! `v_max`, and a dip whose pulse passes through zero speed between two limits, by a bracketed
 //! Illinois / bisection search on its closed form (its slope has no simple form). The
 //! candidates whose distance range holds the move's are compared by their closed-form
-//! durations and only the fastest is built: every move from within the limits. Where no closed
-//! form applies (a start whose acceleration is beyond the limit of the side the speed is
-//! heading into) or its result does not land within rounding, a bracketed search over the same
-//! families builds and measures the pulses themselves: none of the 180 000 plans of the
-//! comparison with Ruckig, 0.35 % of the property suite's (which seeks the edges).
+//! durations and only the fastest is built: every move from within the limits. A start with
+//! more acceleration than zero speed allows ramps down at full jerk through it. Where no closed
+//! form applies (some starts beyond the limits, among them a ramp through zero speed that would
+//! overshoot the end speed) or its result does not land within rounding, a bracketed search
+//! over the same families builds and measures the pulses themselves: none of the 180 000 plans
+//! of the comparison with Ruckig, 0.08 % of the property suite's (which seeks the edges).
 //!
 //! Above `v_max` the speed only ever decreases (or is still being pushed
 //! up by a start acceleration that is ramped down at full jerk); it is eased into `v_max` rather
@@ -831,8 +832,9 @@ struct Closed {
 
 /// The fastest pulse from `(vs, a_s)` to `(ve, 0)` in closed form ([`Closed`]) when it needs no
 /// dip: one acceleration limit (a start acceleration beyond it first returns to it at full
-/// jerk), or through zero speed from `d_max` to `a_max` with the start acceleration within what
-/// they allow. `None` otherwise.
+/// jerk), or through zero speed from `d_max` to `a_max` (a start acceleration beyond `d_max`
+/// first returns to it; one beyond what zero speed allows ramps down at full jerk through it,
+/// then `a_max`'s pulse). `None` otherwise (that ramp would overshoot `ve`).
 ///
 /// A pulse between zero accelerations is symmetric in time: it covers its mean speed times its
 /// duration. This one is cut from such pulses. A start acceleration towards `ve` makes it the
@@ -857,40 +859,72 @@ fn pulse_closed(vs: Vel, a_s: f32, ve: Vel, lim: &Lim) -> Option<Closed> {
     };
     let ue = u0 + w.max(0.0);
     let c = if u0 >= 0.0 || ue <= 0.0 || lim.acc == lim.dec {
-        let level = if u0 >= 0.0 { lim.acc } else { lim.dec };
-        // Beyond the limit, the acceleration first returns to it at full jerk.
-        // (The speed change is kept apart from the speeds, as `w` is: see `Vel`.)
-        let (t_brake, d_brake, u0, a0, w) = if a0 > level {
-            let tb = (a0 - level) / j;
-            let dv = 0.5 * tb * (a0 + level);
-            (tb, tb * (u0 + tb * (0.5 * a0 - (a0 - level) / 6.0)), u0 + dv, level, w - dv)
-        } else {
-            (0.0, 0.0, u0, a0, w)
-        };
-        let tau0 = a0 / j;
-        let lead0 = 0.5 * a0 * tau0;
-        let uv = u0 - lead0;
-        let (t, dt) = pulse_time(w.max(0.0) + lead0, level, j);
-        let m = 0.5 * (uv + ue);
-        let d = d_brake + m * t - tau0 * (uv + a0 * tau0 / 6.0);
-        Closed { t: t_brake + t - tau0, d, d_end: 0.5 * t + m * dt, d_start: 0.5 * t - m * dt }
+        one_level(u0, a0, w, ue, if u0 >= 0.0 { lim.acc } else { lim.dec }, j)
     } else {
+        // Beyond `d_max` before zero speed, the acceleration first returns to it at full jerk.
+        let (t_pre, d_pre, u0, a0) = if a0 > lim.dec && u0 + (a0 * a0 - lim.dec * lim.dec) / (2.0 * j) < 0.0 {
+            let tb = (a0 - lim.dec) / j;
+            (tb, tb * (u0 + tb * (0.5 * a0 - (a0 - lim.dec) / 6.0)), u0 + 0.5 * tb * (a0 + lim.dec), lim.dec)
+        } else {
+            (0.0, 0.0, u0, a0)
+        };
         let a_lo = lim.acc.min(lim.dec);
         let a_z = a_lo.min(sqrt(a0 * a0 - 2.0 * j * u0)).min(sqrt(2.0 * j * ue));
-        if a0 > lim.dec || a0 * a0 > a_z * a_z - 2.0 * j * u0 {
-            return None;
-        }
-        let (tau0, tau1) = (a0 / j, a_z / j);
-        let uv = u0 - 0.5 * a0 * tau0;
-        let ez = 0.5 * a_z * tau1;
-        let (t1, dt1) = pulse_time(ez - uv, lim.dec, j);
-        let (t2, dt2) = pulse_time(ue + ez, lim.acc, j);
-        let (m1, m2) = (0.5 * (uv + ez), 0.5 * (ue - ez));
-        let d1 = m1 * t1 - tau0 * (uv + a0 * tau0 / 6.0) - tau1 * (ez - a_z * tau1 / 6.0);
-        let d2 = m2 * t2 - tau1 * (a_z * tau1 / 6.0 - ez);
-        Closed { t: t1 - tau0 - 2.0 * tau1 + t2, d: d1 + d2, d_end: 0.5 * t2 + m2 * dt2, d_start: 0.5 * t1 - m1 * dt1 }
+        let c = if a0 > lim.dec || a0 * a0 > a_z * a_z - 2.0 * j * u0 {
+            // More acceleration than zero speed allows even ramped down at once: it ramps down
+            // at full jerk through zero speed, then `a_max`'s pulse from there (the limit first
+            // regained if beyond it); `None` if that overshoots the end speed.
+            let a_zd = sqrt(a0 * a0 + 2.0 * j * u0);
+            if a_zd.is_nan() || a_zd * a_zd > 2.0 * j * ue {
+                return None;
+            }
+            let tz = (a0 - a_zd) / j;
+            let dz = tz * (u0 + tz * (0.5 * a0 - (a0 - a_zd) / 6.0));
+            let rest = one_level(0.0, a_zd, ue, ue, lim.acc, j);
+            // (The slope in the start speed is not this pulse's: it starts accelerating.)
+            Closed { t: tz + rest.t, d: dz + rest.d, d_end: rest.d_end, d_start: f32::NAN }
+        } else {
+            let (tau0, tau1) = (a0 / j, a_z / j);
+            let uv = u0 - 0.5 * a0 * tau0;
+            let ez = 0.5 * a_z * tau1;
+            let (t1, dt1) = pulse_time(ez - uv, lim.dec, j);
+            let (t2, dt2) = pulse_time(ue + ez, lim.acc, j);
+            let (m1, m2) = (0.5 * (uv + ez), 0.5 * (ue - ez));
+            let d1 = m1 * t1 - tau0 * (uv + a0 * tau0 / 6.0) - tau1 * (ez - a_z * tau1 / 6.0);
+            let d2 = m2 * t2 - tau1 * (a_z * tau1 / 6.0 - ez);
+            Closed {
+                t: t1 - tau0 - 2.0 * tau1 + t2,
+                d: d1 + d2,
+                d_end: 0.5 * t2 + m2 * dt2,
+                d_start: 0.5 * t1 - m1 * dt1,
+            }
+        };
+        Closed { t: t_pre + c.t, d: d_pre + c.d, ..c }
     };
     Some(Closed { t: t_lead + c.t, d: d_lead + s * c.d, ..c })
+}
+
+/// [`pulse_closed`] at one acceleration limit `level`, normalised: the speed rises by `w`
+/// from `u0` to `ue` with the acceleration `a0 ≥ 0` at the start. (Inlined: it is most of
+/// every pulse's closed form.)
+#[inline(always)]
+fn one_level(u0: f32, a0: f32, w: f32, ue: f32, level: f32, j: f32) -> Closed {
+    // Beyond the limit, the acceleration first returns to it at full jerk.
+    // (The speed change is kept apart from the speeds, as `w` is: see `Vel`.)
+    let (t_brake, d_brake, u0, a0, w) = if a0 > level {
+        let tb = (a0 - level) / j;
+        let dv = 0.5 * tb * (a0 + level);
+        (tb, tb * (u0 + tb * (0.5 * a0 - (a0 - level) / 6.0)), u0 + dv, level, w - dv)
+    } else {
+        (0.0, 0.0, u0, a0, w)
+    };
+    let tau0 = a0 / j;
+    let lead0 = 0.5 * a0 * tau0;
+    let uv = u0 - lead0;
+    let (t, dt) = pulse_time(w.max(0.0) + lead0, level, j);
+    let m = 0.5 * (uv + ue);
+    let d = d_brake + m * t - tau0 * (uv + a0 * tau0 / 6.0);
+    Closed { t: t_brake + t - tau0, d, d_end: 0.5 * t + m * dt, d_start: 0.5 * t - m * dt }
 }
 
 /// Duration, distance and the distance's slope in `w` of "pulse from `(v0, a0)` to `(w, 0)`,
