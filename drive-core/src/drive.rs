@@ -10,7 +10,7 @@ use crate::faults::{FaultLog, Inputs};
 use crate::ident::Identity;
 use crate::maps::{NativeMap, RegisterMap, Spoilt};
 use crate::od::Obj;
-use crate::pdu::{Exception, FileRecords, MAX_READ, Parser, Request, Words};
+use crate::pdu::{Exception, FileRecords, MAX_READ, Request, SubIndex, Words};
 use crate::rtu::{self, MAX_FRAME, RxError};
 use crate::state::ProgramMemory;
 use crate::units::{Baud, Instant, SlaveAddr};
@@ -122,16 +122,16 @@ enum Line {
 /// pays a call into the map for it.
 #[derive(Clone, Copy, Debug)]
 struct Framing {
-    /// [`RegisterMap::parser`]: `None` for Modbus's PDUs, of which the slave decodes the
-    /// commonest itself ([`Request::short`]).
-    parser: Option<Parser>,
+    /// [`RegisterMap::sub_index`]: `None` for Modbus's PDUs. The slave decodes the commonest
+    /// requests itself, by [`Request::short`] or the [`SubIndex::keys`].
+    sub_index: Option<SubIndex>,
     /// [`RegisterMap::address_extra`].
     address_extra: usize,
 }
 
 impl Framing {
     fn of(map: &impl RegisterMap) -> Self {
-        Self { parser: map.parser(), address_extra: map.address_extra() }
+        Self { sub_index: map.sub_index(), address_extra: map.address_extra() }
     }
 }
 
@@ -508,7 +508,30 @@ impl<M: RegisterMap, P: Borrow<Shared>, G: Borrow<ProgramMemory>> Drive<M, P, G>
     /// Ends the frame that has ended (RTU), or the line that ended and waits (ASCII,
     /// [`Drive::end_line`]): serves it if its CRC is good, else counts it and answers it as the
     /// map answers a spoilt frame; the receiver then waits for the next.
+    // Inlined into its callers, which call one of two functions out of line, neither of which
+    // saves registers for the other's path.
+    #[inline(always)]
     fn end_frame(&mut self) {
+        if self.framing.sub_index.is_some() { self.end_sub_indexed_frame() } else { self.end_modbus_frame() }
+    }
+
+    /// [`Drive::end_frame`] of a frame to a map with Modbus's requests (and of an ASCII line).
+    #[inline(never)]
+    fn end_modbus_frame(&mut self) {
+        self.end_rtu_frame::<false>();
+    }
+
+    /// [`Drive::end_frame`] of an RTU frame to a map whose requests name registers by an index
+    /// and a sub-index (and of an ASCII line to it): an instance of its own, out of line, so that
+    /// neither this nor Modbus's RTU path decodes (or holds registers for) the other's requests.
+    #[inline(never)]
+    fn end_sub_indexed_frame(&mut self) {
+        self.end_rtu_frame::<true>();
+    }
+
+    /// [`Drive::end_frame`]: `SUB_INDEX`, the map's requests have a [`SubIndex`].
+    #[inline(always)]
+    fn end_rtu_frame<const SUB_INDEX: bool>(&mut self) {
         let Line::Rtu(framer) = &self.line else { return self.end_line() };
         let ((_, error), crc_ok) = (framer.frame(), framer.crc_ok());
         let c = &mut self.counters;
@@ -522,7 +545,7 @@ impl<M: RegisterMap, P: Borrow<Shared>, G: Borrow<ProgramMemory>> Drive<M, P, G>
                 c.bus_errors = c.bus_errors.wrapping_add(1);
                 self.frame_exception(Spoilt::Crc);
             }
-            None => self.serve_frame::<false>(),
+            None => self.serve_frame::<false, SUB_INDEX>(),
         }
         if let Line::Rtu(framer) = &mut self.line {
             framer.clear();
@@ -541,7 +564,7 @@ impl<M: RegisterMap, P: Borrow<Shared>, G: Borrow<ProgramMemory>> Drive<M, P, G>
     fn end_line(&mut self) {
         let Line::Ascii(framer) = &self.line else { return };
         match framer.ended() {
-            Some((bytes, _)) if ascii::lrc(bytes) == 0 => self.serve_frame::<true>(),
+            Some((bytes, _)) if ascii::lrc(bytes) == 0 => self.serve_frame::<true, false>(),
             Some(_) => {
                 self.counters.bus_errors = self.counters.bus_errors.wrapping_add(1);
                 self.frame_exception(Spoilt::Crc);
@@ -554,11 +577,12 @@ impl<M: RegisterMap, P: Borrow<Shared>, G: Borrow<ProgramMemory>> Drive<M, P, G>
     }
 
     /// Serves a frame with a good check, then the map's own factory settings if it restored the
-    /// drive's. `ASCII`: the frame is an ASCII line's, and so is the reply. (One instance each,
-    /// inlined into `end_frame` and `end_line`: the RTU path pays no test of the framing.)
+    /// drive's. `ASCII`: the frame is an ASCII line's, and so is the reply. `SUB_INDEX`: an RTU
+    /// frame to a map with a [`SubIndex`]. (One instance each, inlined into `end_frame`,
+    /// `end_sub_indexed_frame` and `end_line`: the RTU path pays no test of the framing.)
     #[inline(always)]
-    fn serve_frame<const ASCII: bool>(&mut self) {
-        self.serve::<ASCII>();
+    fn serve_frame<const ASCII: bool, const SUB_INDEX: bool>(&mut self) {
+        self.serve::<ASCII, SUB_INDEX>();
         if core::mem::take(&mut self.state.factory_restored) {
             // The map's own factory settings go over the drive's, before the save.
             self.map.factory_settings(&mut self.state);
@@ -632,10 +656,11 @@ impl<M: RegisterMap, P: Borrow<Shared>, G: Borrow<ProgramMemory>> Drive<M, P, G>
         }
     }
 
-    /// Serves a frame with a good CRC (`ASCII`: LRC) that sits in the framer.
+    /// Serves a frame with a good CRC (`ASCII`: LRC) that sits in the framer (`SUB_INDEX`: see
+    /// [`Drive::serve_frame`]).
     // Inlined into `serve_frame`, its one caller.
     #[inline(always)]
-    fn serve<const ASCII: bool>(&mut self) {
+    fn serve<const ASCII: bool, const SUB_INDEX: bool>(&mut self) {
         let Self { line, address, address_crc, listen_only, counters, framing, tx, tx_len, map, state, .. } = self;
         counters.bus_messages = counters.bus_messages.wrapping_add(1);
         // The frame and the bytes of its check: an RTU frame and its CRC, or the bytes of an ASCII
@@ -667,33 +692,34 @@ impl<M: RegisterMap, P: Borrow<Shared>, G: Borrow<ProgramMemory>> Drive<M, P, G>
             return;
         };
         let body = body.get_mut(..MAX_FRAME - 4).unwrap_or_default();
-        // A register read or write in Modbus's PDU (0x03, 0x04, 0x06, 0x10), answered: the
-        // commonest requests, decoded inline by one match on their bytes, with no checks of
-        // silence.
-        let short = match framing.parser {
-            None if !silent => Request::short(pdu),
-            _ => None,
+        // A register read or write (0x03, 0x04, 0x06, 0x10 in Modbus's PDU; 0x03, 0x06, 0x10 with
+        // a sub-index), answered: the commonest requests, decoded inline by one match on their
+        // bytes, with no checks of silence. (An RTU frame with a sub-index has an instance of
+        // its own: `end_frame`; an ASCII line with one is decoded by the map.)
+        let short = if silent {
+            None
+        } else if SUB_INDEX {
+            framing.sub_index.and_then(|s| s.keys.short(pdu))
+        } else if ASCII && framing.sub_index.is_some() {
+            None
+        } else {
+            Request::short(pdu)
         };
         let result = match short {
             Some(req) => server.execute(&req, body),
             None => {
-                let request = match framing.parser {
-                    Some(parse) => parse(pdu),
-                    None => Request::parse(pdu),
+                // A server of its own: only this path puts one in memory for the call.
+                let mut general = Server {
+                    map: &mut *server.map,
+                    state: &mut *server.state,
+                    counters: &mut *server.counters,
+                    listen_only: &mut *server.listen_only,
+                    address_crc: server.address_crc,
                 };
-                if silent && !request.as_ref().is_ok_and(|req| server.silent_allowed(req)) {
-                    counters.no_responses = counters.no_responses.wrapping_add(1);
-                    return;
+                match general.decoded(framing.sub_index, pdu, silent, body, tx_len) {
+                    Some(result) => result,
+                    None => return,
                 }
-                // One call of `execute` for both: what may execute without an answer executes,
-                // and its reply is dropped (a reply not yet taken with it).
-                let result = request.and_then(|req| server.execute(&req, body));
-                if silent {
-                    *tx_len = 0;
-                    counters.no_responses = counters.no_responses.wrapping_add(1);
-                    return;
-                }
-                result
             }
         };
         let len = match result {
@@ -840,6 +866,39 @@ impl<M: RegisterMap, P: Borrow<Shared>, G: Borrow<ProgramMemory>> Server<'_, M, 
             Request::Diagnostics { sub, .. } => matches!(sub, 0x04 | 0x0A),
             _ => false,
         }
+    }
+
+    /// A request that the slave's inline decoding did not take (one of another kind, an ASCII
+    /// line's to a map with a [`SubIndex`], a malformed one, one not to be answered), decoded by
+    /// the map's decoder or Modbus's and executed if it may be: its result to answer, or `None`,
+    /// counted. Out of line: the short paths do not hold registers for it (nor a server in
+    /// memory for its calls), and every kind of frame shares one instance.
+    #[inline(never)]
+    fn decoded(
+        &mut self,
+        sub_index: Option<SubIndex>,
+        pdu: &[u8],
+        silent: bool,
+        out: &mut [u8],
+        tx_len: &mut usize,
+    ) -> Option<Result<Outcome, Exception>> {
+        let request = match sub_index {
+            Some(s) => (s.parse)(pdu),
+            None => Request::parse(pdu),
+        };
+        if silent && !request.as_ref().is_ok_and(|req| self.silent_allowed(req)) {
+            self.counters.no_responses = self.counters.no_responses.wrapping_add(1);
+            return None;
+        }
+        // One call of `execute` for both: what may execute without an answer executes, and its
+        // reply is dropped (a reply not yet taken with it).
+        let result = request.and_then(|req| self.execute(&req, out));
+        if silent {
+            *tx_len = 0;
+            self.counters.no_responses = self.counters.no_responses.wrapping_add(1);
+            return None;
+        }
+        Some(result)
     }
 
     /// Executes `req`, writing the reply's data (after the function code) into `out`.

@@ -230,6 +230,97 @@ impl<'a> Request<'a> {
     }
 }
 
+/// How a map's register requests name a register by an index and a sub-index byte after it
+/// (seed 003: `01 03 20 03 01 00 02` reads 2 registers from 0x2003 sub-index 1), declared as data
+/// so that a slave decodes the commonest of them inline, as [`Request::short`] Modbus's: the
+/// table's register numbers are keys, `(index - base) << bits | sub`; from `window` on, the
+/// sub-index [`Keys::window_sub`] names the register at the index itself.
+///
+/// ```
+/// use drive_core::pdu::{Keys, Request};
+/// let keys = Keys { base: 0x2000, indexes: 0x100, bits: 4, window: 0x1000, window_sub: 0xFF, max: 16 };
+/// assert_eq!(keys.register(0x2003, 1), Some(0x31));
+/// assert_eq!(keys.index_of(0x31), (0x2003, 1));
+/// assert_eq!(keys.register(0x600C, 0xFF), Some(0x600C));
+/// assert_eq!(keys.register(0x2003, 16), None);
+/// assert_eq!(keys.short(&[0x03, 0x20, 0x03, 0x01, 0x00, 0x02]), Some(Request::ReadHolding { addr: 0x31, qty: 2 }));
+/// assert_eq!(keys.short(&[0x03, 0x20, 0x03, 0x01, 0x00, 17]), None);
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Keys {
+    /// The table's first index.
+    pub base: u16,
+    /// How many indexes from `base` the table has.
+    pub indexes: u16,
+    /// The sub-index's bits in a key: sub-indices `0..1 << bits` an index.
+    pub bits: u8,
+    /// The first index that is a register of its own (with [`Keys::window_sub`]); the keys lie
+    /// below it.
+    pub window: u16,
+    /// The sub-index that names the register at the index.
+    pub window_sub: u8,
+    /// The most registers a request reads or writes.
+    pub max: u16,
+}
+
+impl Keys {
+    /// The register number that an index and sub-index name, if they name one.
+    #[inline(always)]
+    pub const fn register(&self, index: u16, sub: u8) -> Option<u16> {
+        if sub == self.window_sub && index >= self.window {
+            Some(index)
+        } else if (sub as u32).wrapping_shr(self.bits as u32) == 0 && index.wrapping_sub(self.base) < self.indexes {
+            Some(self.key(index, sub))
+        } else {
+            None
+        }
+    }
+
+    /// The table key of an index and sub-index of the table.
+    #[inline(always)]
+    pub const fn key(&self, index: u16, sub: u8) -> u16 {
+        index.wrapping_sub(self.base).wrapping_shl(self.bits as u32) | sub as u16
+    }
+
+    /// The index and sub-index of a table key.
+    pub const fn index_of(&self, key: u16) -> (u16, u8) {
+        let bits = self.bits as u32;
+        (self.base.wrapping_add(key.wrapping_shr(bits)), (key & !u16::MAX.wrapping_shl(bits)) as u8)
+    }
+
+    /// The request of a well-formed register read (0x03), write (0x06) or block write (0x10) of
+    /// registers that the keys name, at most [`Keys::max`]: what the map's own decoder makes of
+    /// it; `None` for anything else, which that decoder decodes (or refuses).
+    #[inline(always)]
+    pub fn short<'a>(&self, pdu: &'a [u8]) -> Option<Request<'a>> {
+        let (&[function, ih, il, sub, wh, wl], rest) = pdu.split_first_chunk::<6>()?;
+        let (index, word) = (u16::from_be_bytes([ih, il]), u16::from_be_bytes([wh, wl]));
+        let addr = self.register(index, sub)?;
+        let quantity = word.wrapping_sub(1) < self.max;
+        match (function, rest) {
+            (0x03, []) if quantity => Some(Request::ReadHolding { addr, qty: word }),
+            (0x06, []) => Some(Request::WriteSingle { addr, value: word }),
+            (0x10, [count, values @ ..])
+                if quantity && usize::from(*count) == 2 * usize::from(word) && values.len() == usize::from(*count) =>
+            {
+                Some(Request::WriteMultiple { addr, values: Words::new(values) })
+            }
+            _ => None,
+        }
+    }
+}
+
+/// How a map's requests name a register by an index and a sub-index byte after it (seed 003):
+/// the map's register numbers are [`Keys`] below [`Keys::window`]; from it on, they are the
+/// native map's registers (a sub-index the map gives them).
+#[derive(Clone, Copy, Debug)]
+pub struct SubIndex {
+    /// Decodes a request PDU, its register as the map's register number.
+    pub parse: Parser,
+    /// How requests name the registers, from which a slave decodes the commonest inline.
+    pub keys: Keys,
+}
+
 /// The sub-requests of a write file record (0x15), as they stand in the request after its byte
 /// count: each a reference type 6, a file number (from 1), a record number (0-9999), a record
 /// length in registers and that many registers; checked whole before any is taken.

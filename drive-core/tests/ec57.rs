@@ -529,3 +529,49 @@ fn the_command_filter_registers() {
     let saved = r.saved();
     assert_eq!((saved.get(Obj::CommandFilter), saved.get(Obj::CommandFilterTime)), (1, 5_000));
 }
+
+/// The slave's inline decoding of the commonest requests ([`ec57::KEYS`]) takes exactly what
+/// the map's own decoder takes of reads, writes and block writes, and decodes it alike; it
+/// takes nothing else (the decoder refuses it, or decodes another function).
+#[test]
+fn the_inline_decoding_agrees_with_the_maps_decoder() {
+    use drive_core::maps::ec57;
+    let indexes: [u16; 10] = [0x0000, 0x0FFF, 0x1000, 0x1FFF, 0x2000, 0x2003, 0x20FF, 0x2100, 0x600C, 0xFFFF];
+    let subs = (0..=17).chain([0x7F, 0xFE, 0xFF]);
+    let subs: Vec<u8> = subs.collect();
+    let words = (0..=18).chain([0x7F, 0x100, 0x7FFF, 0xFFFF]);
+    let words: Vec<u16> = words.collect();
+    let (mut taken, mut pdus) = (0, 0);
+    for function in [0x02, 0x03, 0x04, 0x06, 0x08, 0x10, 0x17] {
+        for &index in &indexes {
+            for &sub in &subs {
+                for &word in &words {
+                    let mut pdu = vec![function];
+                    pdu.extend_from_slice(&index.to_be_bytes());
+                    pdu.push(sub);
+                    pdu.extend_from_slice(&word.to_be_bytes());
+                    // No tail; a byte count and values for the word's registers; one too few.
+                    let n = 2 * usize::from(word.min(20));
+                    let tails = [
+                        vec![],
+                        [vec![n as u8], vec![0x5A; n]].concat(),
+                        [vec![n as u8], vec![0x5A; n.saturating_sub(1)]].concat(),
+                    ];
+                    for tail in tails {
+                        let pdu = [pdu.clone(), tail].concat();
+                        pdus += 1;
+                        let short = ec57::KEYS.short(&pdu);
+                        let parsed = ec57::parse(&pdu);
+                        if matches!(function, 0x03 | 0x06 | 0x10) {
+                            assert_eq!(short, parsed.ok(), "{pdu:02X?}");
+                        } else {
+                            assert_eq!(short, None, "{pdu:02X?}");
+                        }
+                        taken += usize::from(short.is_some());
+                    }
+                }
+            }
+        }
+    }
+    assert!(taken > 1_000 && taken < pdus / 4, "{taken} of {pdus}");
+}

@@ -243,7 +243,7 @@ impl Dictionary {
                     let d = e.obj.def();
                     let at = match layout.sub_index {
                         Some(s) => {
-                            let (register, sub) = (s.index_of)(e.addr);
+                            let (register, sub) = s.keys.index_of(e.addr);
                             Address { register, sub: Some(sub) }
                         }
                         None => Address { register: e.addr, sub: None },

@@ -60,7 +60,7 @@ pub static LAYOUT: Layout = Layout {
 };
 
 /// The table's compiled lookup: the fuzzer reaches the plain reads and writes too.
-static INDEX: drive_core::maps::compiled::Compiled = drive_core::compiled!(ENTRIES);
+static INDEX: drive_core::maps::compiled::Compiled = drive_core::compiled!(ENTRIES, Walk::Address);
 
 /// Every code the layout answers, and the request-level ones.
 const CODES: [u8; 10] = [0x01, 0x02, 0x03, 0x04, 0x06, 0x0B, 0x0C, 0x0D, 0x0E, 0x0F];

@@ -171,12 +171,15 @@ const PROGRAM: ProgramWindow = ProgramWindow {
     check: None,
 };
 
+/// How a request walks [`ENTRIES`].
+const WALK: Walk = Walk::Address;
+
 /// The DS-CLS9 layout.
 pub static LAYOUT: Layout = Layout {
     entries: &ENTRIES,
     order: WordOrder::HighFirst,
     exceptions: EXCEPTIONS,
-    walk: Walk::Address,
+    walk: WALK,
     halves: false,
     spoilt: SPOILT,
     defaults: &DEFAULTS,
@@ -189,7 +192,7 @@ pub static LAYOUT: Layout = Layout {
 };
 
 /// The table's compiled lookup.
-static INDEX: Compiled = compiled!(ENTRIES);
+static INDEX: Compiled = compiled!(ENTRIES, WALK);
 
 /// The manual's factory values (§九) where they differ from the drive's: start and stop
 /// speeds 1 rev/s, ramps 100 rev/s², runs, jogs and homing at 10 rev/s, the homing clockwise,

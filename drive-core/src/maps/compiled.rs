@@ -8,6 +8,8 @@
 //! map's registers are few and scattered over pages (a few dozen in JMC's 0x60xx, seed 003's
 //! keys): a table a register, as the native map's, would be mostly empty.
 
+use crate::od::Obj;
+
 /// The most entries a layout may have (a slot is a byte: an entry's index plus one).
 pub const MAX_ENTRIES: usize = 127;
 
@@ -44,9 +46,23 @@ pub struct Compiled {
     pub mul: u32,
     /// The hash table: a power of two of slots.
     pub slots: &'static [u8],
-    /// Per entry, its flags [`READ`], [`WRITE`], [`TWO`], [`SCALE`], [`SIGNED`], [`LIVE`],
-    /// [`NARROW`].
-    pub fast: &'static [u8],
+    /// Per entry, what the plain paths need of it.
+    pub fast: &'static [Fast],
+}
+
+/// What the plain read and write need of an entry, in one place: they touch nothing else of
+/// it but a scale other than [`ONE`] or [`GEAR`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Fast {
+    /// The entry's first register.
+    pub addr: u16,
+    /// Its object.
+    pub obj: Obj,
+    /// Its flags: [`READ`], [`WRITE`], [`TWO`], [`SCALE`], [`SIGNED`], [`LIVE`], [`NARROW`].
+    pub flags: u8,
+    /// The registers a plain read may take from it on: its own and those of the [`READ`]
+    /// entries a request walks on to, without a gap (0 if it is not [`READ`]), at most 255.
+    pub run: u8,
 }
 
 /// The slot a register hashes to in a table of `len` (a power of two) slots.

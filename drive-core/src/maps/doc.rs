@@ -149,7 +149,7 @@ fn row(out: &mut impl Write, layout: &Layout, e: &Entry, r: &Reference) -> fmt::
         (View::Declared, a) => a.name(),
     };
     if let Some(s) = layout.sub_index {
-        let (index, sub) = (s.index_of)(e.addr);
+        let (index, sub) = s.keys.index_of(e.addr);
         write!(out, "| 0x{index:04X}.{sub} ")?;
     } else if r.decimal && e.addr < 0x2000 {
         write!(out, "| {:04} ", e.addr)?;

@@ -16,16 +16,19 @@
 //! ```
 
 use super::compiled::Compiled;
-use super::layout::{Choice, Entry, Exceptions, Layout, Scale, SpoiltCodes, SubIndex, Walk, WordOrder, ZERO_ONE};
+use super::layout::{Choice, Entry, Exceptions, Layout, Scale, SpoiltCodes, Walk, WordOrder, ZERO_ONE};
 use crate::od::Obj;
-use crate::pdu::{Exception, Request, Words};
+use crate::pdu::{Exception, Keys, Request, SubIndex, Words};
 
+/// The requests' index and sub-index (§1.3): the table's 0x2000-0x20FF with sub-indices 0-15
+/// are keys below the window; from 0x1000 on, sub-index 0xFF names the drive's native register
+/// at the index (the window). At most 16 registers a request.
+pub const KEYS: Keys =
+    Keys { base: 0x2000, indexes: 0x100, bits: 4, window: 0x1000, window_sub: WINDOW_SUB, max: MAX_REGISTERS };
 /// The most registers a request reads or writes (§1.3.1).
 pub const MAX_REGISTERS: u16 = 16;
 /// The sub-index that addresses the drive's native register at the index (the window).
 pub const WINDOW_SUB: u8 = 0xFF;
-/// Below it a register number is a table entry's key; from it on, a native register.
-const WINDOW: u16 = 0x1000;
 /// The answer to a frame whose CRC is wrong, while 0x21D2 asks for one (§1.3.4's example).
 const CRC_ERROR: u8 = 0x01;
 
@@ -40,25 +43,14 @@ const ACCESS: Exception = Exception::Vendor(5);
 /// Exception 06: a value out of range, or one the drive cannot take now.
 const VALUE: Exception = Exception::Vendor(6);
 
-/// The key of the table's (index, sub-index): 0x2000-0x20FF with sub-indices 0-15, below the
-/// window (register numbers from 0x1000 on, [`LAYOUT`]'s [`SubIndex::window`]).
+/// The key of the table's (index, sub-index) ([`KEYS`]).
 pub const fn key(index: u16, sub: u8) -> u16 {
-    (index.wrapping_sub(0x2000) << 4) | sub as u16
+    KEYS.key(index, sub)
 }
 
 /// The (index, sub-index) of a table key.
 pub const fn index_of(key: u16) -> (u16, u8) {
-    (0x2000 + (key >> 4), (key & 0xF) as u8)
-}
-
-/// The register number a request's (index, sub-index) names: a table key, or in the window the
-/// native register at the index.
-fn register(index: u16, sub: u8) -> Result<u16, Exception> {
-    match sub {
-        WINDOW_SUB if index >= WINDOW => Ok(index),
-        0..=15 if (0x2000..=0x20FF).contains(&index) => Ok(key(index, sub)),
-        _ => Err(ADDRESS),
-    }
+    KEYS.index_of(key)
 }
 
 /// Decodes an EC-57 request PDU: 03, 06 and 16 with the sub-index byte after the index (their
@@ -90,7 +82,7 @@ pub fn parse(pdu: &[u8]) -> Result<Request<'_>, Exception> {
     if function != 0x06 && !(1..=MAX_REGISTERS).contains(&word) {
         return Err(COUNT);
     }
-    let addr = register(u16::from_be_bytes([ih, il]), sub)?;
+    let addr = KEYS.register(u16::from_be_bytes([ih, il]), sub).ok_or(ADDRESS)?;
     match (function, rest) {
         (0x03, []) => Ok(Request::ReadHolding { addr, qty: word }),
         (0x06, []) => Ok(Request::WriteSingle { addr, value: word }),
@@ -229,12 +221,15 @@ pub const EXCEPTIONS: Exceptions = Exceptions {
     function: FUNCTION,
 };
 
+/// How a request walks [`ENTRIES`].
+const WALK: Walk = Walk::List;
+
 /// The EC-57 layout: the table, and the native map in the window.
 pub static LAYOUT: Layout = Layout {
     entries: &ENTRIES,
     order: WordOrder::HighFirst,
     exceptions: EXCEPTIONS,
-    walk: Walk::List,
+    walk: WALK,
     halves: false,
     spoilt: SpoiltCodes { gap: None, early: None, crc: Some(CRC_ERROR) },
     defaults: &DEFAULTS,
@@ -248,10 +243,10 @@ pub static LAYOUT: Layout = Layout {
 };
 
 /// The table's compiled lookup.
-static INDEX: Compiled = compiled!(ENTRIES);
+static INDEX: Compiled = compiled!(ENTRIES, WALK);
 
-/// The requests' index and sub-index (§1.3), and the window from [`WINDOW`] on.
-static SUB_INDEX: SubIndex = SubIndex { parse, index_of, window: WINDOW };
+/// The requests' index and sub-index (§1.3): [`KEYS`], and the map's own decoder.
+static SUB_INDEX: SubIndex = SubIndex { parse, keys: KEYS };
 
 /// The manual's factory values where they differ from the drive's: the standstill current after
 /// 50 ms at 50 %, 1 A peak, 10 000 pulses a revolution (the table prints 1000, outside its own

@@ -105,12 +105,15 @@ pub const EXCEPTIONS: Exceptions = Exceptions {
     function: Exception::IllegalFunction,
 };
 
+/// How a request walks [`ENTRIES`].
+const WALK: Walk = Walk::List;
+
 /// The JMC layout.
 pub static LAYOUT: Layout = Layout {
     entries: &ENTRIES,
     order: WordOrder::Setting,
     exceptions: EXCEPTIONS,
-    walk: Walk::List,
+    walk: WALK,
     halves: false,
     spoilt: SpoiltCodes::DROPPED,
     defaults: &[],
@@ -123,7 +126,7 @@ pub static LAYOUT: Layout = Layout {
 };
 
 /// The table's compiled lookup.
-static INDEX: Compiled = compiled!(ENTRIES);
+static INDEX: Compiled = compiled!(ENTRIES, WALK);
 
 /// What the reference says beside the table: the decisions where seed 001 is silent or
 /// contradicts itself.

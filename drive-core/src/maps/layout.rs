@@ -24,10 +24,10 @@
 //! assert_eq!(drive.state().read(Obj::PhaseCurrent), 1200);
 //! ```
 
-use super::compiled::{self, Compiled};
+use super::compiled::{self, Compiled, Fast};
 use super::native::{NativeMap, Op, RegisterMap, Spoilt};
 use crate::od::{Access, OBJECTS, Obj, ObjError, ObjectDef, Range, Type};
-use crate::pdu::{Exception, Parser, Words};
+use crate::pdu::{Exception, SubIndex, Words};
 use crate::scope::WORDS;
 use crate::state::Shared;
 use crate::state::recording::{BLACK_BOX_WINDOW, SCOPE_WINDOW};
@@ -284,9 +284,9 @@ pub const fn addresses<const N: usize>(entries: &[Entry; N]) -> [u16; N] {
     addrs
 }
 
-/// The compiled lookup's flags of each entry ([`Compiled::fast`]).
+/// The compiled lookup's flags of each entry ([`compiled::Fast::flags`]).
 #[allow(clippy::indexing_slicing)]
-pub const fn fast_flags<const N: usize>(entries: &[Entry; N]) -> [u8; N] {
+const fn fast_flags<const N: usize>(entries: &[Entry; N]) -> [u8; N] {
     let mut fast = [0u8; N];
     let mut i = 0;
     while i < N {
@@ -341,14 +341,43 @@ pub const fn fast_flags<const N: usize>(entries: &[Entry; N]) -> [u8; N] {
     fast
 }
 
-/// A layout's [`Compiled`] lookup from its entries (a static array), built when compiling.
+/// What the plain paths need of each entry ([`compiled::Fast`]) of a layout that `walk`s them.
+/// An entry's run: none from one that is not [`compiled::READ`], else its own registers and the
+/// run of the entry a request walks on to (the next in the list, or the one that begins where it
+/// ends), at most 255.
+#[allow(clippy::indexing_slicing)]
+pub const fn fast_entries<const N: usize>(entries: &[Entry; N], walk: Walk) -> [Fast; N] {
+    let flags = fast_flags(entries);
+    let mut fast = [Fast { addr: 0, obj: Obj::NodeId, flags: 0, run: 0 }; N];
+    let mut i = N;
+    while i > 0 {
+        i -= 1;
+        let mut run = 0;
+        if flags[i] & compiled::READ != 0 {
+            let words: u32 = if flags[i] & compiled::TWO != 0 { 2 } else { 1 };
+            let on = i + 1 < N
+                && match walk {
+                    Walk::List => true,
+                    Walk::Address => entries[i].addr as u32 + words == entries[i + 1].addr as u32,
+                };
+            let total = words + if on { fast[i + 1].run as u32 } else { 0 };
+            run = if total > 255 { 255 } else { total as u8 };
+        }
+        fast[i] = Fast { addr: entries[i].addr, obj: entries[i].obj, flags: flags[i], run };
+    }
+    fast
+}
+
+/// A layout's [`Compiled`] lookup from its entries (a static array) and its [`Walk`], built
+/// when compiling.
 #[macro_export]
 macro_rules! compiled {
-    ($entries:path) => {{
+    ($entries:path, $walk:expr) => {{
         const ADDRS: [u16; $entries.len()] = $crate::maps::layout::addresses(&$entries);
         const TABLE: (usize, u32) = $crate::maps::compiled::table(&ADDRS);
         static SLOTS: [u8; TABLE.0] = $crate::maps::compiled::slots::<{ TABLE.0 }>(&ADDRS, TABLE.1);
-        static FAST: [u8; $entries.len()] = $crate::maps::layout::fast_flags(&$entries);
+        static FAST: [$crate::maps::compiled::Fast; $entries.len()] =
+            $crate::maps::layout::fast_entries(&$entries, $walk);
         $crate::maps::compiled::Compiled { mul: TABLE.1, slots: &SLOTS, fast: &FAST }
     }};
 }
@@ -417,20 +446,6 @@ pub struct ProgramWindow {
     pub kind: crate::state::ProgramKind,
     /// Whether a value may be word `k` of it (a value it refuses is out of range); `None`: any.
     pub check: Option<fn(usize, u16) -> bool>,
-}
-
-/// How a map's requests name a register by an index and a sub-index byte after it (seed 003):
-/// the layout's register numbers are keys of the two below [`SubIndex::window`]; from it on they
-/// are the native map's registers (a sub-index the map gives them), answered in the layout's
-/// codes with its staged halves ([`Maps`](super::Maps) serves them).
-#[derive(Clone, Copy, Debug)]
-pub struct SubIndex {
-    /// Decodes a request PDU, its register as the layout's register number.
-    pub parse: Parser,
-    /// The index and sub-index of a layout's register number below the window.
-    pub index_of: fn(u16) -> (u16, u8),
-    /// The first register number that is the native map's.
-    pub window: u16,
 }
 
 /// The exception codes a map answers a frame with that its timing or CRC spoilt, if the frame
@@ -510,7 +525,7 @@ impl Layout {
     /// search over a layout in address order, a scan of a list.
     pub(super) fn find(&self, addr: u16) -> Option<usize> {
         if let Some(index) = self.index {
-            return self.find_compiled(index, addr);
+            return Self::find_compiled(index, addr).map(|(i, _)| i);
         }
         let entries = self.entries;
         let addr_of = |i: usize| entries.get(i).map_or(u16::MAX, |e| e.addr);
@@ -521,11 +536,13 @@ impl Layout {
         (addr_of(i) == addr).then_some(i)
     }
 
-    /// [`Layout::find`] by the compiled lookup `index`, the layout's.
+    /// [`Layout::find`] by the compiled lookup `index`, the layout's, with what it compiled
+    /// of the entry.
     #[inline(always)]
-    fn find_compiled(&self, index: &Compiled, addr: u16) -> Option<usize> {
+    fn find_compiled(index: &Compiled, addr: u16) -> Option<(usize, &Fast)> {
         let i = index.candidate(addr)?;
-        (self.entries.get(i)?.addr == addr).then_some(i)
+        let fast = index.fast.get(i)?;
+        (fast.addr == addr).then_some((i, fast))
     }
 
     /// The place in the program of `qty` registers from `addr`, if they are in its window;
@@ -570,10 +587,11 @@ fn is_high<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(order: WordOrder, drive:
 #[inline(always)]
 fn plain_value<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
     drive: &DriveState<P, G>,
-    e: &Entry,
-    fast: u8,
+    e: &Fast,
+    scale: Option<&Scale>,
     bits: u32,
 ) -> Option<u32> {
+    let fast = e.flags;
     // The map's register is signed as the object is.
     let v = if fast & compiled::SIGNED == 0 {
         i64::from(bits)
@@ -582,14 +600,15 @@ fn plain_value<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
     } else {
         i64::from(bits as i32)
     };
-    let v = match (fast & compiled::SCALE, *e.scale) {
+    let v = match (fast & compiled::SCALE, scale) {
         (compiled::ONE, _) => v,
         (compiled::GEAR, _) => {
             let (num, den) = gear(drive);
             div_round(v.saturating_mul(num), den)?
         }
-        (_, Scale::Ratio(n, den)) => div_round(v.checked_mul(i64::from(n))?, i64::from(den))?,
-        (_, Scale::PerRev(n, den)) => {
+        (_, None) => return None,
+        (_, Some(&Scale::Ratio(n, den))) => div_round(v.checked_mul(i64::from(n))?, i64::from(den))?,
+        (_, Some(&Scale::PerRev(n, den))) => {
             div_round(v.checked_mul(i64::from(n) * i64::from(drive.per_rev()))?, i64::from(den))?
         }
         _ => return None,
@@ -610,28 +629,37 @@ fn plain_value<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
     (v >= lo.max(type_lo) && v <= hi.min(type_hi)).then_some(v as u32)
 }
 
-/// The map's value now of a [`compiled::READ`] entry `e` whose compiled flags are `fast`, as
+/// The map's value now of a [`compiled::READ`] entry `e`, the layout's `entries[i]`, as
 /// register bits: what [`LayoutMap::map_value`] gives these entries, by their flags.
 #[inline(always)]
-fn plain_map_value<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(drive: &DriveState<P, G>, e: &Entry, fast: u8) -> u32 {
+fn plain_map_value<P: Borrow<Shared>, G: Borrow<ProgramMemory>>(
+    drive: &DriveState<P, G>,
+    e: &Fast,
+    entries: &[Entry],
+    i: usize,
+) -> u32 {
+    let fast = e.flags;
     let raw = if fast & compiled::LIVE != 0 {
-        drive.live(e.obj)
+        drive.polled(e.obj)
     } else {
         drive.params.get(e.obj as usize).copied().unwrap_or(0)
     };
+    if fast & compiled::SCALE == compiled::ONE {
+        return raw;
+    }
     let v = if fast & compiled::SIGNED != 0 { i64::from(raw as i32) } else { i64::from(raw) };
     // A drive value beyond the map's range reads as its low bits.
-    let map = match (fast & compiled::SCALE, *e.scale) {
-        (compiled::ONE, _) => return raw,
-        (compiled::GEAR, _) => {
-            let (num, den) = gear(drive);
-            div_round(v.saturating_mul(den), num)
+    let map = if fast & compiled::SCALE == compiled::GEAR {
+        let (num, den) = gear(drive);
+        div_round(v.saturating_mul(den), num)
+    } else {
+        match entries.get(i).map(|e| *e.scale) {
+            Some(Scale::Ratio(n, den)) => v.checked_mul(i64::from(den)).and_then(|x| div_round(x, i64::from(n))),
+            Some(Scale::PerRev(n, den)) => {
+                v.checked_mul(i64::from(den)).and_then(|x| div_round(x, i64::from(n) * i64::from(drive.per_rev())))
+            }
+            _ => None,
         }
-        (_, Scale::Ratio(n, den)) => v.checked_mul(i64::from(den)).and_then(|x| div_round(x, i64::from(n))),
-        (_, Scale::PerRev(n, den)) => {
-            v.checked_mul(i64::from(den)).and_then(|x| div_round(x, i64::from(n) * i64::from(drive.per_rev())))
-        }
-        _ => None,
     };
     map.unwrap_or(v) as u32
 }
@@ -704,7 +732,7 @@ impl LayoutMap {
     /// Whether `addr` is in the window onto the native map (a [`Layout::sub_index`] layout's,
     /// or a [`Layout::scope`] layout's scope registers).
     fn in_window(&self, addr: u16) -> bool {
-        self.layout.sub_index.is_some_and(|s| addr >= s.window)
+        self.layout.sub_index.is_some_and(|s| addr >= s.keys.window)
             || (self.layout.scope && SCOPE_RANGES.iter().any(|&(lo, hi)| (lo..=hi).contains(&addr)))
     }
 
@@ -843,9 +871,11 @@ impl LayoutMap {
     ) -> Option<u16> {
         let layout = self.layout;
         let index = layout.index?;
-        let mut i = layout.find_compiled(index, addr)?;
-        let high_first = is_high(layout.order, drive, 0);
-        let mut reg = addr;
+        let (mut i, first) = Layout::find_compiled(index, addr)?;
+        // Every register asked for is in the entries' plain run from the first.
+        if out.len() / 2 > usize::from(first.run) {
+            return None;
+        }
         let put = |w: u32, slot: &mut [u8; 2], crc: &mut u16| {
             let [hi, lo] = (w as u16).to_be_bytes();
             *slot = [hi, lo];
@@ -853,22 +883,18 @@ impl LayoutMap {
         };
         let mut slots = out.as_chunks_mut::<2>().0;
         while let Some((slot, rest)) = slots.split_first_mut() {
-            let (e, fast) = (layout.entries.get(i)?, *index.fast.get(i)?);
-            if fast & compiled::READ == 0 || (layout.walk == Walk::Address && e.addr != reg) {
-                return None;
-            }
-            let v = plain_map_value(drive, e, fast);
-            if fast & compiled::TWO == 0 {
+            let e = index.fast.get(i)?;
+            let v = plain_map_value(drive, e, layout.entries, i);
+            if e.flags & compiled::TWO == 0 {
                 put(v, slot, &mut crc);
                 slots = rest;
             } else {
                 let (next, rest) = rest.split_first_mut()?;
-                let (first, second) = if high_first { (v >> 16, v) } else { (v, v >> 16) };
+                let (first, second) = if is_high(layout.order, drive, 0) { (v >> 16, v) } else { (v, v >> 16) };
                 put(first, slot, &mut crc);
                 put(second, next, &mut crc);
                 slots = rest;
             }
-            reg = reg.wrapping_add(1 + u16::from(fast & compiled::TWO != 0));
             i += 1;
         }
         Some(crc)
@@ -887,17 +913,16 @@ impl LayoutMap {
     ) -> Option<()> {
         let layout = self.layout;
         let index = layout.index?;
-        let i = layout.find_compiled(index, addr)?;
-        let (e, fast) = (layout.entries.get(i)?, *index.fast.get(i)?);
-        if fast & compiled::WRITE == 0 {
+        let (i, e) = Layout::find_compiled(index, addr)?;
+        if e.flags & compiled::WRITE == 0 {
             return None;
         }
-        let bits = match (fast & compiled::TWO != 0, values.len()) {
+        let bits = match (e.flags & compiled::TWO != 0, values.len()) {
             (false, 1) => u32::from(values.get(0)?),
             (true, 2) => joined(layout.order, drive, u32::from(values.get(0)?), u32::from(values.get(1)?)),
             _ => return None,
         };
-        let v = plain_value(drive, e, fast, bits)?;
+        let v = plain_value(drive, e, layout.entries.get(i).map(|e| e.scale), bits)?;
         *drive.params.get_mut(e.obj as usize)? = v;
         self.set_staged(e.obj, None);
         Some(())
@@ -1067,8 +1092,8 @@ impl RegisterMap for LayoutMap {
         self.layout.program.map_or(crate::state::ProgramKind::None, |p| p.kind)
     }
 
-    fn parser(&self) -> Option<Parser> {
-        self.layout.sub_index.map(|s| s.parse)
+    fn sub_index(&self) -> Option<SubIndex> {
+        self.layout.sub_index.copied()
     }
 
     fn address_extra(&self) -> usize {

@@ -4,7 +4,7 @@ use super::exceptions::Exceptions;
 use super::index;
 use crate::crc;
 use crate::od::{Access, OBJECTS, Obj, ObjError, ObjectDef, Range, Storage, Type, is_command};
-use crate::pdu::{Exception, MAX_WRITE, Parser, Words};
+use crate::pdu::{Exception, MAX_WRITE, SubIndex, Words};
 use crate::scope::WORDS;
 use crate::state::Shared;
 use crate::state::recording::{BLACK_BOX_WINDOW, SCOPE_WINDOW};
@@ -66,10 +66,10 @@ pub trait RegisterMap {
     fn program_kind(&self) -> crate::state::ProgramKind {
         crate::state::ProgramKind::None
     }
-    /// The map's own decoder of request PDUs into its register numbers, if its requests carry
-    /// more than Modbus's (seed 003's sub-index byte after the register); `None`: Modbus's PDUs
+    /// How the map's requests name registers, if by an index and a sub-index byte after it
+    /// (seed 003): the map's own decoder of request PDUs and its keys; `None`: Modbus's PDUs
     /// ([`Request::parse`](crate::pdu::Request::parse)). The slave asks once, at power-up.
-    fn parser(&self) -> Option<Parser> {
+    fn sub_index(&self) -> Option<SubIndex> {
         None
     }
     /// The bytes a register request (0x03, 0x06, 0x10) carries after its register address, which

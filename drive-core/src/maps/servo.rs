@@ -159,12 +159,15 @@ const GROUPS: ProgramWindow = ProgramWindow {
     check: Some(crate::state::groups::word_ok),
 };
 
+/// How a request walks [`ENTRIES`].
+const WALK: Walk = Walk::Address;
+
 /// The servo layout.
 pub static LAYOUT: Layout = Layout {
     entries: &ENTRIES,
     order: WordOrder::LowFirst,
     exceptions: EXCEPTIONS,
-    walk: Walk::Address,
+    walk: WALK,
     halves: false,
     spoilt: SpoiltCodes::DROPPED,
     defaults: &DEFAULTS,
@@ -177,7 +180,7 @@ pub static LAYOUT: Layout = Layout {
 };
 
 /// The table's compiled lookup.
-static INDEX: Compiled = compiled!(ENTRIES);
+static INDEX: Compiled = compiled!(ENTRIES, WALK);
 
 /// The manual's factory values where they differ from the drive's: P□503 10 r/min.
 static DEFAULTS: [(u16, i32); 1] = [(0x01F7, 10)];

@@ -634,12 +634,24 @@ impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
         if d.is_live() { self.live(d.obj) } else { self.params.get(d.obj as usize).copied().unwrap_or(0) }
     }
 
+    /// [`DriveState::live`], with the positions that masters poll read inline, not through its
+    /// match of every live object (for the layout maps' plain read).
+    #[inline(always)]
+    pub(crate) fn polled(&self, obj: Obj) -> u32 {
+        // The axis's own state, not a copy: the registers show the low 32 bits.
+        let setpoint = self.ctl.axis.setpoint().whole;
+        match obj {
+            Obj::Position => setpoint as u32,
+            Obj::ActualPosition => setpoint.wrapping_sub(self.ctl.servo.following) as u32,
+            _ => self.live(obj),
+        }
+    }
+
     /// The value of the live object `obj` (of any other, its stored value).
     pub(crate) fn live(&self, obj: Obj) -> u32 {
         let s = &self.ctl.status;
         match obj {
-            // The axis's own state, not a copy: the register shows the low 32 bits of the setpoint.
-            Obj::Position => self.ctl.axis.setpoint().whole as u32,
+            Obj::Position | Obj::ActualPosition => self.polled(obj),
             Obj::ErrorStatus => u32::from(s.error),
             Obj::ControllerStatus => {
                 u32::from(s.controller | self.fifo_status() | if self.motor_still() { 0 } else { STATUS_BUSY })
@@ -686,7 +698,6 @@ impl<P: Borrow<Shared>, G: Borrow<ProgramMemory>> DriveState<P, G> {
             Obj::Load => percent(s.current_ma, self.param(Obj::PhaseCurrent)),
             Obj::OutputStates => u32::from(self.ctl.outputs_on(&self.settings)),
             Obj::EncoderSignals | Obj::EncoderAngle | Obj::EncoderTurns => self.encoder_live(obj),
-            Obj::ActualPosition => self.ctl.axis.setpoint().whole.wrapping_sub(self.ctl.servo.following) as u32,
             Obj::SerialFormat => self.serial_format(),
             Obj::SignalInputs1 | Obj::SignalInputs2 => self.signal_inputs(obj),
             Obj::ScopeState
