@@ -392,10 +392,20 @@ impl Walk {
             }
         } else if x < xz {
             (cd, 0.0)
+        } else if xz <= 0.0 {
+            // From a start at zero speed or on: `a_max` whatever the acceleration was before.
+            (ca, 0.0)
         } else {
-            let s = cd + j * (x - xz);
+            let s = self.rise_from() + j * (x - xz);
             if s < ca { (s, j) } else { (ca, 0.0) }
         }
+    }
+
+    /// With `d_max` below `a_max`, what `E` is at most as the speed passes zero, whence it may
+    /// rise to `a_max` at full jerk: `d_max`, or where the brake line passes zero speed from a
+    /// start beyond it.
+    fn rise_from(&self) -> f32 {
+        if self.brk { self.cd.max(self.e0 - self.j * self.xz) } else { self.cd }
     }
 
     /// The envelope at `x`: value and slope of the active bound.
@@ -450,7 +460,7 @@ impl Walk {
             }
         } else if w <= xz {
             Some(lim.dec)
-        } else if xz + (ca - cd) / j <= 0.0 {
+        } else if xz <= 0.0 {
             Some(lim.acc)
         } else {
             None
@@ -507,7 +517,7 @@ impl Walk {
             if self.cd > self.ca {
                 add_line(self.ca + j * self.xz, -j);
             } else {
-                add_line(self.cd - j * self.xz, j);
+                add_line(self.rise_from() - j * self.xz, j);
             }
         }
         if let Some((xd, ed)) = self.dip {
@@ -539,7 +549,7 @@ impl Walk {
         if self.cd > self.ca {
             add_pt(self.xz - (self.cd - self.ca) / j);
         } else if self.cd < self.ca {
-            add_pt(self.xz + (self.ca - self.cd) / j);
+            add_pt(self.xz + (self.ca - self.rise_from()) / j);
         }
         if let Some((xd, _)) = self.dip {
             add_pt(xd);
@@ -875,9 +885,12 @@ fn pulse_closed(vs: Vel, a_s: f32, ve: Vel, lim: &Lim) -> Option<Closed> {
             // at full jerk through zero speed, then `a_max`'s pulse from there (the limit first
             // regained if beyond it); `None` if that overshoots the end speed.
             let a_zd = sqrt(a0 * a0 + 2.0 * j * u0);
-            if a_zd.is_nan() || a_zd * a_zd > 2.0 * j * ue {
+            // (A pulse to the natural velocity ends there: beyond it only by the rounding of
+            // `a0²`, against which a small speed is the difference of large terms.)
+            if a_zd.is_nan() || a_zd * a_zd > 2.0 * j * ue + ROUNDING * a0 * a0 {
                 return None;
             }
+            let a_zd = a_zd.min(sqrt(2.0 * j * ue));
             let tz = (a0 - a_zd) / j;
             let dz = tz * (u0 + tz * (0.5 * a0 - (a0 - a_zd) / 6.0));
             let rest = one_level(0.0, a_zd, ue, ue, lim.acc, j);
