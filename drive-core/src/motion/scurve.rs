@@ -1709,6 +1709,61 @@ mod tests {
     use super::{Lim, closed_form, search_position, sort_few};
     use crate::motion::scurve::Limits;
 
+    /// The closed form leaves at most 0.1 % of the hunts' plans to the search: the first plan of
+    /// `SEARCH_SHARE_N` cases (20 000) of each region, drawn as `tests/profile_scurve.rs`'s
+    /// `hunt_case` draws them (S-curves and trapezoids, within the limits and up to twice
+    /// beyond). Prints the counts (`--nocapture`).
+    #[test]
+    fn search_share() {
+        let cases = std::env::var("SEARCH_SHARE_N").ok().and_then(|n| n.parse().ok()).unwrap_or(20_000);
+        let mut seed = 7u64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let log = |x: f32, lo: f32, hi: f32| lo * libm::powf(hi / lo, x);
+        let sign = |x: f32| if x < 0.5 { -1.0f32 } else { 1.0 };
+        for (smooth, wide) in [(true, false), (true, true), (false, false), (false, true)] {
+            let (mut left, mut n) = (0, 0);
+            for _ in 0..cases {
+                let r: [f32; 16] = core::array::from_fn(|_| next());
+                let acc = |x: f32, y: f32, z: f32| {
+                    if smooth || x < 0.5 { 5_210.0 + y * (77_440.0 - 5_210.0) } else { log(z, 100.0, 1e6) }
+                };
+                let a_max = acc(r[0], r[1], r[2]);
+                let d_max = if r[3] < 0.5 { a_max } else { acc(r[4], r[5], r[6]) };
+                let jerk = Some(a_max.max(d_max) / log(r[7], 1e-3, 1.0)).filter(|_| smooth);
+                let v_max = log(r[8], 50.0, 2e5);
+                let v0 = sign(r[9]) * r[10] * v_max * if wide { 2.0 } else { 1.0 };
+                let a_big = a_max.max(d_max);
+                let k = match (r[11] * 4.0) as u32 {
+                    0 => 2.0 * r[12],
+                    1 => 0.9 + 0.2 * r[12],
+                    2 if r[13] < 0.5 => a_max / a_big,
+                    2 => 1.0,
+                    _ => 0.5 + 1.5 * r[12],
+                };
+                let a0 = if wide { sign(r[14]) } else { v0.signum() } * k * a_big;
+                let v_end = if r[15] < 0.75 { 0.0 } else { r[13] * v_max };
+                let d = match wide {
+                    false => sign(r[2]) * log(r[6], 1e-3, 10.0),
+                    true if r[5] < 0.1 => 0.0,
+                    true => sign(r[2]) * log(r[6], 1e-6, 1e3),
+                };
+                let Ok(lim) = Lim::new(&Limits { v_max, a_max, d_max, jerk }) else { continue };
+                let a0 = if lim.smooth() { a0 } else { 0.0 };
+                let vf = if d > 0.0 { v_end } else { -v_end };
+                n += 1;
+                left += usize::from(matches!(closed_form(v0, a0, if d == 0.0 { 0.0 } else { vf }, d, &lim), Ok(None)));
+            }
+            let (kind, region) = (if smooth { "S-curve" } else { "trapezoid" }, if wide { "wide" } else { "narrow" });
+            std::println!("{kind}, {region}: the search plans {left} of {n}");
+            assert!(left * 1000 <= n, "{kind}, {region}: the search plans {left} of {n}");
+        }
+    }
+
     proptest::proptest! {
         /// Where the closed form answers, the full search finds a profile of the same
         /// duration: the closed form never gives a slower move. It answers every move from
