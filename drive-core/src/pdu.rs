@@ -134,7 +134,7 @@ pub enum Request<'a> {
     },
 }
 
-/// A decoder of request PDUs: [`Request::parse`], or a map's own ([`RegisterMap::parser`](crate::maps::RegisterMap::parser)).
+/// A decoder of request PDUs: [`Request::parse`], or a map's own ([`SubIndex::parse`]).
 pub type Parser = fn(&[u8]) -> Result<Request<'_>, Exception>;
 
 fn be16(b: &[u8], at: usize) -> Option<u16> {
