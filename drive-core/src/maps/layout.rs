@@ -857,7 +857,8 @@ impl LayoutMap {
 
 impl LayoutMap {
     /// The commonest read, sealed as it is made: whole entries that the compiled lookup marks
-    /// [`compiled::READ`], from the entry at `addr`. `None` for anything else (a text, a field,
+    /// [`compiled::READ`], from the entry at `addr` on as the layout walks them, within its
+    /// [`Fast::run`] (checked once). `None` for anything else (a text, a field,
     /// a table, a narrow or wide entry, part of an entry, a refusal, a layout without a compiled
     /// lookup), which the general walk answers. (No entry lies in a window, the program or a
     /// reserved range: a test checks each layout.)
