@@ -28,6 +28,9 @@ pub static ENTRIES: [Entry; 10] = [
     Entry::new(0x000E, Obj::ControllerStatus, &Scale::One),
 ];
 
+/// How a request walks [`ENTRIES`].
+const WALK: Walk = Walk::Address;
+
 /// The layout: low word first, vendor codes for the refusals.
 pub static LAYOUT: Layout = Layout {
     entries: &ENTRIES,
@@ -47,7 +50,7 @@ pub static LAYOUT: Layout = Layout {
         byte_count: Exception::IllegalDataValue,
         function: Exception::IllegalFunction,
     },
-    walk: Walk::Address,
+    walk: WALK,
     halves: true,
     spoilt: SpoiltCodes::DROPPED,
     defaults: &[],
@@ -60,7 +63,7 @@ pub static LAYOUT: Layout = Layout {
 };
 
 /// The table's compiled lookup: the fuzzer reaches the plain reads and writes too.
-static INDEX: drive_core::maps::compiled::Compiled = drive_core::compiled!(ENTRIES, Walk::Address);
+static INDEX: drive_core::maps::compiled::Compiled = drive_core::compiled!(ENTRIES, WALK);
 
 /// Every code the layout answers, and the request-level ones.
 const CODES: [u8; 10] = [0x01, 0x02, 0x03, 0x04, 0x06, 0x0B, 0x0C, 0x0D, 0x0E, 0x0F];
