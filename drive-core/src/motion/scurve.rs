@@ -875,8 +875,8 @@ fn pulse_closed(vs: Vel, a_s: f32, ve: Vel, lim: &Lim) -> Option<Closed> {
     } else {
         // Beyond `d_max` before zero speed, the acceleration first returns to it at full jerk.
         let (t_pre, d_pre, u0, a0) = if a0 > lim.dec && u0 + (a0 * a0 - lim.dec * lim.dec) / (2.0 * j) < 0.0 {
-            let tb = (a0 - lim.dec) / j;
-            (tb, tb * (u0 + tb * (0.5 * a0 - (a0 - lim.dec) / 6.0)), u0 + 0.5 * tb * (a0 + lim.dec), lim.dec)
+            let (tb, db, dv) = ramp_down(u0, a0, lim.dec, j);
+            (tb, db, u0 + dv, lim.dec)
         } else {
             (0.0, 0.0, u0, a0)
         };
@@ -893,8 +893,7 @@ fn pulse_closed(vs: Vel, a_s: f32, ve: Vel, lim: &Lim) -> Option<Closed> {
                 return None;
             }
             let a_zd = a_zd.min(sqrt(2.0 * j * ue));
-            let tz = (a0 - a_zd) / j;
-            let dz = tz * (u0 + tz * (0.5 * a0 - (a0 - a_zd) / 6.0));
+            let (tz, dz, _) = ramp_down(u0, a0, a_zd, j);
             let rest = one_level(0.0, a_zd, ue, ue, lim.acc, j);
             // (The slope in the start speed is not this pulse's: it starts accelerating.)
             Closed { t: tz + rest.t, d: dz + rest.d, d_end: rest.d_end, d_start: f32::NAN }
@@ -927,9 +926,8 @@ fn one_level(u0: f32, a0: f32, w: f32, ue: f32, level: f32, j: f32) -> Closed {
     // Beyond the limit, the acceleration first returns to it at full jerk.
     // (The speed change is kept apart from the speeds, as `w` is: see `Vel`.)
     let (t_brake, d_brake, u0, a0, w) = if a0 > level {
-        let tb = (a0 - level) / j;
-        let dv = 0.5 * tb * (a0 + level);
-        (tb, tb * (u0 + tb * (0.5 * a0 - (a0 - level) / 6.0)), u0 + dv, level, w - dv)
+        let (tb, db, dv) = ramp_down(u0, a0, level, j);
+        (tb, db, u0 + dv, level, w - dv)
     } else {
         (0.0, 0.0, u0, a0, w)
     };
@@ -940,6 +938,14 @@ fn one_level(u0: f32, a0: f32, w: f32, ue: f32, level: f32, j: f32) -> Closed {
     let m = 0.5 * (uv + ue);
     let d = d_brake + m * t - tau0 * (uv + a0 * tau0 / 6.0);
     Closed { t: t_brake + t - tau0, d, d_end: 0.5 * t + m * dt, d_start: 0.5 * t - m * dt }
+}
+
+/// A ramp at full jerk `j` of the acceleration from `a0` down to `a1`, normalised, from the
+/// speed `u0`: its duration, distance and change of speed.
+#[inline(always)]
+fn ramp_down(u0: f32, a0: f32, a1: f32, j: f32) -> (f32, f32, f32) {
+    let t = (a0 - a1) / j;
+    (t, t * (u0 + t * (0.5 * a0 - (a0 - a1) / 6.0)), 0.5 * t * (a0 + a1))
 }
 
 /// Duration, distance and the distance's slope in `w` of "pulse from `(v0, a0)` to `(w, 0)`,
